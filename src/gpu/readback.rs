@@ -1,0 +1,98 @@
+//! Reading GPU buffers back to the CPU, for export and tests only (rendering keeps data on the
+//! GPU). Uses `map_async`; only native code may block on the device, never wasm.
+
+use crate::gpu::GpuContext;
+
+/// Why a readback failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReadbackError {
+    #[error("mapping the GPU buffer for reading failed: {0}")]
+    Map(#[from] wgpu::BufferAsyncError),
+    #[error("the GPU device was lost before the readback finished")]
+    Lost,
+    #[error("the mapped GPU buffer could not be read: {0}")]
+    Range(String),
+    #[error("waiting for the GPU failed: {0}")]
+    Poll(#[from] wgpu::PollError),
+}
+
+/// Copies `size` bytes of `src` into a staging buffer and returns them once mapped.
+///
+/// Native callers may drive it with [`read_bytes_blocking`]; on wasm, await it (the browser's
+/// event loop completes the mapping).
+pub async fn read_bytes(
+    ctx: &GpuContext,
+    src: &wgpu::Buffer,
+    size: u64,
+) -> Result<Vec<u8>, ReadbackError> {
+    let (staging, receiver) = start_read(ctx, src, size);
+    receiver.await.map_err(|_| ReadbackError::Lost)??;
+    finish_read(&staging, size)
+}
+
+fn start_read(
+    ctx: &GpuContext,
+    src: &wgpu::Buffer,
+    size: u64,
+) -> (
+    wgpu::Buffer,
+    futures_channel::oneshot::Receiver<Result<(), wgpu::BufferAsyncError>>,
+) {
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback staging"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("readback"),
+        });
+    encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
+    ctx.queue.submit([encoder.finish()]);
+    let (sender, receiver) = futures_channel::oneshot::channel();
+    staging.map_async(wgpu::MapMode::Read, .., move |result| {
+        // The receiver may have been dropped (cancelled readback); nothing to do then.
+        let _ = sender.send(result);
+    });
+    (staging, receiver)
+}
+
+fn finish_read(staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, ReadbackError> {
+    let bytes = staging
+        .slice(..size)
+        .get_mapped_range()
+        .map_err(|e| ReadbackError::Range(e.to_string()))?
+        .to_vec();
+    staging.unmap();
+    Ok(bytes)
+}
+
+/// Native only: reads a buffer back, blocking until the GPU is done.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn read_bytes_blocking(
+    ctx: &GpuContext,
+    src: &wgpu::Buffer,
+    size: u64,
+) -> Result<Vec<u8>, ReadbackError> {
+    let (staging, mut receiver) = start_read(ctx, src, size);
+    ctx.device.poll(wgpu::PollType::wait_indefinitely())?;
+    match receiver.try_recv() {
+        Ok(Some(result)) => result?,
+        Ok(None) | Err(_) => return Err(ReadbackError::Lost),
+    }
+    finish_read(&staging, size)
+}
+
+/// Native only: reads an f32 buffer back, blocking.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn read_f32_blocking(
+    ctx: &GpuContext,
+    src: &wgpu::Buffer,
+    count: usize,
+) -> Result<Vec<f32>, ReadbackError> {
+    let bytes = read_bytes_blocking(ctx, src, count as u64 * 4)?;
+    Ok(bytemuck::pod_collect_to_vec(&bytes))
+}

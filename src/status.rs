@@ -1,0 +1,111 @@
+//! The app's state as a plain object for automation: on the web it is published as
+//! `window.shapecastStatus` (tests and anyone's scripts read it instead of guessing from pixels).
+
+/// What the app is doing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Phase {
+    #[default]
+    Starting,
+    Loading,
+    Computing,
+    Ready,
+    Error,
+}
+
+impl Phase {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Starting => "starting",
+            Self::Loading => "loading",
+            Self::Computing => "computing",
+            Self::Ready => "ready",
+            Self::Error => "error",
+        }
+    }
+}
+
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AdapterStatus {
+    pub name: String,
+    pub backend: String,
+}
+
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct VolumeStatus {
+    pub dims: [usize; 3],
+    pub spacing_mm: [f64; 3],
+    pub source: String,
+}
+
+/// Everything `window.shapecastStatus` holds.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AppStatus {
+    pub phase: Phase,
+    pub adapter: Option<AdapterStatus>,
+    pub volume: Option<VolumeStatus>,
+    /// 0..1 of the current loading or computing step.
+    pub progress: f32,
+    /// The last error, for the user, or `None`.
+    pub error: Option<String>,
+    /// Frames drawn since start.
+    pub frames: u64,
+}
+
+impl AppStatus {
+    /// Makes the status visible outside the app (wasm: `window.shapecastStatus`; native: nothing,
+    /// the CLI and tests read the struct directly).
+    pub fn publish(&self) {
+        #[cfg(target_arch = "wasm32")]
+        web::publish(self);
+    }
+}
+
+#[cfg(target_arch = "wasm32")]
+mod web {
+    use super::AppStatus;
+    use js_sys::{Array, Object, Reflect};
+    use wasm_bindgen::JsValue;
+
+    fn set(obj: &Object, key: &str, value: impl Into<JsValue>) {
+        // Reflect::set only fails on frozen objects or proxies, which ours are not.
+        let _ = Reflect::set(obj, &JsValue::from_str(key), &value.into());
+    }
+
+    fn array_f64(values: impl IntoIterator<Item = f64>) -> Array {
+        values.into_iter().map(JsValue::from_f64).collect()
+    }
+
+    pub fn publish(status: &AppStatus) {
+        let Some(window) = web_sys::window() else {
+            return;
+        };
+        let obj = Object::new();
+        set(&obj, "phase", status.phase.as_str());
+        match &status.adapter {
+            Some(a) => {
+                let o = Object::new();
+                set(&o, "name", a.name.as_str());
+                set(&o, "backend", a.backend.as_str());
+                set(&obj, "adapter", o);
+            }
+            None => set(&obj, "adapter", JsValue::NULL),
+        }
+        match &status.volume {
+            Some(v) => {
+                let o = Object::new();
+                set(&o, "dims", array_f64(v.dims.iter().map(|&d| d as f64)));
+                set(&o, "spacing_mm", array_f64(v.spacing_mm));
+                set(&o, "source", v.source.as_str());
+                set(&obj, "volume", o);
+            }
+            None => set(&obj, "volume", JsValue::NULL),
+        }
+        set(&obj, "progress", f64::from(status.progress));
+        match &status.error {
+            Some(e) => set(&obj, "error", e.as_str()),
+            None => set(&obj, "error", JsValue::NULL),
+        }
+        set(&obj, "frames", status.frames as f64);
+        let _ = Reflect::set(&window, &JsValue::from_str("shapecastStatus"), &obj);
+    }
+}

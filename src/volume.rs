@@ -1,0 +1,250 @@
+//! The `Volume` model: voxels in a compact type plus the scanner geometry (LPS patient space).
+//!
+//! Conventions (shared by every module; see ARCHITECTURE.md):
+//! - Voxel index `(i, j, k)`, `i` fastest in memory: `index = i + nx * (j + ny * k)`.
+//! - World space is DICOM's patient space, LPS, in millimetres.
+//! - `world_from_voxel * (i, j, k) = origin_mm + direction * diag(spacing_mm) * (i, j, k)`, where
+//!   `direction`'s columns are the unit directions of the i, j and k axes in LPS.
+//! - The physical value of a voxel (HU for CT) is `raw * value_slope + value_intercept`.
+
+use glam::{DAffine3, DMat3, DVec3};
+
+/// What kind of scan the voxels come from, as far as the file tells.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Modality {
+    /// Computed tomography; values are Hounsfield units after rescale.
+    Ct,
+    /// Magnetic resonance; values are arbitrary scanner units.
+    Mr,
+    /// A synthetic volume made by this program (phantoms); values in HU.
+    Phantom,
+    #[default]
+    Unknown,
+}
+
+impl Modality {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Ct => "CT",
+            Self::Mr => "MR",
+            Self::Phantom => "phantom",
+            Self::Unknown => "unknown",
+        }
+    }
+}
+
+/// Voxel storage in the smallest type the data needs. A 512x512x2000 CT stays i16 (1 GiB), and
+/// conversion to f32 happens per chunk on the way to the GPU or the CPU reference.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Voxels {
+    U8(Vec<u8>),
+    I16(Vec<i16>),
+    U16(Vec<u16>),
+    F32(Vec<f32>),
+}
+
+impl Voxels {
+    pub fn len(&self) -> usize {
+        match self {
+            Self::U8(v) => v.len(),
+            Self::I16(v) => v.len(),
+            Self::U16(v) => v.len(),
+            Self::F32(v) => v.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The raw stored value at a linear index, as f32 (no rescale).
+    #[inline]
+    pub fn raw_f32(&self, index: usize) -> f32 {
+        match self {
+            Self::U8(v) => f32::from(v[index]),
+            Self::I16(v) => f32::from(v[index]),
+            Self::U16(v) => f32::from(v[index]),
+            Self::F32(v) => v[index],
+        }
+    }
+
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            Self::U8(_) => "u8",
+            Self::I16(_) => "i16",
+            Self::U16(_) => "u16",
+            Self::F32(_) => "f32",
+        }
+    }
+
+    pub fn bytes_per_voxel(&self) -> usize {
+        match self {
+            Self::U8(_) => 1,
+            Self::I16(_) | Self::U16(_) => 2,
+            Self::F32(_) => 4,
+        }
+    }
+}
+
+/// A 3D scalar volume with its scanner geometry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Volume {
+    /// Number of voxels along i, j, k.
+    pub dims: [usize; 3],
+    /// Distance between voxel centres along i, j, k, in mm (always > 0).
+    pub spacing_mm: [f64; 3],
+    /// LPS position of the centre of voxel (0, 0, 0), in mm.
+    pub origin_mm: [f64; 3],
+    /// Direction cosines: column `c` is the LPS unit direction of voxel axis `c`.
+    pub direction: DMat3,
+    pub voxels: Voxels,
+    /// Physical value = raw * value_slope + value_intercept.
+    pub value_slope: f32,
+    pub value_intercept: f32,
+    pub modality: Modality,
+    /// Where the volume came from (file name, "phantom: sphere", ...), for the user.
+    pub source: String,
+    /// Things the user should know (uneven slices, 4D file reduced to its first volume, ...).
+    pub warnings: Vec<String>,
+}
+
+impl Volume {
+    /// An axis-aligned volume (identity direction, origin at 0) holding physical values as f32.
+    pub fn from_f32(dims: [usize; 3], spacing_mm: [f64; 3], values: Vec<f32>) -> Self {
+        debug_assert_eq!(values.len(), dims[0] * dims[1] * dims[2]);
+        Self {
+            dims,
+            spacing_mm,
+            origin_mm: [0.0; 3],
+            direction: DMat3::IDENTITY,
+            voxels: Voxels::F32(values),
+            value_slope: 1.0,
+            value_intercept: 0.0,
+            modality: Modality::Unknown,
+            source: String::new(),
+            warnings: Vec::new(),
+        }
+    }
+
+    pub fn voxel_count(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+
+    #[inline]
+    pub fn linear_index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+
+    /// Physical value (HU for CT) at a linear index.
+    #[inline]
+    pub fn value(&self, index: usize) -> f32 {
+        self.voxels.raw_f32(index) * self.value_slope + self.value_intercept
+    }
+
+    /// Physical value at voxel (i, j, k).
+    #[inline]
+    pub fn value_at(&self, i: usize, j: usize, k: usize) -> f32 {
+        self.value(self.linear_index(i, j, k))
+    }
+
+    /// Writes the physical values of voxels `start..start + out.len()` into `out`.
+    pub fn values_into(&self, start: usize, out: &mut [f32]) {
+        for (n, o) in out.iter_mut().enumerate() {
+            *o = self.value(start + n);
+        }
+    }
+
+    /// All physical values as f32. Allocates 4 bytes per voxel: for small volumes and tests;
+    /// large volumes go through [`Self::values_into`] chunk by chunk.
+    pub fn to_f32(&self) -> Vec<f32> {
+        let mut out = vec![0.0; self.voxel_count()];
+        self.values_into(0, &mut out);
+        out
+    }
+
+    /// Minimum and maximum physical value, or `None` for an empty volume.
+    pub fn value_range(&self) -> Option<(f32, f32)> {
+        let n = self.voxel_count();
+        if n == 0 {
+            return None;
+        }
+        let mut lo = f32::INFINITY;
+        let mut hi = f32::NEG_INFINITY;
+        for idx in 0..n {
+            let v = self.value(idx);
+            if v.is_finite() {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        (lo <= hi).then_some((lo, hi))
+    }
+
+    /// Physical size of the volume's bounding box (centre to centre of the outer voxels), mm.
+    pub fn extent_mm(&self) -> [f64; 3] {
+        std::array::from_fn(|a| (self.dims[a].max(1) - 1) as f64 * self.spacing_mm[a])
+    }
+
+    /// The affine map from continuous voxel index to LPS mm.
+    pub fn world_from_voxel(&self) -> DAffine3 {
+        let scale = DMat3::from_diagonal(DVec3::from(self.spacing_mm));
+        DAffine3 {
+            matrix3: self.direction * scale,
+            translation: DVec3::from(self.origin_mm),
+        }
+    }
+
+    /// The affine map from LPS mm to continuous voxel index.
+    pub fn voxel_from_world(&self) -> DAffine3 {
+        self.world_from_voxel().inverse()
+    }
+}
+
+/// The patient-direction label (DICOM letters, LPS) a direction points towards, most significant
+/// component first, e.g. `"L"`, `"PS"`, `"RAI"`. Components below 1/8 of the largest are left out.
+pub fn orientation_label(direction_lps: DVec3) -> String {
+    let comps = [
+        (direction_lps.x, 'L', 'R'),
+        (direction_lps.y, 'P', 'A'),
+        (direction_lps.z, 'S', 'I'),
+    ];
+    let largest = comps.iter().map(|c| c.0.abs()).fold(0.0, f64::max);
+    if largest == 0.0 {
+        return String::new();
+    }
+    let mut order: Vec<_> = comps.iter().collect();
+    order.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+    order
+        .into_iter()
+        .filter(|c| c.0.abs() >= largest / 8.0)
+        .map(|&(v, pos, neg)| if v > 0.0 { pos } else { neg })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn world_from_voxel_roundtrip() {
+        let mut v = Volume::from_f32([4, 5, 6], [0.5, 0.7, 2.5], vec![0.0; 120]);
+        v.origin_mm = [-10.0, 20.0, 30.0];
+        v.direction = DMat3::from_cols(
+            DVec3::new(0.0, 1.0, 0.0),
+            DVec3::new(0.0, 0.0, -1.0),
+            DVec3::new(-1.0, 0.0, 0.0),
+        );
+        let p = v.world_from_voxel().transform_point3(DVec3::new(1.0, 2.0, 3.0));
+        assert!((p - DVec3::new(-10.0 - 7.5, 20.5, 30.0 - 1.4)).length() < 1e-9);
+        let back = v.voxel_from_world().transform_point3(p);
+        assert!((back - DVec3::new(1.0, 2.0, 3.0)).length() < 1e-9);
+    }
+
+    #[test]
+    fn orientation_labels() {
+        assert_eq!(orientation_label(DVec3::X), "L");
+        assert_eq!(orientation_label(-DVec3::Y), "A");
+        assert_eq!(orientation_label(DVec3::new(0.0, 0.3, -1.0)), "IP");
+        assert_eq!(orientation_label(DVec3::new(0.0, 0.01, -1.0)), "I");
+    }
+}

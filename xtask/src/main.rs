@@ -1,0 +1,356 @@
+//! `cargo xtask serve` and `cargo xtask test`: the README's two commands. Each installs what is
+//! missing (idempotently, on a fresh Debian machine as root with only the Rust toolchain), then
+//! serves the web app or runs every check CI runs.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode};
+use std::time::Instant;
+
+const TRUNK_VERSION: &str = "0.21.14";
+const APT_PACKAGES: &[&str] = &["mesa-vulkan-drivers", "chromium"];
+const WASM_TARGET: &str = "wasm32-unknown-unknown";
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("serve") => serve(&args[1..]),
+        Some("test") => test(&args[1..]),
+        Some("setup") => setup(Needs::all()),
+        _ => {
+            eprintln!(
+                "usage: cargo xtask serve [--port N]   build the web app and serve it on 127.0.0.1\n       \
+                 cargo xtask test [--skip STEP]...   install what is missing and run every check\n       \
+                 cargo xtask setup                  only install what is missing\n\
+                 steps: fmt, clippy, clippy-wasm, test, web-build, browser"
+            );
+            return ExitCode::from(2);
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+type Result<T = ()> = std::result::Result<T, String>;
+
+fn root() -> PathBuf {
+    // xtask/ lives directly under the repository root.
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+fn cargo_bin_dir() -> PathBuf {
+    std::env::var_os("CARGO_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cargo")))
+        .unwrap_or_else(|| PathBuf::from("/root/.cargo"))
+        .join("bin")
+}
+
+/// Runs a command in the repository root, echoing it, and fails if it fails.
+fn run(cmd: &mut Command) -> Result {
+    eprintln!("xtask: $ {}", show(cmd));
+    let status = cmd
+        .current_dir(root())
+        .status()
+        .map_err(|e| format!("could not start `{}`: {e}", show(cmd)))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("`{}` failed ({status})", show(cmd)))
+    }
+}
+
+fn show(cmd: &Command) -> String {
+    let mut s = cmd.get_program().to_string_lossy().into_owned();
+    for a in cmd.get_args() {
+        s.push(' ');
+        s.push_str(&a.to_string_lossy());
+    }
+    s
+}
+
+/// The stdout of a command, or None if it cannot run or fails.
+fn output(program: &str, args: &[&str]) -> Option<String> {
+    let out = Command::new(program).args(args).output().ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+#[derive(Clone, Copy)]
+struct Needs {
+    web: bool,
+    apt: bool,
+    node: bool,
+}
+
+impl Needs {
+    fn all() -> Self {
+        Self {
+            web: true,
+            apt: true,
+            node: true,
+        }
+    }
+}
+
+fn setup(needs: Needs) -> Result {
+    if needs.web {
+        ensure_wasm_target()?;
+        ensure_trunk()?;
+        ensure_wasm_bindgen()?;
+    }
+    if needs.apt {
+        ensure_apt()?;
+    }
+    if needs.node {
+        ensure_node_modules()?;
+    }
+    Ok(())
+}
+
+fn ensure_wasm_target() -> Result {
+    let installed = output("rustup", &["target", "list", "--installed"]).unwrap_or_default();
+    if installed.lines().any(|l| l.trim() == WASM_TARGET) {
+        return Ok(());
+    }
+    run(Command::new("rustup").args(["target", "add", WASM_TARGET]))
+}
+
+fn ensure_trunk() -> Result {
+    let trunk = cargo_bin_dir().join("trunk");
+    let version = output(&trunk.to_string_lossy(), &["--version"]).unwrap_or_default();
+    if version.split_whitespace().nth(1) == Some(TRUNK_VERSION) {
+        return Ok(());
+    }
+    eprintln!("xtask: installing trunk {TRUNK_VERSION} (about 12 minutes on 2 cores, once)");
+    run(Command::new("cargo").args([
+        "install",
+        "--locked",
+        &format!("trunk@{TRUNK_VERSION}"),
+    ]))
+}
+
+/// The wasm-bindgen version Cargo.lock pins; the CLI must match it exactly.
+fn locked_wasm_bindgen_version() -> Result<String> {
+    let lock = std::fs::read_to_string(root().join("Cargo.lock"))
+        .map_err(|e| format!("cannot read Cargo.lock: {e}"))?;
+    let mut lines = lock.lines();
+    while let Some(line) = lines.next() {
+        if line.trim() == "name = \"wasm-bindgen\"" {
+            if let Some(v) = lines.next().and_then(|l| l.trim().strip_prefix("version = \"")) {
+                return Ok(v.trim_end_matches('"').to_owned());
+            }
+        }
+    }
+    Err("Cargo.lock pins no wasm-bindgen version".to_owned())
+}
+
+fn ensure_wasm_bindgen() -> Result {
+    let want = locked_wasm_bindgen_version()?;
+    let trunk_toml = std::fs::read_to_string(root().join("Trunk.toml")).unwrap_or_default();
+    if !trunk_toml.contains(&format!("wasm_bindgen = \"{want}\"")) {
+        return Err(format!(
+            "Trunk.toml's [tools] wasm_bindgen must be \"{want}\", the version Cargo.lock pins"
+        ));
+    }
+    let bin = cargo_bin_dir().join("wasm-bindgen");
+    let have = output(&bin.to_string_lossy(), &["--version"]).unwrap_or_default();
+    if have.split_whitespace().nth(1) == Some(want.as_str()) {
+        return Ok(());
+    }
+    eprintln!("xtask: installing wasm-bindgen-cli {want}");
+    // Without --locked: the CLI's own lock file may pin crates newer than this toolchain allows.
+    run(Command::new("cargo").args(["install", "wasm-bindgen-cli", "--version", &want]))
+}
+
+fn dpkg_installed(package: &str) -> bool {
+    output("dpkg-query", &["-W", "-f=${Status}", package])
+        .is_some_and(|s| s.contains("install ok installed"))
+}
+
+fn ensure_apt() -> Result {
+    let missing: Vec<&str> = APT_PACKAGES
+        .iter()
+        .copied()
+        .filter(|p| !dpkg_installed(p))
+        .collect();
+    if missing.is_empty() {
+        return Ok(());
+    }
+    let is_root = output("id", &["-u"]).is_some_and(|s| s.trim() == "0");
+    if !is_root {
+        return Err(format!(
+            "missing Debian packages {missing:?}; run as root or: sudo apt-get install -y {}",
+            missing.join(" ")
+        ));
+    }
+    run(Command::new("apt-get").args(["update", "-q"]))?;
+    run(Command::new("apt-get")
+        .args(["install", "-y", "-q", "--no-install-recommends"])
+        .args(&missing)
+        .env("DEBIAN_FRONTEND", "noninteractive"))
+}
+
+fn ensure_node_modules() -> Result {
+    let dir = root().join("tests/browser");
+    if dir.join("node_modules/playwright-core").is_dir() && dir.join("node_modules/pngjs").is_dir()
+    {
+        return Ok(());
+    }
+    if output("npm", &["--version"]).is_none() {
+        return Err("npm is missing: apt-get install -y nodejs npm".to_owned());
+    }
+    // playwright-core never downloads a browser; the test drives Debian's /usr/bin/chromium.
+    run(Command::new("npm")
+        .args(["ci", "--no-audit", "--no-fund", "--prefix"])
+        .arg(&dir))
+}
+
+fn serve(args: &[String]) -> Result {
+    let mut port = "8080".to_owned();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--port" => port = it.next().cloned().ok_or("--port needs a number")?,
+            other => return Err(format!("unknown argument {other:?}")),
+        }
+    }
+    setup(Needs {
+        web: true,
+        apt: false,
+        node: false,
+    })?;
+    eprintln!(
+        "xtask: building and serving the app at http://127.0.0.1:{port}/ (Ctrl-C to stop)"
+    );
+    run(Command::new(cargo_bin_dir().join("trunk"))
+        .args(["serve", "--release", "--address", "127.0.0.1", "--port", &port])
+        .env("PATH", path_with_cargo_bin()))
+}
+
+fn path_with_cargo_bin() -> std::ffi::OsString {
+    let mut paths = vec![cargo_bin_dir()];
+    if let Some(p) = std::env::var_os("PATH") {
+        paths.extend(std::env::split_paths(&p));
+    }
+    std::env::join_paths(paths).unwrap_or_default()
+}
+
+struct Step {
+    name: &'static str,
+    run: fn() -> Result,
+}
+
+const STEPS: &[Step] = &[
+    Step {
+        name: "fmt",
+        run: || run(Command::new("cargo").args(["fmt", "--all", "--", "--check"])),
+    },
+    Step {
+        name: "clippy",
+        run: || {
+            run(Command::new("cargo").args([
+                "clippy",
+                "--workspace",
+                "--all-targets",
+                "--",
+                "-D",
+                "warnings",
+            ]))
+        },
+    },
+    Step {
+        name: "clippy-wasm",
+        run: || {
+            run(Command::new("cargo").args([
+                "clippy",
+                "--package",
+                "shapecast",
+                "--lib",
+                "--bins",
+                "--target",
+                WASM_TARGET,
+                "--",
+                "-D",
+                "warnings",
+            ]))
+        },
+    },
+    Step {
+        name: "test",
+        // CI=true makes a missing GPU adapter or ../shared/data a failure, never a skip.
+        run: || run(Command::new("cargo").args(["test", "--workspace"])),
+    },
+    Step {
+        name: "web-build",
+        run: || {
+            run(Command::new(cargo_bin_dir().join("trunk"))
+                .args(["build", "--release"])
+                .env("PATH", path_with_cargo_bin()))
+        },
+    },
+    Step {
+        name: "browser",
+        run: || run(Command::new("node").arg("tests/browser/smoke.mjs")),
+    },
+];
+
+fn test(args: &[String]) -> Result {
+    let mut skip: Vec<String> = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--skip" => skip.push(it.next().cloned().ok_or("--skip needs a step name")?),
+            other => return Err(format!("unknown argument {other:?}")),
+        }
+    }
+    for s in &skip {
+        if !STEPS.iter().any(|step| step.name == s) {
+            return Err(format!("no step named {s:?}"));
+        }
+    }
+    let t0 = Instant::now();
+    setup(Needs::all())?;
+    eprintln!("xtask: setup took {:.0} s", t0.elapsed().as_secs_f64());
+    let mut passed = 0;
+    let mut failed = Vec::new();
+    let mut times = Vec::new();
+    for step in STEPS {
+        if skip.iter().any(|s| s == step.name) {
+            eprintln!("xtask: step {} skipped on request (--skip)", step.name);
+            continue;
+        }
+        eprintln!("xtask: === step {} ===", step.name);
+        let t = Instant::now();
+        let r = (step.run)();
+        times.push((step.name, t.elapsed().as_secs_f64()));
+        match r {
+            Ok(()) => passed += 1,
+            Err(e) => {
+                eprintln!("xtask: step {} FAILED: {e}", step.name);
+                failed.push(step.name);
+            }
+        }
+    }
+    for (name, secs) in &times {
+        eprintln!("xtask: {name:<12} {secs:>7.1} s");
+    }
+    eprintln!("xtask: total {:.0} s", t0.elapsed().as_secs_f64());
+    if !skip.is_empty() {
+        eprintln!("xtask: skipped on request: {}", skip.join(", "));
+    }
+    println!("steps: {passed} passed, {} failed", failed.len());
+    if failed.is_empty() {
+        Ok(())
+    } else {
+        Err(format!("failed steps: {}", failed.join(", ")))
+    }
+}
