@@ -36,6 +36,17 @@ async fn run() -> Result<(), String> {
         publish_error("this browser has no WebGPU (navigator.gpu is missing)");
         return Ok(());
     }
+    match browser_adapter(&gpu).await {
+        Some(name) => BROWSER_ADAPTER.with(|a| *a.borrow_mut() = Some(name)),
+        None => {
+            show_message(&format!(
+                "{NO_WEBGPU}<p>Details: this browser has WebGPU but gave no graphics adapter \
+                 (hardware acceleration may be switched off).</p>"
+            ));
+            publish_error("WebGPU is present but navigator.gpu.requestAdapter() gave no adapter");
+            return Ok(());
+        }
+    }
     let canvas = document
         .get_element_by_id("shapecast_canvas")
         .ok_or("the page has no element with id shapecast_canvas")?
@@ -55,15 +66,61 @@ async fn run() -> Result<(), String> {
     match started {
         Ok(()) => hide("loading"),
         Err(e) => {
-        let detail = e.as_string().unwrap_or_else(|| format!("{e:?}"));
-        show_message(&format!(
-            "{NO_WEBGPU}<p>Details: the graphics adapter could not be started: {}</p>",
-            html_escape(&detail)
-        ));
-        publish_error(&format!("WebGPU could not be started: {detail}"));
+            let detail = e.as_string().unwrap_or_else(|| format!("{e:?}"));
+            show_message(&format!(
+                "{NO_WEBGPU}<p>Details: the graphics adapter could not be started: {}</p>",
+                html_escape(&detail)
+            ));
+            publish_error(&format!("WebGPU could not be started: {detail}"));
         }
     }
     Ok(())
+}
+
+thread_local! {
+    static BROWSER_ADAPTER: std::cell::RefCell<Option<String>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// The adapter as the browser describes it (vendor, architecture, description); wgpu's
+/// `AdapterInfo` on the web carries only the often empty description.
+pub fn browser_adapter_name() -> Option<String> {
+    BROWSER_ADAPTER.with(|a| a.borrow().clone())
+}
+
+/// Asks `navigator.gpu` for an adapter and describes it, or `None` when it gives none.
+async fn browser_adapter(gpu: &JsValue) -> Option<String> {
+    let get = |obj: &JsValue, key: &str| {
+        js_sys::Reflect::get(obj, &JsValue::from_str(key)).unwrap_or(JsValue::UNDEFINED)
+    };
+    let request = get(gpu, "requestAdapter")
+        .dyn_into::<js_sys::Function>()
+        .ok()?;
+    let promise = request
+        .call0(gpu)
+        .ok()?
+        .dyn_into::<js_sys::Promise>()
+        .ok()?;
+    let adapter = wasm_bindgen_futures::JsFuture::from(promise).await.ok()?;
+    if adapter.is_null() || adapter.is_undefined() {
+        return None;
+    }
+    let info = get(&adapter, "info");
+    let parts: Vec<String> = ["vendor", "architecture", "description"]
+        .iter()
+        .filter_map(|k| get(&info, k).as_string())
+        .filter(|s| !s.is_empty())
+        .collect();
+    let fallback = get(&info, "isFallbackAdapter").as_bool() == Some(true);
+    let mut name = if parts.is_empty() {
+        "WebGPU adapter".to_owned()
+    } else {
+        parts.join(" ")
+    };
+    if fallback {
+        name.push_str(" (software fallback)");
+    }
+    Some(name)
 }
 
 fn fail(message: &str) {

@@ -87,6 +87,8 @@ pub struct ShapecastApp {
 
 impl ShapecastApp {
     pub fn new(cc: &eframe::CreationContext<'_>) -> Self {
+        // Radiologists read in a dark room: dark theme regardless of the system's.
+        cc.egui_ctx.set_theme(egui::Theme::Dark);
         let gpu = cc
             .wgpu_render_state
             .as_ref()
@@ -94,8 +96,13 @@ impl ShapecastApp {
         let mut status = AppStatus::default();
         match &gpu {
             Some(g) => {
+                #[cfg(target_arch = "wasm32")]
+                let name = crate::web::browser_adapter_name()
+                    .unwrap_or_else(|| g.adapter_info.name.clone());
+                #[cfg(not(target_arch = "wasm32"))]
+                let name = g.adapter_info.name.clone();
                 status.adapter = Some(AdapterStatus {
-                    name: g.adapter_info.name.clone(),
+                    name,
                     backend: format!("{:?}", g.adapter_info.backend),
                 });
                 log::info!("GPU context:\n{}", g.describe());
@@ -127,6 +134,11 @@ impl ShapecastApp {
                 SlicePane::new(SliceAxis::Sagittal),
             ],
         }
+    }
+
+    /// The shared crosshair, voxel index.
+    pub fn crosshair(&self) -> [usize; 3] {
+        self.crosshair
     }
 
     /// The status as `window.shapecastStatus` shows it.
@@ -250,7 +262,7 @@ impl ShapecastApp {
 
     fn status_bar_ui(&self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
-            ui.label(format!("{}", self.status.phase.as_str()));
+            ui.label(self.status.phase.as_str());
             if let Some(a) = &self.status.adapter {
                 ui.separator();
                 ui.label(format!("GPU: {} ({})", a.name, a.backend));

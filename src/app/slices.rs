@@ -162,8 +162,14 @@ impl SlicePane {
             rect.top() + vy / h as f32 * rect.height()
         };
         let stroke = egui::Stroke::new(1.0, egui::Color32::from_rgb(80, 200, 80));
-        painter.line_segment([egui::pos2(x, rect.top()), egui::pos2(x, rect.bottom())], stroke);
-        painter.line_segment([egui::pos2(rect.left(), y), egui::pos2(rect.right(), y)], stroke);
+        painter.line_segment(
+            [egui::pos2(x, rect.top()), egui::pos2(x, rect.bottom())],
+            stroke,
+        );
+        painter.line_segment(
+            [egui::pos2(rect.left(), y), egui::pos2(rect.right(), y)],
+            stroke,
+        );
 
         // Patient-direction labels at the right and top edges.
         let dir = |a: usize| volume.direction.col(a);

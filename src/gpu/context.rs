@@ -135,9 +135,21 @@ impl GpuContext {
         let _ = writeln!(s, "adapter:                          {}", i.name);
         let _ = writeln!(s, "backend:                          {:?}", i.backend);
         let _ = writeln!(s, "device type:                      {:?}", i.device_type);
-        let _ = writeln!(s, "driver:                           {} {}", i.driver, i.driver_info);
-        let _ = writeln!(s, "max_texture_dimension_3d:         {}", l.max_texture_dimension_3d);
-        let _ = writeln!(s, "max_texture_dimension_2d:         {}", l.max_texture_dimension_2d);
+        let _ = writeln!(
+            s,
+            "driver:                           {} {}",
+            i.driver, i.driver_info
+        );
+        let _ = writeln!(
+            s,
+            "max_texture_dimension_3d:         {}",
+            l.max_texture_dimension_3d
+        );
+        let _ = writeln!(
+            s,
+            "max_texture_dimension_2d:         {}",
+            l.max_texture_dimension_2d
+        );
         let _ = writeln!(s, "max_buffer_size:                  {}", l.max_buffer_size);
         let _ = writeln!(
             s,
@@ -175,10 +187,10 @@ async fn pick_adapter(
     preference: AdapterPreference,
 ) -> Result<wgpu::Adapter, GpuError> {
     let env_name = std::env::var("WGPU_ADAPTER_NAME").ok();
-    if env_name.is_some() {
-        if let Ok(a) = wgpu::util::initialize_adapter_from_env(instance, None).await {
-            return Ok(a);
-        }
+    if env_name.is_some()
+        && let Ok(a) = wgpu::util::initialize_adapter_from_env(instance, None).await
+    {
+        return Ok(a);
     }
     #[cfg(not(target_arch = "wasm32"))]
     if preference == AdapterPreference::Cpu {
@@ -203,7 +215,10 @@ async fn pick_adapter(
         })
         .await
         .map_err(|_| GpuError::NoAdapter {
-            backends: format!("{:?}", wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all())),
+            backends: format!(
+                "{:?}",
+                wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all())
+            ),
             env_hint: match env_name {
                 Some(n) => format!("; WGPU_ADAPTER_NAME={n:?} matched no adapter"),
                 None => String::new(),

@@ -43,7 +43,7 @@ impl GpuVolume {
         let limit = ctx
             .limits
             .max_buffer_size
-            .min(u64::from(ctx.limits.max_storage_buffer_binding_size));
+            .min(ctx.limits.max_storage_buffer_binding_size);
         let dims_fit = [nx, ny, nz].iter().all(|&d| u32::try_from(d).is_ok());
         if bytes > limit || !dims_fit {
             return Err(UploadError::TooLarge {

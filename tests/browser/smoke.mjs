@@ -134,6 +134,10 @@ try {
     await page.goto(url);
     let status;
     try {
+      // The wasm must start within two minutes even on SwiftShader; a page that never leaves
+      // "starting" (a load error) fails fast instead of waiting for the full timeout.
+      await page.waitForFunction(() => window.shapecastStatus?.phase !== 'starting', null,
+        { timeout: 120000, polling: 250 });
       await page.waitForFunction(
         () => {
           const s = window.shapecastStatus;

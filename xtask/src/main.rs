@@ -106,6 +106,9 @@ fn setup(needs: Needs) -> Result {
         ensure_wasm_target()?;
         ensure_trunk()?;
         ensure_wasm_bindgen()?;
+        // Trunk runs cargo with --offline (it must never download), so every crate, including
+        // the wasm-only ones, has to be in cargo's cache first.
+        run(Command::new("cargo").args(["fetch", "--locked"]))?;
     }
     if needs.apt {
         ensure_apt()?;
@@ -131,11 +134,7 @@ fn ensure_trunk() -> Result {
         return Ok(());
     }
     eprintln!("xtask: installing trunk {TRUNK_VERSION} (about 12 minutes on 2 cores, once)");
-    run(Command::new("cargo").args([
-        "install",
-        "--locked",
-        &format!("trunk@{TRUNK_VERSION}"),
-    ]))
+    run(Command::new("cargo").args(["install", "--locked", &format!("trunk@{TRUNK_VERSION}")]))
 }
 
 /// The wasm-bindgen version Cargo.lock pins; the CLI must match it exactly.
@@ -145,7 +144,10 @@ fn locked_wasm_bindgen_version() -> Result<String> {
     let mut lines = lock.lines();
     while let Some(line) = lines.next() {
         if line.trim() == "name = \"wasm-bindgen\"" {
-            if let Some(v) = lines.next().and_then(|l| l.trim().strip_prefix("version = \"")) {
+            if let Some(v) = lines
+                .next()
+                .and_then(|l| l.trim().strip_prefix("version = \""))
+            {
                 return Ok(v.trim_end_matches('"').to_owned());
             }
         }
@@ -228,11 +230,16 @@ fn serve(args: &[String]) -> Result {
         apt: false,
         node: false,
     })?;
-    eprintln!(
-        "xtask: building and serving the app at http://127.0.0.1:{port}/ (Ctrl-C to stop)"
-    );
+    eprintln!("xtask: building and serving the app at http://127.0.0.1:{port}/ (Ctrl-C to stop)");
     run(Command::new(cargo_bin_dir().join("trunk"))
-        .args(["serve", "--release", "--address", "127.0.0.1", "--port", &port])
+        .args([
+            "serve",
+            "--release",
+            "--address",
+            "127.0.0.1",
+            "--port",
+            &port,
+        ])
         .env("PATH", path_with_cargo_bin()))
 }
 
