@@ -234,7 +234,9 @@ mod tests {
             DVec3::new(0.0, 0.0, -1.0),
             DVec3::new(-1.0, 0.0, 0.0),
         );
-        let p = v.world_from_voxel().transform_point3(DVec3::new(1.0, 2.0, 3.0));
+        let p = v
+            .world_from_voxel()
+            .transform_point3(DVec3::new(1.0, 2.0, 3.0));
         assert!((p - DVec3::new(-10.0 - 7.5, 20.5, 30.0 - 1.4)).length() < 1e-9);
         let back = v.voxel_from_world().transform_point3(p);
         assert!((back - DVec3::new(1.0, 2.0, 3.0)).length() < 1e-9);

@@ -50,7 +50,10 @@ fn app_reaches_ready_and_draws() {
         }
     }
     assert!(distinct.len() >= 64, "only {} colours", distinct.len());
-    assert!(bright > 5000, "only {bright} bright pixels: the MIP is missing");
+    assert!(
+        bright > 5000,
+        "only {bright} bright pixels: the MIP is missing"
+    );
 }
 
 #[test]
@@ -69,5 +72,9 @@ fn clicking_the_axial_pane_moves_the_crosshair() {
     harness.run_steps(2);
     let after = harness.state().crosshair();
     assert_eq!(after[2], before[2], "the axial slice itself stays");
-    assert_ne!((after[0], after[1]), (before[0], before[1]), "crosshair did not move");
+    assert_ne!(
+        (after[0], after[1]),
+        (before[0], before[1]),
+        "crosshair did not move"
+    );
 }

@@ -42,9 +42,20 @@ fn context_uses_adapter_limits() {
     assert!(ctx.limits.max_texture_dimension_3d >= defaults.max_texture_dimension_3d);
     assert!(ctx.limits.max_buffer_size >= defaults.max_buffer_size);
     if ctx.adapter_info.device_type == wgpu::DeviceType::Cpu {
-        assert!(ctx.limits.max_texture_dimension_3d >= 4096, "{}", ctx.describe());
-        assert!(ctx.limits.max_buffer_size >= (1 << 31) - 1, "{}", ctx.describe());
-        assert!(ctx.float32_filterable(), "lavapipe offers FLOAT32_FILTERABLE");
+        assert!(
+            ctx.limits.max_texture_dimension_3d >= 4096,
+            "{}",
+            ctx.describe()
+        );
+        assert!(
+            ctx.limits.max_buffer_size >= (1 << 31) - 1,
+            "{}",
+            ctx.describe()
+        );
+        assert!(
+            ctx.float32_filterable(),
+            "lavapipe offers FLOAT32_FILTERABLE"
+        );
     }
 }
 

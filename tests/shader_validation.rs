@@ -15,7 +15,10 @@ fn every_shader_file_is_listed() {
     on_disk.sort();
     let mut listed: Vec<String> = shaders::FILES.iter().map(|(n, _)| n.to_string()).collect();
     listed.sort();
-    assert_eq!(on_disk, listed, "shaders/ and gpu::shaders::FILES must agree");
+    assert_eq!(
+        on_disk, listed,
+        "shaders/ and gpu::shaders::FILES must agree"
+    );
 }
 
 #[test]

@@ -3,6 +3,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod features;
+pub mod info;
 pub mod phantom;
 pub mod reproduce;
 
@@ -26,6 +27,8 @@ pub enum Command {
     Phantom(phantom::PhantomArgs),
     /// Compute Hessian, Frangi, structure-tensor or RST features of a volume (CPU reference).
     Features(features::FeaturesArgs),
+    /// Print a volume's dimensions, spacing, orientation, intensity range, modality and warnings.
+    Info(info::InfoArgs),
     /// Reproduce the paper's experiments on the phantoms: Markdown report and PNG plots.
     Reproduce(reproduce::ReproduceArgs),
 }
@@ -38,6 +41,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Phantom(args) => phantom::run(args),
         Command::Features(args) => features::run(args),
         Command::Reproduce(args) => reproduce::run(args),
+        Command::Info(args) => info::run(&args),
     }
 }
 

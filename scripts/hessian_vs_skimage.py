@@ -1,0 +1,111 @@
+#!/usr/bin/env python3
+"""Compare Shapecast's CPU Hessian eigenvalues with scikit-image's on a real CT (issue 4).
+
+Runs `shapecast features INPUT --method hessian --eigen --sigma-mm S` (gamma-normalised
+eigenvalues sorted by magnitude, per mm), computes the same with scikit-image's
+hessian_matrix(use_gaussian_derivatives=True, mode="nearest") converted to mm and multiplied
+by sigma^2, and reports the Pearson correlation of each eigenvalue over all voxels (the issue
+asks for >= 0.999). Writes a Markdown snippet that `shapecast reproduce` includes.
+
+Needs: pip install scikit-image nibabel numpy. The default input is
+../shared/data/ct/CT_AVM.nii.gz (0.72 x 0.72 x 1.0 mm, so no axis is resampled).
+"""
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import nibabel as nib
+import numpy as np
+from skimage.feature import hessian_matrix
+
+
+def skimage_eigen(vol, spacing, sigma_mm):
+    sigma_vox = [sigma_mm / s for s in spacing]
+    h = hessian_matrix(vol, sigma=sigma_vox, mode="nearest", order="rc",
+                       use_gaussian_derivatives=True)
+    # Order "rc" for 3D: H00, H01, H02, H11, H12, H22 (per voxel^2) -> per mm^2, gamma = 1.
+    idx = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
+    m = np.zeros(vol.shape + (3, 3), dtype=np.float64)
+    for comp, (a, b) in zip(h, idx):
+        v = comp / (spacing[a] * spacing[b]) * sigma_mm ** 2
+        m[..., a, b] = v
+        m[..., b, a] = v
+    e = np.linalg.eigvalsh(m)
+    order = np.argsort(-np.abs(e), axis=-1, kind="stable")
+    return np.take_along_axis(e, order, axis=-1)
+
+
+def main():
+    here = os.path.dirname(os.path.abspath(__file__))
+    root = os.path.dirname(here)
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--input", default=os.path.join(root, "..", "shared", "data", "ct", "CT_AVM.nii.gz"))
+    p.add_argument("--sigma-mm", type=float, default=2.0)
+    p.add_argument("--shapecast", default=None, help="path of the shapecast binary (default: cargo run)")
+    p.add_argument("--out", default=os.path.join(root, "docs", "reproduction"),
+                   help="folder for hessian_vs_skimage.md")
+    args = p.parse_args()
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "eig.nii.gz")
+        cmd = ([args.shapecast] if args.shapecast else ["cargo", "run", "--quiet", "--"]) + [
+            "features", args.input, "--method", "hessian", "--eigen",
+            "--sigma-mm", str(args.sigma_mm), "--out", out]
+        t0 = time.time()
+        subprocess.run(cmd, check=True, cwd=root)
+        t_rust = time.time() - t0
+        ours = np.asarray(nib.load(out).dataobj, dtype=np.float64)
+    img = nib.load(args.input)
+    vol = np.asarray(img.dataobj, dtype=np.float64)  # slope/intercept applied by nibabel
+    spacing = [float(z) for z in img.header.get_zooms()[:3]]
+    t0 = time.time()
+    ref = skimage_eigen(vol, spacing, args.sigma_mm)
+    t_sk = time.time() - t0
+    ours = ours.reshape(vol.shape + (3,)) if ours.ndim != 4 else ours[..., :3] if ours.shape[3] == 3 else ours.reshape(vol.shape + (3,))
+    # Sorted by value, each eigenvalue is a continuous function of the matrix; sorted by
+    # magnitude (as the features use them) two eigenvalues of nearly equal size and opposite
+    # sign swap places on a rounding difference, so that comparison is reported but not judged.
+    ours_v, ref_v = np.sort(ours, axis=-1), np.sort(ref, axis=-1)
+    # Kernel radius per axis (3 sigma + 1 voxel): the interior excludes voxels whose kernel
+    # reaches past the border, where the two implementations replicate differently.
+    border = [int(np.ceil(3 * args.sigma_mm / sp)) + 1 for sp in spacing]
+    lines = []
+    ok = True
+    for c in range(3):
+        a, b = ours_v[..., c].ravel(), ref_v[..., c].ravel()
+        r = float(np.corrcoef(a, b)[0, 1])
+        rel = float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-12))
+        ok &= r >= 0.999
+        am, bm = ours[..., c].ravel(), ref[..., c].ravel()
+        r_mag = float(np.corrcoef(am, bm)[0, 1])
+        inner = tuple(slice(m, -m) for m in border)
+        ai, bi = ours_v[inner][..., c], ref_v[inner][..., c]
+        rel_in = float(np.abs(ai - bi).max() / max(np.abs(bi).max(), 1e-12))
+        lines.append(f"| {['smallest', 'middle', 'largest'][c]} / l{c} | {r:.6f} | {rel:.4f} | {rel_in:.4f} | {r_mag:.6f} |")
+    text = (
+        f"`scripts/hessian_vs_skimage.py` on `{os.path.basename(args.input)}` "
+        f"({'x'.join(map(str, vol.shape))} voxels at {', '.join(f'{s:.3f}' for s in spacing)} mm), "
+        f"sigma {args.sigma_mm} mm, gamma-normalised eigenvalues sorted by magnitude, against "
+        f"scikit-image's `hessian_matrix(use_gaussian_derivatives=True, mode='nearest')` "
+        f"(its Gaussian kernels are cut at 4 sigma, ours at 3 sigma + 1 voxel).\n\n"
+        "| eigenvalue (by value / by magnitude) | Pearson r, by value | max abs difference / max abs value, by value | the same away from the border | Pearson r, by magnitude |\n"
+        "| --- | --- | --- | --- | --- |\n" + "\n".join(lines) + "\n\n"
+        "The requirement is judged on the eigenvalues sorted by value: sorted by magnitude, two "
+        "eigenvalues of nearly equal size and opposite sign trade places on a rounding "
+        "difference, which is a labelling, not a numerical, disagreement. The largest differences "
+        "sit within one kernel radius of the volume's border.\n\n"
+        f"Requirement r >= 0.999: {'met' if ok else 'NOT met'}. "
+        f"Run time: shapecast {t_rust:.1f} s (including cargo), scikit-image {t_sk:.1f} s.\n"
+    )
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, "hessian_vs_skimage.md"), "w") as f:
+        f.write(text)
+    print(text)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,230 @@
+//! `shapecast features INPUT --method ... --out OUT.nii.gz`: the CPU reference features of a
+//! volume as a float32 NIfTI with the input's geometry and three components (V, A, B, or with
+//! `--eigen` the eigenvalues sorted by magnitude).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+
+use crate::cpu::pipeline::{self, Method, Request};
+use crate::cpu::{FeatureMap, Grid, OpacityRule, Preset, TransferFunction};
+use crate::io::{self, InputFile};
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MethodArg {
+    Hessian,
+    Li,
+    Frangi,
+    Gst,
+    Rst,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OpacityArg {
+    Consistent,
+    Paper,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TfArg {
+    /// The preset's transfer function refined by the measured noise.
+    Auto,
+    /// The preset's transfer function as it is.
+    Preset,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MapArg {
+    /// Paper eq. 1.
+    Simple,
+    /// Paper eq. 2 (Li et al.).
+    Li,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BackendArg {
+    Cpu,
+    Gpu,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct FeaturesArgs {
+    /// A volume file (NIfTI, NRRD, MetaImage, DICOM) or a folder holding a DICOM series or a
+    /// header with its data file.
+    pub input: PathBuf,
+    #[arg(long, value_enum)]
+    pub method: MethodArg,
+    /// Output file (.nii or .nii.gz).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// lymph-nodes, lung-nodules, airways or vessels: transfer function, scales and ray length.
+    #[arg(long, default_value = "lymph-nodes")]
+    pub preset: String,
+    /// Scales in mm (Hessian sigma; neighbourhood scale of the general structure tensor).
+    #[arg(long, value_delimiter = ',')]
+    pub sigma_mm: Option<Vec<f64>>,
+    /// RST ray count: 26, 42, 98, 218 or 386.
+    #[arg(long)]
+    pub rays: Option<usize>,
+    /// RST ray length R, mm.
+    #[arg(long)]
+    pub radius_mm: Option<f64>,
+    /// RST step dr, mm (0.25 by default, one voxel for --opacity paper).
+    #[arg(long)]
+    pub step_mm: Option<f64>,
+    #[arg(long, value_enum, default_value = "consistent")]
+    pub opacity: OpacityArg,
+    /// Transfer function lower end, HU (with --dmax; overrides the automatic one).
+    #[arg(long, requires = "dmax")]
+    pub dmin: Option<f64>,
+    /// Transfer function upper end, HU.
+    #[arg(long, requires = "dmin")]
+    pub dmax: Option<f64>,
+    #[arg(long, value_enum, default_value = "auto", conflicts_with = "dmin")]
+    pub tf: TfArg,
+    /// Map of the RST and structure-tensor features.
+    #[arg(long, value_enum, default_value = "li")]
+    pub map: MapArg,
+    /// Gradient scale sigma_g of the RST and the structure tensor, mm.
+    #[arg(long, default_value_t = crate::cpu::rst::DEFAULT_SIGMA_G_MM)]
+    pub sigma_g_mm: f64,
+    /// Frangi's c (default: half the largest Hessian norm of the whole volume, per scale).
+    #[arg(long)]
+    pub frangi_c: Option<f64>,
+    #[arg(long, value_enum, default_value = "cpu")]
+    pub backend: BackendArg,
+    /// Write the three eigenvalues sorted by magnitude instead of V, A, B.
+    #[arg(long)]
+    pub eigen: bool,
+}
+
+/// Reads a file, or every file of a folder, into loader inputs.
+pub fn read_input(path: &Path) -> anyhow::Result<Vec<InputFile>> {
+    let mut files = Vec::new();
+    if path.is_dir() {
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(path)
+            .with_context(|| format!("reading folder {}", path.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_file())
+            .collect();
+        entries.sort();
+        for p in entries {
+            let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+            files.push(InputFile::new(p.to_string_lossy(), bytes));
+        }
+    } else {
+        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        files.push(InputFile::new(path.to_string_lossy(), bytes));
+        // A header's data file sits beside it with the same stem (ras.hdr + ras.img,
+        // x.nhdr + x.raw.gz, x.mhd + x.raw): give the loader those siblings.
+        let name = path.to_string_lossy().to_lowercase();
+        let is_header = [".hdr", ".nhdr", ".mhd"].iter().any(|e| name.ends_with(e));
+        let dir = path.parent().map(|d| {
+            if d.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                d
+            }
+        });
+        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+        if let (true, Some(dir), Some(stem)) = (is_header, dir, stem) {
+            for e in std::fs::read_dir(dir)?.flatten() {
+                let p = e.path();
+                let same_stem = p
+                    .file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with(&format!("{stem}.")));
+                if same_stem && p.file_name() != path.file_name() && p.is_file() {
+                    files.push(InputFile::new(p.to_string_lossy(), std::fs::read(&p)?));
+                }
+            }
+        }
+    }
+    Ok(files)
+}
+
+pub fn request(args: &FeaturesArgs) -> anyhow::Result<Request> {
+    let method = match args.method {
+        MethodArg::Hessian => Method::Hessian,
+        MethodArg::Li => Method::Li,
+        MethodArg::Frangi => Method::Frangi,
+        MethodArg::Gst => Method::Gst,
+        MethodArg::Rst => Method::Rst,
+    };
+    let preset = Preset::from_name(&args.preset).with_context(|| {
+        let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
+        format!(
+            "unknown preset {:?}; known: {}",
+            args.preset,
+            names.join(", ")
+        )
+    })?;
+    let mut req = Request::new(method);
+    req.preset = preset;
+    req.sigmas_mm = args.sigma_mm.clone();
+    req.rays = args.rays;
+    req.radius_mm = args.radius_mm;
+    req.step_mm = args.step_mm;
+    req.rule = match args.opacity {
+        OpacityArg::Consistent => OpacityRule::Consistent,
+        OpacityArg::Paper => OpacityRule::Paper,
+    };
+    req.tf = match (args.dmin, args.dmax, args.tf) {
+        (Some(lo), Some(hi), _) => {
+            if !(lo >= 0.0 && hi >= lo) {
+                bail!("--dmin {lo} --dmax {hi}: need 0 <= dmin <= dmax");
+            }
+            Some(TransferFunction::new(lo, hi))
+        }
+        (_, _, TfArg::Preset) => Some(preset.transfer_function()),
+        _ => None,
+    };
+    req.rst_map = match args.map {
+        MapArg::Simple => FeatureMap::Simple,
+        MapArg::Li => FeatureMap::Li,
+    };
+    req.eigen = args.eigen;
+    req.frangi_c = args.frangi_c;
+    req.sigma_g_mm = args.sigma_g_mm;
+    Ok(req)
+}
+
+pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
+    if args.backend == BackendArg::Gpu {
+        bail!(
+            "the GPU backend arrives with issue 5 (GPU feature kernels); use --backend cpu for now"
+        );
+    }
+    let req = request(&args)?;
+    let files = read_input(&args.input)?;
+    let loaded = io::load(&files).with_context(|| format!("loading {}", args.input.display()))?;
+    for n in &loaded.notes {
+        eprintln!("note: {n}");
+    }
+    let volume = loaded.volume;
+    for w in &volume.warnings {
+        eprintln!("warning: {w}");
+    }
+    let grid = Grid::of(&volume);
+    let values = volume.to_f32();
+    let started = std::time::Instant::now();
+    let outcome = pipeline::compute(&grid, &values, &req)?;
+    for n in &outcome.notes {
+        eprintln!("{n}");
+    }
+    let name = args.out.to_string_lossy().into_owned();
+    let channels: Vec<&[f32]> = outcome.components.iter().map(|c| c.as_slice()).collect();
+    let bytes = io::nifti::write(&name, &volume, &channels, io::nifti::WriteIntent::Vector)?;
+    std::fs::write(&args.out, bytes).with_context(|| format!("writing {name}"))?;
+    let what = if args.eigen {
+        "eigenvalues l0, l1, l2"
+    } else {
+        "vesselness, airwayness, blobness"
+    };
+    println!(
+        "{:?} on {:?} voxels in {:.1} s -> {name} ({what})",
+        args.method,
+        volume.dims,
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}

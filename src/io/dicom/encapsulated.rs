@@ -1,0 +1,238 @@
+//! Encapsulated (compressed) pixel data: our own RLE Lossless decoder, and a check of each JPEG
+//! and JPEG 2000 frame's declared size against Rows/Columns before dicom-rs decodes it. Both
+//! exist because dicom-rs 0.10's adapters index out of bounds (a panic, which on wasm32 ends
+//! the page) on a truncated RLE segment or a codestream larger than Rows x Columns.
+
+use dicom_core::DicomValue;
+use dicom_dictionary_std::tags;
+use dicom_object::DefaultDicomObject;
+
+use super::FileHeader;
+use crate::io::LoadError;
+
+pub(super) const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+
+/// The fragments of encapsulated pixel data, or `None` for native pixel data.
+pub(super) fn fragments(obj: &DefaultDicomObject) -> Option<Vec<&[u8]>> {
+    let element = obj.element_opt(tags::PIXEL_DATA).ok()??;
+    match element.value() {
+        DicomValue::PixelSequence(seq) => Some(seq.fragments().iter().map(Vec::as_slice).collect()),
+        _ => None,
+    }
+}
+
+/// Decodes RLE Lossless frames (DICOM PS3.5 annex G) into little-endian samples, one frame
+/// per fragment.
+pub(super) fn decode_rle(
+    file: &str,
+    h: &FileHeader,
+    frags: &[&[u8]],
+) -> Result<Vec<u8>, LoadError> {
+    let err = |message: String| LoadError::Dicom {
+        file: file.to_owned(),
+        message: format!("RLE Lossless: {message}"),
+    };
+    let bytes_per_sample = match h.bits_allocated {
+        8 => 1,
+        16 => 2,
+        other => return Err(err(format!("BitsAllocated {other} is not supported"))),
+    };
+    let n_frames = h.frames.len();
+    if frags.len() < n_frames {
+        return Err(err(format!(
+            "{} fragments for {n_frames} frames",
+            frags.len()
+        )));
+    }
+    let pixels = h.rows as usize * h.cols as usize;
+    let frame_bytes = pixels * bytes_per_sample;
+    let total = frame_bytes
+        .checked_mul(n_frames)
+        .ok_or_else(|| err("frame size overflows".to_owned()))?;
+    // Even the best RLE needs 2 bytes per 128 output bytes: a smaller input cannot hold the frames.
+    let compressed: usize = frags.iter().map(|f| f.len()).sum();
+    if total / 64 > compressed.saturating_add(1 << 16) {
+        return Err(err(format!(
+            "{compressed} compressed bytes cannot hold {total} bytes of pixels"
+        )));
+    }
+    let mut out = crate::io::raw::try_vec::<u8>(file, "RLE pixel data", total)?;
+    let mut segment = Vec::with_capacity(pixels);
+    for (f, frag) in frags.iter().take(n_frames).enumerate() {
+        if frag.len() < 64 {
+            return Err(err(format!(
+                "frame {f}: fragment of {} bytes has no RLE header",
+                frag.len()
+            )));
+        }
+        let word = |i: usize| {
+            u32::from_le_bytes([
+                frag[4 * i],
+                frag[4 * i + 1],
+                frag[4 * i + 2],
+                frag[4 * i + 3],
+            ]) as usize
+        };
+        let n_segments = word(0);
+        if n_segments != bytes_per_sample {
+            return Err(err(format!(
+                "frame {f}: {n_segments} segments; expected {bytes_per_sample}"
+            )));
+        }
+        for s in 0..n_segments {
+            let start = word(1 + s);
+            let end = if s + 1 < n_segments {
+                word(2 + s)
+            } else {
+                frag.len()
+            };
+            let data = frag.get(start..end).ok_or_else(|| {
+                err(format!(
+                    "frame {f}: segment {s} at {start}..{end} lies outside the {} byte fragment",
+                    frag.len()
+                ))
+            })?;
+            segment.clear();
+            unpack_bits(data, pixels, &mut segment);
+            if segment.len() < pixels {
+                return Err(err(format!(
+                    "frame {f}: segment {s} decodes to {} of {pixels} bytes",
+                    segment.len()
+                )));
+            }
+            // Segment 0 holds the most significant bytes; output is little endian.
+            let byte_in_sample = bytes_per_sample - 1 - s;
+            let base = f * frame_bytes;
+            for (p, &b) in segment.iter().enumerate() {
+                out[base + p * bytes_per_sample + byte_in_sample] = b;
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// PackBits, stopping once `limit` bytes are out.
+fn unpack_bits(data: &[u8], limit: usize, out: &mut Vec<u8>) {
+    let mut i = 0;
+    while i < data.len() && out.len() < limit {
+        let n = data[i] as i8;
+        i += 1;
+        if n >= 0 {
+            let count = n as usize + 1;
+            let end = (i + count).min(data.len());
+            let take = (end - i).min(limit - out.len());
+            out.extend_from_slice(&data[i..i + take]);
+            i = end;
+        } else if n != -128 {
+            let count = (1 - n as isize) as usize;
+            let Some(&b) = data.get(i) else {
+                break;
+            };
+            i += 1;
+            let take = count.min(limit - out.len());
+            out.extend(std::iter::repeat_n(b, take));
+        }
+    }
+}
+
+/// Rows, columns, bits and components a JPEG (SOF marker) or JPEG 2000 (SIZ marker) codestream
+/// declares, if it can be found in its first bytes.
+fn declared_size(codestream: &[u8]) -> Option<(u32, u32, u32, u32)> {
+    let be16 = |at: usize| {
+        codestream
+            .get(at..at + 2)
+            .map(|b| u32::from(u16::from_be_bytes([b[0], b[1]])))
+    };
+    let be32 = |at: usize| {
+        codestream
+            .get(at..at + 4)
+            .map(|b| u32::from_be_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    // JPEG 2000: SOC (FF4F) then SIZ (FF51), possibly inside a JP2 box structure.
+    if let Some(at) = codestream
+        .windows(4)
+        .take(4096)
+        .position(|w| w == [0xFF, 0x4F, 0xFF, 0x51])
+    {
+        let siz = at + 2; // the FF51 marker; offsets below are from ISO 15444-1 A.5.1
+        let width = be32(siz + 6)?.checked_sub(be32(siz + 14)?)?;
+        let height = be32(siz + 10)?.checked_sub(be32(siz + 18)?)?;
+        let components = be16(siz + 38)?;
+        let bits = u32::from(codestream.get(siz + 40)? & 0x7F) + 1;
+        return Some((height, width, bits, components));
+    }
+    // JPEG: walk the markers after SOI to the first SOFn.
+    if codestream.get(0..2) != Some(&[0xFF, 0xD8]) {
+        return None;
+    }
+    let mut at = 2;
+    while at + 4 <= codestream.len() && at < 1 << 20 {
+        if codestream[at] != 0xFF {
+            return None;
+        }
+        let marker = codestream[at + 1];
+        if marker == 0xFF {
+            at += 1;
+            continue;
+        }
+        let len = be16(at + 2)? as usize;
+        if (0xC0..=0xCF).contains(&marker) && !matches!(marker, 0xC4 | 0xC8 | 0xCC) {
+            let bits = u32::from(*codestream.get(at + 4)?);
+            let height = be16(at + 5)?;
+            let width = be16(at + 7)?;
+            let components = u32::from(*codestream.get(at + 9)?);
+            return Some((height, width, bits, components));
+        }
+        at += 2 + len;
+    }
+    None
+}
+
+/// Refuses JPEG and JPEG 2000 frames whose codestream declares another size, more bits or more
+/// components than the DICOM header (dicom-rs would write past its buffer).
+pub(super) fn check_codestreams(
+    file: &str,
+    h: &FileHeader,
+    frags: &[&[u8]],
+) -> Result<(), LoadError> {
+    for (f, frag) in frags.iter().enumerate() {
+        let Some((rows, cols, bits, components)) = declared_size(frag) else {
+            continue;
+        };
+        // JPEG 2000 heights can come out as 0 for a zero-height image; treat as a mismatch.
+        if rows != h.rows
+            || cols != h.cols
+            || bits > u32::from(h.bits_allocated)
+            || components != u32::from(h.samples_per_pixel)
+        {
+            return Err(LoadError::Dicom {
+                file: file.to_owned(),
+                message: format!(
+                    "fragment {f}: the compressed image is {cols}x{rows}, {bits} bits, {components} component(s), but the header says {}x{}, {} bits allocated, {} sample(s) per pixel",
+                    h.cols, h.rows, h.bits_allocated, h.samples_per_pixel
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packbits() {
+        let mut out = Vec::new();
+        // literal run of 2, repeat 3 x 7, no-op, literal 1
+        unpack_bits(&[1, 10, 11, (-2i8) as u8, 7, 0x80, 0, 42], 100, &mut out);
+        assert_eq!(out, vec![10, 11, 7, 7, 7, 42]);
+        out.clear();
+        unpack_bits(&[(-127i8) as u8, 1], 5, &mut out);
+        assert_eq!(out.len(), 5);
+        out.clear();
+        unpack_bits(&[5, 1], 10, &mut out);
+        assert_eq!(out, vec![1]);
+    }
+}

@@ -1,0 +1,393 @@
+//! DICOM reading with dicom-rs: the per-file header scan (geometry of every frame, classic or
+//! enhanced multi-frame) and pixel decoding with the pure-Rust codecs; `series` assembles the
+//! frames of one series into a volume.
+
+mod encapsulated;
+mod series;
+mod validate;
+
+pub(crate) use series::load_series;
+
+use dicom_dictionary_std::tags;
+use dicom_encoding::transfer_syntax::TransferSyntaxIndex;
+use dicom_object::{DefaultDicomObject, InMemDicomObject, OpenFileOptions};
+use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
+use glam::DVec3;
+
+use super::{InputFile, Limits, LoadError};
+use crate::volume::Modality;
+
+/// A DICOM file without the 128-byte preamble still starts with the "DICM" magic.
+pub(crate) fn looks_like_bare_dataset(bytes: &[u8]) -> bool {
+    bytes.starts_with(b"DICM")
+}
+
+/// The message of an error and of its sources, on one line.
+fn chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut cur = e.source();
+    while let Some(inner) = cur {
+        let m = inner.to_string();
+        if !s.contains(&m) {
+            s.push_str(": ");
+            s.push_str(&m);
+        }
+        cur = inner.source();
+    }
+    s
+}
+
+/// Parses a DICOM file from bytes; with `headers_only` it stops before the pixel data.
+pub(super) fn open(file: &InputFile, headers_only: bool) -> Result<DefaultDicomObject, LoadError> {
+    let bytes = file.bytes.as_slice();
+    let body = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
+        &bytes[128..]
+    } else {
+        bytes
+    };
+    validate::check_lengths(&file.name, body)?;
+    let mut options = OpenFileOptions::new().read_preamble(dicom_object::file::ReadPreamble::Never);
+    if headers_only {
+        options = options.read_until(tags::PIXEL_DATA);
+    }
+    options.from_reader(body).map_err(|e| {
+        // An unknown transfer syntax is the most useful thing to name.
+        if let Some(uid) = sniff_transfer_syntax(bytes)
+            && TransferSyntaxRegistry.get(&uid).is_none()
+        {
+            return LoadError::UnsupportedTransferSyntax {
+                file: file.name.clone(),
+                uid,
+                name: "unknown".to_owned(),
+                reason: "dicom-rs does not know this transfer syntax".to_owned(),
+            };
+        }
+        LoadError::Dicom {
+            file: file.name.clone(),
+            message: chain(&e),
+        }
+    })
+}
+
+/// The Transfer Syntax UID (0002,0010) read straight from the file meta group, which is always
+/// explicit VR little endian; used only to name the syntax in an error.
+fn sniff_transfer_syntax(bytes: &[u8]) -> Option<String> {
+    let needle = [0x02, 0x00, 0x10, 0x00, b'U', b'I'];
+    let head = &bytes[..bytes.len().min(4096)];
+    let at = head.windows(needle.len()).position(|w| w == needle)?;
+    let len_bytes = head.get(at + 6..at + 8)?;
+    let len = usize::from(u16::from_le_bytes([len_bytes[0], len_bytes[1]]));
+    let value = head.get(at + 8..at + 8 + len)?;
+    let s = String::from_utf8_lossy(value)
+        .trim_end_matches(['\0', ' '])
+        .to_owned();
+    (!s.is_empty()).then_some(s)
+}
+
+/// Checks that dicom-rs can decode the pixel data of this transfer syntax with the codecs built
+/// in (all pure Rust), and names it otherwise.
+pub(super) fn check_transfer_syntax(file: &str, uid: &str) -> Result<(), LoadError> {
+    let uid = uid.trim_end_matches(['\0', ' ']);
+    let Some(ts) = TransferSyntaxRegistry.get(uid) else {
+        return Err(LoadError::UnsupportedTransferSyntax {
+            file: file.to_owned(),
+            uid: uid.to_owned(),
+            name: "unknown".to_owned(),
+            reason: "dicom-rs does not know this transfer syntax".to_owned(),
+        });
+    };
+    if !ts.can_decode_all() {
+        let reason = if ts.name().contains("JPEG-LS") {
+            "no pure-Rust JPEG-LS decoder builds for the browser (dicom-rs decodes JPEG-LS only with the CharLS C library); convert the series to an uncompressed or JPEG 2000 syntax, e.g. with dcmdjpls or gdcmconv"
+        } else {
+            "no decoder for it is built into Shapecast (only pure-Rust codecs are: deflate, RLE, JPEG, JPEG 2000)"
+        };
+        return Err(LoadError::UnsupportedTransferSyntax {
+            file: file.to_owned(),
+            uid: uid.to_owned(),
+            name: ts.name().to_owned(),
+            reason: reason.to_owned(),
+        });
+    }
+    Ok(())
+}
+
+/// The registry's name of a transfer syntax, for messages.
+pub(super) fn transfer_syntax_name(uid: &str) -> String {
+    TransferSyntaxRegistry
+        .get(uid.trim_end_matches(['\0', ' ']))
+        .map_or_else(|| "unknown".to_owned(), |ts| ts.name().to_owned())
+}
+
+fn elem_str(obj: &InMemDicomObject, tag: dicom_core::Tag) -> Option<String> {
+    let e = obj.element_opt(tag).ok()??;
+    let s = e.to_str().ok()?;
+    let s = s.trim_matches(['\0', ' ']).to_owned();
+    (!s.is_empty()).then_some(s)
+}
+
+fn elem_floats(obj: &InMemDicomObject, tag: dicom_core::Tag) -> Option<Vec<f64>> {
+    let v = obj.element_opt(tag).ok()??.to_multi_float64().ok()?;
+    v.iter().all(|x| x.is_finite()).then_some(v)
+}
+
+fn elem_int(obj: &InMemDicomObject, tag: dicom_core::Tag) -> Option<i64> {
+    let e = obj.element_opt(tag).ok()??;
+    e.to_int::<i64>().ok().or_else(|| {
+        e.to_float64()
+            .ok()
+            .filter(|f| f.is_finite() && f.fract() == 0.0)
+            .map(|f| f as i64)
+    })
+}
+
+/// The first item of a sequence.
+fn first_item(obj: &InMemDicomObject, tag: dicom_core::Tag) -> Option<&InMemDicomObject> {
+    obj.element_opt(tag).ok()??.items()?.first()
+}
+
+/// What one frame (a classic slice, or one frame of a multi-frame object) says about itself.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(super) struct FrameInfo {
+    pub position: Option<DVec3>,
+    /// Row direction then column direction (ImageOrientationPatient).
+    pub orientation: Option<[f64; 6]>,
+    /// Spacing between rows, then between columns (PixelSpacing order).
+    pub pixel_spacing: Option<[f64; 2]>,
+    pub thickness: Option<f64>,
+    pub spacing_between: Option<f64>,
+    pub slope: f64,
+    pub intercept: f64,
+}
+
+/// The header of one image file, as far as grouping and assembling a series needs.
+#[derive(Clone, Debug)]
+pub(super) struct FileHeader {
+    pub series_uid: String,
+    pub series_description: String,
+    pub sop_instance_uid: String,
+    pub instance_number: Option<i64>,
+    pub modality: Modality,
+    pub modality_name: String,
+    pub transfer_syntax: String,
+    pub rows: u32,
+    pub cols: u32,
+    pub bits_allocated: u16,
+    pub bits_stored: u16,
+    pub signed: bool,
+    pub samples_per_pixel: u16,
+    pub photometric: String,
+    pub frames: Vec<FrameInfo>,
+    pub warnings: Vec<String>,
+}
+
+fn frame_info(levels: &[Option<&InMemDicomObject>]) -> FrameInfo {
+    // The first level that has a value wins: per-frame group, shared group, top level.
+    let find = |seq: Option<dicom_core::Tag>, tag: dicom_core::Tag| -> Option<Vec<f64>> {
+        levels.iter().flatten().find_map(|obj| match seq {
+            Some(s) => first_item(obj, s).and_then(|i| elem_floats(i, tag)),
+            None => elem_floats(obj, tag),
+        })
+    };
+    let position = find(
+        Some(tags::PLANE_POSITION_SEQUENCE),
+        tags::IMAGE_POSITION_PATIENT,
+    )
+    .or_else(|| find(None, tags::IMAGE_POSITION_PATIENT))
+    .filter(|v| v.len() == 3)
+    .map(|v| DVec3::new(v[0], v[1], v[2]));
+    let orientation = find(
+        Some(tags::PLANE_ORIENTATION_SEQUENCE),
+        tags::IMAGE_ORIENTATION_PATIENT,
+    )
+    .or_else(|| find(None, tags::IMAGE_ORIENTATION_PATIENT))
+    .filter(|v| v.len() == 6)
+    .map(|v| std::array::from_fn(|i| v[i]));
+    let pixel_spacing = find(Some(tags::PIXEL_MEASURES_SEQUENCE), tags::PIXEL_SPACING)
+        .or_else(|| find(None, tags::PIXEL_SPACING))
+        .or_else(|| find(None, tags::IMAGER_PIXEL_SPACING))
+        .filter(|v| v.len() == 2 && v[0] > 0.0 && v[1] > 0.0)
+        .map(|v| [v[0], v[1]]);
+    let thickness = find(Some(tags::PIXEL_MEASURES_SEQUENCE), tags::SLICE_THICKNESS)
+        .or_else(|| find(None, tags::SLICE_THICKNESS))
+        .and_then(|v| v.first().copied())
+        .filter(|t| *t > 0.0);
+    let spacing_between = find(
+        Some(tags::PIXEL_MEASURES_SEQUENCE),
+        tags::SPACING_BETWEEN_SLICES,
+    )
+    .or_else(|| find(None, tags::SPACING_BETWEEN_SLICES))
+    .and_then(|v| v.first().copied())
+    .filter(|t| *t > 0.0);
+    let slope = find(
+        Some(tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE),
+        tags::RESCALE_SLOPE,
+    )
+    .or_else(|| find(None, tags::RESCALE_SLOPE))
+    .and_then(|v| v.first().copied())
+    .filter(|s| *s != 0.0)
+    .unwrap_or(1.0);
+    let intercept = find(
+        Some(tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE),
+        tags::RESCALE_INTERCEPT,
+    )
+    .or_else(|| find(None, tags::RESCALE_INTERCEPT))
+    .and_then(|v| v.first().copied())
+    .unwrap_or(0.0);
+    FrameInfo {
+        position,
+        orientation,
+        pixel_spacing,
+        thickness,
+        spacing_between,
+        slope,
+        intercept,
+    }
+}
+
+/// Largest frame count accepted from a header before the pixel data are seen.
+const MAX_FRAMES: i64 = 1 << 20;
+
+/// Reads what a file's header says; `Ok(None)` for a DICOM file without an image (a DICOMDIR,
+/// a structured report).
+pub(super) fn read_header(
+    file: &InputFile,
+    limits: &Limits,
+) -> Result<Option<FileHeader>, LoadError> {
+    let obj = open(file, true)?;
+    let (Some(rows), Some(cols)) = (elem_int(&obj, tags::ROWS), elem_int(&obj, tags::COLUMNS))
+    else {
+        return Ok(None);
+    };
+    let name = file.name.as_str();
+    if !(1..=65535).contains(&rows) || !(1..=65535).contains(&cols) {
+        return Err(LoadError::header(
+            name,
+            "Rows/Columns",
+            format!("{rows} x {cols}"),
+        ));
+    }
+    let mut warnings = Vec::new();
+    let n_frames = elem_int(&obj, tags::NUMBER_OF_FRAMES).unwrap_or(1);
+    if !(1..=MAX_FRAMES).contains(&n_frames) {
+        return Err(LoadError::header(
+            name,
+            "NumberOfFrames",
+            format!("is {n_frames}"),
+        ));
+    }
+    // Every frame needs at least a byte of the file, and uncompressed frames need all their
+    // bytes: checked here, before a per-frame table or any pixel buffer is made.
+    let file_len = file.bytes.len() as u64;
+    if n_frames as u64 > file_len {
+        return Err(LoadError::truncated(
+            name,
+            format!("{n_frames} frames"),
+            n_frames as u64,
+            file_len,
+        ));
+    }
+    let ts = obj
+        .meta()
+        .transfer_syntax()
+        .trim_end_matches(['\0', ' '])
+        .to_owned();
+    let bits = elem_int(&obj, tags::BITS_ALLOCATED)
+        .unwrap_or(16)
+        .clamp(1, 64) as u64;
+    let spp = elem_int(&obj, tags::SAMPLES_PER_PIXEL)
+        .unwrap_or(1)
+        .clamp(1, 4) as u64;
+    let pixel_bytes = (rows as u64 * cols as u64 * spp * n_frames as u64 * bits).div_ceil(8);
+    if matches!(
+        ts.as_str(),
+        "1.2.840.10008.1.2" | "1.2.840.10008.1.2.1" | "1.2.840.10008.1.2.2"
+    ) && pixel_bytes > file_len
+    {
+        return Err(LoadError::truncated(
+            name,
+            format!("{n_frames} frame(s) of {cols}x{rows} pixels at {bits} bits"),
+            pixel_bytes,
+            file_len,
+        ));
+    }
+    let out_bytes = rows as u64 * cols as u64 * n_frames as u64 * if bits > 16 { 4 } else { 2 };
+    if out_bytes > limits.max_voxel_bytes {
+        return Err(LoadError::TooLarge {
+            file: name.to_owned(),
+            what: format!("{n_frames} frame(s) of {cols}x{rows} pixels"),
+            bytes: out_bytes,
+            limit: limits.max_voxel_bytes,
+        });
+    }
+    let shared = first_item(&obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
+    let per_frame = obj
+        .element_opt(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .ok()
+        .flatten()
+        .and_then(|e| e.items());
+    if let Some(items) = per_frame
+        && items.len() as i64 != n_frames
+    {
+        warnings.push(format!(
+            "{name}: {} per-frame functional groups for {n_frames} frames",
+            items.len()
+        ));
+    }
+    let top: &InMemDicomObject = &obj;
+    let frames: Vec<FrameInfo> = (0..n_frames as usize)
+        .map(|f| frame_info(&[per_frame.and_then(|items| items.get(f)), shared, Some(top)]))
+        .collect();
+    let modality_name = elem_str(&obj, tags::MODALITY).unwrap_or_default();
+    let modality = match modality_name.as_str() {
+        "CT" => Modality::Ct,
+        "MR" => Modality::Mr,
+        _ => Modality::Unknown,
+    };
+    let bits_allocated = elem_int(&obj, tags::BITS_ALLOCATED).unwrap_or(16);
+    let bits_stored = elem_int(&obj, tags::BITS_STORED).unwrap_or(bits_allocated);
+    Ok(Some(FileHeader {
+        series_uid: elem_str(&obj, tags::SERIES_INSTANCE_UID)
+            .unwrap_or_else(|| "(no SeriesInstanceUID)".to_owned()),
+        series_description: elem_str(&obj, tags::SERIES_DESCRIPTION).unwrap_or_default(),
+        sop_instance_uid: elem_str(&obj, tags::SOP_INSTANCE_UID).unwrap_or_default(),
+        instance_number: elem_int(&obj, tags::INSTANCE_NUMBER),
+        modality,
+        modality_name,
+        transfer_syntax: obj.meta().transfer_syntax().to_owned(),
+        rows: rows as u32,
+        cols: cols as u32,
+        bits_allocated: u16::try_from(bits_allocated).unwrap_or(0),
+        bits_stored: u16::try_from(bits_stored).unwrap_or(0),
+        signed: elem_int(&obj, tags::PIXEL_REPRESENTATION) == Some(1),
+        samples_per_pixel: u16::try_from(elem_int(&obj, tags::SAMPLES_PER_PIXEL).unwrap_or(1))
+            .unwrap_or(0),
+        photometric: elem_str(&obj, tags::PHOTOMETRIC_INTERPRETATION)
+            .unwrap_or_else(|| "MONOCHROME2".to_owned()),
+        frames,
+        warnings,
+    }))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transfer_syntax_support_is_named() {
+        assert!(check_transfer_syntax("f", "1.2.840.10008.1.2.1").is_ok());
+        assert!(check_transfer_syntax("f", "1.2.840.10008.1.2.4.90").is_ok());
+        let e = check_transfer_syntax("f", "1.2.840.10008.1.2.4.80")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("JPEG-LS") && e.contains("1.2.840.10008.1.2.4.80"),
+            "{e}"
+        );
+        let e = check_transfer_syntax("f", "1.2.3.4")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("1.2.3.4"), "{e}");
+    }
+}

@@ -1,0 +1,572 @@
+//! Assembling DICOM files into one volume: grouping by SeriesInstanceUID (the largest series is
+//! loaded, the others are listed), ordering frames by ImagePositionPatient projected on the
+//! slice normal, slice spacing from the positions (with warnings for a disagreeing
+//! SliceThickness, uneven or missing slices), rescale, and pixel decoding frame by frame.
+
+use std::collections::BTreeMap;
+
+use dicom_pixeldata::PixelDecoder;
+use glam::DVec3;
+
+use super::{FileHeader, FrameInfo, check_transfer_syntax, encapsulated, open, read_header};
+use crate::io::geometry::{check_origin, from_axis_vectors};
+use crate::io::raw::{self, try_vec};
+use crate::io::{InputFile, Limits, LoadError, Loaded};
+use crate::volume::{Volume, Voxels};
+
+/// One frame of the chosen series: which file, which frame in it, and its header values.
+struct Frame<'a> {
+    file: usize,
+    frame: usize,
+    info: &'a FrameInfo,
+}
+
+/// Loads the largest series among DICOM files (in any order, from any folders).
+pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loaded, LoadError> {
+    let mut notes = Vec::new();
+    let mut headers: Vec<(usize, FileHeader)> = Vec::new();
+    let mut first_error = None;
+    for (i, f) in files.iter().enumerate() {
+        match read_header(f, limits) {
+            Ok(Some(h)) => headers.push((i, h)),
+            Ok(None) => notes.push(format!("{}: DICOM without an image (skipped)", f.name)),
+            Err(e) => {
+                notes.push(format!("skipped: {e}"));
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    if headers.is_empty() {
+        return Err(first_error.unwrap_or_else(|| LoadError::DicomSeries {
+            series: "-".to_owned(),
+            message: "none of the DICOM files holds an image".to_owned(),
+        }));
+    }
+
+    // Group by series (and image size, which must be shared within a volume); BTreeMap keeps
+    // the grouping independent of the order the files came in.
+    let mut groups: BTreeMap<(String, u32, u32), Vec<usize>> = BTreeMap::new();
+    for (h_index, (_, h)) in headers.iter().enumerate() {
+        groups
+            .entry((h.series_uid.clone(), h.rows, h.cols))
+            .or_default()
+            .push(h_index);
+    }
+    let frame_count = |members: &Vec<usize>| {
+        members
+            .iter()
+            .map(|&m| headers[m].1.frames.len())
+            .sum::<usize>()
+    };
+    let chosen_key = groups
+        .iter()
+        .max_by(|a, b| {
+            frame_count(a.1)
+                .cmp(&frame_count(b.1))
+                .then_with(|| b.0.cmp(a.0))
+        })
+        .map(|(k, _)| k.clone())
+        .ok_or_else(|| LoadError::DicomSeries {
+            series: "-".to_owned(),
+            message: "no series".to_owned(),
+        })?;
+    for (key, members) in &groups {
+        if *key != chosen_key {
+            let h = &headers[members[0]].1;
+            notes.push(format!(
+                "another series was not loaded: {} \"{}\" ({} images of {}x{}, {})",
+                key.0,
+                h.series_description,
+                frame_count(members),
+                key.2,
+                key.1,
+                h.modality_name
+            ));
+        }
+    }
+    let members = groups.remove(&chosen_key).unwrap_or_default();
+    let series = chosen_key.0.clone();
+    let chosen: Vec<(&InputFile, &FileHeader)> = members
+        .iter()
+        .map(|&m| (files[headers[m].0], &headers[m].1))
+        .collect();
+    let mut volume = assemble(&series, &chosen, limits)?;
+    // Sorted so that the volume does not depend on the order the files came in.
+    let mut file_warnings: Vec<String> = chosen
+        .iter()
+        .flat_map(|(_, h)| h.warnings.iter().cloned())
+        .collect();
+    file_warnings.sort();
+    file_warnings.dedup();
+    volume.warnings.extend(file_warnings);
+    Ok(Loaded { volume, notes })
+}
+
+/// Geometry and voxels of one series.
+fn assemble(
+    series: &str,
+    files: &[(&InputFile, &FileHeader)],
+    limits: &Limits,
+) -> Result<Volume, LoadError> {
+    let first = files[0].1;
+    let name0 = files[0].0.name.as_str();
+    let mut warnings = Vec::new();
+    if first.samples_per_pixel != 1 {
+        return Err(LoadError::unsupported(
+            name0,
+            "DICOM image",
+            format!(
+                "{} samples per pixel ({}); only greyscale volumes are loaded",
+                first.samples_per_pixel, first.photometric
+            ),
+        ));
+    }
+    for (f, h) in files {
+        if (h.bits_allocated, h.signed, h.samples_per_pixel)
+            != (first.bits_allocated, first.signed, first.samples_per_pixel)
+        {
+            return Err(LoadError::DicomSeries {
+                series: series.to_owned(),
+                message: format!(
+                    "{} stores pixels differently from {name0} (BitsAllocated/PixelRepresentation)",
+                    f.name
+                ),
+            });
+        }
+    }
+    if !matches!(first.bits_allocated, 1 | 8 | 16 | 32) {
+        return Err(LoadError::unsupported(
+            name0,
+            "BitsAllocated",
+            first.bits_allocated.to_string(),
+        ));
+    }
+
+    let mut frames: Vec<Frame<'_>> = files
+        .iter()
+        .enumerate()
+        .flat_map(|(fi, (_, h))| {
+            h.frames.iter().enumerate().map(move |(k, info)| Frame {
+                file: fi,
+                frame: k,
+                info,
+            })
+        })
+        .collect();
+
+    // Orientation and in-plane spacing from the first frame that has them.
+    let iop = frames.iter().find_map(|f| f.info.orientation);
+    let (row_dir, col_dir) = match iop {
+        Some(o) => (DVec3::new(o[0], o[1], o[2]), DVec3::new(o[3], o[4], o[5])),
+        None => {
+            warnings.push("no ImageOrientationPatient: axes are assumed to be L, P, S".to_owned());
+            (DVec3::X, DVec3::Y)
+        }
+    };
+    let (row_dir, col_dir) = (row_dir.normalize_or_zero(), col_dir.normalize_or_zero());
+    let normal = row_dir.cross(col_dir);
+    if normal.length() < 0.5 {
+        return Err(LoadError::header(
+            name0,
+            "ImageOrientationPatient",
+            format!("{iop:?} does not give two perpendicular directions"),
+        ));
+    }
+    let normal = normal.normalize();
+    if frames.iter().any(|f| {
+        f.info.orientation.is_some_and(|o| {
+            (DVec3::new(o[0], o[1], o[2]) - row_dir).length() > 1e-3
+                || (DVec3::new(o[3], o[4], o[5]) - col_dir).length() > 1e-3
+        })
+    }) {
+        warnings.push(
+            "ImageOrientationPatient differs between slices; the first slice's is used".to_owned(),
+        );
+    }
+    let ps = frames.iter().find_map(|f| f.info.pixel_spacing);
+    let pixel_spacing = ps.unwrap_or_else(|| {
+        warnings.push("no PixelSpacing: 1 mm assumed".to_owned());
+        [1.0, 1.0]
+    });
+    if frames.iter().any(|f| {
+        f.info.pixel_spacing.is_some_and(|p| {
+            (p[0] - pixel_spacing[0]).abs() > 1e-4 || (p[1] - pixel_spacing[1]).abs() > 1e-4
+        })
+    }) {
+        warnings.push("PixelSpacing differs between slices; the first slice's is used".to_owned());
+    }
+
+    // Order: by position along the normal when every frame has one; ties (and frames without
+    // positions) by InstanceNumber, SOPInstanceUID and frame number, so that the input order of
+    // the files never matters.
+    let all_positioned = frames.iter().all(|f| f.info.position.is_some());
+    let proj = |f: &Frame<'_>| f.info.position.map_or(0.0, |p| p.dot(normal));
+    let tie = |f: &Frame<'_>| {
+        (
+            files[f.file].1.instance_number,
+            files[f.file].1.sop_instance_uid.clone(),
+            files[f.file].0.name.clone(),
+            f.frame,
+        )
+    };
+    if all_positioned {
+        frames.sort_by(|a, b| {
+            proj(a)
+                .total_cmp(&proj(b))
+                .then_with(|| tie(a).cmp(&tie(b)))
+        });
+        let before = frames.len();
+        frames.dedup_by(|b, a| (proj(b) - proj(a)).abs() < 1e-3);
+        if frames.len() < before {
+            warnings.push(format!(
+                "{} images share a position with another (several echoes, phases or duplicates?); the first at each position is used",
+                before - frames.len()
+            ));
+        }
+    } else {
+        if frames.len() > 1 {
+            let some = frames.iter().any(|f| f.info.position.is_some());
+            warnings.push(format!(
+                "ImagePositionPatient is missing on {} images: slices are ordered by InstanceNumber and frame number",
+                if some { "some" } else { "all" }
+            ));
+        }
+        frames.sort_by_key(|a| tie(a));
+    }
+
+    // The slice step: from the first to the last position (keeping a gantry tilt's shear),
+    // else from SpacingBetweenSlices or SliceThickness.
+    let n = frames.len();
+    let thickness = frames.iter().find_map(|f| f.info.thickness);
+    let between = frames.iter().find_map(|f| f.info.spacing_between);
+    let first_pos = frames[0].info.position;
+    let slice_step = if all_positioned && n > 1 {
+        let (p0, p1) = (
+            first_pos.unwrap_or_default(),
+            frames[n - 1].info.position.unwrap_or_default(),
+        );
+        let step = (p1 - p0) / (n - 1) as f64;
+        let gaps: Vec<f64> = frames
+            .windows(2)
+            .map(|w| proj(&w[1]) - proj(&w[0]))
+            .collect();
+        let mut sorted = gaps.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        let (lo, hi) = (sorted[0], sorted[sorted.len() - 1]);
+        if hi - lo > (0.01 * median).max(0.005) {
+            let missing: usize = gaps
+                .iter()
+                .map(|g| ((g / median).round() as i64 - 1).max(0) as usize)
+                .sum();
+            if missing > 0 {
+                warnings.push(format!(
+                    "uneven slice positions: gaps from {lo:.3} to {hi:.3} mm (median {median:.3} mm); about {missing} slice(s) seem to be missing. The volume uses the average spacing {:.3} mm",
+                    step.length()
+                ));
+            } else {
+                warnings.push(format!(
+                    "uneven slice positions: gaps from {lo:.3} to {hi:.3} mm (median {median:.3} mm); the volume uses the average spacing {:.3} mm",
+                    step.length()
+                ));
+            }
+        }
+        if let Some(t) = thickness
+            && (t - median).abs() > 0.01 * median.max(t) + 1e-3
+        {
+            warnings.push(format!(
+                "SliceThickness is {t} mm but the slice positions are {median:.3} mm apart; the spacing from the positions is used"
+            ));
+        }
+        step
+    } else {
+        let s = between.or(thickness).unwrap_or_else(|| {
+            if n > 1 {
+                warnings.push("no slice positions, SpacingBetweenSlices or SliceThickness: 1 mm between slices assumed".to_owned());
+            }
+            1.0
+        });
+        if n > 1 && !all_positioned && (between.is_some() || thickness.is_some()) {
+            warnings.push(format!(
+                "slice spacing {s} mm taken from {} as the images have no positions",
+                if between.is_some() {
+                    "SpacingBetweenSlices"
+                } else {
+                    "SliceThickness"
+                }
+            ));
+        }
+        normal * s
+    };
+    if first_pos.is_none() {
+        warnings.push("no ImagePositionPatient: the origin is set to 0".to_owned());
+    }
+    let axes = [
+        row_dir * pixel_spacing[1],
+        col_dir * pixel_spacing[0],
+        slice_step,
+    ];
+    let (spacing_mm, direction) = from_axis_vectors(
+        name0,
+        "ImagePositionPatient/ImageOrientationPatient",
+        axes,
+        &mut warnings,
+    )?;
+    let origin_mm = check_origin(
+        name0,
+        "ImagePositionPatient",
+        first_pos.unwrap_or(DVec3::ZERO),
+    )?;
+
+    let (voxels, value_slope, value_intercept) =
+        read_pixels(series, files, &frames, limits, &mut warnings)?;
+    let dims = [first.cols as usize, first.rows as usize, n];
+    let source = if files.len() == 1 {
+        files[0].0.name.clone()
+    } else {
+        format!("DICOM series {series} ({} files)", files.len())
+    };
+    Ok(Volume {
+        dims,
+        spacing_mm,
+        origin_mm,
+        direction,
+        voxels,
+        value_slope,
+        value_intercept,
+        modality: first.modality,
+        source,
+        warnings,
+    })
+}
+
+/// How decoded samples are stored in the volume.
+#[derive(Clone, Copy, PartialEq)]
+enum Target {
+    U8,
+    I16,
+    U16,
+    F32,
+}
+
+/// Transfer syntaxes whose pixel data are stored as they are (possibly deflated as a whole).
+const NATIVE_SYNTAXES: &[&str] = &[
+    "1.2.840.10008.1.2",
+    "1.2.840.10008.1.2.1",
+    "1.2.840.10008.1.2.2",
+    "1.2.840.10008.1.2.1.99",
+    "1.2.840.10008.1.2.8.1",
+];
+
+/// Decodes each file's pixel data once and copies its frames into their slots.
+fn read_pixels(
+    series: &str,
+    files: &[(&InputFile, &FileHeader)],
+    frames: &[Frame<'_>],
+    limits: &Limits,
+    warnings: &mut Vec<String>,
+) -> Result<(Voxels, f32, f32), LoadError> {
+    let first = files[0].1;
+    let frame_len = first.rows as usize * first.cols as usize;
+    let count = (frame_len as u64).saturating_mul(frames.len() as u64);
+    // One rescale for the whole volume keeps the raw type; differing ones need physical floats.
+    let same_rescale = frames.iter().all(|f| {
+        f.info.slope == frames[0].info.slope && f.info.intercept == frames[0].info.intercept
+    });
+    let target = if !same_rescale {
+        warnings.push("RescaleSlope/RescaleIntercept differ between slices: values are stored as 32-bit floats".to_owned());
+        Target::F32
+    } else {
+        match (first.bits_allocated, first.signed) {
+            (1, _) | (8, false) => Target::U8,
+            (8, true) => Target::I16,
+            (16, false) => Target::U16,
+            (16, true) => Target::I16,
+            _ => Target::F32,
+        }
+    };
+    let out_bytes = match target {
+        Target::U8 => 1,
+        Target::I16 | Target::U16 => 2,
+        Target::F32 => 4,
+    };
+    raw::check_voxel_budget(files[0].0.name.as_str(), count, out_bytes, limits)?;
+    let count = count as usize;
+    let mut voxels = match target {
+        Target::U8 => Voxels::U8(try_vec(&files[0].0.name, "voxels", count)?),
+        Target::I16 => Voxels::I16(try_vec(&files[0].0.name, "voxels", count)?),
+        Target::U16 => Voxels::U16(try_vec(&files[0].0.name, "voxels", count)?),
+        Target::F32 => Voxels::F32(try_vec(&files[0].0.name, "voxels", count)?),
+    };
+
+    // Slots of each file's frames, so that every file is opened and decoded once.
+    let mut slots_of_file: Vec<Vec<(usize, usize)>> = vec![Vec::new(); files.len()];
+    for (slot, f) in frames.iter().enumerate() {
+        slots_of_file[f.file].push((f.frame, slot));
+    }
+    let mut samples = Vec::new();
+    for (fi, slots) in slots_of_file.iter().enumerate() {
+        if slots.is_empty() {
+            continue;
+        }
+        let (file, header) = files[fi];
+        check_transfer_syntax(&file.name, &header.transfer_syntax)?;
+        if header.bits_allocated == 1
+            && !NATIVE_SYNTAXES.contains(&header.transfer_syntax.trim_end_matches(['\0', ' ']))
+        {
+            // dicom-rs's RLE and JPEG 2000 decoders handle 8 and 16 bits only.
+            return Err(LoadError::UnsupportedTransferSyntax {
+                file: file.name.clone(),
+                uid: header.transfer_syntax.clone(),
+                name: super::transfer_syntax_name(&header.transfer_syntax),
+                reason: "1-bit (binary segmentation) pixel data can be read only uncompressed or deflated".to_owned(),
+            });
+        }
+        let obj = open(file, false)?;
+        let fragments = encapsulated::fragments(&obj);
+        let rle_data;
+        let decoded;
+        let data: &[u8] = match &fragments {
+            Some(frags)
+                if header.transfer_syntax.trim_end_matches(['\0', ' '])
+                    == encapsulated::RLE_LOSSLESS =>
+            {
+                rle_data = encapsulated::decode_rle(&file.name, header, frags)?;
+                &rle_data
+            }
+            _ => {
+                if let Some(frags) = &fragments {
+                    encapsulated::check_codestreams(&file.name, header, frags)?;
+                }
+                decoded = obj.decode_pixel_data().map_err(|e| LoadError::Dicom {
+                    file: file.name.clone(),
+                    message: format!(
+                        "cannot decode pixel data ({}): {}",
+                        header.transfer_syntax,
+                        super::chain(&e)
+                    ),
+                })?;
+                decoded.data()
+            }
+        };
+        let n_frames = header.frames.len();
+        for &(frame, slot) in slots {
+            let slice_error = |message: String| LoadError::DicomSlice {
+                series: series.to_owned(),
+                slice: slot,
+                file: file.name.clone(),
+                message,
+            };
+            samples.clear();
+            frame_samples(header, data, frame, n_frames, frame_len, &mut samples)
+                .map_err(slice_error)?;
+            let info = frames[slot].info;
+            let dst = slot * frame_len..(slot + 1) * frame_len;
+            match &mut voxels {
+                Voxels::U8(v) => v[dst]
+                    .iter_mut()
+                    .zip(&samples)
+                    .for_each(|(o, s)| *o = *s as u8),
+                Voxels::I16(v) => v[dst]
+                    .iter_mut()
+                    .zip(&samples)
+                    .for_each(|(o, s)| *o = *s as i16),
+                Voxels::U16(v) => v[dst]
+                    .iter_mut()
+                    .zip(&samples)
+                    .for_each(|(o, s)| *o = *s as u16),
+                Voxels::F32(v) => {
+                    let (a, b) = if same_rescale {
+                        (1.0, 0.0)
+                    } else {
+                        (info.slope, info.intercept)
+                    };
+                    v[dst]
+                        .iter_mut()
+                        .zip(&samples)
+                        .for_each(|(o, s)| *o = (*s as f64 * a + b) as f32)
+                }
+            }
+        }
+    }
+    let (slope, intercept) = if same_rescale {
+        (frames[0].info.slope as f32, frames[0].info.intercept as f32)
+    } else {
+        (1.0, 0.0)
+    };
+    Ok((voxels, slope, intercept))
+}
+
+/// The stored values of one frame as i64 (sign-extended or masked to BitsStored), checking that
+/// the decoded data hold the whole frame.
+fn frame_samples(
+    h: &FileHeader,
+    data: &[u8],
+    frame: usize,
+    n_frames: usize,
+    frame_len: usize,
+    out: &mut Vec<i64>,
+) -> Result<(), String> {
+    let total_pixels = frame_len.saturating_mul(n_frames);
+    match h.bits_allocated {
+        1 => {
+            // Native 1-bit data are expanded to one byte per pixel by dicom-pixeldata; some
+            // codecs keep them packed. Either way a pixel is 0 or 1.
+            if data.len() >= total_pixels {
+                let src = data
+                    .get(frame * frame_len..(frame + 1) * frame_len)
+                    .ok_or("pixel data too short")?;
+                out.extend(src.iter().map(|&b| i64::from(b != 0)));
+            } else {
+                let start_bit = frame * frame_len;
+                let needed = (start_bit + frame_len).div_ceil(8);
+                if data.len() < needed {
+                    return Err(format!(
+                        "pixel data has {} bytes; {} frames of 1-bit pixels need {}",
+                        data.len(),
+                        n_frames,
+                        total_pixels.div_ceil(8)
+                    ));
+                }
+                out.extend(
+                    (start_bit..start_bit + frame_len)
+                        .map(|bit| i64::from((data[bit / 8] >> (bit % 8)) & 1)),
+                );
+            }
+            Ok(())
+        }
+        8 | 16 | 32 => {
+            let bytes = usize::from(h.bits_allocated / 8);
+            let frame_bytes = frame_len * bytes;
+            let src = data
+                .get(frame * frame_bytes..(frame + 1) * frame_bytes)
+                .ok_or_else(|| {
+                    format!(
+                        "pixel data has {} bytes; frame {} of {}x{} pixels at {} bits needs {}",
+                        data.len(),
+                        frame,
+                        h.cols,
+                        h.rows,
+                        h.bits_allocated,
+                        (frame + 1) * frame_bytes
+                    )
+                })?;
+            let stored = u32::from(h.bits_stored.clamp(1, h.bits_allocated));
+            let shift = 64 - stored;
+            out.extend(src.chunks_exact(bytes).map(|c| {
+                let raw = match bytes {
+                    1 => u64::from(c[0]),
+                    2 => u64::from(u16::from_le_bytes([c[0], c[1]])),
+                    _ => u64::from(u32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+                };
+                if h.signed {
+                    ((raw << shift) as i64) >> shift
+                } else {
+                    ((raw << shift) >> shift) as i64
+                }
+            }));
+            Ok(())
+        }
+        other => Err(format!("BitsAllocated {other} is not supported")),
+    }
+}

@@ -1,0 +1,260 @@
+//! Readers and writers of volume files. Everything here takes bytes and returns a `Volume` or a
+//! typed error; nothing here touches wgpu or the file system (the CLI and the web page read files).
+//!
+//! The entry point is [`load`]: it sniffs each file by content (not only by extension), pairs
+//! headers with their data files (.hdr/.img, .nhdr + data, .mhd + .raw), and gathers DICOM files
+//! into the largest series. Every size a header declares is checked against the bytes present and
+//! against [`Limits`] before anything is allocated.
+
+mod dicom;
+mod error;
+mod geometry;
+mod metaimage;
+pub mod nifti;
+mod nrrd;
+mod raw;
+
+pub use error::LoadError;
+
+use crate::volume::Volume;
+
+/// One file as the user gave it: its name (a path or just a file name; only the last component
+/// is used to pair headers with data files) and its whole content.
+#[derive(Clone, Debug)]
+pub struct InputFile {
+    pub name: String,
+    pub bytes: Vec<u8>,
+}
+
+impl InputFile {
+    pub fn new(name: impl Into<String>, bytes: Vec<u8>) -> Self {
+        Self {
+            name: name.into(),
+            bytes,
+        }
+    }
+}
+
+/// A loaded volume and what the loader wants the user to know about the files it was given
+/// (other DICOM series that were not chosen, files that were ignored). Problems with the volume
+/// itself are in `volume.warnings`.
+#[derive(Clone, Debug)]
+pub struct Loaded {
+    pub volume: Volume,
+    pub notes: Vec<String>,
+}
+
+/// Memory caps applied before allocating. The defaults let a 512x512x2000 i16 CT (1 GiB) through.
+#[derive(Clone, Copy, Debug)]
+pub struct Limits {
+    /// Largest voxel buffer a loader may allocate, in bytes.
+    pub max_voxel_bytes: u64,
+    /// Largest output of any one decompression (gzip, zlib), in bytes.
+    pub max_decompressed_bytes: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        // wasm32 has a 4 GiB address space in total, so the browser gets lower caps.
+        if cfg!(target_arch = "wasm32") {
+            Self {
+                max_voxel_bytes: 1536 << 20,
+                max_decompressed_bytes: 2 << 30,
+            }
+        } else {
+            Self {
+                max_voxel_bytes: 4 << 30,
+                max_decompressed_bytes: 8 << 30,
+            }
+        }
+    }
+}
+
+/// What a file's content says it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// NIfTI-1 or NIfTI-2 (single file, or the header of a .hdr/.img pair), or Analyze 7.5.
+    Nifti,
+    /// NIfTI inside gzip (.nii.gz).
+    NiftiGz,
+    Nrrd,
+    MetaImage,
+    Dicom,
+    /// Not recognised: a data file of a detached header, or something else.
+    Unknown,
+}
+
+/// Identifies a file by its first bytes (the name only breaks ties for headerless data).
+pub fn sniff(name: &str, bytes: &[u8]) -> Format {
+    if raw::is_gzip(bytes) {
+        // Peek at the first kilobyte of the decompressed stream.
+        if let Ok((head, _)) = raw::gunzip_prefix(name, bytes, 1024)
+            && nifti::looks_like_header(&head)
+        {
+            return Format::NiftiGz;
+        }
+        return Format::Unknown;
+    }
+    if bytes.starts_with(b"NRRD000") {
+        return Format::Nrrd;
+    }
+    if nifti::looks_like_header(bytes) {
+        return Format::Nifti;
+    }
+    if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
+        return Format::Dicom;
+    }
+    if metaimage::looks_like_header(bytes) {
+        return Format::MetaImage;
+    }
+    if dicom::looks_like_bare_dataset(bytes) {
+        return Format::Dicom;
+    }
+    Format::Unknown
+}
+
+/// The last path component of a name, for pairing headers with data files and for messages.
+pub(crate) fn base_name(name: &str) -> &str {
+    name.rsplit(['/', '\\']).next().unwrap_or(name)
+}
+
+/// Finds the companion data file a header names, among the files the user gave.
+#[derive(Clone, Copy)]
+pub(crate) struct Companions<'a> {
+    files: &'a [InputFile],
+}
+
+impl<'a> Companions<'a> {
+    pub(crate) fn new(files: &'a [InputFile]) -> Self {
+        Self { files }
+    }
+
+    /// A file whose last path component equals that of `wanted` (exactly, else ignoring case).
+    pub(crate) fn find(&self, wanted: &str) -> Option<&'a InputFile> {
+        let wanted = base_name(wanted.trim());
+        self.files
+            .iter()
+            .find(|f| base_name(&f.name) == wanted)
+            .or_else(|| {
+                self.files
+                    .iter()
+                    .find(|f| base_name(&f.name).eq_ignore_ascii_case(wanted))
+            })
+    }
+}
+
+/// Loads one volume from the given files with the default [`Limits`].
+pub fn load(files: &[InputFile]) -> Result<Loaded, LoadError> {
+    load_with(files, &Limits::default())
+}
+
+/// Loads one volume from the given files: a single file, a header and its data file, or a set
+/// of DICOM files (the largest series is chosen; the others are listed in the notes).
+pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadError> {
+    if files.is_empty() {
+        return Err(LoadError::NoFiles);
+    }
+    let formats: Vec<Format> = files.iter().map(|f| sniff(&f.name, &f.bytes)).collect();
+    let dicom_count = formats.iter().filter(|f| **f == Format::Dicom).count();
+    let primary = formats
+        .iter()
+        .position(|f| !matches!(f, Format::Dicom | Format::Unknown));
+
+    let companions = Companions::new(files);
+    let mut notes = Vec::new();
+    let mut loaded = if let (Some(p), true) = (primary, dicom_count <= 1) {
+        let file = &files[p];
+        let volume = match formats[p] {
+            Format::Nifti | Format::NiftiGz => nifti::read(file, companions, limits)?,
+            Format::Nrrd => nrrd::read(file, companions, limits)?,
+            Format::MetaImage => metaimage::read(file, companions, limits)?,
+            _ => unreachable_format(file)?,
+        };
+        let used = used_companions(&volume);
+        for (f, fmt) in files.iter().zip(&formats) {
+            if !std::ptr::eq(f, file)
+                && !used.iter().any(|u| base_name(&f.name) == u.as_str())
+                && *fmt != Format::Unknown
+            {
+                notes.push(format!(
+                    "{}: ignored (only one volume is loaded at a time)",
+                    f.name
+                ));
+            }
+        }
+        Loaded {
+            volume,
+            notes: Vec::new(),
+        }
+    } else if dicom_count > 0 {
+        let dicom_files: Vec<&InputFile> = files
+            .iter()
+            .zip(&formats)
+            .filter(|(_, f)| **f == Format::Dicom)
+            .map(|(f, _)| f)
+            .collect();
+        for (f, fmt) in files.iter().zip(&formats) {
+            if *fmt != Format::Dicom {
+                notes.push(format!("{}: ignored (not DICOM)", f.name));
+            }
+        }
+        dicom::load_series(&dicom_files, limits)?
+    } else {
+        let file = &files[0];
+        let reason = if raw::is_gzip(&file.bytes) {
+            "gzip-compressed, but not a NIfTI file; a compressed data file needs its header"
+                .to_owned()
+        } else if file.bytes.is_empty() {
+            "the file is empty".to_owned()
+        } else {
+            "no NIfTI, NRRD, MetaImage or DICOM header found; a raw data file (.img, .raw) needs its header".to_owned()
+        };
+        return Err(LoadError::UnknownFormat {
+            file: file.name.clone(),
+            reason,
+        });
+    };
+    notes.append(&mut loaded.notes);
+    loaded.notes = notes;
+    Ok(loaded)
+}
+
+fn unreachable_format(file: &InputFile) -> Result<Volume, LoadError> {
+    Err(LoadError::UnknownFormat {
+        file: file.name.clone(),
+        reason: "internal: no reader for this format".to_owned(),
+    })
+}
+
+/// The data files a loader recorded in `volume.source` as "header + data" so that they are
+/// not reported as ignored.
+fn used_companions(volume: &Volume) -> Vec<String> {
+    volume
+        .source
+        .split(" + ")
+        .skip(1)
+        .map(|s| base_name(s).to_owned())
+        .collect()
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nothing_and_garbage_are_errors() {
+        assert!(matches!(load(&[]), Err(LoadError::NoFiles)));
+        let r = load(&[InputFile::new("x.bin", vec![1, 2, 3])]);
+        assert!(matches!(r, Err(LoadError::UnknownFormat { .. })), "{r:?}");
+        let r = load(&[InputFile::new("empty", Vec::new())]);
+        assert!(matches!(r, Err(LoadError::UnknownFormat { .. })), "{r:?}");
+    }
+
+    #[test]
+    fn base_names() {
+        assert_eq!(base_name("a/b/c.nii"), "c.nii");
+        assert_eq!(base_name("c:\\x\\y.raw"), "y.raw");
+        assert_eq!(base_name("plain"), "plain");
+    }
+}

@@ -1,0 +1,604 @@
+//! NRRD reader (teem's format, as Slicer writes it): attached (.nrrd) and detached (.nhdr plus a
+//! data file given beside it) data; raw, gzip and ascii encodings; either endianness; space
+//! directions and space origin in any of the anatomical spaces, converted to LPS. Non-spatial
+//! axes (a DWI's gradient list, a time axis) are reduced to their first element, with a warning.
+
+use std::collections::HashMap;
+
+use glam::DVec3;
+
+use super::geometry::{check_origin, from_axis_vectors};
+use super::raw::{self, Endian, SampleLayout, SampleType};
+use super::{Companions, InputFile, Limits, LoadError};
+use crate::volume::{Modality, Volume};
+
+/// Largest header we parse; real ones are a few kilobytes (a 451-direction DWI is 40 KB).
+const MAX_HEADER_BYTES: usize = 4 << 20;
+
+/// The text header as key -> value (keys lower-cased, key/value pairs "k:=v" skipped) and the
+/// offset of the attached data (just past the blank line), if any.
+fn split_header(
+    file: &str,
+    bytes: &[u8],
+) -> Result<(HashMap<String, String>, Option<usize>), LoadError> {
+    let limit = bytes.len().min(MAX_HEADER_BYTES);
+    let mut fields = HashMap::new();
+    let mut pos = 0;
+    let mut data_start = None;
+    let mut first = true;
+    while pos < limit {
+        let end = bytes[pos..limit]
+            .iter()
+            .position(|&b| b == b'\n')
+            .map(|e| pos + e);
+        let line_end = end.unwrap_or(limit);
+        let mut line = &bytes[pos..line_end];
+        if line.last() == Some(&b'\r') {
+            line = &line[..line.len() - 1];
+        }
+        pos = line_end + 1;
+        if first {
+            first = false;
+            if !line.starts_with(b"NRRD000") {
+                return Err(LoadError::header(
+                    file,
+                    "magic",
+                    "expected NRRD000x on the first line",
+                ));
+            }
+            continue;
+        }
+        if line.is_empty() {
+            // The blank line ends the header; attached data follow it.
+            data_start = Some(pos.min(bytes.len()));
+            break;
+        }
+        if line.starts_with(b"#") {
+            continue;
+        }
+        let text = String::from_utf8_lossy(line);
+        if let Some((k, v)) = text.split_once(":=") {
+            let _ = (k, v); // key/value comments: not needed
+            continue;
+        }
+        match text.split_once(": ") {
+            Some((k, v)) => {
+                fields.insert(k.trim().to_ascii_lowercase(), v.trim().to_owned());
+            }
+            None => {
+                return Err(LoadError::header(
+                    file,
+                    "header line",
+                    format!(
+                        "\"{}\" is not \"field: value\"",
+                        text.chars().take(80).collect::<String>()
+                    ),
+                ));
+            }
+        }
+        if end.is_none() {
+            break;
+        }
+    }
+    if pos >= MAX_HEADER_BYTES && data_start.is_none() && bytes.len() > MAX_HEADER_BYTES {
+        return Err(LoadError::header(
+            file,
+            "header",
+            "no blank line ends the header within 4 MiB",
+        ));
+    }
+    Ok((fields, data_start))
+}
+
+fn get<'a>(fields: &'a HashMap<String, String>, names: &[&str]) -> Option<&'a str> {
+    names
+        .iter()
+        .find_map(|n| fields.get(*n).map(String::as_str))
+}
+
+fn sample_type(file: &str, name: &str) -> Result<SampleType, LoadError> {
+    Ok(match name.trim() {
+        "signed char" | "int8" | "int8_t" => SampleType::I8,
+        "uchar" | "unsigned char" | "uint8" | "uint8_t" => SampleType::U8,
+        "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => {
+            SampleType::I16
+        }
+        "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => {
+            SampleType::U16
+        }
+        "int" | "signed int" | "int32" | "int32_t" => SampleType::I32,
+        "uint" | "unsigned int" | "uint32" | "uint32_t" => SampleType::U32,
+        "longlong"
+        | "long long"
+        | "long long int"
+        | "signed long long"
+        | "signed long long int"
+        | "int64"
+        | "int64_t" => SampleType::I64,
+        "ulonglong" | "unsigned long long" | "unsigned long long int" | "uint64" | "uint64_t" => {
+            SampleType::U64
+        }
+        "float" => SampleType::F32,
+        "double" => SampleType::F64,
+        other => return Err(LoadError::unsupported(file, "NRRD type", other.to_owned())),
+    })
+}
+
+/// Parses "(x,y,z)" into a vector; `None` for "none".
+fn parse_vector(file: &str, field: &str, token: &str) -> Result<Option<Vec<f64>>, LoadError> {
+    let t = token.trim();
+    if t == "none" {
+        return Ok(None);
+    }
+    let inner = t
+        .strip_prefix('(')
+        .and_then(|s| s.strip_suffix(')'))
+        .ok_or_else(|| {
+            LoadError::header(file, field, format!("\"{t}\" is not a vector like (x,y,z)"))
+        })?;
+    inner
+        .split(',')
+        .map(|x| {
+            x.trim()
+                .parse::<f64>()
+                .map_err(|_| LoadError::header(file, field, format!("\"{x}\" is not a number")))
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map(Some)
+}
+
+/// Splits "(a,b,c) none (d,e,f)" into its tokens (vectors may contain spaces after commas).
+fn vector_tokens(value: &str) -> Vec<String> {
+    let mut tokens = Vec::new();
+    let mut cur = String::new();
+    let mut depth = 0;
+    for ch in value.chars() {
+        match ch {
+            '(' => {
+                depth += 1;
+                cur.push(ch);
+            }
+            ')' => {
+                depth -= 1;
+                cur.push(ch);
+            }
+            c if c.is_whitespace() && depth == 0 => {
+                if !cur.is_empty() {
+                    tokens.push(std::mem::take(&mut cur));
+                }
+            }
+            c => cur.push(c),
+        }
+    }
+    if !cur.is_empty() {
+        tokens.push(cur);
+    }
+    tokens
+}
+
+/// The sign flips that take a NRRD space to LPS, or `None` for a non-anatomical space.
+fn space_to_lps(space: &str) -> Option<DVec3> {
+    match space.trim().to_ascii_lowercase().as_str() {
+        "left-posterior-superior" | "lps" => Some(DVec3::new(1.0, 1.0, 1.0)),
+        "right-anterior-superior" | "ras" => Some(DVec3::new(-1.0, -1.0, 1.0)),
+        "left-anterior-superior" | "las" => Some(DVec3::new(1.0, -1.0, 1.0)),
+        _ => None,
+    }
+}
+
+/// Reads an attached .nrrd or a detached .nhdr (its data file is looked up among `companions`).
+pub(crate) fn read(
+    file: &InputFile,
+    companions: Companions<'_>,
+    limits: &Limits,
+) -> Result<Volume, LoadError> {
+    let name = file.name.as_str();
+    let (fields, data_start) = split_header(name, &file.bytes)?;
+    let mut warnings = Vec::new();
+    let need = |names: &[&str]| {
+        get(&fields, names)
+            .ok_or_else(|| LoadError::header(name, names[0], "missing (a required NRRD field)"))
+    };
+
+    let ty = sample_type(name, need(&["type"])?)?;
+    let dimension: usize = need(&["dimension"])?
+        .parse()
+        .map_err(|_| LoadError::header(name, "dimension", "not a positive integer"))?;
+    if !(1..=16).contains(&dimension) {
+        return Err(LoadError::header(
+            name,
+            "dimension",
+            format!("is {dimension}; expected 1 to 16"),
+        ));
+    }
+    let sizes: Vec<u64> = need(&["sizes"])?
+        .split_whitespace()
+        .map(|s| {
+            s.parse::<u64>()
+                .map_err(|_| LoadError::header(name, "sizes", format!("\"{s}\" is not a size")))
+        })
+        .collect::<Result<_, _>>()?;
+    if sizes.len() != dimension || sizes.contains(&0) {
+        return Err(LoadError::header(
+            name,
+            "sizes",
+            format!("{sizes:?} does not give {dimension} non-zero sizes"),
+        ));
+    }
+
+    // Which axes are spatial, and the step vector of each.
+    let flips = get(&fields, &["space"]).map(|s| (s, space_to_lps(s)));
+    let mut axis_steps: Vec<Option<DVec3>> = vec![None; dimension];
+    let mut oriented = false;
+    if let Some(dirs) = get(&fields, &["space directions"]) {
+        let tokens = vector_tokens(dirs);
+        if tokens.len() != dimension {
+            return Err(LoadError::header(
+                name,
+                "space directions",
+                format!("has {} entries for {dimension} axes", tokens.len()),
+            ));
+        }
+        for (a, t) in tokens.iter().enumerate() {
+            if let Some(v) = parse_vector(name, "space directions", t)? {
+                if v.len() != 3 {
+                    return Err(LoadError::unsupported(
+                        name,
+                        "NRRD space",
+                        format!("{}-dimensional space directions", v.len()),
+                    ));
+                }
+                axis_steps[a] = Some(DVec3::new(v[0], v[1], v[2]));
+            }
+        }
+        oriented = true;
+    } else {
+        // No orientation: spacings (or 1 mm) along the axes whose kind is spatial.
+        let spacings: Vec<f64> = get(&fields, &["spacings"])
+            .map(|s| {
+                s.split_whitespace()
+                    .map(|x| x.parse::<f64>().unwrap_or(f64::NAN))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let kinds: Vec<String> = get(&fields, &["kinds"])
+            .map(|s| s.split_whitespace().map(str::to_ascii_lowercase).collect())
+            .unwrap_or_default();
+        let mut spatial = 0;
+        for (a, step) in axis_steps.iter_mut().enumerate() {
+            let kind_ok = kinds
+                .get(a)
+                .is_none_or(|k| matches!(k.as_str(), "domain" | "space" | "???" | "none"));
+            if kind_ok && spatial < 3 {
+                let s = spacings
+                    .get(a)
+                    .copied()
+                    .filter(|s| s.is_finite() && *s != 0.0)
+                    .map_or(1.0, f64::abs);
+                let mut v = DVec3::ZERO;
+                v[spatial] = s;
+                *step = Some(v);
+                spatial += 1;
+            }
+        }
+        warnings.push(
+            "no space directions: the orientation is unknown; axes are assumed to be LPS"
+                .to_owned(),
+        );
+    }
+    let spatial: Vec<usize> = (0..dimension)
+        .filter(|&a| axis_steps[a].is_some())
+        .collect();
+    if spatial.is_empty() || spatial.len() > 3 {
+        return Err(LoadError::unsupported(
+            name,
+            "NRRD layout",
+            format!("{} spatial axes (expected 1 to 3)", spatial.len()),
+        ));
+    }
+    if spatial.windows(2).any(|w| w[1] != w[0] + 1) {
+        return Err(LoadError::unsupported(
+            name,
+            "NRRD layout",
+            "a non-spatial axis between spatial axes",
+        ));
+    }
+    // Elements of the non-spatial axes before the first spatial one interleave with the voxels.
+    let stride = raw::checked_product(&sizes[..spatial[0]]).unwrap_or(u64::MAX);
+    let total = raw::checked_product(&sizes).unwrap_or(u64::MAX);
+    let extra_axes: Vec<String> = (0..dimension)
+        .filter(|a| !spatial.contains(a) && sizes[*a] > 1)
+        .map(|a| format!("axis {a} ({} elements)", sizes[a]))
+        .collect();
+    if !extra_axes.is_empty() {
+        warnings.push(format!(
+            "non-spatial {}: the first element is shown",
+            extra_axes.join(", ")
+        ));
+    }
+    let mut dims = [1usize; 3];
+    let mut steps = [DVec3::X, DVec3::Y, DVec3::Z];
+    for (slot, &a) in spatial.iter().enumerate() {
+        dims[slot] =
+            usize::try_from(sizes[a]).map_err(|_| LoadError::header(name, "sizes", "too large"))?;
+        steps[slot] = axis_steps[a].unwrap_or(DVec3::ONE);
+    }
+    if spatial.len() < 3 {
+        // A 2D image: make the missing axes orthogonal unit steps.
+        let n = steps[0]
+            .cross(if spatial.len() == 2 {
+                steps[1]
+            } else {
+                DVec3::Y
+            })
+            .normalize_or(DVec3::Z);
+        if spatial.len() == 1 {
+            steps[1] = n.cross(steps[0]).normalize_or(DVec3::Y);
+        }
+        steps[2] = n;
+    }
+    let count = raw::checked_product(&dims.map(|d| d as u64)).unwrap_or(u64::MAX);
+    raw::check_voxel_budget(name, count, ty.output_size() as u64, limits)?;
+    let data_bytes_total = total.saturating_mul(ty.size() as u64);
+
+    let mut origin = match get(&fields, &["space origin"]) {
+        Some(o) => match parse_vector(name, "space origin", o)? {
+            Some(v) if v.len() == 3 => DVec3::new(v[0], v[1], v[2]),
+            _ => return Err(LoadError::header(name, "space origin", "expected (x,y,z)")),
+        },
+        None => DVec3::ZERO,
+    };
+    if oriented {
+        match flips {
+            Some((_, Some(f))) => {
+                for s in &mut steps {
+                    *s *= f;
+                }
+                origin *= f;
+            }
+            Some((space, None)) => warnings.push(format!(
+                "space \"{space}\" is not anatomical; its axes are taken as LPS"
+            )),
+            None => warnings.push("no space field: the axes are taken as LPS".to_owned()),
+        }
+    }
+
+    // The data bytes: attached after the blank line, or in the named data file.
+    let (data_name, data_file): (String, &[u8]) = match get(&fields, &["data file", "datafile"]) {
+        Some(df) => {
+            let df = df.trim();
+            if df.starts_with("LIST") || df.contains('%') || df.split_whitespace().count() > 1 {
+                return Err(LoadError::unsupported(
+                    name,
+                    "NRRD data file",
+                    format!("\"{df}\" (multiple data files)"),
+                ));
+            }
+            let f = companions
+                .find(df)
+                .ok_or_else(|| LoadError::MissingDataFile {
+                    file: name.to_owned(),
+                    data_file: df.to_owned(),
+                })?;
+            (f.name.clone(), &f.bytes)
+        }
+        None => {
+            let start = data_start.ok_or_else(|| {
+                LoadError::truncated(
+                    name,
+                    "NRRD header (no blank line before the data)",
+                    file.bytes.len() as u64 + 1,
+                    file.bytes.len() as u64,
+                )
+            })?;
+            (name.to_owned(), &file.bytes[start..])
+        }
+    };
+    let line_skip: usize = get(&fields, &["line skip", "lineskip"])
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let byte_skip: i64 = get(&fields, &["byte skip", "byteskip"])
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let mut data = data_file;
+    for _ in 0..line_skip {
+        match data.iter().position(|&b| b == b'\n') {
+            Some(p) => data = &data[p + 1..],
+            None => {
+                return Err(LoadError::truncated(
+                    &data_name,
+                    "line skip",
+                    line_skip as u64,
+                    0,
+                ));
+            }
+        }
+    }
+
+    let endian = match get(&fields, &["endian"]).map(str::trim) {
+        Some("big") => Endian::Big,
+        Some("little") => Endian::Little,
+        None => {
+            if ty.size() > 1 {
+                warnings.push("no endian field: little endian assumed".to_owned());
+            }
+            Endian::Little
+        }
+        Some(other) => {
+            return Err(LoadError::header(
+                name,
+                "endian",
+                format!("\"{other}\"; expected little or big"),
+            ));
+        }
+    };
+    let encoding = need(&["encoding"])?.trim().to_ascii_lowercase();
+    let decoded: std::borrow::Cow<'_, [u8]> = match encoding.as_str() {
+        "raw" => {
+            let skip = if byte_skip == -1 {
+                // -1: the data are the last bytes of the file.
+                (data.len() as u64)
+                    .checked_sub(data_bytes_total)
+                    .ok_or_else(|| {
+                        LoadError::truncated(
+                            &data_name,
+                            "NRRD raw data",
+                            data_bytes_total,
+                            data.len() as u64,
+                        )
+                    })?
+            } else {
+                u64::try_from(byte_skip)
+                    .map_err(|_| LoadError::header(name, "byte skip", format!("{byte_skip}")))?
+            };
+            let skip = usize::try_from(skip).unwrap_or(usize::MAX);
+            std::borrow::Cow::Borrowed(data.get(skip..).ok_or_else(|| {
+                LoadError::truncated(&data_name, "byte skip", skip as u64, data.len() as u64)
+            })?)
+        }
+        "gzip" | "gz" => {
+            let skip = u64::try_from(byte_skip).map_err(|_| {
+                LoadError::header(name, "byte skip", "-1 is only allowed with raw encoding")
+            })?;
+            let needed = skip.saturating_add(data_bytes_total);
+            if needed > limits.max_decompressed_bytes {
+                return Err(LoadError::TooLarge {
+                    file: data_name,
+                    what: "decompressed NRRD data".to_owned(),
+                    bytes: needed,
+                    limit: limits.max_decompressed_bytes,
+                });
+            }
+            let (mut out, _) = raw::gunzip_prefix(&data_name, data, needed)?;
+            let skip = (skip as usize).min(out.len());
+            out.drain(..skip);
+            std::borrow::Cow::Owned(out)
+        }
+        "ascii" | "text" | "txt" => {
+            std::borrow::Cow::Owned(ascii_to_f64_bytes(&data_name, data, total, limits)?)
+        }
+        other => {
+            return Err(LoadError::unsupported(
+                name,
+                "NRRD encoding",
+                other.to_owned(),
+            ));
+        }
+    };
+    let (ty, endian) = if matches!(encoding.as_str(), "ascii" | "text" | "txt") {
+        (SampleType::F64, Endian::Little)
+    } else {
+        (ty, endian)
+    };
+    let needed = total.saturating_mul(ty.size() as u64);
+    if (decoded.len() as u64) < needed {
+        // Only the first volume is read, but a short file is a broken file.
+        return Err(LoadError::truncated(
+            &data_name,
+            "NRRD data",
+            needed,
+            decoded.len() as u64,
+        ));
+    }
+    let layout = SampleLayout {
+        ty,
+        endian,
+        offset: 0,
+        count: count as usize,
+        stride_samples: usize::try_from(stride).unwrap_or(usize::MAX),
+    };
+    let voxels = raw::decode_samples(&data_name, &decoded, layout, limits)?;
+    let (spacing_mm, direction) =
+        from_axis_vectors(name, "space directions", steps, &mut warnings)?;
+    let origin_mm = check_origin(name, "space origin", origin)?;
+    let source = if data_name == name {
+        name.to_owned()
+    } else {
+        format!("{name} + {data_name}")
+    };
+    Ok(Volume {
+        dims,
+        spacing_mm,
+        origin_mm,
+        direction,
+        voxels,
+        value_slope: 1.0,
+        value_intercept: 0.0,
+        modality: Modality::Unknown,
+        source,
+        warnings,
+    })
+}
+
+/// Parses whitespace-separated numbers (ascii encoding) into little-endian f64 bytes.
+fn ascii_to_f64_bytes(
+    file: &str,
+    data: &[u8],
+    total: u64,
+    limits: &Limits,
+) -> Result<Vec<u8>, LoadError> {
+    let bytes = total.saturating_mul(8);
+    if bytes > limits.max_decompressed_bytes {
+        return Err(LoadError::TooLarge {
+            file: file.to_owned(),
+            what: "ascii NRRD data".to_owned(),
+            bytes,
+            limit: limits.max_decompressed_bytes,
+        });
+    }
+    let text = String::from_utf8_lossy(data);
+    let mut out = Vec::new();
+    for tok in text
+        .split(|c: char| c.is_whitespace() || c == ',')
+        .filter(|t| !t.is_empty())
+        .take(total as usize)
+    {
+        let v: f64 = tok.parse().map_err(|_| {
+            LoadError::header(file, "ascii data", format!("\"{tok}\" is not a number"))
+        })?;
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+
+    fn nrrd(header: &str, data: &[u8]) -> InputFile {
+        let mut b = header.as_bytes().to_vec();
+        b.extend_from_slice(data);
+        InputFile::new("t.nrrd", b)
+    }
+
+    #[test]
+    fn attached_raw_ras_and_list_axis() {
+        // 2 components x 2 x 1 x 1: the first component of each voxel is read.
+        let f = nrrd(
+            "NRRD0004\ntype: short\ndimension: 4\nspace: right-anterior-superior\nsizes: 2 2 1 1\nspace directions: none (2,0,0) (0,3,0) (0,0,4)\nendian: big\nencoding: raw\nspace origin: (1,2,3)\n\n",
+            &[0, 1, 0, 9, 0, 2, 0, 9],
+        );
+        let v = read(&f, Companions::new(&[]), &Limits::default()).unwrap();
+        assert_eq!(v.dims, [2, 1, 1]);
+        assert_eq!(v.to_f32(), vec![1.0, 2.0]);
+        assert_eq!(v.spacing_mm, [2.0, 3.0, 4.0]);
+        assert_eq!(v.origin_mm, [-1.0, -2.0, 3.0]);
+        assert_eq!(v.direction.x_axis, DVec3::new(-1.0, 0.0, 0.0));
+        assert!(v.warnings.iter().any(|w| w.contains("first element")));
+    }
+
+    #[test]
+    fn detached_ascii_and_missing_data_file() {
+        let hdr = InputFile::new(
+            "dir/a.nhdr",
+            b"NRRD0004\ntype: float\ndimension: 3\nsizes: 2 1 1\nspacings: 0.5 1 1\nencoding: ascii\ndata file: a.txt\n".to_vec(),
+        );
+        let r = read(&hdr, Companions::new(&[]), &Limits::default());
+        assert!(matches!(r, Err(LoadError::MissingDataFile { .. })), "{r:?}");
+        let data = [InputFile::new("other/a.txt", b"1.5 -2\n".to_vec())];
+        let v = read(&hdr, Companions::new(&data), &Limits::default()).unwrap();
+        assert_eq!(v.to_f32(), vec![1.5, -2.0]);
+        assert_eq!(v.spacing_mm[0], 0.5);
+    }
+}

@@ -1,0 +1,99 @@
+//! RST smoothness and invariance with the consistent opacity rule (issue 4, "Checked by"):
+//! radius sweep, voxel spacing, step length, contrast and orientation.
+
+mod cpu_common;
+
+use cpu_common::{Rendered, blobness, cv, rst_eigen, vesselness};
+use shapecast::cpu::RstParams;
+use shapecast::phantom;
+
+/// Blobness at the exact centre of a sphere of `radius_mm`, `contrast_hu`, moved by `offset`.
+fn sphere_blobness(
+    radius_mm: f64,
+    contrast_hu: f32,
+    spacing_mm: [f64; 3],
+    offset: [f64; 3],
+    params: &RstParams,
+) -> f64 {
+    let r = Rendered::new(
+        phantom::sphere(radius_mm, contrast_hu).shifted(offset),
+        spacing_mm,
+    );
+    blobness(rst_eigen(&r, &r.gradient(0.7), offset, params))
+}
+
+#[test]
+fn blobness_is_smooth_in_the_radius() {
+    let params = RstParams::paper_defaults();
+    let mut b = Vec::new();
+    for n in 0..=10 {
+        let radius = 4.5 + 0.1 * n as f64;
+        // Sub-voxel offsets that differ from radius to radius (0.5 mm voxels).
+        let offset = [
+            0.05 * (n % 5) as f64,
+            0.07 * (n % 3) as f64,
+            0.11 * (n % 4) as f64,
+        ];
+        b.push(sphere_blobness(radius, 100.0, [0.5; 3], offset, &params));
+    }
+    let c = cv(&b);
+    println!("blobness over radii 4.5..5.5: {b:.3?}, CV {c:.4}");
+    assert!(c <= 0.01, "CV {c}");
+}
+
+#[test]
+fn blobness_is_invariant_to_voxel_spacing() {
+    let params = RstParams::paper_defaults();
+    let reference = sphere_blobness(5.0, 100.0, [0.5; 3], [0.0; 3], &params);
+    for spacing in [[0.6, 0.6, 1.2], [0.7, 0.7, 2.5], [1.0; 3]] {
+        let b = sphere_blobness(5.0, 100.0, spacing, [0.0; 3], &params);
+        let rel = b / reference;
+        println!("spacing {spacing:?}: {b:.3} vs {reference:.3} at 0.5 iso ({rel:.3})");
+        assert!(
+            (rel - 1.0).abs() <= 0.08,
+            "spacing {spacing:?}: ratio {rel}"
+        );
+    }
+}
+
+#[test]
+fn halving_the_step_changes_little() {
+    let params = RstParams::paper_defaults();
+    let mut fine = params.clone();
+    fine.step_mm = params.step_mm / 2.0;
+    let a = sphere_blobness(5.0, 100.0, [0.5; 3], [0.1, 0.2, 0.05], &params);
+    let b = sphere_blobness(5.0, 100.0, [0.5; 3], [0.1, 0.2, 0.05], &fine);
+    println!("dr 0.25: {a:.4}, dr 0.125: {b:.4}");
+    assert!((b / a - 1.0).abs() <= 0.03, "{a} vs {b}");
+}
+
+#[test]
+fn blobness_grows_with_contrast() {
+    let params = RstParams::paper_defaults();
+    let b: Vec<f64> = [50.0, 100.0, 200.0, 400.0]
+        .iter()
+        .map(|&c| sphere_blobness(5.0, c, [0.5; 3], [0.0; 3], &params))
+        .collect();
+    println!("blobness at 50, 100, 200, 400 HU: {b:.3?}");
+    assert!(b.windows(2).all(|w| w[1] > w[0]), "{b:?}");
+}
+
+#[test]
+fn cylinder_along_an_axis_and_a_diagonal_agree() {
+    let params = RstParams::paper_defaults();
+    let mut along_z = phantom::cylinder(3.0, 100.0, [0.0, 0.0, 1.0]);
+    along_z.min_mm = [-12.0, -12.0, -2.0];
+    along_z.max_mm = [12.0, 12.0, 2.0];
+    let mut diagonal = phantom::cylinder(3.0, 100.0, [1.0, 1.0, 1.0]);
+    diagonal.min_mm = [-13.0; 3];
+    diagonal.max_mm = [13.0; 3];
+    let v: Vec<f64> = [along_z, diagonal]
+        .into_iter()
+        .map(|p| {
+            let r = Rendered::new(p, [0.5; 3]);
+            vesselness(rst_eigen(&r, &r.gradient(0.7), [0.0; 3], &params))
+        })
+        .collect();
+    println!("vesselness along z {:.3}, along (1,1,1) {:.3}", v[0], v[1]);
+    assert!((v[1] / v[0] - 1.0).abs() <= 0.08, "{v:?}");
+}
