@@ -79,7 +79,8 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<()> {
 /// The row-major 3x3 direction matrix (LPS; column c is the direction of voxel axis c).
 fn direction_rows(loaded: &Loaded) -> [[f64; 3]; 3] {
     let d = loaded.volume.direction;
-    std::array::from_fn(|r| std::array::from_fn(|c| d.col(c)[r]))
+    // `+ 0.0` turns -0.0 (from RAS->LPS flips) into 0.0 for the reader.
+    std::array::from_fn(|r| std::array::from_fn(|c| d.col(c)[r] + 0.0))
 }
 
 fn to_json(loaded: &Loaded) -> serde_json::Value {
@@ -92,7 +93,7 @@ fn to_json(loaded: &Loaded) -> serde_json::Value {
         "source": v.source,
         "dims": v.dims,
         "spacing_mm": v.spacing_mm,
-        "origin_mm": v.origin_mm,
+        "origin_mm": v.origin_mm.map(|x| x + 0.0),
         "direction": direction_rows(loaded),
         "orientation": axes,
         "voxel_type": v.voxels.type_name(),

@@ -97,10 +97,14 @@ pub(super) fn check_transfer_syntax(file: &str, uid: &str) -> Result<(), LoadErr
         });
     };
     if !ts.can_decode_all() {
-        let reason = if ts.name().contains("JPEG-LS") {
-            "no pure-Rust JPEG-LS decoder builds for the browser (dicom-rs decodes JPEG-LS only with the CharLS C library); convert the series to an uncompressed or JPEG 2000 syntax, e.g. with dcmdjpls or gdcmconv"
+        let reason = if ts.uid().starts_with("1.2.840.10008.1.2.4.9") {
+            // JPEG 2000 (…4.90 to …4.99): openjp2 calls C's malloc/free, which
+            // wasm32-unknown-unknown lacks, so only the native build decodes it.
+            "JPEG 2000 is decoded only by the native build (shapecast on the command line); convert the series to an uncompressed or RLE syntax for the browser, e.g. with gdcmconv --raw"
+        } else if ts.name().contains("JPEG-LS") {
+            "no pure-Rust JPEG-LS decoder builds for the browser (dicom-rs decodes JPEG-LS only with the CharLS C library); convert the series to an uncompressed or RLE syntax, e.g. with dcmdjpls or gdcmconv --raw"
         } else {
-            "no decoder for it is built into Shapecast (only pure-Rust codecs are: deflate, RLE, JPEG, JPEG 2000)"
+            "no decoder for it is built into Shapecast (only pure-Rust codecs are: deflate, RLE, JPEG, and natively JPEG 2000)"
         };
         return Err(LoadError::UnsupportedTransferSyntax {
             file: file.to_owned(),

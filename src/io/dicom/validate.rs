@@ -185,7 +185,15 @@ impl Walker<'_> {
                 }
             };
             if !is_sequence {
-                self.pos += len as usize;
+                // dicom-rs 0.10 reads only whole numbers of binary values (len / size of them)
+                // and goes on from there, so an odd length shifts it; follow it exactly.
+                let size = match vr.as_ref().map(|v| &v[..]) {
+                    Some(b"US" | b"SS" | b"OW") => 2,
+                    Some(b"UL" | b"SL" | b"FL" | b"AT" | b"OL" | b"OF") => 4,
+                    Some(b"FD" | b"OD" | b"OV" | b"SV" | b"UV") => 8,
+                    _ => 1,
+                };
+                self.pos += len as usize - len as usize % size;
             }
         }
         Ok(())
