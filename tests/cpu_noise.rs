@@ -88,17 +88,21 @@ fn blobness_falls_with_noise_and_more_rays_help_up_to_about_100() {
 }
 
 /// Issue 4 also asks that the spread over draws shrinks with more rays. Measured with the
-/// consistent rule and the 10/30 function it does not (40 draws, 50 HU: 26 rays 0.089,
-/// 386 rays 0.099): the draw-to-draw spread is dominated by the noise of the central value
-/// I(x), common to all rays (correlation -0.95 at 10 HU). Kept, ignored, so that the claim
-/// stays visible: `cargo test --test cpu_noise -- --ignored`.
+/// consistent rule and the 10/30 function it does not (1000 draws, 50 HU: 26 rays 0.107,
+/// 386 rays 0.107): the draw-to-draw spread is dominated by the noise of the central value
+/// I(x), which every ray shares (correlation -0.95 at 10 HU), so more rays cannot average it
+/// out; only the mean improves (tested above). This test pins that finding, so that a change
+/// which makes the spread ray-dependent is noticed and the report is revisited.
 #[test]
-#[ignore = "fails as measured: the spread is common-mode, see the doc comment"]
-fn spread_shrinks_with_more_rays() {
+fn spread_is_common_mode_and_does_not_shrink_with_rays() {
     let sets = ray_sets(&[26, 386]);
     let b0 = clean_blobness(&sets);
     let rel = relative_blobness(50.0, &sets, &b0);
     let (s_few, s_many) = (mean_sd(&rel[0]).1, mean_sd(&rel[1]).1);
     println!("spread at 50 HU: 26 rays {s_few:.3}, 386 rays {s_many:.3}");
-    assert!(s_many < s_few, "26 rays {s_few}, 386 rays {s_many}");
+    assert!(s_few > 0.0 && s_many > 0.0);
+    assert!(
+        s_many > 0.7 * s_few,
+        "the spread now shrinks with rays (26 rays {s_few}, 386 rays {s_many}): update the report"
+    );
 }
