@@ -1,6 +1,15 @@
-//! A walk over DICOM element headers that checks every declared length against the bytes that
-//! are present, before dicom-rs parses the file: dicom-rs allocates and zero-fills a value's
-//! declared length before reading it, so a corrupt length of 0xFFFFFFF0 would cost 4 GiB.
+//! Checks every length a DICOM file declares against the bytes that are present, before
+//! dicom-rs parses it: dicom-rs allocates and zero-fills a value's declared length before reading
+//! it, so a corrupt length of 0xFFFFFFF0 would cost 4 GiB. The file meta group is walked by hand;
+//! the data set through dicom-rs's own token reader, so both agree on where elements start.
+
+use std::cell::Cell;
+use std::io::Read;
+use std::rc::Rc;
+
+use dicom_encoding::transfer_syntax::{TransferSyntax, TransferSyntaxIndex as _};
+use dicom_parser::dataset::{DataSetReader, DataToken, read::DataSetReaderOptions};
+use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
 
 use crate::io::LoadError;
 
@@ -25,23 +34,75 @@ pub(super) fn check_lengths(file: &str, body: &[u8]) -> Result<(), LoadError> {
     walker.walk()?;
     let ts = walker.transfer_syntax.clone().unwrap_or_default();
     let data_start = walker.pos;
-    let (explicit, big_endian) = match ts.as_str() {
-        "1.2.840.10008.1.2" => (false, false),
-        "1.2.840.10008.1.2.2" => (true, true),
-        // A deflated data set cannot be walked without inflating it.
-        "1.2.840.10008.1.2.1.99" => return Ok(()),
-        _ => (true, false),
+    // A deflated data set cannot be checked without inflating it.
+    if ts == "1.2.840.10008.1.2.1.99" {
+        return Ok(());
+    }
+    let Some(syntax) = TransferSyntaxRegistry.get(&ts) else {
+        return Ok(()); // dicom-rs names the unknown transfer syntax itself
     };
-    let mut data = Walker {
-        file,
-        bytes: rest,
-        pos: data_start,
-        explicit,
-        big_endian,
-        stop_after_group2: false,
-        transfer_syntax: None,
+    walk_tokens(file, rest.get(data_start..).unwrap_or_default(), syntax)
+}
+
+/// A byte source that tells how far it has been read.
+struct CountingReader<'a> {
+    bytes: &'a [u8],
+    pos: Rc<Cell<usize>>,
+}
+
+impl Read for CountingReader<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let start = self.pos.get().min(self.bytes.len());
+        let n = buf.len().min(self.bytes.len() - start);
+        buf[..n].copy_from_slice(&self.bytes[start..start + n]);
+        self.pos.set(start + n);
+        Ok(n)
+    }
+}
+
+/// Reads the data set with dicom-rs's own token reader, and before each value is read (which is
+/// when dicom-rs allocates and zero-fills the declared length) checks that the declared length
+/// is present. Following dicom-rs's tokens, instead of a second parser that mimics it, means the
+/// check cannot disagree with dicom-rs about where an element starts.
+fn walk_tokens(file: &str, data: &[u8], syntax: &TransferSyntax) -> Result<(), LoadError> {
+    let pos = Rc::new(Cell::new(0));
+    let source = CountingReader {
+        bytes: data,
+        pos: Rc::clone(&pos),
     };
-    data.walk()
+    let Ok(mut reader) =
+        DataSetReader::new_with_ts_options(source, syntax, DataSetReaderOptions::default())
+    else {
+        return Ok(()); // dicom-rs reports the same failure when it parses the file
+    };
+    loop {
+        let declared = match reader.next() {
+            None | Some(Err(_)) => return Ok(()), // the parse proper reports it
+            Some(Ok(DataToken::ElementHeader(header))) => Some((header.tag, header.len)),
+            Some(Ok(DataToken::ItemStart { len })) => Some((dicom_core::Tag(0xFFFE, 0xE000), len)),
+            Some(Ok(_)) => None,
+        };
+        let Some((tag, len)) = declared else {
+            continue;
+        };
+        let Some(len) = len.get() else {
+            continue; // undefined length: a sequence or item, walked into
+        };
+        // The header has been read; its value has not.
+        let remaining = data.len().saturating_sub(pos.get());
+        if len as usize > remaining {
+            return Err(LoadError::truncated(
+                file,
+                format!(
+                    "DICOM element ({:04X},{:04X}) of {len} bytes",
+                    tag.group(),
+                    tag.element()
+                ),
+                u64::from(len),
+                remaining as u64,
+            ));
+        }
+    }
 }
 
 struct Walker<'a> {
@@ -103,6 +164,20 @@ impl Walker<'_> {
                                 self.pos += len as usize;
                             }
                         }
+                    }
+                    // Delimiters carry no value and must have length 0 (PS3.5 7.5). dicom-rs
+                    // reads a delimiter that closes nothing as an element and skips its length,
+                    // while one that closes a sequence skips nothing; rather than follow that,
+                    // a non-zero delimiter length is refused as corrupt (a fuzzed file made
+                    // dicom-rs zero-fill 3.7 GB after such a delimiter).
+                    0xE0DD | 0xE00D if len != 0 => {
+                        return Err(LoadError::Dicom {
+                            file: self.file.to_owned(),
+                            message: format!(
+                                "delimitation item (FFFE,{element:04X}) at byte {at} has length \
+                                 {len}; the standard requires 0 (the file is corrupt)"
+                            ),
+                        });
                     }
                     0xE0DD => in_fragments = false,
                     0xE00D => {}
