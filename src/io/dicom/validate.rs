@@ -1,13 +1,14 @@
 //! Checks every length a DICOM file declares against the bytes that are present, before
 //! dicom-rs parses it: dicom-rs allocates and zero-fills a value's declared length before reading
-//! it, so a corrupt length of 0xFFFFFFF0 would cost 4 GiB. The file meta group is walked by hand;
-//! the data set through dicom-rs's own token reader, so both agree on where elements start.
+//! it, so a corrupt length of 0xFFFFFFF0 would cost 4 GiB. The file meta group is walked by hand,
+//! then read by dicom-rs to find the data set, which is walked through dicom-rs's own token reader.
 
 use std::cell::Cell;
 use std::io::Read;
 use std::rc::Rc;
 
 use dicom_encoding::transfer_syntax::{TransferSyntax, TransferSyntaxIndex as _};
+use dicom_object::meta::FileMetaTable;
 use dicom_parser::dataset::{DataSetReader, DataToken, read::DataSetReaderOptions};
 use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
 
@@ -32,16 +33,27 @@ pub(super) fn check_lengths(file: &str, body: &[u8]) -> Result<(), LoadError> {
         transfer_syntax: None,
     };
     walker.walk()?;
-    let ts = walker.transfer_syntax.clone().unwrap_or_default();
-    let data_start = walker.pos;
+    // Where the data set starts and how it is encoded, exactly as dicom-rs will see it: its own
+    // meta reader on the same bytes (it trusts the group length where a hand walk would stop at
+    // a mutated tag). A meta group it cannot read is reported by the parse proper.
+    let pos = Rc::new(Cell::new(0));
+    let mut source = CountingReader {
+        bytes: body,
+        pos: Rc::clone(&pos),
+    };
+    let Ok(meta) = FileMetaTable::from_reader(&mut source) else {
+        return Ok(());
+    };
+    let ts = meta.transfer_syntax();
     // A deflated data set cannot be checked without inflating it.
     if ts == "1.2.840.10008.1.2.1.99" {
         return Ok(());
     }
-    let Some(syntax) = TransferSyntaxRegistry.get(&ts) else {
+    let Some(syntax) = TransferSyntaxRegistry.get(ts) else {
         return Ok(()); // dicom-rs names the unknown transfer syntax itself
     };
-    walk_tokens(file, rest.get(data_start..).unwrap_or_default(), syntax)
+    let data_start = pos.get();
+    walk_tokens(file, body.get(data_start..).unwrap_or_default(), syntax)
 }
 
 /// A byte source that tells how far it has been read.
