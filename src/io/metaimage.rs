@@ -293,14 +293,6 @@ pub(crate) fn read(
         let skip = usize::try_from(skip).unwrap_or(usize::MAX).min(data.len());
         std::borrow::Cow::Borrowed(&data[skip..])
     };
-    if (decoded.len() as u64) < total_bytes {
-        return Err(LoadError::truncated(
-            &data_name,
-            "MetaImage data",
-            total_bytes,
-            decoded.len() as u64,
-        ));
-    }
     let layout = SampleLayout {
         ty,
         endian,
@@ -308,7 +300,14 @@ pub(crate) fn read(
         count: count as usize,
         stride_samples: usize::try_from(channels).unwrap_or(usize::MAX),
     };
-    let voxels = raw::decode_samples(&data_name, &decoded, layout, limits)?;
+    let voxels = raw::decode_present(
+        &data_name,
+        "MetaImage data",
+        &decoded,
+        total_bytes,
+        layout,
+        limits,
+    )?;
     let (spacing_mm, direction) =
         from_axis_vectors(name, "ElementSpacing/TransformMatrix", steps, &mut warnings)?;
     let origin_mm = check_origin(name, "Offset", origin)?;
@@ -317,11 +316,7 @@ pub(crate) fn read(
         Some("MET_MOD_MR") => Modality::Mr,
         _ => Modality::Unknown,
     };
-    let source = if data_name == name {
-        name.to_owned()
-    } else {
-        format!("{name} + {data_name}")
-    };
+    let source = raw::source_name(name, &data_name);
     Ok(Volume {
         dims,
         spacing_mm,

@@ -491,15 +491,7 @@ pub(crate) fn read(
         (ty, endian)
     };
     let needed = total.saturating_mul(ty.size() as u64);
-    if (decoded.len() as u64) < needed {
-        // Only the first volume is read, but a short file is a broken file.
-        return Err(LoadError::truncated(
-            &data_name,
-            "NRRD data",
-            needed,
-            decoded.len() as u64,
-        ));
-    }
+    // Only the first volume is read, but a short file is a broken file.
     let layout = SampleLayout {
         ty,
         endian,
@@ -507,15 +499,11 @@ pub(crate) fn read(
         count: count as usize,
         stride_samples: usize::try_from(stride).unwrap_or(usize::MAX),
     };
-    let voxels = raw::decode_samples(&data_name, &decoded, layout, limits)?;
+    let voxels = raw::decode_present(&data_name, "NRRD data", &decoded, needed, layout, limits)?;
     let (spacing_mm, direction) =
         from_axis_vectors(name, "space directions", steps, &mut warnings)?;
     let origin_mm = check_origin(name, "space origin", origin)?;
-    let source = if data_name == name {
-        name.to_owned()
-    } else {
-        format!("{name} + {data_name}")
-    };
+    let source = raw::source_name(name, &data_name);
     Ok(Volume {
         dims,
         spacing_mm,

@@ -224,6 +224,30 @@ impl SampleLayout {
     }
 }
 
+/// Checks that `needed` bytes of `what` are present, then decodes them (NRRD and MetaImage data).
+pub(crate) fn decode_present(
+    file: &str,
+    what: &str,
+    bytes: &[u8],
+    needed: u64,
+    layout: SampleLayout,
+    limits: &Limits,
+) -> Result<Voxels, LoadError> {
+    if (bytes.len() as u64) < needed {
+        return Err(LoadError::truncated(file, what, needed, bytes.len() as u64));
+    }
+    decode_samples(file, bytes, layout, limits)
+}
+
+/// How a volume read from `header` and, possibly, a separate data file is named to the user.
+pub(crate) fn source_name(header: &str, data_file: &str) -> String {
+    if data_file == header {
+        header.to_owned()
+    } else {
+        format!("{header} + {data_file}")
+    }
+}
+
 /// Converts raw samples into the most compact `Voxels` that holds them exactly: u8 stays u8,
 /// i8/i16 become i16, u16 stays u16, wider integers become i16/u16 when every value fits and
 /// f32 otherwise, and floats become f32. Checks that the bytes are present first.
