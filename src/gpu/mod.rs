@@ -3,7 +3,10 @@
 
 pub mod axis_mip;
 pub mod context;
+pub mod kernel;
+pub mod pipeline;
 pub mod readback;
+pub mod render_volume;
 pub mod shaders;
 pub mod volume;
 

@@ -1,0 +1,240 @@
+//! What the MIP ray caster and the slice panes read every frame: the intensity and the feature
+//! volumes as 3D textures, kept on the GPU after they are computed (features computed once,
+//! projected many times).
+//!
+//! - Intensity: `R16Float`, physical values (HU), uploaded once from the CPU volume. Half floats
+//!   hold integers exactly up to 2048 and in steps of 2 up to 4096: enough for display; values
+//!   shown to the user come from the CPU volume.
+//! - Features: `Rgba16Float` per method, `(V, A, B, 0)` in their physical units (no scale to keep),
+//!   written slab by slab by the GPU feature pipeline (`STORAGE_BINDING`) or uploaded from CPU
+//!   components. `max` is the largest value of each feature, for default gains.
+//!
+//! Both are on the volume's own voxel grid (the input grid), whatever grid features used.
+
+use crate::cpu::Components3;
+use crate::gpu::GpuContext;
+use crate::volume::Volume;
+
+pub const INTENSITY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R16Float;
+pub const FEATURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// Why a volume cannot be shown on this device.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum RenderVolumeError {
+    #[error(
+        "the volume ({0}x{1}x{2} voxels) exceeds this GPU's largest 3D texture ({3} voxels per side)"
+    )]
+    TooLarge(u32, u32, u32, u32),
+    #[error("the volume is empty")]
+    Empty,
+    #[error("feature components have {got} values, the volume has {want} voxels")]
+    Length { got: usize, want: usize },
+}
+
+/// Checks that `dims` fit a 3D texture on this device.
+pub fn check_dims(ctx: &GpuContext, dims: [u32; 3]) -> Result<(), RenderVolumeError> {
+    let max = ctx.limits.max_texture_dimension_3d;
+    if dims.contains(&0) {
+        return Err(RenderVolumeError::Empty);
+    }
+    if dims.iter().any(|&d| d > max) {
+        return Err(RenderVolumeError::TooLarge(dims[0], dims[1], dims[2], max));
+    }
+    Ok(())
+}
+
+fn texture_3d(
+    ctx: &GpuContext,
+    label: &str,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: dims[0],
+            height: dims[1],
+            depth_or_array_layers: dims[2],
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D3,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
+/// Writes z-slices `[z0, z0 + nz)` of a 3D texture from texel bytes (whole slices).
+fn write_slices(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    dims: [u32; 3],
+    bpt: u32,
+    z0: u32,
+    nz: u32,
+    bytes: &[u8],
+) {
+    ctx.queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d { x: 0, y: 0, z: z0 },
+            aspect: wgpu::TextureAspect::All,
+        },
+        bytes,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(dims[0] * bpt),
+            rows_per_image: Some(dims[1]),
+        },
+        wgpu::Extent3d {
+            width: dims[0],
+            height: dims[1],
+            depth_or_array_layers: nz,
+        },
+    );
+}
+
+/// Slices per CPU->GPU upload step (bounds the temporary CPU copy).
+fn slices_per_chunk(dims: [u32; 3], bytes_per_texel: u32) -> u32 {
+    let slice = u64::from(dims[0]) * u64::from(dims[1]) * u64::from(bytes_per_texel);
+    ((32u64 << 20) / slice.max(1)).clamp(1, u64::from(dims[2])) as u32
+}
+
+/// The intensity of a volume as a 3D texture, with the geometry the ray caster needs.
+pub struct RenderVolume {
+    pub dims: [u32; 3],
+    pub spacing_mm: [f32; 3],
+    /// World (LPS, mm) from continuous voxel index.
+    pub world_from_voxel: glam::DAffine3,
+    pub intensity: wgpu::Texture,
+    pub intensity_view: wgpu::TextureView,
+    /// Smallest and largest physical value.
+    pub value_range: (f32, f32),
+}
+
+impl RenderVolume {
+    /// Uploads `volume` slab by slab (the CPU never holds a second full-size copy).
+    pub fn upload(ctx: &GpuContext, volume: &Volume) -> Result<Self, RenderVolumeError> {
+        let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
+        check_dims(ctx, dims)?;
+        let intensity = texture_3d(
+            ctx,
+            "intensity",
+            dims,
+            INTENSITY_FORMAT,
+            wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_DST
+                | wgpu::TextureUsages::COPY_SRC,
+        );
+        let per = slices_per_chunk(dims, 2);
+        let slice = dims[0] as usize * dims[1] as usize;
+        let mut values = vec![0f32; slice * per as usize];
+        let mut halves: Vec<half::f16> = vec![half::f16::ZERO; values.len()];
+        let mut z0 = 0;
+        while z0 < dims[2] {
+            let nz = per.min(dims[2] - z0);
+            let n = slice * nz as usize;
+            volume.values_into(z0 as usize * slice, &mut values[..n]);
+            for (h, v) in halves[..n].iter_mut().zip(&values[..n]) {
+                *h = half::f16::from_f32(*v);
+            }
+            write_slices(
+                ctx,
+                &intensity,
+                dims,
+                2,
+                z0,
+                nz,
+                bytemuck::cast_slice(&halves[..n]),
+            );
+            z0 += nz;
+        }
+        let intensity_view = intensity.create_view(&wgpu::TextureViewDescriptor::default());
+        Ok(Self {
+            dims,
+            spacing_mm: volume.spacing_mm.map(|s| s as f32),
+            world_from_voxel: volume.world_from_voxel(),
+            intensity,
+            intensity_view,
+            value_range: volume.value_range().unwrap_or((0.0, 1.0)),
+        })
+    }
+}
+
+/// One method's features `(V, A, B, 0)` on the volume's grid, as a 3D texture.
+pub struct FeatureTexture {
+    pub dims: [u32; 3],
+    pub texture: wgpu::Texture,
+    pub view: wgpu::TextureView,
+    /// The largest value of each feature (for default gains); `[0; 3]` until known.
+    pub max: [f32; 3],
+}
+
+impl FeatureTexture {
+    /// An empty feature texture the GPU pipeline writes into (storage) and renderers sample.
+    pub fn new(ctx: &GpuContext, dims: [u32; 3], label: &str) -> Result<Self, RenderVolumeError> {
+        check_dims(ctx, dims)?;
+        let texture = texture_3d(
+            ctx,
+            label,
+            dims,
+            FEATURE_FORMAT,
+            wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::COPY_DST
+                | wgpu::TextureUsages::COPY_SRC,
+        );
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        Ok(Self {
+            dims,
+            texture,
+            view,
+            max: [0.0; 3],
+        })
+    }
+
+    /// A feature texture filled from CPU components (e.g. the CPU reference's output).
+    pub fn from_components(
+        ctx: &GpuContext,
+        dims: [u32; 3],
+        components: &Components3,
+        label: &str,
+    ) -> Result<Self, RenderVolumeError> {
+        let mut tex = Self::new(ctx, dims, label)?;
+        let want = dims.iter().map(|&d| d as usize).product::<usize>();
+        if let Some(c) = components.iter().find(|c| c.len() != want) {
+            return Err(RenderVolumeError::Length { got: c.len(), want });
+        }
+        let per = slices_per_chunk(dims, 8);
+        let slice = dims[0] as usize * dims[1] as usize;
+        let mut texels: Vec<half::f16> = Vec::with_capacity(slice * per as usize * 4);
+        let mut z0 = 0;
+        while z0 < dims[2] {
+            let nz = per.min(dims[2] - z0);
+            let range = z0 as usize * slice..(z0 + nz) as usize * slice;
+            texels.clear();
+            for idx in range {
+                for c in components {
+                    texels.push(half::f16::from_f32(c[idx].clamp(-65504.0, 65504.0)));
+                }
+                texels.push(half::f16::ZERO);
+            }
+            write_slices(
+                ctx,
+                &tex.texture,
+                dims,
+                8,
+                z0,
+                nz,
+                bytemuck::cast_slice(&texels),
+            );
+            z0 += nz;
+        }
+        tex.max = std::array::from_fn(|c| components[c].iter().copied().fold(0.0, f32::max));
+        Ok(tex)
+    }
+}
