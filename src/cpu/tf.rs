@@ -44,38 +44,56 @@ pub const NOISE_WINDOW: usize = 11;
 /// median over in-plane (i, j) 11 x 11 windows, tiled without overlap on every slice, of the
 /// standard deviation in each window that lies wholly inside `band`. `None` if no window does.
 pub fn estimate_noise_sigma(grid: &Grid, smoothed: &[f32], band: (f32, f32)) -> Option<f64> {
-    let [nx, ny, nz] = grid.dims;
-    let w = NOISE_WINDOW;
     let mut sigmas = Vec::new();
-    for k in 0..nz {
-        for j0 in (0..ny.saturating_sub(w - 1)).step_by(w) {
-            'window: for i0 in (0..nx.saturating_sub(w - 1)).step_by(w) {
-                let (mut s, mut s2) = (0.0f64, 0.0f64);
-                for j in j0..j0 + w {
-                    for i in i0..i0 + w {
-                        let v = smoothed[grid.index(i, j, k)];
-                        if !(v >= band.0 && v <= band.1) {
-                            continue 'window;
-                        }
-                        s += f64::from(v);
-                        s2 += f64::from(v) * f64::from(v);
+    for k in 0..grid.dims[2] {
+        sigmas.extend(noise_window_sigmas(grid, smoothed, band, k));
+    }
+    median(sigmas)
+}
+
+/// Windows per row and per column of one slice of `dims` (tiled from (0, 0), no overlap).
+pub fn noise_window_counts(dims: [usize; 3]) -> [usize; 2] {
+    let w = NOISE_WINDOW;
+    [0, 1].map(|a| dims[a].saturating_sub(w - 1).div_ceil(w))
+}
+
+/// The standard deviations of slice `k`'s windows that lie wholly inside `band`.
+pub fn noise_window_sigmas(grid: &Grid, smoothed: &[f32], band: (f32, f32), k: usize) -> Vec<f64> {
+    let w = NOISE_WINDOW;
+    let [nwx, nwy] = noise_window_counts(grid.dims);
+    let mut sigmas = Vec::new();
+    for j0 in (0..nwy).map(|t| t * w) {
+        'window: for i0 in (0..nwx).map(|t| t * w) {
+            let (mut s, mut s2) = (0.0f64, 0.0f64);
+            for j in j0..j0 + w {
+                for i in i0..i0 + w {
+                    let v = smoothed[grid.index(i, j, k)];
+                    if !(v >= band.0 && v <= band.1) {
+                        continue 'window;
                     }
+                    s += f64::from(v);
+                    s2 += f64::from(v) * f64::from(v);
                 }
-                let n = (w * w) as f64;
-                let var = (s2 - s * s / n) / (n - 1.0);
-                sigmas.push(var.max(0.0).sqrt());
             }
+            let n = (w * w) as f64;
+            let var = (s2 - s * s / n) / (n - 1.0);
+            sigmas.push(var.max(0.0).sqrt());
         }
     }
-    if sigmas.is_empty() {
+    sigmas
+}
+
+/// The median (mean of the middle two for an even count); `None` for no values.
+pub fn median(mut values: Vec<f64>) -> Option<f64> {
+    if values.is_empty() {
         return None;
     }
-    sigmas.sort_by(f64::total_cmp);
-    let m = sigmas.len();
+    values.sort_by(f64::total_cmp);
+    let m = values.len();
     Some(if m % 2 == 1 {
-        sigmas[m / 2]
+        values[m / 2]
     } else {
-        0.5 * (sigmas[m / 2 - 1] + sigmas[m / 2])
+        0.5 * (values[m / 2 - 1] + values[m / 2])
     })
 }
 

@@ -4,10 +4,13 @@
 pub mod axis_mip;
 pub mod context;
 pub mod kernel;
+pub mod noise;
+pub mod pack;
 pub mod pipeline;
 pub mod readback;
 pub mod render_volume;
 pub mod shaders;
+pub mod slab;
 pub mod volume;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};

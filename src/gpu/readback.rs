@@ -96,3 +96,47 @@ pub fn read_f32_blocking(
     let bytes = read_bytes_blocking(ctx, src, count as u64 * 4)?;
     Ok(bytemuck::pod_collect_to_vec(&bytes))
 }
+
+/// A readback in flight, polled without blocking: what a step-by-step job (one step per frame)
+/// uses on every platform. Natively `poll` also drives the device; in the browser the event loop
+/// completes the mapping between frames.
+pub struct PendingRead {
+    staging: wgpu::Buffer,
+    size: u64,
+    receiver: futures_channel::oneshot::Receiver<Result<(), wgpu::BufferAsyncError>>,
+}
+
+impl PendingRead {
+    /// Copies `size` bytes of `src` (which needs `COPY_SRC`) and starts mapping them.
+    pub fn start(ctx: &GpuContext, src: &wgpu::Buffer, size: u64) -> Self {
+        let (staging, receiver) = start_read(ctx, src, size);
+        Self {
+            staging,
+            size,
+            receiver,
+        }
+    }
+
+    /// The bytes once mapped, `None` while the GPU is still busy.
+    pub fn poll(&mut self, ctx: &GpuContext) -> Option<Result<Vec<u8>, ReadbackError>> {
+        #[cfg(not(target_arch = "wasm32"))]
+        if let Err(e) = ctx.device.poll(wgpu::PollType::Poll) {
+            return Some(Err(e.into()));
+        }
+        #[cfg(target_arch = "wasm32")]
+        let _ = ctx;
+        match self.receiver.try_recv() {
+            Ok(None) => None,
+            Ok(Some(Ok(()))) => Some(finish_read(&self.staging, self.size)),
+            Ok(Some(Err(e))) => Some(Err(e.into())),
+            Err(_) => Some(Err(ReadbackError::Lost)),
+        }
+    }
+
+    /// Native only: waits for the bytes.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn wait(mut self, ctx: &GpuContext) -> Result<Vec<u8>, ReadbackError> {
+        ctx.device.poll(wgpu::PollType::wait_indefinitely())?;
+        self.poll(ctx).unwrap_or(Err(ReadbackError::Lost))
+    }
+}

@@ -1,0 +1,50 @@
+// Packs a block of features (3 components, component-major f32, as the feature kernels write
+// them) into slices z0.. of a method's Rgba16Float feature texture (V, A, B, 0), and keeps the
+// largest value of each component (non-negative floats order like their bits) for default gains.
+
+struct Params {
+    dims: vec3<u32>, // the block: nx, ny, nz
+    z0: u32,         // first texture slice it goes to
+}
+
+@group(0) @binding(0) var<uniform> p: Params;
+@group(0) @binding(1) var<storage, read> src: array<f32>;
+@group(0) @binding(2) var dst: texture_storage_3d<rgba16float, write>;
+@group(0) @binding(3) var<storage, read_write> maxima: array<atomic<u32>, 3>;
+
+var<workgroup> wg_max: array<atomic<u32>, 3>;
+
+const F16_MAX: f32 = 65504.0;
+
+fn finite_or_zero(v: f32) -> f32 {
+    // NaN fails every comparison; infinities are clamped below.
+    if !(v == v) {
+        return 0.0;
+    }
+    return clamp(v, -F16_MAX, F16_MAX);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    if li < 3u {
+        atomicStore(&wg_max[li], 0u);
+    }
+    workgroupBarrier();
+    if all(id < p.dims) {
+        let n = p.dims.x * p.dims.y * p.dims.z;
+        let idx = id.x + p.dims.x * (id.y + p.dims.y * id.z);
+        let v = vec3<f32>(
+            finite_or_zero(src[idx]),
+            finite_or_zero(src[n + idx]),
+            finite_or_zero(src[2u * n + idx]),
+        );
+        textureStore(dst, vec3<u32>(id.x, id.y, id.z + p.z0), vec4<f32>(v, 0.0));
+        for (var c = 0u; c < 3u; c++) {
+            atomicMax(&wg_max[c], bitcast<u32>(max(v[c], 0.0)));
+        }
+    }
+    workgroupBarrier();
+    if li < 3u {
+        atomicMax(&maxima[li], atomicLoad(&wg_max[li]));
+    }
+}

@@ -1,0 +1,108 @@
+//! Packing feature blocks into a method's feature texture (shaders/pack_features.wgsl): the last
+//! step of the slab pipeline, keeping the features on the GPU for rendering. The CPU twin is the
+//! half-float conversion of [`crate::gpu::render_volume::FeatureTexture::from_components`].
+
+use crate::gpu::kernel::{SlabGrid, WORKGROUP, uniform_buffer};
+use crate::gpu::render_volume::FeatureTexture;
+use crate::gpu::{GpuContext, shaders};
+
+/// Mirrors `Params` in pack_features.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    dims: [u32; 3],
+    z0: u32,
+}
+const _: () = assert!(std::mem::size_of::<Params>() == 16);
+
+/// The pack pipeline and the running maxima of the features it packed.
+pub struct Pack {
+    pipeline: wgpu::ComputePipeline,
+    /// Three u32 (float bits of the non-negative maxima), `COPY_SRC` for readback.
+    pub maxima: wgpu::Buffer,
+}
+
+impl Pack {
+    pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
+        let module = shaders::create_module(&ctx.device, "pack_features.wgsl")?;
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("pack_features"),
+                layout: None,
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        let maxima = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("feature maxima"),
+            size: 16,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Ok(Self { pipeline, maxima })
+    }
+
+    /// Records: the block `src` (3 components of `block.dims`, component-major) into slices
+    /// `z0..z0 + nz` of `dst`.
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        block: SlabGrid,
+        src: &wgpu::Buffer,
+        dst: &FeatureTexture,
+        z0: u32,
+    ) {
+        let params = uniform_buffer(
+            &ctx.device,
+            "pack params",
+            &Params {
+                dims: block.dims,
+                z0,
+            },
+        );
+        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("pack"),
+            layout: &self.pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: src.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&dst.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: self.maxima.as_entire_binding(),
+                },
+            ],
+        });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("pack"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        let [x, y, z] = block.workgroups(WORKGROUP);
+        pass.dispatch_workgroups(x, y, z);
+    }
+
+    /// The maxima from the bytes of a readback of [`Pack::maxima`].
+    pub fn decode_maxima(bytes: &[u8]) -> [f32; 3] {
+        std::array::from_fn(|c| {
+            bytes
+                .get(4 * c..4 * c + 4)
+                .map_or(0.0, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        })
+    }
+}
