@@ -1,0 +1,197 @@
+//! The GPU feature pipeline (issue 5) against the CPU reference pipeline, on lavapipe: every
+//! method on phantoms with anisotropic, thick-slice spacing (so thick axes are resampled), dims
+//! that are not multiples of the workgroup, and slab processing (several slabs) equal to one
+//! piece.
+
+use shapecast::cpu::pipeline::{Method, Request, compute};
+use shapecast::cpu::{Grid, TransferFunction};
+use shapecast::gpu::context::test_context;
+use shapecast::gpu::pipeline::{FeatureJob, FeatureResult, JobOptions};
+use shapecast::gpu::GpuContext;
+use shapecast::phantom::{Phantom, Shape};
+use shapecast::volume::Volume;
+
+/// A nodule next to a vessel and a dark tube (airway-like), in soft tissue with mild noise.
+fn scene(spacing_mm: [f64; 3], noise_hu: f64) -> Volume {
+    let p = Phantom::new("scene", [0.0, 0.0, 0.0], [17.0, 15.0, 21.0], 40.0)
+        .with(
+            Shape::Sphere {
+                centre_mm: [6.0, 7.0, 10.0],
+                radius_mm: 3.0,
+            },
+            140.0,
+        )
+        .with(
+            Shape::Cylinder {
+                a_mm: [0.0, 7.5, 4.0],
+                b_mm: [17.0, 7.5, 18.0],
+                radius_mm: 1.8,
+            },
+            150.0,
+        )
+        .with(
+            Shape::Cylinder {
+                a_mm: [13.0, 0.0, 6.0],
+                b_mm: [13.0, 15.0, 14.0],
+                radius_mm: 1.5,
+            },
+            -60.0,
+        );
+    if noise_hu > 0.0 {
+        p.render_noisy(spacing_mm, noise_hu, 7)
+    } else {
+        p.render(spacing_mm)
+    }
+}
+
+fn run_gpu(ctx: &GpuContext, volume: &Volume, req: &Request, max_slab_voxels: Option<u64>) -> FeatureResult {
+    let options = JobOptions {
+        export: true,
+        max_slab_voxels,
+        ..JobOptions::default()
+    };
+    let mut job = FeatureJob::with_options(ctx, volume, req, options).expect("job");
+    job.run_blocking(ctx).expect("run");
+    job.finish_result().expect("result")
+}
+
+/// Largest |gpu - cpu| over all components, relative to the largest |cpu|, and the fraction of
+/// values within `tight` of it.
+fn compare(gpu: &[Vec<f32>; 3], cpu: &[Vec<f32>; 3], tight: f64) -> (f64, f64) {
+    let scale = cpu
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(f64::from(v.abs())))
+        .max(1e-12);
+    let mut worst = 0.0f64;
+    let (mut within, mut n) = (0usize, 0usize);
+    for c in 0..3 {
+        assert_eq!(gpu[c].len(), cpu[c].len());
+        for (g, r) in gpu[c].iter().zip(&cpu[c]) {
+            let e = f64::from((g - r).abs()) / scale;
+            worst = worst.max(e);
+            within += usize::from(e <= tight);
+            n += 1;
+        }
+    }
+    (worst, within as f64 / n as f64)
+}
+
+fn check_method(ctx: &GpuContext, volume: &Volume, req: &Request, tol: f64, frac_tight: Option<(f64, f64)>) {
+    let grid = Grid::of(volume);
+    let cpu = compute(&grid, &volume.to_f32(), req).expect("cpu");
+    let gpu = run_gpu(ctx, volume, req, Some(grid.dims[0] as u64 * grid.dims[1] as u64 * 24));
+    assert!(gpu.slabs >= 3, "{:?}: only {} slabs", req.method, gpu.slabs);
+    let comps = gpu.components.as_ref().expect("exported");
+    let (worst, _) = compare(comps, &cpu.components, tol);
+    let cmax = cpu.components.iter().flatten().fold(0.0f32, |m, v| m.max(v.abs()));
+    eprintln!(
+        "{:?} {:?}: {} slabs, max |gpu-cpu| = {worst:.2e} of max {cmax:.3}",
+        req.method, volume.dims, gpu.slabs
+    );
+    assert!(cmax > 0.05, "{:?}: features are all near zero ({cmax})", req.method);
+    assert!(worst <= tol, "{:?}: max error {worst:.3e} > {tol:.0e}", req.method);
+    if let Some((tight, frac)) = frac_tight {
+        let (_, f) = compare(comps, &cpu.components, tight);
+        eprintln!("  {:.3}% within {tight:.0e}", 100.0 * f);
+        assert!(f >= frac, "{:?}: only {f:.4} within {tight:.0e}", req.method);
+    }
+    assert_eq!(gpu.tf, cpu.tf, "transfer functions differ");
+}
+
+#[test]
+fn hessian_maps_match_the_cpu_on_thick_slices_in_slabs() {
+    let Some(ctx) = test_context() else { return };
+    // z thicker than 1.25 mm: the pipeline resamples per slab and maps back.
+    let volume = scene([0.8, 0.9, 2.0], 0.0);
+    for method in [Method::Hessian, Method::Li, Method::Frangi] {
+        let mut req = Request::new(method);
+        req.sigmas_mm = Some(vec![1.0, 2.0]);
+        check_method(&ctx, &volume, &req, 1e-3, None);
+    }
+    let mut req = Request::new(Method::Hessian);
+    req.sigmas_mm = Some(vec![1.0, 2.0]);
+    req.eigen = true;
+    check_method(&ctx, &volume, &req, 1e-3, None);
+}
+
+#[test]
+fn structure_tensor_matches_the_cpu() {
+    let Some(ctx) = test_context() else { return };
+    let volume = scene([0.7, 0.7, 1.0], 0.0);
+    let mut req = Request::new(Method::Gst);
+    req.sigmas_mm = Some(vec![1.0, 1.5]);
+    check_method(&ctx, &volume, &req, 1e-3, None);
+}
+
+#[test]
+fn rst_matches_the_cpu_with_the_automatic_transfer_function() {
+    let Some(ctx) = test_context() else { return };
+    // Noise so that the automatic transfer function has windows to measure (0..100 HU band).
+    let volume = scene([0.9, 0.9, 1.5], 5.0);
+    let mut req = Request::new(Method::Rst);
+    req.rays = Some(26);
+    req.radius_mm = Some(5.0);
+    req.step_mm = Some(0.5);
+    check_method(&ctx, &volume, &req, 1e-2, Some((1e-3, 0.995)));
+}
+
+#[test]
+fn rst_paper_rule_with_an_explicit_transfer_function() {
+    let Some(ctx) = test_context() else { return };
+    let volume = scene([0.7, 0.8, 0.9], 0.0);
+    let mut req = Request::new(Method::Rst);
+    req.rays = Some(42);
+    req.radius_mm = Some(4.0);
+    req.rule = shapecast::cpu::OpacityRule::Paper;
+    req.tf = Some(TransferFunction::PAPER_CT);
+    check_method(&ctx, &volume, &req, 1e-2, Some((1e-3, 0.995)));
+}
+
+#[test]
+fn slabs_give_the_same_result_as_one_piece_and_fill_the_texture() {
+    let Some(ctx) = test_context() else { return };
+    let volume = scene([0.8, 0.8, 1.6], 0.0);
+    let mut req = Request::new(Method::Li);
+    req.sigmas_mm = Some(vec![1.5]);
+    let one = run_gpu(&ctx, &volume, &req, None);
+    let plane = (volume.dims[0] * volume.dims[1]) as u64;
+    let many = run_gpu(&ctx, &volume, &req, Some(plane * 16));
+    assert_eq!(one.slabs, 1);
+    assert!(many.slabs >= 3, "{} slabs", many.slabs);
+    let (worst, _) = compare(
+        many.components.as_ref().expect("exported"),
+        one.components.as_ref().expect("exported"),
+        0.0,
+    );
+    eprintln!("{} slabs vs one piece: max rel. difference {worst:.2e}", many.slabs);
+    assert!(worst < 1e-5, "slabs differ from one piece by {worst:.2e}");
+    // The texture holds what was exported (half floats) and the maxima are the components'.
+    let comps = many.components.as_ref().expect("exported");
+    let texels = shapecast::gpu::render_volume::read_texture_blocking(&ctx, &many.texture)
+        .expect("texture readback");
+    for c in 0..3 {
+        let max = comps[c].iter().copied().fold(0.0f32, f32::max);
+        assert!((many.texture.max[c] - max).abs() <= 1e-3 * max.max(1.0), "max {c}");
+        for (i, v) in comps[c].iter().enumerate() {
+            let t = texels[4 * i + c];
+            assert!((t - v).abs() <= 1e-3 * v.abs() + 1e-4, "texel {i} comp {c}: {t} vs {v}");
+        }
+    }
+}
+
+#[test]
+fn a_device_too_small_for_one_slice_is_refused_with_a_message() {
+    let Some(ctx) = test_context() else { return };
+    let volume = scene([0.8, 0.8, 1.0], 0.0);
+    let req = Request::new(Method::Hessian);
+    let options = JobOptions {
+        max_slab_voxels: Some(10),
+        ..JobOptions::default()
+    };
+    let err = FeatureJob::with_options(&ctx, &volume, &req, options)
+        .err()
+        .expect("refused");
+    let msg = err.to_string();
+    assert!(msg.contains("slab") || msg.contains("slice"), "{msg}");
+}
