@@ -5,6 +5,8 @@
 pub const FILES: &[(&str, &str)] = &[
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("axis_mip.wgsl", include_str!("../../shaders/axis_mip.wgsl")),
+    ("eigen.wgsl", include_str!("../../shaders/eigen.wgsl")),
+    ("feature_maps.wgsl", include_str!("../../shaders/feature_maps.wgsl")),
 ];
 
 /// Why a shader source could not be assembled.
