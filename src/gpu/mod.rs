@@ -2,7 +2,11 @@
 //! kernel that owns its pipeline and the bytemuck structs mirroring its WGSL structs.
 
 pub mod axis_mip;
+pub mod checks;
 pub mod context;
+pub mod eigen_features;
+pub mod gaussian;
+pub mod hessian;
 pub mod kernel;
 pub mod pipeline;
 pub mod readback;

@@ -6,7 +6,15 @@ pub const FILES: &[(&str, &str)] = &[
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("axis_mip.wgsl", include_str!("../../shaders/axis_mip.wgsl")),
     ("eigen.wgsl", include_str!("../../shaders/eigen.wgsl")),
-    ("feature_maps.wgsl", include_str!("../../shaders/feature_maps.wgsl")),
+    (
+        "feature_maps.wgsl",
+        include_str!("../../shaders/feature_maps.wgsl"),
+    ),
+    ("gaussian.wgsl", include_str!("../../shaders/gaussian.wgsl")),
+    (
+        "eigen_features.wgsl",
+        include_str!("../../shaders/eigen_features.wgsl"),
+    ),
 ];
 
 /// Why a shader source could not be assembled.
