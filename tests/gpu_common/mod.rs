@@ -16,6 +16,13 @@ pub const SPACING: [f64; 3] = [0.6, 0.8, 1.1];
 /// capsule (r 1 mm, -400 HU, an airway-like lumen), so that vesselness, airwayness and
 /// blobness all occur.
 pub fn phantom() -> (Grid, Vec<f32>) {
+    let (grid, values) = phantom_at(SPACING);
+    assert_eq!(grid.dims, [13, 17, 11]);
+    (grid, values)
+}
+
+/// The same objects at another spacing (e.g. finer along z for a slab with room for halos).
+pub fn phantom_at(spacing_mm: [f64; 3]) -> (Grid, Vec<f32>) {
     let p = Phantom::new(
         "gpu-test",
         [0.0; 3],
@@ -45,8 +52,7 @@ pub fn phantom() -> (Grid, Vec<f32>) {
         },
         -400.0,
     );
-    let v = p.render(SPACING);
-    assert_eq!(v.dims, [13, 17, 11]);
+    let v = p.render(spacing_mm);
     (Grid::of(&v), v.to_f32())
 }
 
