@@ -667,3 +667,109 @@ fn slab_with_halo_matches_whole_volume() {
         );
     }
 }
+
+/// The general structure tensor from the CPU twin's own gradient (the gradient kernel is the
+/// RST module's): six smoothed products, then its eigenvalues and the GST mapping (eq. 1 / Li of
+/// -l), against `structure_tensor_eigen` / `structure_tensor_features`.
+#[test]
+fn structure_tensor_matches_cpu() {
+    use shapecast::cpu::GradientVolume;
+    use shapecast::cpu::structure_tensor::{structure_tensor_eigen, structure_tensor_features};
+    use shapecast::gpu::gaussian::SeparableKernel;
+    use shapecast::gpu::structure_tensor::StructureTensor;
+    let Some(ctx) = test_context() else { return };
+    let (grid, values) = phantom();
+    let sg = slab_grid(&grid);
+    let n = grid.len();
+    let gv = GradientVolume::new(&grid, &values, 0.7);
+    let grads: Vec<wgpu::Buffer> = (0..3)
+        .map(|a| upload(&ctx, &gv.gradient.iter().map(|g| g[a]).collect::<Vec<_>>()))
+        .collect();
+    let st = StructureTensor::new(&ctx).expect("shader");
+    let ef = EigenFeatures::new(&ctx).expect("shader");
+    for rho in [1.0, 2.0] {
+        let kernel = SeparableKernel::smooth(&ctx, rho, grid.spacing_mm);
+        let tmp = [buffer(&ctx, n), buffer(&ctx, n)];
+        let t: Vec<wgpu::Buffer> = (0..6).map(|_| buffer(&ctx, n)).collect();
+        let eig_out = buffer(&ctx, 4 * n);
+        let feats: Vec<wgpu::Buffer> = (0..2).map(|_| buffer(&ctx, 3 * n)).collect();
+        let mut enc = encoder(&ctx);
+        st.record(
+            &ctx,
+            &mut enc,
+            &sg,
+            &kernel,
+            [&grads[0], &grads[1], &grads[2]],
+            [&tmp[0], &tmp[1]],
+            refs(&t),
+        )
+        .expect("record");
+        let all = (0, sg.dims[2]);
+        ef.record(
+            &ctx,
+            &mut enc,
+            &sg,
+            refs(&t),
+            all,
+            TensorOutput::Eigen,
+            false,
+            &eig_out,
+        )
+        .expect("record");
+        for (m, map) in [FeatureMap::Simple, FeatureMap::Li].into_iter().enumerate() {
+            ef.record(
+                &ctx,
+                &mut enc,
+                &sg,
+                refs(&t),
+                all,
+                TensorOutput::structure_tensor(map),
+                false,
+                &feats[m],
+            )
+            .expect("record");
+        }
+        submit(&ctx, enc);
+        let cpu_eig = structure_tensor_eigen(&gv, rho);
+        let gpu_eig = read(&ctx, &eig_out, 4 * n);
+        let eig: Vec<[f64; 3]> = (0..n)
+            .map(|i| std::array::from_fn(|c| f64::from(cpu_eig[c][i])))
+            .collect();
+        let largest = max_abs(&cpu_eig[0]);
+        assert!(
+            cpu_eig.iter().flatten().all(|&l| l >= -1e-3 * largest),
+            "GST eigenvalues are >= 0"
+        );
+        let (e, ties) = compare_with_ties(
+            "GST eigenvalues",
+            &gpu_eig[..3 * n],
+            &cpu_eig,
+            std::slice::from_ref(&eig),
+            1e-4 * largest,
+            1e-4 * f64::from(largest),
+        );
+        eprintln!(
+            "GST rho {rho}: eigenvalues max error {:.2e} of the largest ({largest:.1}), {ties} ties",
+            e / largest
+        );
+        for (m, map) in [FeatureMap::Simple, FeatureMap::Li].into_iter().enumerate() {
+            let cpu = structure_tensor_features(&gv, rho, map);
+            let gpu = read(&ctx, &feats[m], 3 * n);
+            let scale = cpu.iter().map(|c| max_abs(c)).fold(0.0, f32::max);
+            // Mapped as bright structures: V and B occur, A (positive l) never does.
+            assert!(max_abs(&cpu[0]) > 0.0 && max_abs(&cpu[2]) > 0.0 && max_abs(&cpu[1]) == 0.0);
+            let (e, ties) = compare_with_ties(
+                "GST features",
+                &gpu,
+                &cpu,
+                std::slice::from_ref(&eig),
+                1e-4 * scale,
+                1e-4 * f64::from(largest),
+            );
+            eprintln!(
+                "GST rho {rho} {map:?}: max error {:.2e} of the largest feature ({scale:.2}), {ties} ties",
+                e / scale
+            );
+        }
+    }
+}

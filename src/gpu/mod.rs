@@ -12,6 +12,7 @@ pub mod pipeline;
 pub mod readback;
 pub mod render_volume;
 pub mod shaders;
+pub mod structure_tensor;
 pub mod volume;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};

@@ -15,6 +15,10 @@ pub const FILES: &[(&str, &str)] = &[
         "eigen_features.wgsl",
         include_str!("../../shaders/eigen_features.wgsl"),
     ),
+    (
+        "structure_tensor.wgsl",
+        include_str!("../../shaders/structure_tensor.wgsl"),
+    ),
 ];
 
 /// Why a shader source could not be assembled.
