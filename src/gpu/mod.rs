@@ -11,6 +11,7 @@ pub mod kernel;
 pub mod pipeline;
 pub mod readback;
 pub mod render_volume;
+pub mod resample;
 pub mod shaders;
 pub mod structure_tensor;
 pub mod volume;

@@ -19,6 +19,7 @@ pub const FILES: &[(&str, &str)] = &[
         "structure_tensor.wgsl",
         include_str!("../../shaders/structure_tensor.wgsl"),
     ),
+    ("resample.wgsl", include_str!("../../shaders/resample.wgsl")),
 ];
 
 /// Why a shader source could not be assembled.
