@@ -2,15 +2,24 @@
 //! kernel that owns its pipeline and the bytemuck structs mirroring its WGSL structs.
 
 pub mod axis_mip;
+pub mod checks;
 pub mod context;
+pub mod eigen_features;
+pub mod gaussian;
+pub mod hessian;
 pub mod kernel;
 pub mod noise;
 pub mod pack;
 pub mod pipeline;
 pub mod readback;
 pub mod render_volume;
+pub mod resample;
 pub mod shaders;
+<<<<<<< HEAD
 pub mod slab;
+=======
+pub mod structure_tensor;
+>>>>>>> hessian
 pub mod volume;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};

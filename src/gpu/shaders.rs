@@ -7,6 +7,21 @@ pub const FILES: &[(&str, &str)] = &[
     ("axis_mip.wgsl", include_str!("../../shaders/axis_mip.wgsl")),
     ("noise_windows.wgsl", include_str!("../../shaders/noise_windows.wgsl")),
     ("pack_features.wgsl", include_str!("../../shaders/pack_features.wgsl")),
+    ("eigen.wgsl", include_str!("../../shaders/eigen.wgsl")),
+    (
+        "feature_maps.wgsl",
+        include_str!("../../shaders/feature_maps.wgsl"),
+    ),
+    ("gaussian.wgsl", include_str!("../../shaders/gaussian.wgsl")),
+    (
+        "eigen_features.wgsl",
+        include_str!("../../shaders/eigen_features.wgsl"),
+    ),
+    (
+        "structure_tensor.wgsl",
+        include_str!("../../shaders/structure_tensor.wgsl"),
+    ),
+    ("resample.wgsl", include_str!("../../shaders/resample.wgsl")),
 ];
 
 /// Why a shader source could not be assembled.
