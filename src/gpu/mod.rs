@@ -3,6 +3,7 @@
 
 pub mod axis_mip;
 pub mod context;
+pub mod gradient;
 pub mod kernel;
 pub mod pipeline;
 pub mod readback;

@@ -7,6 +7,7 @@ pub const FILES: &[(&str, &str)] = &[
     ("axis_mip.wgsl", include_str!("../../shaders/axis_mip.wgsl")),
     ("eigen.wgsl", include_str!("../../shaders/eigen.wgsl")),
     ("feature_maps.wgsl", include_str!("../../shaders/feature_maps.wgsl")),
+    ("gradient.wgsl", include_str!("../../shaders/gradient.wgsl")),
 ];
 
 /// Why a shader source could not be assembled.
