@@ -8,6 +8,7 @@ pub mod kernel;
 pub mod pipeline;
 pub mod readback;
 pub mod render_volume;
+pub mod rst;
 pub mod shaders;
 pub mod volume;
 

@@ -6,8 +6,12 @@ pub const FILES: &[(&str, &str)] = &[
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("axis_mip.wgsl", include_str!("../../shaders/axis_mip.wgsl")),
     ("eigen.wgsl", include_str!("../../shaders/eigen.wgsl")),
-    ("feature_maps.wgsl", include_str!("../../shaders/feature_maps.wgsl")),
+    (
+        "feature_maps.wgsl",
+        include_str!("../../shaders/feature_maps.wgsl"),
+    ),
     ("gradient.wgsl", include_str!("../../shaders/gradient.wgsl")),
+    ("rst.wgsl", include_str!("../../shaders/rst.wgsl")),
 ];
 
 /// Why a shader source could not be assembled.
