@@ -6,6 +6,7 @@ pub mod checks;
 pub mod context;
 pub mod eigen_features;
 pub mod gaussian;
+pub mod gradient;
 pub mod hessian;
 pub mod kernel;
 pub mod noise;
@@ -14,12 +15,10 @@ pub mod pipeline;
 pub mod readback;
 pub mod render_volume;
 pub mod resample;
+pub mod rst;
 pub mod shaders;
-<<<<<<< HEAD
 pub mod slab;
-=======
 pub mod structure_tensor;
->>>>>>> hessian
 pub mod volume;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};

@@ -22,6 +22,8 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../../shaders/structure_tensor.wgsl"),
     ),
     ("resample.wgsl", include_str!("../../shaders/resample.wgsl")),
+    ("gradient.wgsl", include_str!("../../shaders/gradient.wgsl")),
+    ("rst.wgsl", include_str!("../../shaders/rst.wgsl")),
 ];
 
 /// Why a shader source could not be assembled.

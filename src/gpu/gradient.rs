@@ -1,0 +1,211 @@
+//! The RST's gradient volume on the GPU (shaders/gradient.wgsl): central differences in mm of an
+//! already smoothed slab, borders replicated, into three buffers gx, gy, gz. It is the second half
+//! of [`crate::cpu::GradientVolume::new`] (the Gaussian smoothing before it is another kernel's).
+//!
+//! Also holds what the RST and gradient kernels share: [`DispatchError`] and the checks that make
+//! a bad size an error instead of a wgpu validation panic.
+
+use crate::gpu::kernel::{SlabGrid, WORKGROUP, uniform_buffer};
+use crate::gpu::{GpuContext, shaders};
+
+/// Why a kernel could not be recorded. Everything is checked before anything is recorded, so a
+/// bad size never reaches wgpu's validation (which panics natively).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DispatchError {
+    #[error("the slab is empty ({nx}x{ny}x{nz} voxels)")]
+    EmptySlab { nx: u32, ny: u32, nz: u32 },
+    #[error("the {name} buffer holds {have} bytes; the kernel needs {need}")]
+    BufferTooSmall {
+        name: &'static str,
+        need: u64,
+        have: u64,
+    },
+    #[error("the {name} buffer was not created with STORAGE usage")]
+    NotStorage { name: &'static str },
+    #[error("the {name} binding needs {bytes} bytes; this GPU binds at most {limit}")]
+    BindingTooLarge {
+        name: &'static str,
+        bytes: u64,
+        limit: u64,
+    },
+    #[error("the dispatch needs {groups:?} workgroups; this GPU allows {limit} per dimension")]
+    TooManyWorkgroups { groups: [u32; 3], limit: u32 },
+    #[error("output slices {z0}..{end} are not a non-empty range inside the slab's {nz} slices")]
+    OutputRange { z0: u32, end: u64, nz: u32 },
+    #[error("the slab's spacing {slab:?} mm is not the one the rays were built for ({rays:?} mm)")]
+    SpacingMismatch { slab: [f32; 3], rays: [f32; 3] },
+    #[error("the {0} buffer is bound both as an input and as an output")]
+    Aliased(&'static str),
+}
+
+/// Checks that `buffer` can be bound as a storage buffer of `bytes` bytes and returns that
+/// binding (only the bytes the kernel uses are bound, so a larger buffer is fine).
+pub(crate) fn storage_binding<'a>(
+    ctx: &GpuContext,
+    name: &'static str,
+    buffer: &'a wgpu::Buffer,
+    bytes: u64,
+) -> Result<wgpu::BindingResource<'a>, DispatchError> {
+    if !buffer.usage().contains(wgpu::BufferUsages::STORAGE) {
+        return Err(DispatchError::NotStorage { name });
+    }
+    if buffer.size() < bytes {
+        return Err(DispatchError::BufferTooSmall {
+            name,
+            need: bytes,
+            have: buffer.size(),
+        });
+    }
+    let limit = ctx.limits.max_storage_buffer_binding_size;
+    if bytes > limit {
+        return Err(DispatchError::BindingTooLarge { name, bytes, limit });
+    }
+    Ok(wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+        buffer,
+        offset: 0,
+        size: wgpu::BufferSize::new(bytes),
+    }))
+}
+
+/// Workgroup counts of an `(8, 8, 1)` dispatch over `dims`, checked against the device's limit.
+pub(crate) fn workgroups(ctx: &GpuContext, dims: [u32; 3]) -> Result<[u32; 3], DispatchError> {
+    let groups = SlabGrid::new(dims, [1.0; 3]).workgroups(WORKGROUP);
+    let limit = ctx.limits.max_compute_workgroups_per_dimension;
+    if groups.iter().any(|&g| g > limit) {
+        return Err(DispatchError::TooManyWorkgroups { groups, limit });
+    }
+    Ok(groups)
+}
+
+/// The slab's voxel count, or an error for an empty slab.
+pub(crate) fn voxel_count(grid: &SlabGrid) -> Result<u64, DispatchError> {
+    if grid.is_empty() {
+        let [nx, ny, nz] = grid.dims;
+        return Err(DispatchError::EmptySlab { nx, ny, nz });
+    }
+    Ok(grid.len())
+}
+
+/// Records one compute pass with a single pipeline and bind group.
+pub(crate) fn record_pass(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    bind_group: &wgpu::BindGroup,
+    groups: [u32; 3],
+) {
+    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: None,
+    });
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, bind_group, &[]);
+    pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+}
+
+pub(crate) fn compute_pipeline(
+    ctx: &GpuContext,
+    shader: &str,
+    entry: &str,
+) -> Result<wgpu::ComputePipeline, shaders::ShaderSourceError> {
+    let module = shaders::create_module(&ctx.device, shader)?;
+    Ok(ctx
+        .device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry),
+            layout: None,
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        }))
+}
+
+/// Mirrors `Params` in gradient.wgsl (keep in sync).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    dims: [u32; 3],
+    _pad0: u32,
+    two_spacing: [f32; 3],
+    _pad1: f32,
+}
+const _: () = assert!(std::mem::size_of::<Params>() == 32);
+
+/// The gradient kernel's pipeline.
+pub struct Gradient {
+    pipeline: wgpu::ComputePipeline,
+}
+
+/// The three gradient components (HU/mm), one f32 buffer each, `nx * ny * nz` voxels of the slab.
+#[derive(Clone, Copy, Debug)]
+pub struct GradientBuffers<'a> {
+    pub gx: &'a wgpu::Buffer,
+    pub gy: &'a wgpu::Buffer,
+    pub gz: &'a wgpu::Buffer,
+}
+
+impl Gradient {
+    /// Slices of smoothed intensity the kernel reads beyond each side of the slices whose
+    /// gradient must be right (the central-difference stencil).
+    pub const HALO_SLICES: u32 = 1;
+    /// Bytes per slab voxel of the input (smoothed intensity, f32).
+    pub const INPUT_BYTES_PER_VOXEL: u64 = 4;
+    /// Bytes per slab voxel of the outputs (gx, gy, gz, f32).
+    pub const OUTPUT_BYTES_PER_VOXEL: u64 = 12;
+
+    pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
+        Ok(Self {
+            pipeline: compute_pipeline(ctx, "gradient.wgsl", "gradient")?,
+        })
+    }
+
+    /// Records the gradient of the smoothed `intensity` of `grid` into `out` (every voxel of the
+    /// slab; the slab's edge slices replicate the border, as the CPU twin does at the volume's).
+    /// Nothing is submitted.
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        intensity: &wgpu::Buffer,
+        out: &GradientBuffers<'_>,
+    ) -> Result<(), DispatchError> {
+        let bytes = voxel_count(grid)? * 4;
+        for (name, b) in [("gx", out.gx), ("gy", out.gy), ("gz", out.gz)] {
+            if b == intensity {
+                return Err(DispatchError::Aliased(name));
+            }
+        }
+        if out.gx == out.gy || out.gx == out.gz || out.gy == out.gz {
+            return Err(DispatchError::Aliased("gradient output"));
+        }
+        let groups = workgroups(ctx, grid.dims)?;
+        let params = Params {
+            dims: grid.dims,
+            _pad0: 0,
+            two_spacing: grid.spacing_mm.map(|s| 2.0 * s),
+            _pad1: 0.0,
+        };
+        let params_buf = uniform_buffer(&ctx.device, "gradient params", &params);
+        let entries = [
+            entry(0, params_buf.as_entire_binding()),
+            entry(1, storage_binding(ctx, "intensity", intensity, bytes)?),
+            entry(2, storage_binding(ctx, "gx", out.gx, bytes)?),
+            entry(3, storage_binding(ctx, "gy", out.gy, bytes)?),
+            entry(4, storage_binding(ctx, "gz", out.gz, bytes)?),
+        ];
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("gradient"),
+            layout: &self.pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        record_pass(encoder, "gradient", &self.pipeline, &bind_group, groups);
+        Ok(())
+    }
+}
+
+pub(crate) fn entry(binding: u32, resource: wgpu::BindingResource<'_>) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry { binding, resource }
+}

@@ -1,0 +1,394 @@
+//! The radial structure tensor on the GPU (shaders/rst.wgsl): the ray kernel whose twin is
+//! [`crate::cpu::rst_tensor_at`], at the same sample positions, with both opacity rules.
+//!
+//! Use: build [`Rst`] once per device; build [`RstRays`] once per run (ray set, opacity lengths
+//! and steps computed here on the CPU with the twin's own functions, uploaded once); then
+//! [`Rst::record`] per dispatch into the caller's command encoder, over the output slices
+//! `out_z0 .. out_z0 + out_nz` of a slab whose smoothed intensity and gradient
+//! ([`crate::gpu::gradient`]) are in storage buffers.
+//!
+//! Sizing a slab for it: the rays read [`RstRays::halo_slices`] slices of (I, g) beyond each side
+//! of the output range; the gradient needs [`Gradient::HALO_SLICES`] more of smoothed intensity,
+//! and the smoothing its own kernel radius on top ([`RstRays::total_halo_slices`] adds the
+//! first two). Memory: [`Rst::INPUT_BYTES_PER_VOXEL`] per slab voxel,
+//! [`RstOutput::bytes_per_voxel`] per output voxel.
+
+use crate::cpu::rst::{ALPHA_STOP, opacity_length_mm};
+use crate::cpu::{FeatureMap, OpacityRule, RstParams};
+use crate::gpu::gradient::{
+    DispatchError, Gradient, GradientBuffers, compute_pipeline, entry, record_pass,
+    storage_binding, voxel_count, workgroups,
+};
+use crate::gpu::kernel::{SlabGrid, uniform_buffer};
+use crate::gpu::{GpuContext, shaders};
+
+/// Mirrors `Params` in rst.wgsl (keep in sync).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    dims: [u32; 3],
+    n_rays: u32,
+    out_z0: u32,
+    out_nz: u32,
+    n_steps: u32,
+    rule: u32,
+    step_mm: f32,
+    dr_vox: f32,
+    d_min: f32,
+    d_max: f32,
+    mode: u32,
+    map: u32,
+    alpha_stop: f32,
+    trans_stop: f32,
+}
+const _: () = assert!(std::mem::size_of::<Params>() == 64);
+
+/// Mirrors `Ray` in rst.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct GpuRay {
+    dir_len: [f32; 4],
+    step_vox: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
+
+// The numbers of rst.wgsl and feature_maps.wgsl.
+const RULE_CONSISTENT: u32 = 0;
+const RULE_PAPER: u32 = 1;
+const MODE_TENSOR: u32 = 0;
+const MODE_EIGEN: u32 = 1;
+const MODE_FEATURES: u32 = 2;
+const MODE_SAMPLE_COUNT: u32 = 3;
+const MAP_SIMPLE: u32 = 0;
+const MAP_LI: u32 = 1;
+
+/// The most steps per ray a run may ask for (a runaway loop would hang the device).
+pub const MAX_STEPS: usize = 1 << 16;
+/// The most rays a run may ask for.
+pub const MAX_RAYS: usize = 4096;
+
+/// What the kernel writes per output voxel, component-major (`c * n_out + index`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RstOutput {
+    /// The symmetrised tensor Ts = (T + T^T) / N_R: six components `[xx, yy, zz, xy, xz, yz]`
+    /// (the order of [`crate::cpu::Sym3`]).
+    Tensor,
+    /// Eigenvalues `[l0, l1, l2]`, `|l0| >= |l1| >= |l2|` (shaders/eigen.wgsl).
+    Eigen,
+    /// `[V, A, B]` with the simple (eq. 1) or Li (eq. 2) map (shaders/feature_maps.wgsl).
+    Features(FeatureMap),
+    /// One component: the number of ray samples taken at the voxel (excluding the centre), as
+    /// f32. For benchmarks (ray samples per second).
+    SampleCount,
+}
+
+impl RstOutput {
+    pub fn components(self) -> u32 {
+        match self {
+            Self::Tensor => 6,
+            Self::Eigen | Self::Features(_) => 3,
+            Self::SampleCount => 1,
+        }
+    }
+
+    /// Bytes of output per output voxel (f32 components).
+    pub fn bytes_per_voxel(self) -> u64 {
+        u64::from(self.components()) * 4
+    }
+
+    fn mode_and_map(self) -> (u32, u32) {
+        match self {
+            Self::Tensor => (MODE_TENSOR, 0),
+            Self::Eigen => (MODE_EIGEN, 0),
+            Self::Features(FeatureMap::Simple) => (MODE_FEATURES, MAP_SIMPLE),
+            Self::Features(FeatureMap::Li) => (MODE_FEATURES, MAP_LI),
+            Self::SampleCount => (MODE_SAMPLE_COUNT, 0),
+        }
+    }
+}
+
+/// Why a ray configuration was refused.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RstConfigError {
+    #[error("the RST needs between 1 and {MAX_RAYS} rays, got {0}")]
+    RayCount(usize),
+    #[error("ray {index} is not a finite unit vector: {dir:?}")]
+    BadRay { index: usize, dir: [f64; 3] },
+    #[error(
+        "the RST step ({step_mm} mm) and ray length ({radius_mm} mm) must be finite, step > 0, length >= 0"
+    )]
+    BadLength { step_mm: f64, radius_mm: f64 },
+    #[error("the RST would take {steps} steps per ray (at most {MAX_STEPS})")]
+    TooManySteps { steps: f64 },
+    #[error("the voxel spacing {0:?} mm must be finite and positive")]
+    BadSpacing([f64; 3]),
+    #[error("sigma_g ({0} mm) must be finite and >= 0")]
+    BadSigma(f64),
+    #[error("the transfer function ({d_min}, {d_max}) must be finite")]
+    BadTransferFunction { d_min: f64, d_max: f64 },
+}
+
+/// Everything constant over an RST run, on the GPU: the ray set with each ray's opacity length
+/// L_i and step in voxels (f64 on the CPU, then f32), the step count K, transfer function and
+/// rule. Valid for one voxel spacing and one sigma_g.
+pub struct RstRays {
+    buffer: wgpu::Buffer,
+    n_rays: u32,
+    steps: u32,
+    step_mm: f64,
+    dr_vox: f64,
+    d_min: f64,
+    d_max: f64,
+    rule: OpacityRule,
+    spacing_mm: [f64; 3],
+    /// Largest |r_z| * K * dr / s_z over the rays: how many slices a ray reaches along z.
+    reach_z_vox: f64,
+}
+
+impl RstRays {
+    /// Uploads the rays of `params` for a grid of `spacing_mm` whose gradient volume was made
+    /// with `sigma_g_mm`. The opacity lengths come from the twin's [`opacity_length_mm`], K from
+    /// [`RstParams::steps`].
+    pub fn new(
+        ctx: &GpuContext,
+        params: &RstParams,
+        spacing_mm: [f64; 3],
+        sigma_g_mm: f64,
+    ) -> Result<Self, RstConfigError> {
+        let n = params.rays.len();
+        if n == 0 || n > MAX_RAYS {
+            return Err(RstConfigError::RayCount(n));
+        }
+        if !spacing_mm.iter().all(|s| s.is_finite() && *s > 0.0) {
+            return Err(RstConfigError::BadSpacing(spacing_mm));
+        }
+        if !(sigma_g_mm.is_finite() && sigma_g_mm >= 0.0) {
+            return Err(RstConfigError::BadSigma(sigma_g_mm));
+        }
+        let (step_mm, radius_mm) = (params.step_mm, params.radius_mm);
+        if !(step_mm.is_finite() && step_mm > 0.0 && radius_mm.is_finite() && radius_mm >= 0.0) {
+            return Err(RstConfigError::BadLength { step_mm, radius_mm });
+        }
+        let steps_f = (radius_mm / step_mm + 1e-6).floor();
+        if steps_f > MAX_STEPS as f64 {
+            return Err(RstConfigError::TooManySteps { steps: steps_f });
+        }
+        let (d_min, d_max) = (params.tf.d_min, params.tf.d_max);
+        if !(d_min.is_finite() && d_max.is_finite()) {
+            return Err(RstConfigError::BadTransferFunction { d_min, d_max });
+        }
+        let steps = params.steps();
+        let grid = crate::cpu::Grid::new([1, 1, 1], spacing_mm);
+        let mut rays = Vec::with_capacity(n);
+        let mut max_rz = 0.0f64;
+        for (index, r) in params.rays.iter().enumerate() {
+            let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+            let unit = r.iter().all(|c| c.is_finite()) && (norm - 1.0).abs() < 1e-6;
+            if !unit {
+                return Err(RstConfigError::BadRay { index, dir: *r });
+            }
+            let len = opacity_length_mm(&grid, sigma_g_mm, *r);
+            max_rz = max_rz.max(r[2].abs());
+            rays.push(GpuRay {
+                dir_len: [r[0] as f32, r[1] as f32, r[2] as f32, len as f32],
+                step_vox: [
+                    (step_mm * r[0] / spacing_mm[0]) as f32,
+                    (step_mm * r[1] / spacing_mm[1]) as f32,
+                    (step_mm * r[2] / spacing_mm[2]) as f32,
+                    0.0,
+                ],
+            });
+        }
+        let buffer = {
+            use wgpu::util::DeviceExt as _;
+            ctx.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("rst rays"),
+                    contents: bytemuck::cast_slice(&rays),
+                    usage: wgpu::BufferUsages::STORAGE,
+                })
+        };
+        let min_spacing = spacing_mm.iter().copied().fold(f64::INFINITY, f64::min);
+        Ok(Self {
+            buffer,
+            n_rays: n as u32,
+            steps: steps as u32,
+            step_mm,
+            dr_vox: step_mm / min_spacing,
+            d_min,
+            d_max,
+            rule: params.rule,
+            spacing_mm,
+            reach_z_vox: max_rz * steps as f64 * step_mm / spacing_mm[2],
+        })
+    }
+
+    pub fn ray_count(&self) -> u32 {
+        self.n_rays
+    }
+
+    /// K, the most steps a ray takes.
+    pub fn steps(&self) -> u32 {
+        self.steps
+    }
+
+    /// The most ray samples (trilinear reads of I and g) per output voxel: N_R * K. Early ray
+    /// termination makes the real count smaller (about 60 per ray in homogeneous tissue at the
+    /// defaults, 24 inside an object; [`RstOutput::SampleCount`] measures it).
+    pub fn max_samples_per_voxel(&self) -> u64 {
+        u64::from(self.n_rays) * u64::from(self.steps)
+    }
+
+    /// Slices of smoothed intensity and gradient the rays read beyond each side of the output
+    /// range: ceil(max_i |r_i,z| K dr / s_z). (A sample exactly on a slice also touches the next
+    /// one with weight 0, or ~1e-7 after f32 rounding; that slice may be missing.)
+    pub fn halo_slices(&self) -> u32 {
+        ((self.reach_z_vox - 1e-6).ceil().max(0.0)) as u32
+    }
+
+    /// Slices of *smoothed intensity* the RST plus the gradient kernel need beyond each side of
+    /// the output range: [`Self::halo_slices`] + [`Gradient::HALO_SLICES`]. The Gaussian
+    /// smoothing that produces it needs its own kernel radius more of raw intensity.
+    pub fn total_halo_slices(&self) -> u32 {
+        self.halo_slices() + Gradient::HALO_SLICES
+    }
+
+    /// The spacing the rays were built for.
+    pub fn spacing_mm(&self) -> [f64; 3] {
+        self.spacing_mm
+    }
+}
+
+/// The slab's (I, g) buffers and the rays: what [`Rst::record`] reads.
+#[derive(Clone, Copy)]
+pub struct RstInputs<'a> {
+    /// Smoothed intensity I of the slab (f32, `nx * ny * nz`).
+    pub intensity: &'a wgpu::Buffer,
+    /// Its gradient (HU/mm), e.g. from [`Gradient::record`].
+    pub gradient: GradientBuffers<'a>,
+    pub rays: &'a RstRays,
+}
+
+/// One dispatch: the slab's grid, the output slices and what to write.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RstDispatch {
+    /// The slab (with its halo). Its spacing must be the one the rays were built for.
+    pub grid: SlabGrid,
+    /// First output slice (slab index).
+    pub out_z0: u32,
+    /// Number of output slices; the output buffer holds `nx * ny * out_nz` voxels per component.
+    pub out_nz: u32,
+    pub output: RstOutput,
+}
+
+impl RstDispatch {
+    /// Output voxels of this dispatch.
+    pub fn out_voxels(&self) -> u64 {
+        u64::from(self.grid.dims[0]) * u64::from(self.grid.dims[1]) * u64::from(self.out_nz)
+    }
+
+    /// Bytes the output buffer needs.
+    pub fn out_bytes(&self) -> u64 {
+        self.out_voxels() * self.output.bytes_per_voxel()
+    }
+}
+
+/// The RST kernel's pipeline.
+pub struct Rst {
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl Rst {
+    /// Bytes per slab voxel of the inputs (I, gx, gy, gz as f32).
+    pub const INPUT_BYTES_PER_VOXEL: u64 = 16;
+
+    pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
+        Ok(Self {
+            pipeline: compute_pipeline(ctx, "rst.wgsl", "rst")?,
+        })
+    }
+
+    /// Records the RST of the output slices of `params.grid` into `out` (component-major,
+    /// `c * out_voxels + i + nx * (j + ny * (k - out_z0))`). Nothing is submitted.
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        inputs: &RstInputs<'_>,
+        params: &RstDispatch,
+        out: &wgpu::Buffer,
+    ) -> Result<(), DispatchError> {
+        let grid = &params.grid;
+        let slab_bytes = voxel_count(grid)? * 4;
+        let nz = grid.dims[2];
+        let end = u64::from(params.out_z0) + u64::from(params.out_nz);
+        if params.out_nz == 0 || end > u64::from(nz) {
+            return Err(DispatchError::OutputRange {
+                z0: params.out_z0,
+                end,
+                nz,
+            });
+        }
+        let rays = inputs.rays;
+        let rays_spacing = rays.spacing_mm.map(|s| s as f32);
+        if rays_spacing != grid.spacing_mm {
+            return Err(DispatchError::SpacingMismatch {
+                slab: grid.spacing_mm,
+                rays: rays_spacing,
+            });
+        }
+        let g = &inputs.gradient;
+        let named = [
+            ("intensity", inputs.intensity),
+            ("gx", g.gx),
+            ("gy", g.gy),
+            ("gz", g.gz),
+        ];
+        if let Some((name, _)) = named.iter().find(|(_, b)| *b == out) {
+            return Err(DispatchError::Aliased(name));
+        }
+        let groups = workgroups(ctx, [grid.dims[0], grid.dims[1], params.out_nz])?;
+        let (mode, map) = params.output.mode_and_map();
+        let gpu_params = Params {
+            dims: grid.dims,
+            n_rays: rays.n_rays,
+            out_z0: params.out_z0,
+            out_nz: params.out_nz,
+            n_steps: rays.steps,
+            rule: match rays.rule {
+                OpacityRule::Consistent => RULE_CONSISTENT,
+                OpacityRule::Paper => RULE_PAPER,
+            },
+            step_mm: rays.step_mm as f32,
+            dr_vox: rays.dr_vox as f32,
+            d_min: rays.d_min as f32,
+            d_max: rays.d_max as f32,
+            mode,
+            map,
+            alpha_stop: ALPHA_STOP as f32,
+            trans_stop: (1.0 - ALPHA_STOP) as f32,
+        };
+        let params_buf = uniform_buffer(&ctx.device, "rst params", &gpu_params);
+        let ray_bytes = u64::from(rays.n_rays) * std::mem::size_of::<GpuRay>() as u64;
+        let entries = [
+            entry(0, params_buf.as_entire_binding()),
+            entry(
+                1,
+                storage_binding(ctx, "intensity", inputs.intensity, slab_bytes)?,
+            ),
+            entry(2, storage_binding(ctx, "gx", g.gx, slab_bytes)?),
+            entry(3, storage_binding(ctx, "gy", g.gy, slab_bytes)?),
+            entry(4, storage_binding(ctx, "gz", g.gz, slab_bytes)?),
+            entry(5, storage_binding(ctx, "rays", &rays.buffer, ray_bytes)?),
+            entry(6, storage_binding(ctx, "output", out, params.out_bytes())?),
+        ];
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("rst"),
+            layout: &self.pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        record_pass(encoder, "rst", &self.pipeline, &bind_group, groups);
+        Ok(())
+    }
+}
