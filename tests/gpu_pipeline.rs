@@ -4,6 +4,7 @@
 //! piece.
 
 use shapecast::cpu::pipeline::{Method, Request, compute};
+use shapecast::cpu::resample::{MAX_FEATURE_SPACING_MM, refined_grid};
 use shapecast::cpu::{Grid, TransferFunction};
 use shapecast::gpu::context::test_context;
 use shapecast::gpu::pipeline::{FeatureJob, FeatureResult, JobOptions};
@@ -13,10 +14,10 @@ use shapecast::volume::Volume;
 
 /// A nodule next to a vessel and a dark tube (airway-like), in soft tissue with mild noise.
 fn scene(spacing_mm: [f64; 3], noise_hu: f64) -> Volume {
-    let p = Phantom::new("scene", [0.0, 0.0, 0.0], [17.0, 15.0, 21.0], 40.0)
+    let p = Phantom::new("scene", [0.0, 0.0, 0.0], [17.0, 15.0, 40.0], 40.0)
         .with(
             Shape::Sphere {
-                centre_mm: [6.0, 7.0, 10.0],
+                centre_mm: [6.0, 7.0, 22.0],
                 radius_mm: 3.0,
             },
             140.0,
@@ -24,15 +25,15 @@ fn scene(spacing_mm: [f64; 3], noise_hu: f64) -> Volume {
         .with(
             Shape::Cylinder {
                 a_mm: [0.0, 7.5, 4.0],
-                b_mm: [17.0, 7.5, 18.0],
+                b_mm: [17.0, 7.5, 36.0],
                 radius_mm: 1.8,
             },
             150.0,
         )
         .with(
             Shape::Cylinder {
-                a_mm: [13.0, 0.0, 6.0],
-                b_mm: [13.0, 15.0, 14.0],
+                a_mm: [13.0, 0.0, 26.0],
+                b_mm: [13.0, 15.0, 34.0],
                 radius_mm: 1.5,
             },
             -60.0,
@@ -80,7 +81,12 @@ fn compare(gpu: &[Vec<f32>; 3], cpu: &[Vec<f32>; 3], tight: f64) -> (f64, f64) {
 fn check_method(ctx: &GpuContext, volume: &Volume, req: &Request, tol: f64, frac_tight: Option<(f64, f64)>) {
     let grid = Grid::of(volume);
     let cpu = compute(&grid, &volume.to_f32(), req).expect("cpu");
-    let gpu = run_gpu(ctx, volume, req, Some(grid.dims[0] as u64 * grid.dims[1] as u64 * 24));
+    // A part of the compute grid per slab: at least three slabs once halos are counted (the
+    // RST's halo, the rays' reach, is the widest).
+    let c = refined_grid(&grid, MAX_FEATURE_SPACING_MM);
+    let part = if req.method == Method::Rst { 0.85 } else { 0.67 };
+    let cap = (c.dims[0] * c.dims[1]) as u64 * (part * c.dims[2] as f64) as u64;
+    let gpu = run_gpu(ctx, volume, req, Some(cap));
     assert!(gpu.slabs >= 3, "{:?}: only {} slabs", req.method, gpu.slabs);
     let comps = gpu.components.as_ref().expect("exported");
     let (worst, _) = compare(comps, &cpu.components, tol);
@@ -156,7 +162,7 @@ fn slabs_give_the_same_result_as_one_piece_and_fill_the_texture() {
     req.sigmas_mm = Some(vec![1.5]);
     let one = run_gpu(&ctx, &volume, &req, None);
     let plane = (volume.dims[0] * volume.dims[1]) as u64;
-    let many = run_gpu(&ctx, &volume, &req, Some(plane * 16));
+    let many = run_gpu(&ctx, &volume, &req, Some(plane * 2 * volume.dims[2] as u64 / 3));
     assert_eq!(one.slabs, 1);
     assert!(many.slabs >= 3, "{} slabs", many.slabs);
     let (worst, _) = compare(

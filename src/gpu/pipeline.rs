@@ -1,17 +1,41 @@
 //! The feature pipeline the app and `shapecast features --backend gpu` run: one volume in, one
-//! method's features out, on the GPU, as a [`FeatureTexture`] for rendering (and read back only
-//! for export and tests).
+//! method's features out, computed on the GPU slab by slab and kept there as a
+//! [`FeatureTexture`] for rendering; read back only when asked (export, tests).
 //!
-//! It is a job advanced by [`FeatureJob::step`], a bounded amount of work per call, so the app
-//! calls it once per frame and stays responsive, shows progress, and can cancel by dropping it.
+//! A [`FeatureJob`] is advanced by [`FeatureJob::step`]: each call records and submits at most one
+//! bounded piece of GPU work, and returns at once while the GPU is busy, so the app calls it once
+//! per frame and stays responsive, shows progress, and cancels by dropping the job. Natively,
+//! [`FeatureJob::run_blocking`] drives it to the end.
 //!
-//! (First version: runs the CPU reference in one step. The slab-by-slab GPU version replaces the
-//! inside; the API stays.)
+//! What it computes is `crate::cpu::pipeline::compute` (the CPU reference): thick axes resampled
+//! to <= 1.25 mm, the automatic transfer function from the noise of the whole volume, Frangi's
+//! c over the whole volume per scale, the multi-scale maximum, and results on the input grid.
+//! Slabs come from [`crate::gpu::slab::plan`], sized from the device's binding limit and a
+//! memory budget, with halos wide enough for the kernels and the rays.
 
-use crate::cpu::Grid;
-use crate::cpu::pipeline::{Outcome, Request, RequestError, compute};
-use crate::gpu::GpuContext;
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use crate::cpu::features::FeatureMap;
+use crate::cpu::gaussian::kernel_radius_vox;
+use crate::cpu::pipeline::{Method, Request, RequestError};
+use crate::cpu::resample::{MAX_FEATURE_SPACING_MM, refined_grid};
+use crate::cpu::rst::{DEFAULT_STEP_MM, OpacityRule};
+use crate::cpu::tf::{NOISE_BAND_HU, TransferFunction, auto_transfer_function, median};
+use crate::cpu::{Components3, Grid, rays};
+use crate::gpu::eigen_features::{EigenFeatures, Mapping, TensorOutput};
+use crate::gpu::gaussian::{Gaussian, SeparableKernel};
+use crate::gpu::gradient::{Gradient, GradientBuffers};
+use crate::gpu::hessian::{Hessian, HessianKernels};
+use crate::gpu::kernel::{SlabGrid, f32_buffer};
+use crate::gpu::resample::{Resample, ResampleGeometry};
+use crate::gpu::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
+use crate::gpu::structure_tensor::StructureTensor;
+use crate::gpu::readback::{PendingRead, ReadbackError};
 use crate::gpu::render_volume::{FeatureTexture, RenderVolumeError};
+use crate::gpu::slab::{PlanError, Slab, plan};
+use crate::gpu::{GpuContext, noise, pack, shaders};
 use crate::volume::Volume;
 
 /// Why a feature computation failed.
@@ -22,76 +46,1058 @@ pub enum PipelineError {
     Request(#[from] RequestError),
     #[error(transparent)]
     Texture(#[from] RenderVolumeError),
+    #[error("this GPU cannot hold the volume in slabs: {0}")]
+    Plan(#[from] PlanError),
+    #[error("a GPU kernel failed to build: {0}")]
+    Shader(#[from] shaders::ShaderSourceError),
+    #[error("reading results back from the GPU failed: {0}")]
+    Readback(#[from] ReadbackError),
+    #[error("a GPU kernel refused its inputs: {0}")]
+    Dispatch(String),
 }
 
 /// Where a job is.
 #[derive(Clone, Debug, PartialEq)]
 pub enum JobState {
     /// `fraction` of the work done (0..1), and what it is doing now.
-    Running {
-        fraction: f32,
-        stage: String,
-    },
+    Running { fraction: f32, stage: String },
     Done,
+}
+
+/// How a job runs (the defaults suit the app).
+#[derive(Clone, Debug)]
+pub struct JobOptions {
+    /// Working memory for slab buffers, bytes.
+    pub memory_budget_bytes: u64,
+    /// Caps compute voxels per slab below what the budget allows (tests force several slabs).
+    pub max_slab_voxels: Option<u64>,
+    /// Also read the features back to the CPU (export, tests).
+    pub export: bool,
+    /// Output voxels per RST dispatch (a step); `None` picks from the adapter type.
+    pub rst_voxels_per_step: Option<u64>,
+}
+
+impl Default for JobOptions {
+    fn default() -> Self {
+        Self {
+            memory_budget_bytes: 512 << 20,
+            max_slab_voxels: None,
+            export: false,
+            rst_voxels_per_step: None,
+        }
+    }
+}
+
+/// A finished job's results.
+pub struct FeatureResult {
+    pub texture: FeatureTexture,
+    /// The features on the input grid, when [`JobOptions::export`] asked for them.
+    pub components: Option<Components3>,
+    pub notes: Vec<String>,
+    /// The transfer function the RST used.
+    pub tf: Option<TransferFunction>,
+    /// The measured noise of the smoothed intensity (auto TF), HU.
+    pub noise_sigma_hu: Option<f64>,
+    /// Number of slabs the volume was split into.
+    pub slabs: usize,
+}
+
+/// One bounded piece of work.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Task {
+    /// Smoothed intensity of a slab -> noise windows of its measured slices (auto TF).
+    Noise(usize),
+    /// Median of the window sigmas -> transfer function.
+    NoiseDone,
+    /// Hessian at scale `s` of a slab -> largest norm of its core (Frangi's default c).
+    FrangiC { scale: usize, slab: usize },
+    /// Upload a slab and resample it; smoothing and gradient for the RST and the GST.
+    Prepare(usize),
+    /// One scale (Hessian, GST) or one z-chunk of core slices (RST) of a slab.
+    Compute { slab: usize, part: usize },
+    /// Resample back onto the input grid, pack into the texture, read back if exporting.
+    Deliver(usize),
+    /// Read the features' maxima (for default gains).
+    Maxima,
+}
+
+/// What a pending readback's bytes are for.
+enum ReadFor {
+    Noise,
+    FrangiC(usize),
+    Export(usize),
+    Maxima,
+}
+
+/// The kernels a method needs, built once per job.
+struct Kernels {
+    gaussian: Gaussian,
+    hessian: Hessian,
+    eigen: EigenFeatures,
+    resample: Resample,
+    gradient: Gradient,
+    rst: Option<Rst>,
+    /// The ray set, built once the transfer function is known.
+    rays: Option<RstRays>,
+    gst: Option<StructureTensor>,
+    noise: noise::NoiseWindows,
+    pack: pack::Pack,
+    /// Per-scale kernels, uploaded once.
+    hessian_kernels: Vec<HessianKernels>,
+    smooth_g: SeparableKernel,
+    rho: Vec<SeparableKernel>,
+}
+
+/// Per-slab GPU buffers, allocated once at the largest slab's size and reused.
+struct Buffers {
+    /// Input-grid slices of a slab.
+    input: wgpu::Buffer,
+    /// The slab on the compute grid (only when it differs from the input grid).
+    vol: Option<wgpu::Buffer>,
+    /// Scratch for separable passes and smoothing.
+    tmp: [wgpu::Buffer; 2],
+    /// Six tensor components (Hessian); I, gx, gy, gz (RST); I, gx, gy, gz and six tensor
+    /// components (structure tensor).
+    work: Vec<wgpu::Buffer>,
+    /// Features of the core on the compute grid, component-major (3, or 4 for eigenvalues).
+    out_core: wgpu::Buffer,
+    /// One RST dispatch's output block.
+    chunk_out: Option<wgpu::Buffer>,
+    /// Features on the input grid (only when the grids differ).
+    out_in: Option<wgpu::Buffer>,
+    /// Noise windows, small.
+    small: wgpu::Buffer,
+    /// Largest tensor norm (Frangi's c).
+    norm: wgpu::Buffer,
 }
 
 /// One method's features for one volume, computed step by step.
 pub struct FeatureJob {
-    grid: Grid,
-    values: Option<Vec<f32>>,
     request: Request,
-    dims: [u32; 3],
-    result: Option<(FeatureTexture, Outcome)>,
+    input: Grid,
+    compute: Grid,
+    slabs: Vec<Slab>,
+    tasks: VecDeque<Task>,
+    total_tasks: usize,
+    kernels: Kernels,
+    buffers: Buffers,
+    texture: FeatureTexture,
+    /// The volume's values are read slice by slice from here (compact voxels, not f32).
+    volume: Arc<Volume>,
+    options: JobOptions,
+    // Method parameters, resolved from the request and the preset.
+    sigmas_mm: Vec<f64>,
+    rays: Vec<[f64; 3]>,
+    radius_mm: f64,
+    step_mm: f64,
+    tf: Option<TransferFunction>,
+    noise_sigmas: Vec<f64>,
+    noise_sigma: Option<f64>,
+    frangi_c: Vec<f64>,
+    rst_slices_per_step: usize,
+    // GPU sync.
+    busy: Option<Arc<AtomicBool>>,
+    pending: Option<(PendingRead, ReadFor)>,
+    components: Option<Components3>,
+    notes: Vec<String>,
+    stage: String,
+    done: bool,
+}
+
+/// Bytes per compute voxel of a method's working buffers (for the memory budget).
+fn bytes_per_voxel(method: Method, resampled: bool) -> u64 {
+    let base = match method {
+        // input + 6 components + 2 scratch
+        Method::Hessian | Method::Li | Method::Frangi | Method::Gst => 9 * 4,
+        // input + I, gx, gy, gz + 2 scratch
+        Method::Rst => 7 * 4,
+    };
+    // + the features of the core (3 components), + the compute-grid copy when resampling
+    base + 12 + if resampled { 4 } else { 0 }
+}
+
+fn to_u32(v: usize) -> u32 {
+    u32::try_from(v).unwrap_or(u32::MAX)
+}
+
+fn slab_grid(grid: &Grid, nz: usize) -> SlabGrid {
+    SlabGrid::new(
+        [to_u32(grid.dims[0]), to_u32(grid.dims[1]), to_u32(nz)],
+        grid.spacing_mm.map(|s| s as f32),
+    )
 }
 
 impl FeatureJob {
-    pub fn new(
-        _ctx: &GpuContext,
+    /// A job with the app's defaults.
+    pub fn new(ctx: &GpuContext, volume: &Volume, request: &Request) -> Result<Self, PipelineError> {
+        Self::with_options(ctx, volume, request, JobOptions::default())
+    }
+
+    pub fn with_options(
+        ctx: &GpuContext,
         volume: &Volume,
         request: &Request,
+        options: JobOptions,
     ) -> Result<Self, PipelineError> {
-        let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
+        Self::shared(ctx, Arc::new(volume.clone()), request, options)
+    }
+
+    /// A job that reads its slices from a volume the caller shares (no copy).
+    pub fn shared(
+        ctx: &GpuContext,
+        volume: Arc<Volume>,
+        request: &Request,
+        options: JobOptions,
+    ) -> Result<Self, PipelineError> {
+        let req = request.clone();
+        let input = Grid::of(&volume);
+        if input.is_empty() {
+            return Err(RequestError::Empty.into());
+        }
+        let dims = volume.dims.map(to_u32);
+        let texture = FeatureTexture::new(ctx, dims, "features")?;
+        let compute = refined_grid(&input, MAX_FEATURE_SPACING_MM);
+        let mut notes = Vec::new();
+        if compute != input {
+            notes.push(format!(
+                "thick axes resampled for the features: {:?} mm -> {:.3?} mm ({:?} voxels); output on the input grid",
+                input.spacing_mm, compute.spacing_mm, compute.dims
+            ));
+        }
+        // Parameters, as the CPU pipeline resolves them.
+        let sigmas_mm = req.sigmas_mm.clone().unwrap_or_else(|| req.preset.sigmas_mm());
+        if let Some(&s) = sigmas_mm.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
+            return Err(RequestError::Sigma(s).into());
+        }
+        let sz = compute.spacing_mm[2];
+        let max_spacing = compute.spacing_mm.iter().copied().fold(0.0, f64::max);
+        let mut rays = Vec::new();
+        let (mut radius_mm, mut step_mm) = (0.0, 0.0);
+        let halo = match req.method {
+            Method::Hessian | Method::Li | Method::Frangi => {
+                for s in &sigmas_mm {
+                    if *s < 0.5 * max_spacing {
+                        notes.push(format!(
+                            "warning: sigma {s} mm is below half the spacing ({max_spacing:.3} mm)"
+                        ));
+                    }
+                }
+                sigmas_mm
+                    .iter()
+                    .map(|&s| kernel_radius_vox(s / sz))
+                    .max()
+                    .unwrap_or(0)
+            }
+            Method::Gst => {
+                let rho = sigmas_mm.iter().copied().fold(0.0, f64::max);
+                kernel_radius_vox(req.sigma_g_mm / sz) + 1 + kernel_radius_vox(rho / sz)
+            }
+            Method::Rst => {
+                let n_rays = req.rays.unwrap_or(42);
+                rays = rays::ray_set(n_rays).ok_or(RequestError::RayCount(n_rays, rays::RAY_COUNTS))?;
+                radius_mm = req.radius_mm.unwrap_or_else(|| req.preset.radius_mm());
+                step_mm = req.step_mm.unwrap_or(match req.rule {
+                    OpacityRule::Consistent => DEFAULT_STEP_MM,
+                    OpacityRule::Paper => compute.min_spacing_mm(),
+                });
+                if radius_mm.is_nan() || radius_mm <= 0.0 {
+                    return Err(RequestError::NotPositive("--radius-mm").into());
+                }
+                if step_mm.is_nan() || step_mm <= 0.0 {
+                    return Err(RequestError::NotPositive("--step-mm").into());
+                }
+                let k = (radius_mm / step_mm + 1e-6).floor();
+                let reach = k * step_mm / sz;
+                kernel_radius_vox(req.sigma_g_mm / sz) + 1 + reach.ceil() as usize + 1
+            }
+        };
+        let resampled = compute != input;
+        let binding = ctx.limits.max_storage_buffer_binding_size.min(ctx.limits.max_buffer_size);
+        let budget_voxels = options.memory_budget_bytes / bytes_per_voxel(req.method, resampled);
+        let mut max_slab = (binding / 16).min(budget_voxels);
+        if let Some(cap) = options.max_slab_voxels {
+            max_slab = max_slab.min(cap);
+        }
+        let slabs = plan(&input, &compute, halo, max_slab)?;
+        let kernels = Kernels::new(ctx, &req, &compute, &sigmas_mm)?;
+        let mut tasks = VecDeque::new();
+        let tf = if req.method == Method::Rst { req.tf } else { None };
+        if req.method == Method::Rst && tf.is_none() {
+            tasks.extend((0..slabs.len()).map(Task::Noise));
+            tasks.push_back(Task::NoiseDone);
+        }
+        let frangi_default = req.method == Method::Frangi && req.frangi_c.is_none() && !req.eigen;
+        if frangi_default {
+            for scale in 0..sigmas_mm.len() {
+                tasks.extend((0..slabs.len()).map(|slab| Task::FrangiC { scale, slab }));
+            }
+        }
+        let plane_c = (compute.dims[0] * compute.dims[1]) as u64;
+        let per_step = options.rst_voxels_per_step.unwrap_or(
+            if ctx.adapter_info.device_type == wgpu::DeviceType::Cpu {
+                1 << 15
+            } else {
+                1 << 20
+            },
+        );
+        let rst_slices_per_step = ((per_step / plane_c.max(1)) as usize).max(1);
+        let buffers = Buffers::new(ctx, &input, &compute, &slabs, &req, rst_slices_per_step);
+        for (s, slab) in slabs.iter().enumerate() {
+            tasks.push_back(Task::Prepare(s));
+            let parts = match req.method {
+                Method::Rst => slab.core_c.len().div_ceil(rst_slices_per_step),
+                Method::Gst if req.eigen => 1,
+                _ => sigmas_mm.len(),
+            };
+            tasks.extend((0..parts).map(|part| Task::Compute { slab: s, part }));
+            tasks.push_back(Task::Deliver(s));
+        }
+        tasks.push_back(Task::Maxima);
+        if req.method == Method::Gst && req.eigen && sigmas_mm.len() > 1 {
+            notes.push(format!(
+                "--eigen with the structure tensor uses the first scale, {} mm",
+                sigmas_mm[0]
+            ));
+        }
+        let components = options
+            .export
+            .then(|| std::array::from_fn(|_| vec![0.0f32; input.len()]));
+        let total_tasks = tasks.len();
         Ok(Self {
-            grid: Grid::of(volume),
-            values: Some(volume.to_f32()),
-            request: request.clone(),
-            dims,
-            result: None,
+            frangi_c: vec![0.0; sigmas_mm.len()],
+            request: req,
+            input,
+            compute,
+            slabs,
+            tasks,
+            total_tasks,
+            kernels,
+            buffers,
+            texture,
+            volume,
+            options,
+            sigmas_mm,
+            rays,
+            radius_mm,
+            step_mm,
+            tf,
+            noise_sigmas: Vec::new(),
+            noise_sigma: None,
+            rst_slices_per_step,
+            busy: None,
+            pending: None,
+            components,
+            notes,
+            stage: "starting".to_owned(),
+            done: false,
         })
     }
 
-    /// Does the next bounded piece of work.
-    pub fn step(&mut self, ctx: &GpuContext) -> Result<JobState, PipelineError> {
-        if let Some(values) = self.values.take() {
-            let outcome = compute(&self.grid, &values, &self.request)?;
-            let tex =
-                FeatureTexture::from_components(ctx, self.dims, &outcome.components, "features")?;
-            self.result = Some((tex, outcome));
-        }
-        Ok(JobState::Done)
+    /// Number of slabs the volume is processed in.
+    pub fn slab_count(&self) -> usize {
+        self.slabs.len()
     }
 
     /// Progress so far, without doing work.
     pub fn state(&self) -> JobState {
-        if self.result.is_some() {
+        if self.done {
             JobState::Done
         } else {
+            let left = self.tasks.len() + usize::from(self.pending.is_some());
             JobState::Running {
-                fraction: 0.0,
-                stage: "starting".to_owned(),
+                fraction: 1.0 - left as f32 / self.total_tasks.max(1) as f32,
+                stage: self.stage.clone(),
             }
         }
     }
 
     /// What the user should be told (resampling, transfer function, warnings).
     pub fn notes(&self) -> &[String] {
-        self.result
-            .as_ref()
-            .map_or(&[], |(_, o)| o.notes.as_slice())
+        &self.notes
+    }
+
+    /// Does the next bounded piece of work, or nothing while the GPU is busy with the last.
+    pub fn step(&mut self, ctx: &GpuContext) -> Result<JobState, PipelineError> {
+        #[cfg(not(target_arch = "wasm32"))]
+        ctx.device
+            .poll(wgpu::PollType::Poll)
+            .map_err(ReadbackError::from)?;
+        if let Some(flag) = &self.busy {
+            if !flag.load(Ordering::Acquire) {
+                return Ok(self.state());
+            }
+            self.busy = None;
+        }
+        if let Some((read, what)) = &mut self.pending {
+            match read.poll(ctx) {
+                None => return Ok(self.state()),
+                Some(bytes) => {
+                    let bytes = bytes?;
+                    let what = match what {
+                        ReadFor::Noise => ReadFor::Noise,
+                        ReadFor::FrangiC(s) => ReadFor::FrangiC(*s),
+                        ReadFor::Export(s) => ReadFor::Export(*s),
+                        ReadFor::Maxima => ReadFor::Maxima,
+                    };
+                    self.pending = None;
+                    self.take_read(what, &bytes);
+                }
+            }
+        }
+        let Some(task) = self.tasks.pop_front() else {
+            self.done = true;
+            return Ok(JobState::Done);
+        };
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("feature job"),
+            });
+        let read = self.record(ctx, &mut encoder, task)?;
+        ctx.queue.submit([encoder.finish()]);
+        if let Some((buffer, size, what)) = read {
+            self.pending = Some((PendingRead::start(ctx, &buffer, size), what));
+        } else {
+            let flag = Arc::new(AtomicBool::new(false));
+            let f = Arc::clone(&flag);
+            ctx.queue
+                .on_submitted_work_done(move || f.store(true, Ordering::Release));
+            self.busy = Some(flag);
+        }
+        Ok(self.state())
+    }
+
+    /// Native only: runs the job to the end, waiting on the GPU between steps.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn run_blocking(&mut self, ctx: &GpuContext) -> Result<(), PipelineError> {
+        loop {
+            if self.step(ctx)? == JobState::Done {
+                return Ok(());
+            }
+            ctx.device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .map_err(ReadbackError::from)?;
+        }
     }
 
     /// The features once [`JobState::Done`]; `None` before.
     pub fn finish(self) -> Option<FeatureTexture> {
-        self.result.map(|(t, _)| t)
+        self.finish_result().map(|r| r.texture)
+    }
+
+    /// Everything a finished job produced; `None` before [`JobState::Done`].
+    pub fn finish_result(self) -> Option<FeatureResult> {
+        if !self.done {
+            return None;
+        }
+        let slabs = self.slabs.len();
+        Some(FeatureResult {
+            texture: self.texture,
+            components: self.components,
+            notes: self.notes,
+            tf: self.tf,
+            noise_sigma_hu: self.noise_sigma,
+            slabs,
+        })
+    }
+
+    fn take_read(&mut self, what: ReadFor, bytes: &[u8]) {
+        match what {
+            ReadFor::Noise => self.noise_sigmas.extend(noise::NoiseWindows::decode(bytes)),
+            ReadFor::FrangiC(scale) => {
+                let m = bytes
+                    .get(..4)
+                    .map_or(0.0, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+                self.frangi_c[scale] = self.frangi_c[scale].max(0.5 * f64::from(m));
+            }
+            ReadFor::Export(s) => {
+                let Some(out) = &mut self.components else { return };
+                let slab = &self.slabs[s];
+                let plane = self.input.dims[0] * self.input.dims[1];
+                let n = plane * slab.out_z.len();
+                let values: Vec<f32> = bytemuck::pod_collect_to_vec(bytes);
+                for (c, comp) in out.iter_mut().enumerate() {
+                    if let Some(src) = values.get(c * n..(c + 1) * n) {
+                        comp[slab.out_z.start * plane..slab.out_z.end * plane].copy_from_slice(src);
+                    }
+                }
+            }
+            ReadFor::Maxima => self.texture.max = pack::Pack::decode_maxima(bytes),
+        }
+    }
+}
+
+fn dispatch_err(e: impl std::fmt::Display) -> PipelineError {
+    PipelineError::Dispatch(e.to_string())
+}
+
+impl FeatureJob {
+    /// Uploads input slices `range` into `buffers.input` (f32, physical values).
+    fn upload(&self, ctx: &GpuContext, range: std::ops::Range<usize>) {
+        let plane = self.input.dims[0] * self.input.dims[1];
+        // At most 16 MiB of f32 converted at a time.
+        let per = ((4usize << 20) / plane.max(1)).max(1);
+        let mut chunk = vec![0f32; plane * per.min(range.len())];
+        let mut z = range.start;
+        while z < range.end {
+            let nz = per.min(range.end - z);
+            let n = plane * nz;
+            self.volume.values_into(z * plane, &mut chunk[..n]);
+            ctx.queue.write_buffer(
+                &self.buffers.input,
+                ((z - range.start) * plane * 4) as u64,
+                bytemuck::cast_slice(&chunk[..n]),
+            );
+            z += nz;
+        }
+    }
+
+    /// Slab `s` on the compute grid in [`Self::vol`]: uploaded, and resampled when needed.
+    fn record_slab_values(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        s: usize,
+    ) -> Result<(), PipelineError> {
+        let slab = &self.slabs[s];
+        self.upload(ctx, slab.in_z.clone());
+        if let Some(vol) = &self.buffers.vol {
+            let src = slab_grid(&self.input, slab.in_z.len());
+            let dst = slab_grid(&self.compute, slab.slab_c.len());
+            let geometry = ResampleGeometry::z_slabs(
+                self.input.spacing_mm,
+                to_u32(slab.in_z.start),
+                self.compute.spacing_mm,
+                to_u32(slab.slab_c.start),
+            );
+            self.kernels
+                .resample
+                .record(
+                    ctx,
+                    encoder,
+                    &self.buffers.input,
+                    src.dims,
+                    vol,
+                    dst.dims,
+                    1,
+                    &geometry,
+                )
+                .map_err(dispatch_err)?;
+        }
+        Ok(())
+    }
+
+    fn vol(&self) -> &wgpu::Buffer {
+        self.buffers.vol.as_ref().unwrap_or(&self.buffers.input)
+    }
+
+    /// Smoothed intensity (`work[0]`) and gradient (`work[1..4]`) of the slab in `vol()`.
+    fn record_gradient(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+    ) -> Result<(), PipelineError> {
+        let b = &self.buffers;
+        self.kernels
+            .gaussian
+            .record_separable(
+                ctx,
+                encoder,
+                grid,
+                &self.kernels.smooth_g,
+                self.vol(),
+                &b.tmp[0],
+                &b.work[0],
+            )
+            .map_err(dispatch_err)?;
+        self.kernels
+            .gradient
+            .record(
+                ctx,
+                encoder,
+                grid,
+                &b.work[0],
+                &GradientBuffers {
+                    gx: &b.work[1],
+                    gy: &b.work[2],
+                    gz: &b.work[3],
+                },
+            )
+            .map_err(dispatch_err)
+    }
+
+    /// The six Hessian components at scale `scale` in `work[0..6]`.
+    fn record_hessian(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        scale: usize,
+    ) -> Result<(), PipelineError> {
+        let b = &self.buffers;
+        let out: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
+        self.kernels
+            .hessian
+            .record(
+                ctx,
+                encoder,
+                grid,
+                &self.kernels.hessian_kernels[scale],
+                self.vol(),
+                &b.tmp[0],
+                out,
+            )
+            .map_err(dispatch_err)
+    }
+
+    /// Records one task; returns a buffer to read back when the task ends with a readback.
+    fn record(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        task: Task,
+    ) -> Result<Option<(wgpu::Buffer, u64, ReadFor)>, PipelineError> {
+        let n_slabs = self.slabs.len();
+        match task {
+            Task::Noise(s) => {
+                self.stage = format!("measuring noise, slab {}/{n_slabs}", s + 1);
+                let slab = self.slabs[s].clone();
+                let grid = slab_grid(&self.compute, slab.slab_c.len());
+                self.record_slab_values(ctx, encoder, s)?;
+                let b = &self.buffers;
+                self.kernels
+                    .gaussian
+                    .record_separable(
+                        ctx,
+                        encoder,
+                        &grid,
+                        &self.kernels.smooth_g,
+                        self.vol(),
+                        &b.tmp[0],
+                        &b.work[0],
+                    )
+                    .map_err(dispatch_err)?;
+                // Each compute slice is measured once: from the end of the previous core on.
+                let from = if s == 0 {
+                    0
+                } else {
+                    self.slabs[s - 1].core_c.end.max(slab.core_c.start)
+                };
+                let to = slab.core_c.end;
+                if to <= from {
+                    return Ok(None);
+                }
+                let z0 = to_u32(from - slab.slab_c.start);
+                let nz = to_u32(to - from);
+                let len = noise::output_len(grid, nz);
+                if len == 0 {
+                    return Ok(None);
+                }
+                self.kernels
+                    .noise
+                    .record(ctx, encoder, grid, &b.work[0], z0, nz, NOISE_BAND_HU, &b.small);
+                Ok(Some((b.small.clone(), len * 4, ReadFor::Noise)))
+            }
+            Task::NoiseDone => {
+                self.noise_sigma = median(std::mem::take(&mut self.noise_sigmas));
+                match self.noise_sigma {
+                    Some(s) => self.notes.push(format!(
+                        "noise of the smoothed intensity: {s:.2} HU (median of 11x11 windows in 0..100 HU)"
+                    )),
+                    None => self.notes.push(
+                        "noise: no 11x11 window lies wholly in 0..100 HU; the preset's transfer function is used"
+                            .to_owned(),
+                    ),
+                }
+                self.tf = Some(auto_transfer_function(
+                    self.request.preset.transfer_function(),
+                    self.noise_sigma,
+                ));
+                Ok(None)
+            }
+            Task::FrangiC { scale, slab: s } => {
+                self.stage = format!(
+                    "Frangi's c, scale {}/{}, slab {}/{n_slabs}",
+                    scale + 1,
+                    self.sigmas_mm.len(),
+                    s + 1
+                );
+                let slab = self.slabs[s].clone();
+                let grid = slab_grid(&self.compute, slab.slab_c.len());
+                self.record_slab_values(ctx, encoder, s)?;
+                self.record_hessian(ctx, encoder, &grid, scale)?;
+                let b = &self.buffers;
+                let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
+                self.kernels.eigen.record_clear_norm(encoder, &b.norm);
+                self.kernels
+                    .eigen
+                    .record_max_norm(
+                        ctx,
+                        encoder,
+                        &grid,
+                        tensor,
+                        (
+                            to_u32(slab.core_c.start - slab.slab_c.start),
+                            to_u32(slab.core_c.len()),
+                        ),
+                        &b.norm,
+                    )
+                    .map_err(dispatch_err)?;
+                Ok(Some((b.norm.clone(), 4, ReadFor::FrangiC(scale))))
+            }
+            Task::Prepare(s) => {
+                self.stage = format!("slab {}/{n_slabs}: upload", s + 1);
+                let slab = self.slabs[s].clone();
+                self.record_slab_values(ctx, encoder, s)?;
+                if matches!(self.request.method, Method::Rst | Method::Gst) {
+                    let grid = slab_grid(&self.compute, slab.slab_c.len());
+                    self.record_gradient(ctx, encoder, &grid)?;
+                }
+                Ok(None)
+            }
+            Task::Compute { slab: s, part } => {
+                self.record_compute(ctx, encoder, s, part)?;
+                Ok(None)
+            }
+            Task::Deliver(s) => {
+                self.stage = format!("slab {}/{n_slabs}: storing", s + 1);
+                self.record_deliver(ctx, encoder, s)
+            }
+            Task::Maxima => {
+                self.stage = "finishing".to_owned();
+                Ok(Some((self.kernels.pack.maxima.clone(), 12, ReadFor::Maxima)))
+            }
+        }
+    }
+
+    fn tensor_output(&self, part: usize) -> TensorOutput {
+        if self.request.eigen {
+            return TensorOutput::Eigen;
+        }
+        match self.request.method {
+            Method::Hessian => TensorOutput::hessian(Mapping::Map(FeatureMap::Simple)),
+            Method::Li => TensorOutput::hessian(Mapping::Map(FeatureMap::Li)),
+            Method::Frangi => TensorOutput::hessian(Mapping::Frangi {
+                c: self.request.frangi_c.unwrap_or(self.frangi_c[part]),
+            }),
+            _ => TensorOutput::structure_tensor(self.request.rst_map),
+        }
+    }
+
+    fn record_compute(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        s: usize,
+        part: usize,
+    ) -> Result<(), PipelineError> {
+        let slab = self.slabs[s].clone();
+        let grid = slab_grid(&self.compute, slab.slab_c.len());
+        let core = (
+            to_u32(slab.core_c.start - slab.slab_c.start),
+            to_u32(slab.core_c.len()),
+        );
+        let n_slabs = self.slabs.len();
+        match self.request.method {
+            Method::Hessian | Method::Li | Method::Frangi => {
+                self.stage = format!(
+                    "slab {}/{n_slabs}: Hessian, sigma {} mm",
+                    s + 1,
+                    self.sigmas_mm[part]
+                );
+                self.record_hessian(ctx, encoder, &grid, part)?;
+                let b = &self.buffers;
+                let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
+                self.kernels
+                    .eigen
+                    .record(
+                        ctx,
+                        encoder,
+                        &grid,
+                        tensor,
+                        core,
+                        self.tensor_output(part),
+                        part > 0,
+                        &b.out_core,
+                    )
+                    .map_err(dispatch_err)?;
+            }
+            Method::Gst => {
+                self.stage = format!(
+                    "slab {}/{n_slabs}: structure tensor, rho {} mm",
+                    s + 1,
+                    self.sigmas_mm[part]
+                );
+                let b = &self.buffers;
+                let gst = self
+                    .kernels
+                    .gst
+                    .as_ref()
+                    .ok_or_else(|| dispatch_err("no structure tensor kernel"))?;
+                let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[4 + c]);
+                gst.record(
+                    ctx,
+                    encoder,
+                    &grid,
+                    &self.kernels.rho[part],
+                    [&b.work[1], &b.work[2], &b.work[3]],
+                    [&b.tmp[0], &b.tmp[1]],
+                    tensor,
+                )
+                .map_err(dispatch_err)?;
+                self.kernels
+                    .eigen
+                    .record(
+                        ctx,
+                        encoder,
+                        &grid,
+                        tensor,
+                        core,
+                        self.tensor_output(part),
+                        part > 0,
+                        &b.out_core,
+                    )
+                    .map_err(dispatch_err)?;
+            }
+            Method::Rst => self.record_rst(ctx, encoder, s, part, grid)?,
+        }
+        Ok(())
+    }
+
+    fn record_rst(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        s: usize,
+        part: usize,
+        grid: SlabGrid,
+    ) -> Result<(), PipelineError> {
+        let slab = self.slabs[s].clone();
+        let tf = self
+            .tf
+            .unwrap_or_else(|| self.request.preset.transfer_function());
+        if self.kernels.rays.is_none() {
+            self.notes.push(format!(
+                "transfer function: d_min {:.1} HU, d_max {:.1} HU",
+                tf.d_min, tf.d_max
+            ));
+            let params = crate::cpu::rst::RstParams {
+                rays: self.rays.clone(),
+                radius_mm: self.radius_mm,
+                step_mm: self.step_mm,
+                tf,
+                rule: self.request.rule,
+            };
+            let rays = RstRays::new(
+                ctx,
+                &params,
+                self.compute.spacing_mm,
+                self.request.sigma_g_mm,
+            )
+            .map_err(dispatch_err)?;
+            self.kernels.rays = Some(rays);
+            self.tf = Some(tf);
+        }
+        let first = slab.core_c.start + part * self.rst_slices_per_step;
+        let last = (first + self.rst_slices_per_step).min(slab.core_c.end);
+        self.stage = format!(
+            "slab {}/{}: RST, slices {}-{} of {}",
+            s + 1,
+            self.slabs.len(),
+            first + 1,
+            last,
+            self.compute.dims[2]
+        );
+        let (Some(rst), Some(rays)) = (&self.kernels.rst, &self.kernels.rays) else {
+            return Err(dispatch_err("no RST kernel"));
+        };
+        let b = &self.buffers;
+        let output = if self.request.eigen {
+            RstOutput::Eigen
+        } else {
+            RstOutput::Features(self.request.rst_map)
+        };
+        let dispatch = RstDispatch {
+            grid,
+            out_z0: to_u32(first - slab.slab_c.start),
+            out_nz: to_u32(last - first),
+            output,
+        };
+        let inputs = RstInputs {
+            intensity: &b.work[0],
+            gradient: GradientBuffers {
+                gx: &b.work[1],
+                gy: &b.work[2],
+                gz: &b.work[3],
+            },
+            rays,
+        };
+        let chunk = b
+            .chunk_out
+            .as_ref()
+            .ok_or_else(|| dispatch_err("no RST output buffer"))?;
+        rst.record(ctx, encoder, &inputs, &dispatch, chunk)
+            .map_err(dispatch_err)?;
+        // Into the core's component-major block.
+        let plane = (self.compute.dims[0] * self.compute.dims[1]) as u64;
+        let n_chunk = plane * (last - first) as u64;
+        let n_core = plane * slab.core_c.len() as u64;
+        let at = plane * (first - slab.core_c.start) as u64;
+        for c in 0..3u64 {
+            encoder.copy_buffer_to_buffer(
+                chunk,
+                c * n_chunk * 4,
+                &b.out_core,
+                (c * n_core + at) * 4,
+                n_chunk * 4,
+            );
+        }
+        Ok(())
+    }
+
+    fn record_deliver(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        s: usize,
+    ) -> Result<Option<(wgpu::Buffer, u64, ReadFor)>, PipelineError> {
+        let slab = self.slabs[s].clone();
+        let b = &self.buffers;
+        let block = slab_grid(&self.input, slab.out_z.len());
+        let features = match &b.out_in {
+            Some(out_in) => {
+                let core = slab_grid(&self.compute, slab.core_c.len());
+                let geometry = ResampleGeometry::z_slabs(
+                    self.compute.spacing_mm,
+                    to_u32(slab.core_c.start),
+                    self.input.spacing_mm,
+                    to_u32(slab.out_z.start),
+                );
+                self.kernels
+                    .resample
+                    .record(
+                        ctx,
+                        encoder,
+                        &b.out_core,
+                        core.dims,
+                        out_in,
+                        block.dims,
+                        3,
+                        &geometry,
+                    )
+                    .map_err(dispatch_err)?;
+                out_in
+            }
+            None => &b.out_core,
+        };
+        self.kernels.pack.record(
+            ctx,
+            encoder,
+            block,
+            features,
+            &self.texture,
+            to_u32(slab.out_z.start),
+        );
+        Ok(self
+            .options
+            .export
+            .then(|| (features.clone(), 3 * block.len() * 4, ReadFor::Export(s))))
+    }
+}
+
+impl Kernels {
+    fn new(
+        ctx: &GpuContext,
+        req: &Request,
+        compute: &Grid,
+        sigmas_mm: &[f64],
+    ) -> Result<Self, PipelineError> {
+        let spacing = compute.spacing_mm;
+        let hessian_scales = matches!(req.method, Method::Hessian | Method::Li | Method::Frangi);
+        let gst = req.method == Method::Gst;
+        Ok(Self {
+            gaussian: Gaussian::new(ctx)?,
+            hessian: Hessian::new(ctx)?,
+            eigen: EigenFeatures::new(ctx)?,
+            resample: Resample::new(ctx)?,
+            gradient: Gradient::new(ctx)?,
+            rst: if req.method == Method::Rst {
+                Some(Rst::new(ctx)?)
+            } else {
+                None
+            },
+            rays: None,
+            gst: if gst {
+                Some(StructureTensor::new(ctx)?)
+            } else {
+                None
+            },
+            noise: noise::NoiseWindows::new(ctx)?,
+            pack: pack::Pack::new(ctx)?,
+            hessian_kernels: if hessian_scales {
+                sigmas_mm
+                    .iter()
+                    .map(|&s| HessianKernels::new(ctx, s, spacing, true))
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            smooth_g: SeparableKernel::smooth(ctx, req.sigma_g_mm, spacing),
+            rho: if gst {
+                sigmas_mm
+                    .iter()
+                    .map(|&s| SeparableKernel::smooth(ctx, s, spacing))
+                    .collect()
+            } else {
+                Vec::new()
+            },
+        })
+    }
+}
+
+impl Buffers {
+    fn new(
+        ctx: &GpuContext,
+        input: &Grid,
+        compute: &Grid,
+        slabs: &[Slab],
+        req: &Request,
+        rst_slices: usize,
+    ) -> Self {
+        let d = &ctx.device;
+        let plane_in = (input.dims[0] * input.dims[1]) as u64;
+        let plane_c = (compute.dims[0] * compute.dims[1]) as u64;
+        let max = |f: &dyn Fn(&Slab) -> usize| slabs.iter().map(f).max().unwrap_or(1) as u64;
+        let in_n = plane_in * max(&|s| s.in_z.len());
+        let slab_n = plane_c * max(&|s| s.slab_c.len());
+        let core_n = plane_c * max(&|s| s.core_c.len());
+        let out_n = plane_in * max(&|s| s.out_z.len());
+        let resampled = input != compute;
+        let work_count = match req.method {
+            Method::Rst => 4,
+            Method::Gst => 10,
+            _ => 6,
+        };
+        let out_components = if req.eigen && req.method != Method::Rst { 4 } else { 3 };
+        let [nwx, nwy] = crate::cpu::tf::noise_window_counts(compute.dims);
+        let noise_n = ((nwx * nwy) as u64 * max(&|s| s.core_c.len())).max(1);
+        Self {
+            input: f32_buffer(d, "slab input", in_n),
+            vol: resampled.then(|| f32_buffer(d, "slab on the compute grid", slab_n)),
+            tmp: [
+                f32_buffer(d, "slab scratch 0", slab_n),
+                f32_buffer(d, "slab scratch 1", slab_n),
+            ],
+            work: (0..work_count)
+                .map(|_| f32_buffer(d, "slab work", slab_n))
+                .collect(),
+            out_core: f32_buffer(d, "slab features", out_components * core_n),
+            chunk_out: (req.method == Method::Rst)
+                .then(|| f32_buffer(d, "RST block", 3 * plane_c * rst_slices as u64)),
+            out_in: resampled.then(|| f32_buffer(d, "features on the input grid", 3 * out_n)),
+            small: f32_buffer(d, "noise windows", noise_n),
+            norm: crate::gpu::eigen_features::norm_buffer(ctx),
+        }
     }
 }
