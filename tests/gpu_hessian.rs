@@ -419,11 +419,15 @@ fn feature_maps_and_multiscale_max_match_cpu() {
                 TensorOutput::hessian(mapping)
             });
             let scale = cpu.iter().map(|c| max_abs(c)).fold(0.0, f32::max);
-            // Every feature occurs in the phantom (V, A; B except for Frangi).
-            for c in 0..2 {
-                assert!(
-                    max_abs(&cpu[c]) > 0.05 * scale,
-                    "{name}: component {c} is empty"
+            // Every feature occurs in the phantom (V, A, and B except for Frangi, which has none).
+            let frangi = matches!(mapping, Mapping::Frangi { .. });
+            for (c, comp) in cpu.iter().enumerate() {
+                let expected = !(frangi && c == 2);
+                assert_eq!(
+                    max_abs(comp) > 0.05 * scale,
+                    expected,
+                    "{name}: component {c} max {}",
+                    max_abs(comp)
                 );
             }
             let (err, ties) =
@@ -583,6 +587,8 @@ fn slab_with_halo_matches_whole_volume() {
     let (z0, nz) = (10usize, 3usize);
     for sigma in [0.7, 1.0] {
         let halo = shapecast::gpu::hessian::halo_slices(sigma, grid.spacing_mm[2]) as usize;
+        let kernels = HessianKernels::new(&ctx, sigma, grid.spacing_mm, true);
+        assert_eq!(kernels.halo_slices() as usize, halo);
         let (s0, s1) = (z0 - halo, z0 + nz + halo);
         assert!(
             s0 > 0 && s1 < grid.dims[2],
@@ -772,4 +778,56 @@ fn structure_tensor_matches_cpu() {
             );
         }
     }
+}
+
+/// Wrong sizes and ranges are typed errors before anything is recorded (no wgpu panic).
+#[test]
+fn record_refuses_wrong_buffers() {
+    use shapecast::gpu::checks::RecordError;
+    let Some(ctx) = test_context() else { return };
+    let sg = SlabGrid::new([13, 17, 11], [0.6, 0.8, 1.1]);
+    let n = sg.len() as usize;
+    let gauss = Gaussian::new(&ctx).expect("shader");
+    let k = SeparableKernel::smooth(&ctx, 1.0, SPACING);
+    let (a, b, small) = (buffer(&ctx, n), buffer(&ctx, n), buffer(&ctx, n - 1));
+    let mut enc = encoder(&ctx);
+    assert!(matches!(
+        gauss.record_axis(&ctx, &mut enc, &sg, 0, &k.axes[0], &a, &small),
+        Err(RecordError::BufferTooSmall { .. })
+    ));
+    assert!(matches!(
+        gauss.record_axis(&ctx, &mut enc, &sg, 0, &k.axes[0], &a, &a),
+        Err(RecordError::Invalid(_))
+    ));
+    assert!(matches!(
+        gauss.record_axis(&ctx, &mut enc, &sg, 3, &k.axes[0], &a, &b),
+        Err(RecordError::Invalid(_))
+    ));
+    let ef = EigenFeatures::new(&ctx).expect("shader");
+    let t: Vec<wgpu::Buffer> = (0..6).map(|_| buffer(&ctx, n)).collect();
+    let out = buffer(&ctx, 3 * n);
+    let what = TensorOutput::hessian(Mapping::Map(FeatureMap::Li));
+    assert_eq!(
+        ef.record(&ctx, &mut enc, &sg, refs(&t), (8, 4), what, false, &out),
+        Err(RecordError::OutputRange {
+            z0: 8,
+            nz: 4,
+            depth: 11
+        })
+    );
+    // Eigenvalues need 4 components: a 3-component buffer is refused.
+    assert!(matches!(
+        ef.record(
+            &ctx,
+            &mut enc,
+            &sg,
+            refs(&t),
+            (0, 11),
+            TensorOutput::Eigen,
+            false,
+            &out
+        ),
+        Err(RecordError::BufferTooSmall { .. })
+    ));
+    submit(&ctx, enc);
 }

@@ -31,7 +31,7 @@ pub enum RecordError {
     Invalid(&'static str),
 }
 
-/// `buffer` can hold `needed` bytes, and that many bytes fit one storage binding.
+/// `buffer` can hold `needed` bytes and can be bound whole as one storage binding.
 pub fn buffer(
     ctx: &GpuContext,
     what: &'static str,
@@ -45,11 +45,11 @@ pub fn buffer(
             have: buffer.size(),
         });
     }
-    let limit = u64::from(ctx.limits.max_storage_buffer_binding_size);
-    if needed > limit {
+    let limit = ctx.limits.max_storage_buffer_binding_size;
+    if buffer.size() > limit {
         return Err(RecordError::BindingTooLarge {
             what,
-            bytes: needed,
+            bytes: buffer.size(),
             limit,
         });
     }

@@ -57,6 +57,15 @@ pub fn halo_slices(sigma_mm: f64, spacing_z_mm: f64) -> u32 {
     crate::gpu::gaussian::halo_slices(sigma_mm, spacing_z_mm)
 }
 
+/// The largest halo over several scales (multi-scale features run every sigma on one slab).
+pub fn halo_slices_multiscale(sigmas_mm: &[f64], spacing_z_mm: f64) -> u32 {
+    sigmas_mm
+        .iter()
+        .map(|&s| halo_slices(s, spacing_z_mm))
+        .max()
+        .unwrap_or(0)
+}
+
 /// Bytes per slab voxel of the Hessian's buffers besides its input: six components and one
 /// temporary, f32 each.
 pub const BYTES_PER_VOXEL: u64 = 7 * 4;
