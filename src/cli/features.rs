@@ -8,6 +8,8 @@ use anyhow::{Context, bail};
 
 use crate::cpu::pipeline::{self, Method, Request};
 use crate::cpu::{FeatureMap, Grid, OpacityRule, Preset, TransferFunction};
+use crate::gpu::GpuContext;
+use crate::gpu::pipeline::{FeatureJob, JobOptions};
 use crate::io::{self, InputFile};
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,7 +45,11 @@ pub enum MapArg {
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BackendArg {
+    /// The GPU where an adapter exists, else the CPU reference.
+    Auto,
+    /// The CPU reference (src/cpu).
     Cpu,
+    /// The WGSL kernels (src/gpu), slab by slab.
     Gpu,
 }
 
@@ -91,7 +97,7 @@ pub struct FeaturesArgs {
     /// Frangi's c (default: half the largest Hessian norm of the whole volume, per scale).
     #[arg(long)]
     pub frangi_c: Option<f64>,
-    #[arg(long, value_enum, default_value = "cpu")]
+    #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
     /// Write the three eigenvalues sorted by magnitude instead of V, A, B.
     #[arg(long)]
@@ -188,12 +194,24 @@ pub fn request(args: &FeaturesArgs) -> anyhow::Result<Request> {
     Ok(req)
 }
 
-pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
-    if args.backend == BackendArg::Gpu {
-        bail!(
-            "the GPU backend arrives with issue 5 (GPU feature kernels); use --backend cpu for now"
-        );
+/// The GPU context a backend choice asks for: `None` is the CPU reference.
+fn backend_context(backend: BackendArg) -> anyhow::Result<Option<GpuContext>> {
+    match backend {
+        BackendArg::Cpu => Ok(None),
+        BackendArg::Gpu => Ok(Some(
+            pollster::block_on(GpuContext::new_headless()).context("--backend gpu")?,
+        )),
+        BackendArg::Auto => match pollster::block_on(GpuContext::new_headless()) {
+            Ok(ctx) => Ok(Some(ctx)),
+            Err(e) => {
+                eprintln!("note: no GPU ({e}); using the CPU reference");
+                Ok(None)
+            }
+        },
     }
+}
+
+pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
     let req = request(&args)?;
     let files = read_input(&args.input)?;
     let loaded = io::load(&files).with_context(|| format!("loading {}", args.input.display()))?;
@@ -205,14 +223,35 @@ pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
         eprintln!("warning: {w}");
     }
     let grid = Grid::of(&volume);
-    let values = volume.to_f32();
     let started = std::time::Instant::now();
-    let outcome = pipeline::compute(&grid, &values, &req)?;
-    for n in &outcome.notes {
+    let (components, notes, backend) = match backend_context(args.backend)? {
+        Some(ctx) => {
+            let options = JobOptions {
+                export: true,
+                ..JobOptions::default()
+            };
+            let mut job = FeatureJob::with_options(&ctx, &volume, &req, options)?;
+            eprintln!(
+                "GPU: {} ({} slab{})",
+                ctx.adapter_label(),
+                job.slab_count(),
+                if job.slab_count() == 1 { "" } else { "s" }
+            );
+            job.run_blocking(&ctx)?;
+            let result = job.finish_result().context("the GPU job did not finish")?;
+            let comps = result.components.context("the GPU job returned no features")?;
+            (comps, result.notes, "gpu")
+        }
+        None => {
+            let outcome = pipeline::compute(&grid, &volume.to_f32(), &req)?;
+            (outcome.components, outcome.notes, "cpu")
+        }
+    };
+    for n in &notes {
         eprintln!("{n}");
     }
     let name = args.out.to_string_lossy().into_owned();
-    let channels: Vec<&[f32]> = outcome.components.iter().map(|c| c.as_slice()).collect();
+    let channels: Vec<&[f32]> = components.iter().map(|c| c.as_slice()).collect();
     let bytes = io::nifti::write(&name, &volume, &channels, io::nifti::WriteIntent::Vector)?;
     std::fs::write(&args.out, bytes).with_context(|| format!("writing {name}"))?;
     let what = if args.eigen {
@@ -221,7 +260,7 @@ pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
         "vesselness, airwayness, blobness"
     };
     println!(
-        "{:?} on {:?} voxels in {:.1} s -> {name} ({what})",
+        "{:?} ({backend}) on {:?} voxels in {:.1} s -> {name} ({what})",
         args.method,
         volume.dims,
         started.elapsed().as_secs_f64()

@@ -170,7 +170,7 @@ mod tests {
     #[test]
     fn thin_slices_are_their_own_compute_grid() {
         let g = Grid::new([64, 48, 100], [0.7, 0.7, 1.0]);
-        let slabs = plan(&g, &g, 5, 64 * 48 * 30).unwrap();
+        let slabs = plan(&g, &g, 5, 64 * 48 * 30).expect("plan");
         assert_eq!(slabs.len(), 5); // 20 delivered + 10 halo = 30 slices each
         assert_eq!(slabs[0].slab_c, 0..25);
         assert_eq!(slabs[1].slab_c, 15..45);
@@ -183,7 +183,7 @@ mod tests {
             let g = Grid::new([32, 32, nz], [0.6, 0.6, dz]);
             let c = refined_grid(&g, MAX_FEATURE_SPACING_MM);
             for max_slices in [20usize, 47, 1000] {
-                let slabs = plan(&g, &c, 7, (32 * 32 * max_slices) as u64).unwrap();
+                let slabs = plan(&g, &c, 7, (32 * 32 * max_slices) as u64).expect("plan");
                 check_cover(&g, &c, 7, &slabs);
                 for s in &slabs {
                     assert!(s.slab_c.len() <= max_slices);
@@ -195,7 +195,7 @@ mod tests {
     #[test]
     fn a_slice_too_large_for_the_device_is_refused_with_its_size() {
         let g = Grid::new([512, 512, 40], [0.7, 0.7, 1.0]);
-        let err = plan(&g, &g, 10, 512 * 512 * 15).unwrap_err();
+        let err = plan(&g, &g, 10, 512 * 512 * 15).expect_err("too large");
         assert!(err.to_string().contains("512x512"), "{err}");
     }
 }
