@@ -6,9 +6,9 @@
 use shapecast::cpu::pipeline::{Method, Request, compute};
 use shapecast::cpu::resample::{MAX_FEATURE_SPACING_MM, refined_grid};
 use shapecast::cpu::{Grid, TransferFunction};
+use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
 use shapecast::gpu::pipeline::{FeatureJob, FeatureResult, JobOptions};
-use shapecast::gpu::GpuContext;
 use shapecast::phantom::{Phantom, Shape};
 use shapecast::volume::Volume;
 
@@ -45,7 +45,12 @@ fn scene(spacing_mm: [f64; 3], noise_hu: f64) -> Volume {
     }
 }
 
-fn run_gpu(ctx: &GpuContext, volume: &Volume, req: &Request, max_slab_voxels: Option<u64>) -> FeatureResult {
+fn run_gpu(
+    ctx: &GpuContext,
+    volume: &Volume,
+    req: &Request,
+    max_slab_voxels: Option<u64>,
+) -> FeatureResult {
     let options = JobOptions {
         export: true,
         max_slab_voxels,
@@ -78,29 +83,55 @@ fn compare(gpu: &[Vec<f32>; 3], cpu: &[Vec<f32>; 3], tight: f64) -> (f64, f64) {
     (worst, within as f64 / n as f64)
 }
 
-fn check_method(ctx: &GpuContext, volume: &Volume, req: &Request, tol: f64, frac_tight: Option<(f64, f64)>) {
+fn check_method(
+    ctx: &GpuContext,
+    volume: &Volume,
+    req: &Request,
+    tol: f64,
+    frac_tight: Option<(f64, f64)>,
+) {
     let grid = Grid::of(volume);
     let cpu = compute(&grid, &volume.to_f32(), req).expect("cpu");
     // A part of the compute grid per slab: at least three slabs once halos are counted (the
     // RST's halo, the rays' reach, is the widest).
     let c = refined_grid(&grid, MAX_FEATURE_SPACING_MM);
-    let part = if req.method == Method::Rst { 0.85 } else { 0.67 };
+    let part = if req.method == Method::Rst {
+        0.85
+    } else {
+        0.67
+    };
     let cap = (c.dims[0] * c.dims[1]) as u64 * (part * c.dims[2] as f64) as u64;
     let gpu = run_gpu(ctx, volume, req, Some(cap));
     assert!(gpu.slabs >= 3, "{:?}: only {} slabs", req.method, gpu.slabs);
     let comps = gpu.components.as_ref().expect("exported");
     let (worst, _) = compare(comps, &cpu.components, tol);
-    let cmax = cpu.components.iter().flatten().fold(0.0f32, |m, v| m.max(v.abs()));
+    let cmax = cpu
+        .components
+        .iter()
+        .flatten()
+        .fold(0.0f32, |m, v| m.max(v.abs()));
     eprintln!(
         "{:?} {:?}: {} slabs, max |gpu-cpu| = {worst:.2e} of max {cmax:.3}",
         req.method, volume.dims, gpu.slabs
     );
-    assert!(cmax > 0.05, "{:?}: features are all near zero ({cmax})", req.method);
-    assert!(worst <= tol, "{:?}: max error {worst:.3e} > {tol:.0e}", req.method);
+    assert!(
+        cmax > 0.05,
+        "{:?}: features are all near zero ({cmax})",
+        req.method
+    );
+    assert!(
+        worst <= tol,
+        "{:?}: max error {worst:.3e} > {tol:.0e}",
+        req.method
+    );
     if let Some((tight, frac)) = frac_tight {
         let (_, f) = compare(comps, &cpu.components, tight);
         eprintln!("  {:.3}% within {tight:.0e}", 100.0 * f);
-        assert!(f >= frac, "{:?}: only {f:.4} within {tight:.0e}", req.method);
+        assert!(
+            f >= frac,
+            "{:?}: only {f:.4} within {tight:.0e}",
+            req.method
+        );
     }
     assert_eq!(gpu.tf, cpu.tf, "transfer functions differ");
 }
@@ -162,7 +193,12 @@ fn slabs_give_the_same_result_as_one_piece_and_fill_the_texture() {
     req.sigmas_mm = Some(vec![1.5]);
     let one = run_gpu(&ctx, &volume, &req, None);
     let plane = (volume.dims[0] * volume.dims[1]) as u64;
-    let many = run_gpu(&ctx, &volume, &req, Some(plane * 2 * volume.dims[2] as u64 / 3));
+    let many = run_gpu(
+        &ctx,
+        &volume,
+        &req,
+        Some(plane * 2 * volume.dims[2] as u64 / 3),
+    );
     assert_eq!(one.slabs, 1);
     assert!(many.slabs >= 3, "{} slabs", many.slabs);
     let (worst, _) = compare(
@@ -170,7 +206,10 @@ fn slabs_give_the_same_result_as_one_piece_and_fill_the_texture() {
         one.components.as_ref().expect("exported"),
         0.0,
     );
-    eprintln!("{} slabs vs one piece: max rel. difference {worst:.2e}", many.slabs);
+    eprintln!(
+        "{} slabs vs one piece: max rel. difference {worst:.2e}",
+        many.slabs
+    );
     assert!(worst < 1e-5, "slabs differ from one piece by {worst:.2e}");
     // The texture holds what was exported (half floats) and the maxima are the components'.
     let comps = many.components.as_ref().expect("exported");
@@ -178,10 +217,16 @@ fn slabs_give_the_same_result_as_one_piece_and_fill_the_texture() {
         .expect("texture readback");
     for c in 0..3 {
         let max = comps[c].iter().copied().fold(0.0f32, f32::max);
-        assert!((many.texture.max[c] - max).abs() <= 1e-3 * max.max(1.0), "max {c}");
+        assert!(
+            (many.texture.max[c] - max).abs() <= 1e-3 * max.max(1.0),
+            "max {c}"
+        );
         for (i, v) in comps[c].iter().enumerate() {
             let t = texels[4 * i + c];
-            assert!((t - v).abs() <= 1e-3 * v.abs() + 1e-4, "texel {i} comp {c}: {t} vs {v}");
+            assert!(
+                (t - v).abs() <= 1e-3 * v.abs() + 1e-4,
+                "texel {i} comp {c}: {t} vs {v}"
+            );
         }
     }
 }

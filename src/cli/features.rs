@@ -239,7 +239,9 @@ pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
             );
             job.run_blocking(&ctx)?;
             let result = job.finish_result().context("the GPU job did not finish")?;
-            let comps = result.components.context("the GPU job returned no features")?;
+            let comps = result
+                .components
+                .context("the GPU job returned no features")?;
             (comps, result.notes, "gpu")
         }
         None => {

@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod bench;
 pub mod features;
 pub mod info;
 pub mod phantom;
@@ -25,8 +26,10 @@ pub enum Command {
     Gpu,
     /// Write one of the paper's phantoms (anti-aliased, in HU) as NIfTI.
     Phantom(phantom::PhantomArgs),
-    /// Compute Hessian, Frangi, structure-tensor or RST features of a volume (CPU reference).
+    /// Compute Hessian, Frangi, structure-tensor or RST features of a volume (GPU or CPU).
     Features(features::FeaturesArgs),
+    /// Time every GPU feature stage against the CPU reference (and scikit-image).
+    Bench(bench::BenchArgs),
     /// Print a volume's dimensions, spacing, orientation, intensity range, modality and warnings.
     Info(info::InfoArgs),
     /// Reproduce the paper's experiments on the phantoms: Markdown report and PNG plots.
@@ -40,6 +43,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Gpu => gpu_info(),
         Command::Phantom(args) => phantom::run(args),
         Command::Features(args) => features::run(args),
+        Command::Bench(args) => bench::run(args),
         Command::Reproduce(args) => reproduce::run(args),
         Command::Info(args) => info::run(&args),
     }

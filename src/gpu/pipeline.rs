@@ -29,12 +29,12 @@ use crate::gpu::gaussian::{Gaussian, SeparableKernel};
 use crate::gpu::gradient::{Gradient, GradientBuffers};
 use crate::gpu::hessian::{Hessian, HessianKernels};
 use crate::gpu::kernel::{SlabGrid, f32_buffer};
-use crate::gpu::resample::{Resample, ResampleGeometry};
-use crate::gpu::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
-use crate::gpu::structure_tensor::StructureTensor;
 use crate::gpu::readback::{PendingRead, ReadbackError};
 use crate::gpu::render_volume::{FeatureTexture, RenderVolumeError};
+use crate::gpu::resample::{Resample, ResampleGeometry};
+use crate::gpu::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
 use crate::gpu::slab::{PlanError, Slab, plan};
+use crate::gpu::structure_tensor::StructureTensor;
 use crate::gpu::{GpuContext, noise, pack, shaders};
 use crate::volume::Volume;
 
@@ -60,7 +60,10 @@ pub enum PipelineError {
 #[derive(Clone, Debug, PartialEq)]
 pub enum JobState {
     /// `fraction` of the work done (0..1), and what it is doing now.
-    Running { fraction: f32, stage: String },
+    Running {
+        fraction: f32,
+        stage: String,
+    },
     Done,
 }
 
@@ -229,7 +232,11 @@ fn slab_grid(grid: &Grid, nz: usize) -> SlabGrid {
 
 impl FeatureJob {
     /// A job with the app's defaults.
-    pub fn new(ctx: &GpuContext, volume: &Volume, request: &Request) -> Result<Self, PipelineError> {
+    pub fn new(
+        ctx: &GpuContext,
+        volume: &Volume,
+        request: &Request,
+    ) -> Result<Self, PipelineError> {
         Self::with_options(ctx, volume, request, JobOptions::default())
     }
 
@@ -265,7 +272,10 @@ impl FeatureJob {
             ));
         }
         // Parameters, as the CPU pipeline resolves them.
-        let sigmas_mm = req.sigmas_mm.clone().unwrap_or_else(|| req.preset.sigmas_mm());
+        let sigmas_mm = req
+            .sigmas_mm
+            .clone()
+            .unwrap_or_else(|| req.preset.sigmas_mm());
         if let Some(&s) = sigmas_mm.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
             return Err(RequestError::Sigma(s).into());
         }
@@ -294,7 +304,8 @@ impl FeatureJob {
             }
             Method::Rst => {
                 let n_rays = req.rays.unwrap_or(42);
-                rays = rays::ray_set(n_rays).ok_or(RequestError::RayCount(n_rays, rays::RAY_COUNTS))?;
+                rays = rays::ray_set(n_rays)
+                    .ok_or(RequestError::RayCount(n_rays, rays::RAY_COUNTS))?;
                 radius_mm = req.radius_mm.unwrap_or_else(|| req.preset.radius_mm());
                 step_mm = req.step_mm.unwrap_or(match req.rule {
                     OpacityRule::Consistent => DEFAULT_STEP_MM,
@@ -312,7 +323,10 @@ impl FeatureJob {
             }
         };
         let resampled = compute != input;
-        let binding = ctx.limits.max_storage_buffer_binding_size.min(ctx.limits.max_buffer_size);
+        let binding = ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(ctx.limits.max_buffer_size);
         let budget_voxels = options.memory_budget_bytes / bytes_per_voxel(req.method, resampled);
         let mut max_slab = (binding / 16).min(budget_voxels);
         if let Some(cap) = options.max_slab_voxels {
@@ -321,7 +335,11 @@ impl FeatureJob {
         let slabs = plan(&input, &compute, halo, max_slab)?;
         let kernels = Kernels::new(ctx, &req, &compute, &sigmas_mm)?;
         let mut tasks = VecDeque::new();
-        let tf = if req.method == Method::Rst { req.tf } else { None };
+        let tf = if req.method == Method::Rst {
+            req.tf
+        } else {
+            None
+        };
         if req.method == Method::Rst && tf.is_none() {
             tasks.extend((0..slabs.len()).map(Task::Noise));
             tasks.push_back(Task::NoiseDone);
@@ -511,7 +529,9 @@ impl FeatureJob {
                 self.frangi_c[scale] = self.frangi_c[scale].max(0.5 * f64::from(m));
             }
             ReadFor::Export(s) => {
-                let Some(out) = &mut self.components else { return };
+                let Some(out) = &mut self.components else {
+                    return;
+                };
                 let slab = &self.slabs[s];
                 let plane = self.input.dims[0] * self.input.dims[1];
                 let n = plane * slab.out_z.len();
@@ -694,9 +714,16 @@ impl FeatureJob {
                 if len == 0 {
                     return Ok(None);
                 }
-                self.kernels
-                    .noise
-                    .record(ctx, encoder, grid, &b.work[0], z0, nz, NOISE_BAND_HU, &b.small);
+                self.kernels.noise.record(
+                    ctx,
+                    encoder,
+                    grid,
+                    &b.work[0],
+                    z0,
+                    nz,
+                    NOISE_BAND_HU,
+                    &b.small,
+                );
                 Ok(Some((b.small.clone(), len * 4, ReadFor::Noise)))
             }
             Task::NoiseDone => {
@@ -766,7 +793,11 @@ impl FeatureJob {
             }
             Task::Maxima => {
                 self.stage = "finishing".to_owned();
-                Ok(Some((self.kernels.pack.maxima.clone(), 12, ReadFor::Maxima)))
+                Ok(Some((
+                    self.kernels.pack.maxima.clone(),
+                    12,
+                    ReadFor::Maxima,
+                )))
             }
         }
     }
@@ -1079,7 +1110,11 @@ impl Buffers {
             Method::Gst => 10,
             _ => 6,
         };
-        let out_components = if req.eigen && req.method != Method::Rst { 4 } else { 3 };
+        let out_components = if req.eigen && req.method != Method::Rst {
+            4
+        } else {
+            3
+        };
         let [nwx, nwy] = crate::cpu::tf::noise_window_counts(compute.dims);
         let noise_n = ((nwx * nwy) as u64 * max(&|s| s.core_c.len())).max(1);
         Self {

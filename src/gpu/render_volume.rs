@@ -247,7 +247,8 @@ pub fn read_texture_blocking(
 ) -> Result<Vec<f32>, crate::gpu::readback::ReadbackError> {
     let [nx, ny, nz] = tex.dims;
     let row = nx * 8;
-    let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let padded =
+        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
     let size = u64::from(padded) * u64::from(ny) * u64::from(nz);
     let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("texture readback"),

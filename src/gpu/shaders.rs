@@ -5,8 +5,14 @@
 pub const FILES: &[(&str, &str)] = &[
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("axis_mip.wgsl", include_str!("../../shaders/axis_mip.wgsl")),
-    ("noise_windows.wgsl", include_str!("../../shaders/noise_windows.wgsl")),
-    ("pack_features.wgsl", include_str!("../../shaders/pack_features.wgsl")),
+    (
+        "noise_windows.wgsl",
+        include_str!("../../shaders/noise_windows.wgsl"),
+    ),
+    (
+        "pack_features.wgsl",
+        include_str!("../../shaders/pack_features.wgsl"),
+    ),
     ("eigen.wgsl", include_str!("../../shaders/eigen.wgsl")),
     (
         "feature_maps.wgsl",

@@ -153,7 +153,10 @@ mod tests {
             for z in s.out_z.clone() {
                 let u = z as f64 * input.spacing_mm[2] / compute.spacing_mm[2];
                 let lo = u.floor() as usize;
-                assert!(s.core_c.contains(&lo.min(compute.dims[2] - 1)), "{s:?} z {z}");
+                assert!(
+                    s.core_c.contains(&lo.min(compute.dims[2] - 1)),
+                    "{s:?} z {z}"
+                );
                 assert!(s.core_c.contains(&(lo + 1).min(compute.dims[2] - 1)));
             }
             // Every computed slice can be resampled from the uploaded input slices.
