@@ -6,7 +6,8 @@
 // `GradientVolume::sample`, never hardware filtering), accumulates the opacity
 // with the consistent rule or the paper's, stops a ray after the step where alpha >= 0.99, and
 // writes the symmetrised tensor Ts = (T + T^T) / N_R, its eigenvalues, its features, or the
-// number of samples taken, for the slices out_z0 .. out_z0 + out_nz only.
+// number of samples taken, for the slices out_z0 .. out_z0 + out_nz only (and, to split a slice
+// into smaller dispatches, only its rows row0 .. row0 + n_rows; the output layout is the same).
 //
 // Positions are in slab voxel units: the voxel (i, j, k) at (i, j, k); a ray's step in voxels,
 // dr * r_a / s_a, and its opacity length L_i are computed on the CPU in f64 (the twin's
@@ -44,6 +45,10 @@ struct Params {
     alpha_stop: f32,
     // Consistent rule: stop once the transmittance 1 - alpha <= trans_stop (= 1 - alpha_stop).
     trans_stop: f32,
+    // Rows (j) of the output slices this dispatch computes.
+    row0: u32,
+    n_rows: u32,
+    _pad: vec2<u32>,
 }
 
 struct Ray {
@@ -108,10 +113,12 @@ fn one_minus_exp_neg(x: f32) -> f32 {
 
 @compute @workgroup_size(8, 8, 1)
 fn rst(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= params.dims.x || gid.y >= params.dims.y || gid.z >= params.out_nz {
+    let j = params.row0 + gid.y;
+    if gid.x >= params.dims.x || gid.y >= params.n_rows || j >= params.dims.y
+        || gid.z >= params.out_nz {
         return;
     }
-    let x = vec3<f32>(f32(gid.x), f32(gid.y), f32(params.out_z0 + gid.z));
+    let x = vec3<f32>(f32(gid.x), f32(j), f32(params.out_z0 + gid.z));
     let centre = sample_ig(x);
     // Ts = (T + T^T) accumulated as its diagonal (xx, yy, zz) and off-diagonal (xy, xz, yz).
     var diag = vec3<f32>(0.0);
@@ -172,7 +179,7 @@ fn rst(@builtin(global_invocation_id) gid: vec3<u32>) {
     off = off / n;
 
     let n_out = params.dims.x * params.dims.y * params.out_nz;
-    let o = gid.x + params.dims.x * (gid.y + params.dims.y * gid.z);
+    let o = gid.x + params.dims.x * (j + params.dims.y * gid.z);
     switch params.mode {
         case MODE_TENSOR: {
             result[o] = diag.x;

@@ -179,6 +179,34 @@ fn run_rst(
     flat.chunks(n_out).map(<[f32]>::to_vec).collect()
 }
 
+/// Like [`run_rst`], in one dispatch per row range `bounds[n] .. bounds[n + 1]`.
+fn run_rst_rows(
+    ctx: &GpuContext,
+    rst: &Rst,
+    inputs: &RstInputs<'_>,
+    dispatch: &RstDispatch,
+    bounds: &[u32],
+) -> Vec<Vec<f32>> {
+    let n_out = dispatch.out_voxels() as usize;
+    let comps = dispatch.output.components() as usize;
+    // Poisoned first, so that a row no dispatch wrote shows.
+    let out = f32_buffer_init(&ctx.device, "rst out", &vec![f32::NAN; n_out * comps]);
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("rst") });
+    for w in bounds.windows(2) {
+        let d = RstDispatch {
+            rows: Some([w[0], w[1] - w[0]]),
+            ..*dispatch
+        };
+        rst.record(ctx, &mut encoder, inputs, &d, &out)
+            .expect("record");
+    }
+    ctx.queue.submit([encoder.finish()]);
+    let flat = read_f32_blocking(ctx, &out, n_out * comps).expect("readback");
+    flat.chunks(n_out).map(<[f32]>::to_vec).collect()
+}
+
 /// Error statistics of GPU eigenvalues against the CPU's, relative to the largest |eigenvalue|
 /// the CPU finds in the compared voxels.
 #[derive(Debug)]
@@ -347,6 +375,7 @@ fn tensor_matches_the_twin_on_an_output_sub_range() {
             grid: slab_of(&c.grid),
             out_z0: z0 as u32,
             out_nz: nz as u32,
+            rows: None,
             output: RstOutput::Tensor,
         };
         let gpu = run_rst(&ctx, &rst, &inputs.inputs(&rays), &dispatch);
@@ -398,10 +427,22 @@ fn eigenvalues_and_features_match_the_twin() {
             grid: slab_of(&c.grid),
             out_z0: z0 as u32,
             out_nz: nz as u32,
+            rows: None,
             output: RstOutput::Eigen,
         };
-        let gpu = rows3(&run_rst(&ctx, &rst, &inputs.inputs(&rays), &dispatch));
+        let whole = run_rst(&ctx, &rst, &inputs.inputs(&rays), &dispatch);
+        let gpu = rows3(&whole);
         Stats::of(&cpu_eigen, &gpu).check(&format!("{what}: eigen mode"));
+        // The same slices in three dispatches of rows (5 + 9 + 5 of 19) into one buffer: the
+        // same bits.
+        let split = run_rst_rows(
+            &ctx,
+            &rst,
+            &inputs.inputs(&rays),
+            &dispatch,
+            &[0, 5, 14, 19],
+        );
+        assert_eq!(split, whole, "{what}: row-split dispatches");
         for map in [FeatureMap::Simple, FeatureMap::Li] {
             dispatch.output = RstOutput::Features(map);
             let gpu = rows3(&run_rst(&ctx, &rst, &inputs.inputs(&rays), &dispatch));
@@ -435,6 +476,7 @@ fn sample_count_mode_counts_ray_steps() {
         grid: slab_of(&c.grid),
         out_z0: 5,
         out_nz: 4,
+        rows: None,
         output: RstOutput::SampleCount,
     };
     p.tf = TransferFunction::new(1e6, 2e6);
@@ -498,6 +540,7 @@ fn slab_with_its_halo_matches_the_whole_volume() {
             grid: slab,
             out_z0: (out0 - z0) as u32,
             out_nz: out_n as u32,
+            rows: None,
             output: RstOutput::Eigen,
         };
         let out = f32_buffer(&ctx.device, "out", dispatch.out_voxels() * 3);
@@ -549,6 +592,7 @@ fn bad_dispatches_are_errors() {
         grid: slab_of(&c.grid),
         out_z0: 10,
         out_nz: 5,
+        rows: None,
         output: RstOutput::Tensor,
     };
     let out = f32_buffer(&ctx.device, "out", ok.out_voxels() * 6);
@@ -565,6 +609,36 @@ fn bad_dispatches_are_errors() {
         Err(DispatchError::OutputRange { .. })
     ));
     let empty = RstDispatch { out_nz: 0, ..ok };
+    assert!(matches!(
+        record(
+            &RstDispatch {
+                rows: Some([15, 5]),
+                ..ok
+            },
+            &out
+        ),
+        Err(DispatchError::RowRange { .. })
+    ));
+    assert!(matches!(
+        record(
+            &RstDispatch {
+                rows: Some([3, 0]),
+                ..ok
+            },
+            &out
+        ),
+        Err(DispatchError::RowRange { .. })
+    ));
+    assert_eq!(
+        record(
+            &RstDispatch {
+                rows: Some([14, 5]),
+                ..ok
+            },
+            &out
+        ),
+        Ok(())
+    );
     assert!(matches!(
         record(&empty, &out),
         Err(DispatchError::OutputRange { .. })
@@ -720,6 +794,7 @@ fn time_gpu_rst_against_the_cpu_twin() {
                 grid: slab,
                 out_z0: z0,
                 out_nz: 4.min(nz - z0),
+                rows: None,
                 output,
             };
             // Every dispatch writes the start of the same buffer: only the time matters here.
@@ -743,6 +818,7 @@ fn time_gpu_rst_against_the_cpu_twin() {
         grid: slab,
         out_z0: 0,
         out_nz: nz,
+        rows: None,
         output: RstOutput::SampleCount,
     };
     let counts = run_rst(&ctx, &rst, &inputs.inputs(&rays), &count_dispatch);
@@ -764,6 +840,7 @@ fn time_gpu_rst_against_the_cpu_twin() {
         grid: slab,
         out_z0: 0,
         out_nz: nz,
+        rows: None,
         output: RstOutput::Features(FeatureMap::Li),
     };
     let gpu_features = rows3(&run_rst(&ctx, &rst, &inputs.inputs(&rays), &full));

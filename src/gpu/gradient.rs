@@ -55,6 +55,8 @@ pub enum DispatchError {
         format: wgpu::TextureFormat,
         usage: wgpu::TextureUsages,
     },
+    #[error("output rows {j0}..{end} are not a non-empty range inside the slab's {ny} rows")]
+    RowRange { j0: u32, end: u64, ny: u32 },
     #[error("the {0} buffer is bound both as an input and as an output")]
     Aliased(&'static str),
 }

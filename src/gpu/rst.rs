@@ -49,8 +49,11 @@ struct Params {
     map: u32,
     alpha_stop: f32,
     trans_stop: f32,
+    row0: u32,
+    n_rows: u32,
+    _pad: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 64);
+const _: () = assert!(std::mem::size_of::<Params>() == 80);
 
 /// Mirrors `Ray` in rst.wgsl.
 #[repr(C)]
@@ -288,11 +291,31 @@ pub struct RstDispatch {
     pub out_z0: u32,
     /// Number of output slices; the output buffer holds `nx * ny * out_nz` voxels per component.
     pub out_nz: u32,
+    /// `Some([j0, nj])`: compute only the rows `j0 .. j0 + nj` of the output slices (the rest of
+    /// the output buffer is left as it is), to split a slice into smaller dispatches where the
+    /// device is slow (lavapipe: ~30 s for one 512 x 512 slice at the defaults). `None`: all rows.
+    pub rows: Option<[u32; 2]>,
     pub output: RstOutput,
 }
 
 impl RstDispatch {
-    /// Output voxels of this dispatch.
+    /// All rows of the output slices `out_z0 .. out_z0 + out_nz` of `grid`.
+    pub fn slices(grid: SlabGrid, out_z0: u32, out_nz: u32, output: RstOutput) -> Self {
+        Self {
+            grid,
+            out_z0,
+            out_nz,
+            rows: None,
+            output,
+        }
+    }
+
+    /// The rows `[j0, nj]` this dispatch computes.
+    pub fn row_range(&self) -> [u32; 2] {
+        self.rows.unwrap_or([0, self.grid.dims[1]])
+    }
+
+    /// Output voxels the output buffer holds (every row of the output slices).
     pub fn out_voxels(&self) -> u64 {
         u64::from(self.grid.dims[0]) * u64::from(self.grid.dims[1]) * u64::from(self.out_nz)
     }
@@ -340,6 +363,15 @@ impl Rst {
                 nz,
             });
         }
+        let [row0, n_rows] = params.row_range();
+        let rows_end = u64::from(row0) + u64::from(n_rows);
+        if n_rows == 0 || rows_end > u64::from(grid.dims[1]) {
+            return Err(DispatchError::RowRange {
+                j0: row0,
+                end: rows_end,
+                ny: grid.dims[1],
+            });
+        }
         let rays = inputs.rays;
         let rays_spacing = rays.spacing_mm.map(|s| s as f32);
         if rays_spacing != grid.spacing_mm {
@@ -348,7 +380,7 @@ impl Rst {
                 rays: rays_spacing,
             });
         }
-        let groups = workgroups(ctx, [grid.dims[0], grid.dims[1], params.out_nz])?;
+        let groups = workgroups(ctx, [grid.dims[0], n_rows, params.out_nz])?;
         let (mode, map) = params.output.mode_and_map();
         let gpu_params = Params {
             dims: grid.dims,
@@ -368,6 +400,9 @@ impl Rst {
             map,
             alpha_stop: ALPHA_STOP as f32,
             trans_stop: (1.0 - ALPHA_STOP) as f32,
+            row0,
+            n_rows,
+            _pad: [0; 2],
         };
         let params_buf = uniform_buffer(&ctx.device, "rst params", &gpu_params);
         let ray_bytes = u64::from(rays.n_rays) * std::mem::size_of::<GpuRay>() as u64;
