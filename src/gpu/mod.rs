@@ -2,14 +2,20 @@
 //! kernel that owns its pipeline and the bytemuck structs mirroring its WGSL structs.
 
 pub mod axis_mip;
+pub mod checks;
 pub mod context;
+pub mod eigen_features;
+pub mod gaussian;
 pub mod gradient;
+pub mod hessian;
 pub mod kernel;
 pub mod pipeline;
 pub mod readback;
 pub mod render_volume;
+pub mod resample;
 pub mod rst;
 pub mod shaders;
+pub mod structure_tensor;
 pub mod volume;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};

@@ -12,6 +12,16 @@ pub const FILES: &[(&str, &str)] = &[
     ),
     ("gradient.wgsl", include_str!("../../shaders/gradient.wgsl")),
     ("rst.wgsl", include_str!("../../shaders/rst.wgsl")),
+    ("gaussian.wgsl", include_str!("../../shaders/gaussian.wgsl")),
+    (
+        "eigen_features.wgsl",
+        include_str!("../../shaders/eigen_features.wgsl"),
+    ),
+    (
+        "structure_tensor.wgsl",
+        include_str!("../../shaders/structure_tensor.wgsl"),
+    ),
+    ("resample.wgsl", include_str!("../../shaders/resample.wgsl")),
 ];
 
 /// Why a shader source could not be assembled.

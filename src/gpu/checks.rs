@@ -1,0 +1,121 @@
+//! Checks the feature kernels' `record_*` methods make before recording, so that a wrong size
+//! becomes a typed error instead of a wgpu validation panic.
+
+use crate::gpu::GpuContext;
+
+/// Why a kernel could not be recorded.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum RecordError {
+    #[error("{what}: the buffer holds {have} bytes, the kernel needs {needed}")]
+    BufferTooSmall {
+        what: &'static str,
+        needed: u64,
+        have: u64,
+    },
+    #[error("{what}: {bytes} bytes exceed this GPU's storage binding limit ({limit} bytes)")]
+    BindingTooLarge {
+        what: &'static str,
+        bytes: u64,
+        limit: u64,
+    },
+    #[error("{what}: {groups} workgroups along one axis exceed this GPU's limit ({limit})")]
+    TooManyWorkgroups {
+        what: &'static str,
+        groups: u32,
+        limit: u32,
+    },
+    #[error("output slices {z0}..{z0}+{nz} are not inside the slab's {depth} slices")]
+    OutputRange { z0: u32, nz: u32, depth: u32 },
+    #[error("{0}")]
+    Invalid(&'static str),
+}
+
+/// `buffer` can hold `needed` bytes and can be bound whole as one storage binding.
+pub fn buffer(
+    ctx: &GpuContext,
+    what: &'static str,
+    buffer: &wgpu::Buffer,
+    needed: u64,
+) -> Result<(), RecordError> {
+    if buffer.size() < needed {
+        return Err(RecordError::BufferTooSmall {
+            what,
+            needed,
+            have: buffer.size(),
+        });
+    }
+    let limit = ctx.limits.max_storage_buffer_binding_size;
+    if buffer.size() > limit {
+        return Err(RecordError::BindingTooLarge {
+            what,
+            bytes: buffer.size(),
+            limit,
+        });
+    }
+    Ok(())
+}
+
+/// Every workgroup count is within the device's per-dimension limit.
+pub fn workgroups(
+    ctx: &GpuContext,
+    what: &'static str,
+    groups: [u32; 3],
+) -> Result<[u32; 3], RecordError> {
+    let limit = ctx.limits.max_compute_workgroups_per_dimension;
+    match groups.iter().find(|&&g| g > limit) {
+        Some(&g) => Err(RecordError::TooManyWorkgroups {
+            what,
+            groups: g,
+            limit,
+        }),
+        None => Ok(groups),
+    }
+}
+
+/// Bytes of `components` f32 values per voxel of `voxels` voxels.
+pub fn f32_bytes(voxels: u64, components: u64) -> u64 {
+    voxels.saturating_mul(components).saturating_mul(4)
+}
+
+/// A bind group entry.
+pub fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
+}
+
+/// A compute pipeline of `entry_point` in `module`, layout derived from the shader.
+pub fn pipeline(
+    ctx: &GpuContext,
+    module: &wgpu::ShaderModule,
+    entry_point: &str,
+) -> wgpu::ComputePipeline {
+    ctx.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry_point),
+            layout: None,
+            module,
+            entry_point: Some(entry_point),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+}
+
+/// Records one dispatch of `pipeline` with `bind_group` in its own compute pass.
+pub fn dispatch(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    bind_group: &wgpu::BindGroup,
+    groups: [u32; 3],
+) {
+    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: None,
+    });
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, bind_group, &[]);
+    pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+}
