@@ -1,6 +1,8 @@
 //! The RST's gradient volume on the GPU (shaders/gradient.wgsl): central differences in mm of an
-//! already smoothed slab, borders replicated, into three buffers gx, gy, gz. It is the second half
-//! of [`crate::cpu::GradientVolume::new`] (the Gaussian smoothing before it is another kernel's).
+//! already smoothed slab, borders replicated. It is the second half of
+//! [`crate::cpu::GradientVolume::new`] (the Gaussian smoothing before it is another kernel's).
+//! Two outputs: three f32 buffers gx, gy, gz ([`Gradient::record`]), or (I, gx, gy, gz) packed
+//! in one rgba32float 3D texture ([`Gradient::record_packed`]), the input of the RST kernel.
 //!
 //! Also holds what the RST and gradient kernels share: [`DispatchError`] and the checks that make
 //! a bad size an error instead of a wgpu validation panic.
@@ -35,6 +37,26 @@ pub enum DispatchError {
     OutputRange { z0: u32, end: u64, nz: u32 },
     #[error("the slab's spacing {slab:?} mm is not the one the rays were built for ({rays:?} mm)")]
     SpacingMismatch { slab: [f32; 3], rays: [f32; 3] },
+    #[error(
+        "the slab ({nx}x{ny}x{nz} voxels) exceeds this GPU's 3D texture size ({limit} per axis)"
+    )]
+    TextureTooLarge {
+        nx: u32,
+        ny: u32,
+        nz: u32,
+        limit: u32,
+    },
+    #[error(
+        "the packed (I, g) texture must be a 3D rgba32float texture of the slab's size {want:?} with {usage:?} usage; got {got:?} {format:?}"
+    )]
+    WrongTexture {
+        want: [u32; 3],
+        got: [u32; 3],
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    },
+    #[error("output rows {j0}..{end} are not a non-empty range inside the slab's {ny} rows")]
+    RowRange { j0: u32, end: u64, ny: u32 },
     #[error("the {0} buffer is bound both as an input and as an output")]
     Aliased(&'static str),
 }
@@ -66,6 +88,30 @@ pub(crate) fn storage_binding<'a>(
         offset: 0,
         size: wgpu::BufferSize::new(bytes),
     }))
+}
+
+/// Checks that `texture` is a 3D texture of `PACKED_FORMAT` and the slab's dims with `usage`.
+pub(crate) fn check_packed(
+    texture: &wgpu::Texture,
+    grid: &SlabGrid,
+    usage: wgpu::TextureUsages,
+) -> Result<(), DispatchError> {
+    let size = texture.size();
+    let got = [size.width, size.height, size.depth_or_array_layers];
+    if texture.dimension() != wgpu::TextureDimension::D3
+        || texture.format() != PACKED_FORMAT
+        || got != grid.dims
+        || !texture.usage().contains(usage)
+        || texture.mip_level_count() != 1
+    {
+        return Err(DispatchError::WrongTexture {
+            want: grid.dims,
+            got,
+            format: texture.format(),
+            usage,
+        });
+    }
+    Ok(())
 }
 
 /// Workgroup counts of an `(8, 8, 1)` dispatch over `dims`, checked against the device's limit.
@@ -133,9 +179,46 @@ struct Params {
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 32);
 
-/// The gradient kernel's pipeline.
+/// The format of the packed (I, gx, gy, gz) texture.
+pub const PACKED_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// A texture for [`Gradient::record_packed`] and [`crate::gpu::rst::Rst::record`]: 3D,
+/// rgba32float, the slab's dims, usable as a storage texture (written) and a sampled texture
+/// (read with `textureLoad`, never filtered), and as a copy source (readback in tests).
+pub fn packed_texture(
+    ctx: &GpuContext,
+    grid: &SlabGrid,
+    label: &str,
+) -> Result<wgpu::Texture, DispatchError> {
+    voxel_count(grid)?;
+    let limit = ctx.limits.max_texture_dimension_3d;
+    let [nx, ny, nz] = grid.dims;
+    if grid.dims.iter().any(|&d| d > limit) {
+        return Err(DispatchError::TextureTooLarge { nx, ny, nz, limit });
+    }
+    Ok(ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: nx,
+            height: ny,
+            depth_or_array_layers: nz,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D3,
+        format: PACKED_FORMAT,
+        usage: wgpu::TextureUsages::STORAGE_BINDING
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC
+            | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    }))
+}
+
+/// The gradient kernel's pipelines.
 pub struct Gradient {
     pipeline: wgpu::ComputePipeline,
+    packed: wgpu::ComputePipeline,
 }
 
 /// The three gradient components (HU/mm), one f32 buffer each, `nx * ny * nz` voxels of the slab.
@@ -152,13 +235,61 @@ impl Gradient {
     pub const HALO_SLICES: u32 = 1;
     /// Bytes per slab voxel of the input (smoothed intensity, f32).
     pub const INPUT_BYTES_PER_VOXEL: u64 = 4;
-    /// Bytes per slab voxel of the outputs (gx, gy, gz, f32).
+    /// Bytes per slab voxel of the buffer outputs (gx, gy, gz, f32).
     pub const OUTPUT_BYTES_PER_VOXEL: u64 = 12;
+    /// Bytes per slab voxel of the packed output (I, gx, gy, gz as rgba32float).
+    pub const PACKED_BYTES_PER_VOXEL: u64 = 16;
 
     pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
         Ok(Self {
             pipeline: compute_pipeline(ctx, "gradient.wgsl", "gradient")?,
+            packed: compute_pipeline(ctx, "gradient.wgsl", "gradient_packed")?,
         })
+    }
+
+    fn params_buffer(ctx: &GpuContext, grid: &SlabGrid) -> wgpu::Buffer {
+        let params = Params {
+            dims: grid.dims,
+            _pad0: 0,
+            two_spacing: grid.spacing_mm.map(|s| 2.0 * s),
+            _pad1: 0.0,
+        };
+        uniform_buffer(&ctx.device, "gradient params", &params)
+    }
+
+    /// Records (I, gx, gy, gz) of the smoothed `intensity` of `grid` into `out`, a texture from
+    /// [`packed_texture`] of the slab's size (the RST kernel's input). Nothing is submitted.
+    pub fn record_packed(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        intensity: &wgpu::Buffer,
+        out: &wgpu::Texture,
+    ) -> Result<(), DispatchError> {
+        let bytes = voxel_count(grid)? * 4;
+        check_packed(out, grid, wgpu::TextureUsages::STORAGE_BINDING)?;
+        let groups = workgroups(ctx, grid.dims)?;
+        let params_buf = Self::params_buffer(ctx, grid);
+        let view = out.create_view(&wgpu::TextureViewDescriptor::default());
+        let entries = [
+            entry(0, params_buf.as_entire_binding()),
+            entry(1, storage_binding(ctx, "intensity", intensity, bytes)?),
+            entry(5, wgpu::BindingResource::TextureView(&view)),
+        ];
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("gradient packed"),
+            layout: &self.packed.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        record_pass(
+            encoder,
+            "gradient packed",
+            &self.packed,
+            &bind_group,
+            groups,
+        );
+        Ok(())
     }
 
     /// Records the gradient of the smoothed `intensity` of `grid` into `out` (every voxel of the
@@ -182,13 +313,7 @@ impl Gradient {
             return Err(DispatchError::Aliased("gradient output"));
         }
         let groups = workgroups(ctx, grid.dims)?;
-        let params = Params {
-            dims: grid.dims,
-            _pad0: 0,
-            two_spacing: grid.spacing_mm.map(|s| 2.0 * s),
-            _pad1: 0.0,
-        };
-        let params_buf = uniform_buffer(&ctx.device, "gradient params", &params);
+        let params_buf = Self::params_buffer(ctx, grid);
         let entries = [
             entry(0, params_buf.as_entire_binding()),
             entry(1, storage_binding(ctx, "intensity", intensity, bytes)?),
