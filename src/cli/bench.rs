@@ -262,9 +262,12 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             gy: &gbufs[1],
             gz: &gbufs[2],
         };
+        // The RST reads (I, g) packed in one texture; the structure tensor reads g as buffers.
+        let packed = crate::gpu::gradient::packed_texture(&ctx, &slab, "bench (I, g)")?;
         let g = timed(&ctx, |e| {
             gaussian.record_separable(&ctx, e, &slab, &kernel, &input, &tmp, &smooth_out)?;
             gradient.record(&ctx, e, &slab, &smooth_out, &gb)?;
+            gradient.record_packed(&ctx, e, &slab, &smooth_out, &packed)?;
             Ok(())
         })?;
         let mut gv = None;
@@ -299,8 +302,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             crate::cpu::rst::DEFAULT_SIGMA_G_MM,
         )?;
         let inputs = RstInputs {
-            intensity: &smooth_out,
-            gradient: gb,
+            volume: &packed,
             rays: &ray_set,
         };
         // Slices per dispatch: a few million voxel-rays each, so no dispatch runs for minutes.
@@ -315,6 +317,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 grid: slab,
                 out_z0: z,
                 out_nz: nz,
+                rows: None,
                 output: RstOutput::Features(FeatureMap::Li),
             };
             total += timed(&ctx, |e| Ok(rst.record(&ctx, e, &inputs, &dispatch, &out)?))?;
@@ -329,6 +332,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 grid: slab,
                 out_z0: mid,
                 out_nz: nz,
+                rows: None,
                 output: RstOutput::SampleCount,
             };
             Ok(rst.record(&ctx, e, &inputs, &dispatch, &count_out)?)

@@ -198,6 +198,10 @@ pub struct FeatureJob {
     noise_sigma: Option<f64>,
     frangi_c: Vec<f64>,
     rst_slices_per_step: usize,
+    /// Rows per RST dispatch when one slice is more than a step (slow devices).
+    rst_rows_per_step: Option<usize>,
+    /// The slab's (I, gx, gy, gz) texture the rays read, with its dims.
+    packed: Option<([u32; 3], wgpu::Texture)>,
     // GPU sync.
     busy: Option<Arc<AtomicBool>>,
     pending: Option<(PendingRead, ReadFor)>,
@@ -212,8 +216,8 @@ fn bytes_per_voxel(method: Method, resampled: bool) -> u64 {
     let base = match method {
         // input + 6 components + 2 scratch
         Method::Hessian | Method::Li | Method::Frangi | Method::Gst => 9 * 4,
-        // input + I, gx, gy, gz + 2 scratch
-        Method::Rst => 7 * 4,
+        // input + I + 2 scratch + the (I, g) texture
+        Method::Rst => 4 * 4 + 16,
     };
     // + the features of the core (3 components), + the compute-grid copy when resampling
     base + 12 + if resampled { 4 } else { 0 }
@@ -359,11 +363,17 @@ impl FeatureJob {
             },
         );
         let rst_slices_per_step = ((per_step / plane_c.max(1)) as usize).max(1);
+        let rst_rows_per_step = (per_step < plane_c).then(|| {
+            ((per_step / compute.dims[0].max(1) as u64) as usize).clamp(1, compute.dims[1])
+        });
         let buffers = Buffers::new(ctx, &input, &compute, &slabs, &req, rst_slices_per_step);
         for (s, slab) in slabs.iter().enumerate() {
             tasks.push_back(Task::Prepare(s));
             let parts = match req.method {
-                Method::Rst => slab.core_c.len().div_ceil(rst_slices_per_step),
+                Method::Rst => match rst_rows_per_step {
+                    Some(rows) => slab.core_c.len() * compute.dims[1].div_ceil(rows),
+                    None => slab.core_c.len().div_ceil(rst_slices_per_step),
+                },
                 Method::Gst if req.eigen => 1,
                 _ => sigmas_mm.len(),
             };
@@ -402,6 +412,8 @@ impl FeatureJob {
             noise_sigmas: Vec::new(),
             noise_sigma: None,
             rst_slices_per_step,
+            rst_rows_per_step,
+            packed: None,
             busy: None,
             pending: None,
             components,
@@ -611,9 +623,10 @@ impl FeatureJob {
         self.buffers.vol.as_ref().unwrap_or(&self.buffers.input)
     }
 
-    /// Smoothed intensity (`work[0]`) and gradient (`work[1..4]`) of the slab in `vol()`.
+    /// Smoothed intensity (`work[0]`) and gradient (`work[1..4]`) of the slab in `vol()`; for the
+    /// RST, (I, g) packed into the texture the rays read instead of `work[1..4]`.
     fn record_gradient(
-        &self,
+        &mut self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         grid: &SlabGrid,
@@ -631,6 +644,22 @@ impl FeatureJob {
                 &b.work[0],
             )
             .map_err(dispatch_err)?;
+        if self.request.method == Method::Rst {
+            if self.packed.as_ref().is_none_or(|(d, _)| *d != grid.dims) {
+                let tex = crate::gpu::gradient::packed_texture(ctx, grid, "slab (I, g)")
+                    .map_err(dispatch_err)?;
+                self.packed = Some((grid.dims, tex));
+            }
+            let Some((_, tex)) = &self.packed else {
+                return Err(dispatch_err("no (I, g) texture"));
+            };
+            return self
+                .kernels
+                .gradient
+                .record_packed(ctx, encoder, grid, &self.buffers.work[0], tex)
+                .map_err(dispatch_err);
+        }
+        let b = &self.buffers;
         self.kernels
             .gradient
             .record(
@@ -930,8 +959,23 @@ impl FeatureJob {
             self.kernels.rays = Some(rays);
             self.tf = Some(tf);
         }
-        let first = slab.core_c.start + part * self.rst_slices_per_step;
-        let last = (first + self.rst_slices_per_step).min(slab.core_c.end);
+        let (first, last, rows) = match self.rst_rows_per_step {
+            Some(per) => {
+                let blocks = self.compute.dims[1].div_ceil(per);
+                let z = slab.core_c.start + part / blocks;
+                let j0 = (part % blocks) * per;
+                let nj = per.min(self.compute.dims[1] - j0);
+                (z, z + 1, Some([to_u32(j0), to_u32(nj)]))
+            }
+            None => {
+                let first = slab.core_c.start + part * self.rst_slices_per_step;
+                (
+                    first,
+                    (first + self.rst_slices_per_step).min(slab.core_c.end),
+                    None,
+                )
+            }
+        };
         self.stage = format!(
             "slab {}/{}: RST, slices {}-{} of {}",
             s + 1,
@@ -953,17 +997,13 @@ impl FeatureJob {
             grid,
             out_z0: to_u32(first - slab.slab_c.start),
             out_nz: to_u32(last - first),
+            rows,
             output,
         };
-        let inputs = RstInputs {
-            intensity: &b.work[0],
-            gradient: GradientBuffers {
-                gx: &b.work[1],
-                gy: &b.work[2],
-                gz: &b.work[3],
-            },
-            rays,
+        let Some((_, volume)) = &self.packed else {
+            return Err(dispatch_err("no (I, g) texture"));
         };
+        let inputs = RstInputs { volume, rays };
         let chunk = b
             .chunk_out
             .as_ref()
@@ -1106,7 +1146,7 @@ impl Buffers {
         let out_n = plane_in * max(&|s| s.out_z.len());
         let resampled = input != compute;
         let work_count = match req.method {
-            Method::Rst => 4,
+            Method::Rst => 1,
             Method::Gst => 10,
             _ => 6,
         };
