@@ -5,9 +5,11 @@ pub mod axis_mip;
 pub mod context;
 pub mod kernel;
 pub mod pipeline;
+pub mod probe;
 pub mod readback;
 pub mod render_volume;
 pub mod shaders;
+pub mod slice;
 pub mod volume;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};

@@ -1,0 +1,56 @@
+// One slice of the volume for the slice panes (keep in sync with src/gpu/slice.rs and its CPU
+// twin `cpu_twin`): the intensity windowed to grey, optionally blended with one method's
+// features (V red, A blue, B yellow, as in the MIP). Output pixel (x, y) is the voxel with
+// `across` index x and `vertical` index y on slice `index` of the `fixed` axis; the pane flips
+// the image for patient orientation when it draws it.
+#import common.wgsl
+
+struct Params {
+    dims: vec3<u32>,
+    fixed_axis: u32,
+    across_axis: u32,
+    vertical_axis: u32,
+    index: u32,
+    // 1: blend the features in; 0: grey only.
+    overlay: u32,
+    out_size: vec2<u32>,
+    window_lo: f32,
+    window_hi: f32,
+    // Per feature (V, A, B): weight = clamp(value * scale, 0, 1); 0 switches it off.
+    // w: opacity of the overlay where a feature is at full weight.
+    scale: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var intensity: texture_3d<f32>;
+@group(0) @binding(2) var features: texture_3d<f32>;
+@group(0) @binding(3) var image: texture_storage_2d<rgba8unorm, write>;
+
+const VESSEL_RGB: vec3<f32> = vec3<f32>(1.0, 0.2, 0.15);
+const AIRWAY_RGB: vec3<f32> = vec3<f32>(0.25, 0.45, 1.0);
+const BLOB_RGB: vec3<f32> = vec3<f32>(1.0, 0.9, 0.1);
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= params.out_size.x || gid.y >= params.out_size.y {
+        return;
+    }
+    var p = vec3<u32>(0u, 0u, 0u);
+    p[params.fixed_axis] = params.index;
+    p[params.across_axis] = gid.x;
+    p[params.vertical_axis] = gid.y;
+    let v = textureLoad(intensity, vec3<i32>(p), 0).r;
+    let g = window01(v, params.window_lo, params.window_hi);
+    var rgb = vec3<f32>(g, g, g);
+    if params.overlay == 1u {
+        let f = textureLoad(features, vec3<i32>(p), 0).xyz;
+        let w = clamp(f * params.scale.xyz, vec3<f32>(0.0), vec3<f32>(1.0));
+        let total = w.x + w.y + w.z;
+        if total > 0.0 {
+            let colour = (w.x * VESSEL_RGB + w.y * AIRWAY_RGB + w.z * BLOB_RGB) / total;
+            let a = max(w.x, max(w.y, w.z)) * params.scale.w;
+            rgb = mix(rgb, colour, a);
+        }
+    }
+    textureStore(image, vec2<i32>(gid.xy), vec4<f32>(rgb, 1.0));
+}
