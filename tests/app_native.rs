@@ -122,6 +122,18 @@ fn demo_ct_opens_and_draws_the_slice_panes() {
         let (greys, _) = region_stats(&image, rect.shrink(3.0));
         assert!(greys > 40, "{kind:?}: only {greys} grey levels in {rect:?}");
     }
+    // The demo's licence and attribution are in the About window.
+    use egui_kittest::kittest::Queryable as _;
+    harness.get_by_label("About & data").click();
+    harness.run_steps(2);
+    harness.get_by_label_contains("Wasserthal");
+    harness.get_by_label("Apache License 2.0");
+    harness
+        .get_by_role_and_label(egui::accesskit::Role::Button, "About & data")
+        .click();
+    harness.run_steps(2);
+    let app = harness.state();
+
     // Maximising a pane gives it the whole area.
     let small = app.pane_rect(SliceKind::Coronal).expect("coronal");
     harness

@@ -114,12 +114,16 @@ impl AxisMipPane {
             });
         });
         let volume = inputs.volume;
+        // A MIP collects the brightest values: the slice window's upper end raised by one width
+        // keeps contrast-filled vessels and bone apart instead of all white.
+        let (lo, hi) = inputs.window;
+        let window = (lo, hi + (hi - lo));
         if let Err(e) = self.prepare(
             inputs.gpu,
             inputs.render_state,
             volume,
             inputs.generation,
-            inputs.window,
+            window,
         ) {
             self.error = Some((inputs.generation, e.clone()));
             ui.colored_label(ui.visuals().warn_fg_color, e);

@@ -382,13 +382,13 @@ impl ShapecastApp {
                 .inner_margin(6.0)
                 .corner_radius(4.0)
                 .show(ui, |ui| {
-                    ui.horizontal(|ui| {
-                        ui.colored_label(egui::Color32::from_rgb(255, 170, 160), "Error:");
-                        ui.label(e);
-                        ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
-                            if ui.button("Dismiss").clicked() {
-                                dismiss = Some(n);
-                            }
+                    ui.with_layout(egui::Layout::right_to_left(egui::Align::TOP), |ui| {
+                        if ui.button("Dismiss").clicked() {
+                            dismiss = Some(n);
+                        }
+                        ui.with_layout(egui::Layout::left_to_right(egui::Align::TOP), |ui| {
+                            ui.colored_label(egui::Color32::from_rgb(255, 170, 160), "Error:");
+                            ui.add(egui::Label::new(e).wrap());
                         });
                     });
                 });

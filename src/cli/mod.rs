@@ -98,3 +98,29 @@ fn gpu_info() -> anyhow::Result<()> {
     println!("{}", ctx.describe());
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn view_takes_paths_or_a_phantom() {
+        let parse = |args: &[&str]| Cli::try_parse_from(args).map(|c| c.command);
+        match parse(&["shapecast", "view", "a.nii.gz", "dicom/"]) {
+            Ok(Some(Command::View(v))) => {
+                assert_eq!(v.paths.len(), 2);
+                assert_eq!(v.method, "rst");
+            }
+            other => panic!("{other:?}"),
+        }
+        match parse(&["shapecast", "view", "--phantom", "sphere", "--method", "li"]) {
+            Ok(Some(Command::View(v))) => {
+                assert_eq!(v.phantom.as_deref(), Some("sphere"));
+                assert_eq!(v.method, "li");
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(parse(&["shapecast", "view", "--phantom", "sphere", "a.nii"]).is_err());
+        assert!(matches!(parse(&["shapecast"]), Ok(None)));
+    }
+}
