@@ -1,6 +1,7 @@
 // One slice of the volume for the slice panes (keep in sync with src/gpu/slice.rs and its CPU
-// twin `cpu_twin`): the intensity windowed to grey, optionally blended with one method's
-// features (V red, A blue, B yellow, as in the MIP). Output pixel (x, y) is the voxel with
+// twin `cpu_twin`): the intensity windowed to grey, optionally overlaid with one method's
+// features as the MIP composites them: over the grey, in this order, red = vesselness, blue =
+// airwayness, yellow = blobness, each with opacity clamp(value * scale, 0, 1) * overlay opacity. Output pixel (x, y) is the voxel with
 // `across` index x and `vertical` index y on slice `index` of the `fixed` axis; the pane flips
 // the image for patient orientation when it draws it.
 #import common.wgsl
@@ -16,8 +17,7 @@ struct Params {
     out_size: vec2<u32>,
     window_lo: f32,
     window_hi: f32,
-    // Per feature (V, A, B): weight = clamp(value * scale, 0, 1); 0 switches it off.
-    // w: opacity of the overlay where a feature is at full weight.
+    // Per feature (V, A, B): opacity = clamp(value * scale, 0, 1) * scale.w; 0 switches it off.
     scale: vec4<f32>,
 }
 
@@ -26,9 +26,10 @@ struct Params {
 @group(0) @binding(2) var features: texture_3d<f32>;
 @group(0) @binding(3) var image: texture_storage_2d<rgba8unorm, write>;
 
-const VESSEL_RGB: vec3<f32> = vec3<f32>(1.0, 0.2, 0.15);
-const AIRWAY_RGB: vec3<f32> = vec3<f32>(0.25, 0.45, 1.0);
-const BLOB_RGB: vec3<f32> = vec3<f32>(1.0, 0.9, 0.1);
+// The MIP's colours (gpu::raycast::CHANNEL_COLOURS).
+const VESSEL_RGB: vec3<f32> = vec3<f32>(1.0, 0.0, 0.0);
+const AIRWAY_RGB: vec3<f32> = vec3<f32>(0.0, 0.4, 1.0);
+const BLOB_RGB: vec3<f32> = vec3<f32>(1.0, 1.0, 0.0);
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -44,13 +45,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var rgb = vec3<f32>(g, g, g);
     if params.overlay == 1u {
         let f = textureLoad(features, vec3<i32>(p), 0).xyz;
-        let w = clamp(f * params.scale.xyz, vec3<f32>(0.0), vec3<f32>(1.0));
-        let total = w.x + w.y + w.z;
-        if total > 0.0 {
-            let colour = (w.x * VESSEL_RGB + w.y * AIRWAY_RGB + w.z * BLOB_RGB) / total;
-            let a = max(w.x, max(w.y, w.z)) * params.scale.w;
-            rgb = mix(rgb, colour, a);
-        }
+        let a = clamp(f * params.scale.xyz, vec3<f32>(0.0), vec3<f32>(1.0)) * params.scale.w;
+        rgb = rgb + (VESSEL_RGB - rgb) * a.x;
+        rgb = rgb + (AIRWAY_RGB - rgb) * a.y;
+        rgb = rgb + (BLOB_RGB - rgb) * a.z;
     }
     textureStore(image, vec2<i32>(gid.xy), vec4<f32>(rgb, 1.0));
 }

@@ -172,20 +172,21 @@ impl Default for FeatureDisplay {
             enabled: [true; 3],
             gain: [1.0; 3],
             overlay_on_slices: true,
-            opacity: 0.7,
+            opacity: 1.0,
         }
     }
 }
 
 impl FeatureDisplay {
-    /// Per feature: weight = clamp(value * scale, 0, 1), full weight at a quarter of the
-    /// feature's maximum times the gain (or 50 units while the maximum is unknown).
+    /// Per feature: opacity = clamp(value * scale, 0, 1) with scale = gain / the feature's
+    /// maximum, as the MIP composites it (gain 1: the maximum is full colour; 2: half of it).
+    /// While the maximum is unknown (0), 100 units stand in for it.
     pub fn scales(&self, max: [f32; 3]) -> [f32; 3] {
         std::array::from_fn(|c| {
             if !self.enabled[c] {
                 return 0.0;
             }
-            let reference = if max[c] > 0.0 { 0.25 * max[c] } else { 50.0 };
+            let reference = if max[c] > 0.0 { max[c] } else { 100.0 };
             self.gain[c] / reference
         })
     }
@@ -265,6 +266,11 @@ impl FeatureManager {
         let e = self.entries.iter_mut().find(|e| &e.request == request)?;
         e.last_used = clock;
         Some(e)
+    }
+
+    /// Every method kept (for a MIP widget that offers them by name).
+    pub fn entries(&self) -> impl Iterator<Item = &FeatureEntry> {
+        self.entries.iter()
     }
 
     /// How many methods are kept.
@@ -587,9 +593,9 @@ mod tests {
     #[test]
     fn display_scales() {
         let mut d = FeatureDisplay::default();
-        assert_eq!(d.scales([100.0, 0.0, 40.0]), [0.04, 0.02, 0.1]);
+        assert_eq!(d.scales([100.0, 0.0, 40.0]), [0.01, 0.01, 0.025]);
         d.enabled[1] = false;
         d.gain[2] = 2.0;
-        assert_eq!(d.scales([100.0, 0.0, 40.0]), [0.04, 0.0, 0.2]);
+        assert_eq!(d.scales([100.0, 0.0, 40.0]), [0.01, 0.0, 0.05]);
     }
 }

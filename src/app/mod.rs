@@ -349,6 +349,16 @@ impl ShapecastApp {
         }
     }
 
+    /// The crosshair in patient space (LPS, mm): the MIP's slab centre and marker.
+    pub fn crosshair_lps_mm(&self) -> Option<glam::DVec3> {
+        let v = self.volume()?;
+        let [i, j, k] = self.crosshair;
+        Some(
+            v.world_from_voxel()
+                .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64)),
+        )
+    }
+
     /// The status as `window.shapecastStatus` shows it.
     pub fn status(&self) -> &AppStatus {
         &self.status
@@ -826,8 +836,14 @@ impl ShapecastApp {
                                 }
                             }
                             PaneId::Mip => {
-                                // The MIP pane: the ray caster's widget (src/app/mip_view.rs,
-                                // branch `render`) replaces this stand-in, with the same inputs.
+                                // The MIP pane. The ray caster's widget (src/app/mip_view.rs,
+                                // branch `render`) replaces this stand-in here, fed from the
+                                // same `MipInputs`: its scene is `scene.render` plus `entry`'s
+                                // texture under `self.mode.label()` (or every kept entry,
+                                // `self.features.entries()`); before drawing,
+                                // `set_crosshair(self.crosshair_lps_mm())`; a finished pick sets
+                                // `self.crosshair` to the pick's voxel. Its maximise button
+                                // sets `toggle = Some(id)`.
                                 let clicked = self.mip_pane.ui(
                                     ui,
                                     MipInputs {

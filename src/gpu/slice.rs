@@ -1,7 +1,10 @@
 //! Slices for the slice panes, rendered on the GPU (shaders/slice.wgsl) from the textures the MIP
 //! reads: the intensity (`RenderVolume`, windowed to grey) and optionally one method's features
-//! (`FeatureTexture`, V red, A blue, B yellow, blended over the grey). The result is an
-//! `Rgba8Unorm` texture the app registers with egui. Its CPU twin is [`cpu_twin`].
+//! (`FeatureTexture`), composited as the MIP does: over the grey, in this order, red =
+//! vesselness, blue = airwayness, yellow = blobness, each with opacity
+//! `clamp(value * scale, 0, 1) * opacity` (scale = gain / the feature's maximum, as in the MIP).
+//! The result is an `Rgba8Unorm` texture the app registers with egui. Its CPU twin is
+//! [`cpu_twin`].
 //!
 //! Image layout: pixel (x, y) is the voxel whose `across` index is x and `vertical` index is y on
 //! slice `index` of the `fixed` axis (no flips; the pane flips for patient orientation).
@@ -10,8 +13,9 @@ use crate::cpu::Components3;
 use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
 use crate::gpu::{GpuContext, shaders};
 
-/// Colours of vesselness, airwayness and blobness (as in shaders/slice.wgsl).
-pub const FEATURE_RGB: [[f32; 3]; 3] = [[1.0, 0.2, 0.15], [0.25, 0.45, 1.0], [1.0, 0.9, 0.1]];
+/// Colours of vesselness, airwayness and blobness: the MIP's (`gpu::raycast::CHANNEL_COLOURS`
+/// on the render branch; as in shaders/slice.wgsl).
+pub const FEATURE_RGB: [[f32; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 0.4, 1.0], [1.0, 1.0, 0.0]];
 
 /// Mirrors `Params` in slice.wgsl (keep in sync).
 #[repr(C)]
@@ -53,12 +57,13 @@ impl SlicePlane {
     }
 }
 
-/// How the features are blended over the grey.
+/// How the features are composited over the grey.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Overlay {
-    /// Per feature (V, A, B): weight = clamp(value * scale, 0, 1); 0 switches it off.
+    /// Per feature (V, A, B): opacity = clamp(value * scale, 0, 1) * `opacity`; 0 switches it
+    /// off.
     pub scale: [f32; 3],
-    /// Opacity where a feature is at full weight, 0..1.
+    /// Opacity of a feature at full weight, 0..1.
     pub opacity: f32,
 }
 
@@ -289,15 +294,11 @@ pub fn cpu_twin(
             let g = ((v - lo) / (hi - lo).max(1e-6)).clamp(0.0, 1.0);
             let mut rgb = [g; 3];
             if let (Some(o), Some(f)) = (request.overlay, features) {
-                let wts: [f32; 3] =
-                    std::array::from_fn(|c| (as_f16(f[c][n]) * o.scale[c]).clamp(0.0, 1.0));
-                let total = wts[0] + wts[1] + wts[2];
-                if total > 0.0 {
-                    let a = wts[0].max(wts[1]).max(wts[2]) * o.opacity.clamp(0.0, 1.0);
-                    for (ch, out) in rgb.iter_mut().enumerate() {
-                        let colour =
-                            (0..3).map(|c| wts[c] * FEATURE_RGB[c][ch]).sum::<f32>() / total;
-                        *out += (colour - *out) * a;
+                for (c, colour) in FEATURE_RGB.iter().enumerate() {
+                    let a =
+                        (as_f16(f[c][n]) * o.scale[c]).clamp(0.0, 1.0) * o.opacity.clamp(0.0, 1.0);
+                    for (out, col) in rgb.iter_mut().zip(colour) {
+                        *out += (col - *out) * a;
                     }
                 }
             }
