@@ -35,6 +35,31 @@ pub struct VolumeStatus {
     pub dims: [usize; 3],
     pub spacing_mm: [f64; 3],
     pub source: String,
+    /// "CT", "MR", "phantom" or "unknown".
+    pub modality: String,
+}
+
+/// The features of the displayed method.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FeatureStatus {
+    /// "intensity", "hessian", "rst", "li", "frangi" or "gst".
+    pub method: String,
+    /// The preset of the parameters ("vessels", ...).
+    pub preset: String,
+    /// "none" (not computed), "running", "done", "cancelled" or "failed".
+    pub state: String,
+    /// 0..1 of the running computation (1 when done).
+    pub fraction: f32,
+    /// How many methods are computed and kept on the GPU.
+    pub cached: usize,
+}
+
+/// The shared crosshair (the MIP's slab centre).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CrosshairStatus {
+    pub voxel: [usize; 3],
+    /// Position in patient space, LPS, mm.
+    pub lps_mm: [f64; 3],
 }
 
 /// Everything `window.shapecastStatus` holds.
@@ -49,6 +74,12 @@ pub struct AppStatus {
     pub error: Option<String>,
     /// Frames drawn since start.
     pub frames: u64,
+    /// What is being loaded or computed now, for the user ("decoding x.nii.gz").
+    pub task: Option<String>,
+    pub features: Option<FeatureStatus>,
+    pub crosshair: Option<CrosshairStatus>,
+    /// "mip+slices", "grid", "mip", "axial", "coronal" or "sagittal".
+    pub layout: String,
 }
 
 impl AppStatus {
@@ -96,6 +127,7 @@ mod web {
                 set(&o, "dims", array_f64(v.dims.iter().map(|&d| d as f64)));
                 set(&o, "spacing_mm", array_f64(v.spacing_mm));
                 set(&o, "source", v.source.as_str());
+                set(&o, "modality", v.modality.as_str());
                 set(&obj, "volume", o);
             }
             None => set(&obj, "volume", JsValue::NULL),
@@ -106,6 +138,32 @@ mod web {
             None => set(&obj, "error", JsValue::NULL),
         }
         set(&obj, "frames", status.frames as f64);
+        match &status.task {
+            Some(t) => set(&obj, "task", t.as_str()),
+            None => set(&obj, "task", JsValue::NULL),
+        }
+        match &status.features {
+            Some(f) => {
+                let o = Object::new();
+                set(&o, "method", f.method.as_str());
+                set(&o, "preset", f.preset.as_str());
+                set(&o, "state", f.state.as_str());
+                set(&o, "fraction", f64::from(f.fraction));
+                set(&o, "cached", f.cached as f64);
+                set(&obj, "features", o);
+            }
+            None => set(&obj, "features", JsValue::NULL),
+        }
+        match &status.crosshair {
+            Some(c) => {
+                let o = Object::new();
+                set(&o, "voxel", array_f64(c.voxel.iter().map(|&d| d as f64)));
+                set(&o, "lps_mm", array_f64(c.lps_mm));
+                set(&obj, "crosshair", o);
+            }
+            None => set(&obj, "crosshair", JsValue::NULL),
+        }
+        set(&obj, "layout", status.layout.as_str());
         let _ = Reflect::set(&window, &JsValue::from_str("shapecastStatus"), &obj);
     }
 }

@@ -1,15 +1,21 @@
-//! The whole app rendered through wgpu on the test adapter (lavapipe) with egui_kittest: it must
-//! reach "ready" on its demo volume, draw a non-blank picture (saved for a person to look at),
-//! and move the crosshair where a slice pane is clicked.
+//! The whole app rendered through wgpu on the test adapter (lavapipe) with egui_kittest, driven
+//! as a person would: it opens on the demo CT and on a phantom and draws the slice panes
+//! (screenshots saved for a person to look at), the wheel moves through slices, a click in one
+//! pane moves the others, a right-button or ctrl drag changes the window, features are computed
+//! once and reused when switching modes, a corrupt file shows an error and keeps the volume, and
+//! a dropped folder (a DICOM series) loads.
 
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use egui_kittest::Harness;
-use egui_kittest::kittest::Queryable as _;
-use shapecast::app::ShapecastApp;
+use shapecast::app::{
+    AppOptions, DisplayMode, Layout, LoadSource, PaneId, ShapecastApp, SliceKind, StartWith,
+};
+use shapecast::cpu::pipeline::Method;
 use shapecast::status::Phase;
 
-fn harness() -> Option<Harness<'static, ShapecastApp>> {
+fn harness(options: AppOptions) -> Option<Harness<'static, ShapecastApp>> {
     // The same adapter rule as the GPU tests: skip visibly without one, fail under CI=true.
     shapecast::gpu::context::test_context()?;
     let mut setup = egui_kittest::wgpu::default_wgpu_setup();
@@ -19,62 +25,435 @@ fn harness() -> Option<Harness<'static, ShapecastApp>> {
     let mut harness = Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
         .wgpu_setup(setup)
-        .build_eframe(|cc| ShapecastApp::new(cc));
-    for _ in 0..20 {
-        harness.step();
-        if harness.state().status().phase == Phase::Ready {
-            break;
-        }
-    }
+        .build_eframe(move |cc| ShapecastApp::with_options(cc, options));
+    run_until(&mut harness, "ready", 60, |app| {
+        app.status().phase == Phase::Ready
+    });
     harness.run_steps(2);
     Some(harness)
 }
 
-#[test]
-fn app_reaches_ready_and_draws() {
-    let Some(mut harness) = harness() else { return };
-    let status = harness.state().status().clone();
-    assert_eq!(status.phase, Phase::Ready, "{status:?}");
-    assert_eq!(status.volume.as_ref().map(|v| v.dims), Some([96, 96, 96]));
-    let image = harness.render().expect("render");
-    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("app_native.png");
-    image.save(&out).expect("save screenshot");
-    eprintln!("screenshot: {}", out.display());
-    // The MIP in the middle of the central panel shows the bright vessels of the demo phantom.
-    let mut distinct = std::collections::HashSet::new();
-    let mut bright = 0usize;
-    for p in image.pixels() {
-        distinct.insert([p[0], p[1], p[2]]);
-        if p[0] > 200 && p[1] > 200 && p[2] > 200 {
-            bright += 1;
+/// Steps until `done`, or fails naming `what` after `max` frames.
+fn run_until(
+    harness: &mut Harness<'static, ShapecastApp>,
+    what: &str,
+    max: usize,
+    done: impl Fn(&ShapecastApp) -> bool,
+) {
+    for _ in 0..max {
+        harness.step();
+        if done(harness.state()) {
+            return;
         }
     }
-    assert!(distinct.len() >= 64, "only {} colours", distinct.len());
-    assert!(
-        bright > 5000,
-        "only {bright} bright pixels: the MIP is missing"
+    panic!(
+        "not {what} after {max} frames: {:?}",
+        harness.state().status()
     );
 }
 
+fn intensity_only(start: StartWith) -> AppOptions {
+    AppOptions {
+        start,
+        mode: DisplayMode::Intensity,
+        compute_on_load: false,
+        preset: None,
+    }
+}
+
+fn save(image: &image::RgbaImage, name: &str) -> PathBuf {
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    image.save(&out).expect("save screenshot");
+    eprintln!("screenshot: {}", out.display());
+    out
+}
+
+/// Distinct grey levels and coloured pixels of the image inside `rect` (points = pixels here).
+fn region_stats(image: &image::RgbaImage, rect: egui::Rect) -> (usize, usize) {
+    let mut greys = std::collections::HashSet::new();
+    let mut coloured = 0;
+    for y in rect.top().ceil() as u32..rect.bottom().floor() as u32 {
+        for x in rect.left().ceil() as u32..rect.right().floor() as u32 {
+            if x >= image.width() || y >= image.height() {
+                continue;
+            }
+            let p = image.get_pixel(x, y);
+            greys.insert(p[0] / 2);
+            let (mx, mn) = (p[0].max(p[1]).max(p[2]), p[0].min(p[1]).min(p[2]));
+            if mx - mn > 40 {
+                coloured += 1;
+            }
+        }
+    }
+    (greys.len(), coloured)
+}
+
 #[test]
-fn clicking_the_axial_pane_moves_the_crosshair() {
-    let Some(mut harness) = harness() else { return };
-    let before = harness.state().crosshair();
-    // The axial pane is the first image in the right-hand panel; find it through its label.
-    let label = harness
-        .query_by_label_contains("axial")
-        .map(|n| n.rect())
-        .expect("axial pane label");
-    let target = egui::pos2(label.left() + 30.0, label.bottom() + 40.0);
+fn demo_ct_opens_and_draws_the_slice_panes() {
+    let Some(mut harness) = harness(intensity_only(StartWith::DemoCt)) else {
+        return;
+    };
+    let status = harness.state().status().clone();
+    let volume = status.volume.as_ref().expect("a volume");
+    assert_eq!(volume.dims, shapecast::app::demo::DEMO_DIMS);
+    assert_eq!(volume.source, shapecast::app::demo::DEMO_FILE);
+    assert_eq!(status.error, None);
+    assert_eq!(status.layout, "mip+slices");
+    let crosshair = status.crosshair.expect("crosshair");
+    assert_eq!(crosshair.voxel, [60, 63, 82]);
+    let image = harness.render().expect("render");
+    save(&image, "app_demo_ct.png");
+    let app = harness.state();
+    for kind in SliceKind::ALL {
+        let rect = app.pane_rect(kind).expect("pane drawn");
+        // True aspect in mm: the demo is isotropic 1.5 mm, so voxel counts set the shape.
+        let (w, h) = match kind {
+            SliceKind::Axial => (120.0, 126.0),
+            SliceKind::Coronal => (120.0, 164.0),
+            SliceKind::Sagittal => (126.0, 164.0),
+        };
+        let ratio = rect.width() / rect.height();
+        assert!(
+            (ratio - w / h).abs() < 0.02,
+            "{kind:?}: aspect {ratio} vs {}",
+            w / h
+        );
+        // A CT slice in a soft-tissue window has many grey levels (a blank or flat pane has one).
+        let (greys, _) = region_stats(&image, rect.shrink(3.0));
+        assert!(greys > 40, "{kind:?}: only {greys} grey levels in {rect:?}");
+    }
+    // The demo's licence and attribution are in the About window.
+    use egui_kittest::kittest::Queryable as _;
+    harness.get_by_label("About & data").click();
+    harness.run_steps(2);
+    harness.get_by_label_contains("Wasserthal");
+    harness.get_by_label("Apache License 2.0");
+    harness
+        .get_by_role_and_label(egui::accesskit::Role::Button, "About & data")
+        .click();
+    harness.run_steps(2);
+    let app = harness.state();
+
+    // Maximising a pane gives it the whole area.
+    let small = app.pane_rect(SliceKind::Coronal).expect("coronal");
+    harness
+        .state_mut()
+        .set_layout(Layout::Single(PaneId::Slice(SliceKind::Coronal)));
+    harness.run_steps(2);
+    let big = harness
+        .state()
+        .pane_rect(SliceKind::Coronal)
+        .expect("coronal");
+    assert!(big.area() > 3.0 * small.area(), "{big:?} vs {small:?}");
+    assert_eq!(harness.state().pane_rect(SliceKind::Axial), None);
+    assert_eq!(harness.state().status().layout, "coronal");
+    let image = harness.render().expect("render");
+    save(&image, "app_demo_ct_coronal.png");
+}
+
+#[test]
+fn slice_panes_scroll_link_and_window() {
+    let Some(mut harness) = harness(intensity_only(StartWith::DemoCt)) else {
+        return;
+    };
+    let app = harness.state();
+    let axial = app.pane_rect(SliceKind::Axial).expect("axial");
+    let before = app.crosshair();
+    let axial_slice = app.pane_slice(SliceKind::Axial).expect("slice");
+
+    // Wheel over the axial pane: three lines up, three slices on; 100 points (a browser's
+    // notch) two more.
+    harness.hover_at(axial.center());
+    harness.event(egui::Event::MouseWheel {
+        unit: egui::MouseWheelUnit::Line,
+        delta: egui::vec2(0.0, 3.0),
+        phase: egui::TouchPhase::Move,
+        source: egui::MouseWheelSource::Wheel,
+        modifiers: egui::Modifiers::NONE,
+    });
+    harness.run_steps(2);
+    assert_eq!(
+        harness.state().pane_slice(SliceKind::Axial),
+        Some(axial_slice + 3),
+        "the wheel did not move the axial slice"
+    );
+    harness.event(egui::Event::MouseWheel {
+        unit: egui::MouseWheelUnit::Point,
+        delta: egui::vec2(0.0, -100.0),
+        phase: egui::TouchPhase::Move,
+        source: egui::MouseWheelSource::Wheel,
+        modifiers: egui::Modifiers::NONE,
+    });
+    harness.run_steps(2);
+    assert_eq!(
+        harness.state().pane_slice(SliceKind::Axial),
+        Some(axial_slice + 1)
+    );
+    // The other panes keep their slices.
+    let after_wheel = harness.state().crosshair();
+    assert_eq!((after_wheel[0], after_wheel[1]), (before[0], before[1]));
+
+    // A click in the axial pane, up and to the left of the centre, moves the coronal and
+    // sagittal slices (j and i) to the voxel clicked, and not the axial one.
+    let target = axial.center() + egui::vec2(-0.25 * axial.width(), -0.2 * axial.height());
+    let expected = harness
+        .state()
+        .pane_voxel_at(SliceKind::Axial, target)
+        .expect("inside the axial image");
+    harness.hover_at(target);
     harness.drag_at(target);
     harness.run_steps(1);
     harness.drop_at(target);
     harness.run_steps(2);
-    let after = harness.state().crosshair();
-    assert_eq!(after[2], before[2], "the axial slice itself stays");
-    assert_ne!(
-        (after[0], after[1]),
-        (before[0], before[1]),
-        "crosshair did not move"
+    let clicked = harness.state().crosshair();
+    assert_eq!(clicked, expected);
+    assert_eq!(clicked[2], after_wheel[2], "the axial slice itself stays");
+    // Patient left is on the right of the axial pane and anterior up: the click went to the
+    // patient's right (smaller i) and anterior (smaller j).
+    assert!(
+        clicked[0] < before[0] && clicked[1] < before[1],
+        "{clicked:?} vs {before:?}"
     );
+    assert_eq!(
+        harness.state().pane_slice(SliceKind::Coronal),
+        Some(clicked[1])
+    );
+    assert_eq!(
+        harness.state().pane_slice(SliceKind::Sagittal),
+        Some(clicked[0])
+    );
+    let status = harness.state().status().clone();
+    assert_eq!(status.crosshair.expect("crosshair").voxel, clicked);
+
+    // Right-button drag on the coronal pane: right widens, down raises the level.
+    let coronal = harness
+        .state()
+        .pane_rect(SliceKind::Coronal)
+        .expect("coronal");
+    let w0 = harness.state().window();
+    let start = coronal.center();
+    let end = start + egui::vec2(80.0, 30.0);
+    let press = |pos, pressed| egui::Event::PointerButton {
+        pos,
+        button: egui::PointerButton::Secondary,
+        pressed,
+        modifiers: egui::Modifiers::NONE,
+    };
+    harness.hover_at(start);
+    harness.event(press(start, true));
+    harness.run_steps(1);
+    for t in 1..=4 {
+        harness.hover_at(start + (end - start) * (t as f32 / 4.0));
+        harness.run_steps(1);
+    }
+    harness.event(press(end, false));
+    harness.run_steps(2);
+    let w1 = harness.state().window();
+    assert!(
+        w1.width > w0.width * 1.2,
+        "width {} -> {}",
+        w0.width,
+        w1.width
+    );
+    assert!(w1.level > w0.level, "level {} -> {}", w0.level, w1.level);
+    assert_eq!(
+        harness.state().crosshair(),
+        clicked,
+        "a window drag is not a click"
+    );
+
+    // Ctrl + left drag to the left narrows it again.
+    harness.event(egui::Event::ModifiersChanged(egui::Modifiers::CTRL));
+    harness.hover_at(start);
+    harness.drag_at(start);
+    harness.run_steps(1);
+    for t in 1..=4 {
+        harness.hover_at(start - egui::vec2(25.0 * t as f32, 0.0));
+        harness.run_steps(1);
+    }
+    harness.drop_at(start - egui::vec2(100.0, 0.0));
+    harness.run_steps(2);
+    harness.event(egui::Event::ModifiersChanged(egui::Modifiers::NONE));
+    let w2 = harness.state().window();
+    assert!(
+        w2.width < w1.width * 0.8,
+        "width {} -> {}",
+        w1.width,
+        w2.width
+    );
+    assert_eq!(
+        harness.state().crosshair(),
+        clicked,
+        "a ctrl drag is not a click"
+    );
+}
+
+#[test]
+fn phantom_features_overlay_and_mode_switch_reuse() {
+    let Some(mut harness) = harness(AppOptions {
+        start: StartWith::Phantom("sphere-cylinder".into()),
+        mode: DisplayMode::Features(Method::Li),
+        compute_on_load: true,
+        preset: None,
+    }) else {
+        return;
+    };
+    run_until(&mut harness, "features done", 200, |app| {
+        app.status()
+            .features
+            .as_ref()
+            .is_some_and(|f| f.state == "done")
+    });
+    // The crosshair on the sphere's centre (the phantom frame's origin, 0.5 mm voxels).
+    let v = harness.state().volume().expect("volume").clone();
+    let centre = v
+        .voxel_from_world()
+        .transform_point3(glam::DVec3::ZERO)
+        .round();
+    let centre = [centre.x as usize, centre.y as usize, centre.z as usize];
+    harness.state_mut().set_crosshair(centre);
+    run_until(&mut harness, "feature values read back", 50, |app| {
+        app.features_at_crosshair().is_some()
+    });
+    let [vessel, airway, blob] = harness.state().features_at_crosshair().expect("values");
+    eprintln!("Li at the sphere centre: V {vessel} A {airway} B {blob}");
+    assert!(
+        blob > 1.0 && blob > vessel && airway < 0.1 * blob,
+        "V {vessel} A {airway} B {blob}"
+    );
+    harness.run_steps(2);
+    let image = harness.render().expect("render");
+    save(&image, "app_phantom_li.png");
+    // The overlay colours the sphere and the vessel in every slice pane through them.
+    for kind in SliceKind::ALL {
+        let rect = harness.state().pane_rect(kind).expect("pane");
+        let (_, coloured) = region_stats(&image, rect);
+        assert!(coloured > 50, "{kind:?}: {coloured} coloured pixels");
+    }
+
+    // Another mode computes once; switching back to Li is instant (no job, still one entry
+    // each).
+    harness
+        .state_mut()
+        .set_mode(DisplayMode::Features(Method::Hessian));
+    run_until(&mut harness, "Hessian done", 200, |app| {
+        app.status()
+            .features
+            .as_ref()
+            .is_some_and(|f| f.state == "done" && f.method == "hessian")
+    });
+    assert_eq!(
+        harness.state().status().features.as_ref().map(|f| f.cached),
+        Some(2)
+    );
+    harness
+        .state_mut()
+        .set_mode(DisplayMode::Features(Method::Li));
+    assert!(!harness.state().computing(), "switching back recomputed");
+    harness.step();
+    let f = harness.state().status().features.clone().expect("features");
+    assert_eq!(
+        (f.method.as_str(), f.state.as_str(), f.cached),
+        ("li", "done", 2)
+    );
+    assert_eq!(
+        harness.state().status().phase,
+        Phase::Ready,
+        "nothing recomputed"
+    );
+
+    // Changing a parameter and recomputing computes a third entry; cancelling a job keeps
+    // the app ready with the old ones.
+    harness.state_mut().params_mut().sigma_count = 2;
+    harness.state_mut().recompute();
+    assert!(harness.state().computing());
+    harness.state_mut().cancel_features();
+    harness.step();
+    let f = harness.state().status().features.clone().expect("features");
+    assert_eq!(f.state, "cancelled", "{f:?}");
+    assert_eq!(f.cached, 2);
+}
+
+#[derive(Debug)]
+struct DroppedPath(PathBuf);
+
+impl egui::DroppedFile for DroppedPath {
+    fn path(&self) -> &Path {
+        &self.0
+    }
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        std::fs::read(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+#[test]
+fn corrupt_file_shows_an_error_and_keeps_the_volume_then_a_folder_drop_loads() {
+    let Some(mut harness) = harness(intensity_only(StartWith::Phantom("sphere".into()))) else {
+        return;
+    };
+    let dims = harness.state().volume().expect("phantom").dims;
+    let crosshair = harness.state().crosshair();
+    // A NIfTI header with garbage after it.
+    let mut bytes = vec![0u8; 352];
+    bytes[0..4].copy_from_slice(&348i32.to_le_bytes());
+    bytes[344..348].copy_from_slice(b"n+1\0");
+    bytes.extend_from_slice(&[0xAB; 100]);
+    harness.state_mut().open(LoadSource::Files {
+        label: "broken.nii".into(),
+        files: vec![shapecast::io::InputFile::new("broken.nii", bytes)],
+    });
+    run_until(&mut harness, "done loading", 20, |app| {
+        app.status().phase != Phase::Loading
+    });
+    harness.run_steps(2);
+    let status = harness.state().status().clone();
+    assert_eq!(status.phase, Phase::Ready, "{status:?}");
+    let error = status.error.clone().expect("an error");
+    assert!(error.contains("broken.nii"), "{error}");
+    assert_eq!(
+        harness.state().volume().map(|v| v.dims),
+        Some(dims),
+        "volume kept"
+    );
+    assert_eq!(harness.state().crosshair(), crosshair);
+    let image = harness.render().expect("render");
+    save(&image, "app_error.png");
+    // The message is on screen, with a Dismiss button that removes it.
+    use egui_kittest::kittest::Queryable as _;
+    harness.get_by_label_contains("broken.nii");
+    harness.get_by_label("Dismiss").click();
+    harness.run_steps(2);
+    assert!(harness.state().errors().is_empty());
+    assert_eq!(harness.state().status().error, None);
+    // The volume still works: scrolling still moves the slice.
+    let axial = harness.state().pane_rect(SliceKind::Axial).expect("axial");
+    let slice = harness.state().pane_slice(SliceKind::Axial).expect("slice");
+    harness.hover_at(axial.center());
+    harness.event(egui::Event::MouseWheel {
+        unit: egui::MouseWheelUnit::Line,
+        delta: egui::vec2(0.0, -2.0),
+        phase: egui::TouchPhase::Move,
+        source: egui::MouseWheelSource::Wheel,
+        modifiers: egui::Modifiers::NONE,
+    });
+    harness.run_steps(2);
+    assert_eq!(
+        harness.state().pane_slice(SliceKind::Axial),
+        Some(slice - 2)
+    );
+
+    // Dropping a folder (six slices of a DICOM series) loads it.
+    let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/dicom/ct-head-64px");
+    harness
+        .input_mut()
+        .dropped_files
+        .push(Arc::new(DroppedPath(folder)));
+    run_until(&mut harness, "the series loaded", 40, |app| {
+        app.volume().is_some_and(|v| v.dims != dims)
+    });
+    harness.run_steps(2);
+    let v = harness.state().volume().expect("series");
+    assert_eq!(v.dims, [64, 64, 6]);
+    assert_eq!(harness.state().status().error, None);
+    assert_eq!(harness.state().crosshair(), [32, 32, 3]);
 }

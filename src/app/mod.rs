@@ -1,15 +1,45 @@
 //! The viewer app (eframe, wgpu renderer): the same code runs in the browser and in a native
-//! window. It owns the loaded volume, the GPU context it takes from eframe, and the panes.
+//! window. It owns the loaded volume and its GPU textures, the features computed for it, the
+//! shared crosshair and window, and the panes.
+//!
+//! Nothing blocks: each frame advances the load (read, decode, upload) and the feature job by
+//! one bounded step (`advance`), then draws. A failed load shows a dismissable message and keeps
+//! the previous volume.
 
-mod slices;
+mod axis_mip_pane;
+pub mod demo;
+pub mod features;
+pub mod load;
+mod panels;
+mod probe;
+pub mod slices;
+#[cfg(target_arch = "wasm32")]
+mod web_files;
+pub mod window_level;
 
 use std::sync::Arc;
 
-use crate::gpu::axis_mip::{AxisMip, AxisMipOutput};
-use crate::gpu::{GpuContext, GpuVolume};
-use crate::status::{AdapterStatus, AppStatus, Phase, VolumeStatus};
+use eframe::egui_wgpu::RenderState;
+
+use crate::cpu::pipeline::Request;
+use crate::cpu::tf::Preset;
+use crate::gpu::GpuContext;
+use crate::gpu::render_volume::RenderVolume;
+use crate::gpu::slice::{Overlay, SliceRenderer};
+use crate::status::{
+    AdapterStatus, AppStatus, CrosshairStatus, FeatureStatus, Phase, VolumeStatus,
+};
 use crate::volume::Volume;
-use slices::{SliceAxis, SlicePane};
+
+pub use features::{DisplayMode, FeatureDisplay, FeatureEntry, FeatureParams, JobOutcome};
+pub use load::LoadSource;
+pub use slices::SliceKind;
+pub use window_level::{Window, WindowPreset};
+
+use axis_mip_pane::AxisMipPane;
+use features::{FeatureManager, JobEvent};
+use load::{LoadJob, LoadStep};
+use slices::{PaneInputs, SlicePane};
 
 /// The eframe/egui wgpu configuration both targets use: the adapter's own limits and features
 /// (wgpu's defaults are far too small for volumes), WebGPU only on the web.
@@ -34,59 +64,207 @@ pub fn wgpu_options() -> eframe::egui_wgpu::WgpuConfiguration {
 
 /// Opens the viewer in a native window.
 #[cfg(not(target_arch = "wasm32"))]
-pub fn run_native() -> anyhow::Result<()> {
-    let options = eframe::NativeOptions {
+pub fn run_native(options: AppOptions) -> anyhow::Result<()> {
+    let native = eframe::NativeOptions {
         renderer: eframe::Renderer::Wgpu,
         wgpu_options: wgpu_options(),
         viewport: egui::ViewportBuilder::default()
             .with_title("Shapecast")
-            .with_inner_size([1280.0, 800.0]),
+            .with_inner_size([1440.0, 900.0])
+            .with_drag_and_drop(true),
         ..Default::default()
     };
     eframe::run_native(
         "Shapecast",
-        options,
-        Box::new(|cc| Ok(Box::new(ShapecastApp::new(cc)))),
+        native,
+        Box::new(move |cc| Ok(Box::new(ShapecastApp::with_options(cc, options)))),
     )
     .map_err(|e| anyhow::anyhow!("could not open the viewer window: {e}"))
 }
 
-/// The MIP on the GPU and the id egui draws it with.
-struct MipView {
-    output: AxisMipOutput,
-    texture_id: egui::TextureId,
-    axis: usize,
+/// What the app opens on.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StartWith {
+    /// The demo CT (web/demo/): embedded natively, fetched by the page.
+    DemoCt,
+    /// A phantom by name (`crate::phantom::NAMES`, "fig8-sphere", "demo").
+    Phantom(String),
+    /// Files and folders on this machine (`shapecast view PATH...`).
+    #[cfg(not(target_arch = "wasm32"))]
+    Paths(Vec<std::path::PathBuf>),
+    /// Nothing: an empty app that asks for files.
+    Nothing,
 }
 
-/// Where the app is in getting from nothing to a displayed volume. Each step runs in one frame,
-/// so the browser's event loop is never blocked for long.
+/// How the app starts.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AppOptions {
+    pub start: StartWith,
+    /// The display mode it opens in.
+    pub mode: DisplayMode,
+    /// Compute the mode's features as soon as a volume is loaded.
+    pub compute_on_load: bool,
+    /// The feature preset; `None`: vessels for the demo CT (a CTA), lymph nodes otherwise.
+    pub preset: Option<Preset>,
+}
+
+impl Default for AppOptions {
+    fn default() -> Self {
+        Self {
+            start: StartWith::DemoCt,
+            mode: features::DEFAULT_MODE,
+            compute_on_load: true,
+            preset: None,
+        }
+    }
+}
+
+impl AppOptions {
+    /// The defaults, changed by the page's URL on the web: `?phantom=NAME` opens a phantom
+    /// instead of the demo CT, `?method=intensity|hessian|rst|li|frangi|gst` the mode,
+    /// `?preset=lymph-nodes|lung-nodules|airways|vessels` the preset, `?compute=0` waits for
+    /// the Recompute button.
+    pub fn from_environment() -> Self {
+        #[allow(unused_mut)]
+        let mut o = Self::default();
+        #[cfg(target_arch = "wasm32")]
+        {
+            if let Some(name) = web_files::query_param("phantom") {
+                o.start = StartWith::Phantom(name);
+            }
+            if let Some(m) =
+                web_files::query_param("method").and_then(|m| DisplayMode::from_name(&m))
+            {
+                o.mode = m;
+            }
+            if let Some(p) = web_files::query_param("preset").and_then(|p| Preset::from_name(&p)) {
+                o.preset = Some(p);
+            }
+            if web_files::query_param("compute").as_deref() == Some("0") {
+                o.compute_on_load = false;
+            }
+        }
+        o
+    }
+}
+
+/// The panes a layout can show.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Step {
-    LoadDemo,
-    Upload,
-    Project,
-    Idle,
+pub enum PaneId {
+    Mip,
+    Slice(SliceKind),
+}
+
+impl PaneId {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Mip => "mip",
+            Self::Slice(k) => k.name(),
+        }
+    }
+}
+
+/// How the panes are arranged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// The MIP large on the left, the three slice panes stacked on the right (the arrangement
+    /// the paper's clinicians preferred: a separate viewport beside the linked slices).
+    MipAndSlices,
+    /// MIP, axial / coronal, sagittal in a 2x2 grid.
+    Grid,
+    /// One pane, maximised.
+    Single(PaneId),
+}
+
+impl Layout {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::MipAndSlices => "mip+slices",
+            Self::Grid => "grid",
+            Self::Single(p) => p.name(),
+        }
+    }
+}
+
+/// The loaded volume and its intensity texture.
+struct Scene {
+    volume: Arc<Volume>,
+    render: RenderVolume,
+    /// Unique per loaded volume.
+    generation: u64,
+    /// Whether values are shown as HU.
+    is_ct: bool,
+}
+
+/// What the MIP pane gets every frame. The ray caster's widget (`src/app/mip_view.rs`, branch
+/// `render`) takes these in place of the axis-MIP stand-in: the intensity texture, the
+/// displayed method's feature texture, the gains and toggles, the window, and the shared
+/// crosshair (voxel index; the slab centre, and where a click on a MIP pixel moves it).
+pub struct MipInputs<'a> {
+    pub gpu: &'a GpuContext,
+    pub render_state: &'a RenderState,
+    pub volume: &'a Volume,
+    pub render_volume: &'a RenderVolume,
+    /// Changes with every loaded volume.
+    pub generation: u64,
+    pub mode: DisplayMode,
+    /// The displayed method's features, once computed (`texture`, `id` changes per computation).
+    pub features: Option<&'a FeatureEntry>,
+    pub display: &'a FeatureDisplay,
+    /// Grey window (lo, hi), physical units.
+    pub window: (f32, f32),
+    pub crosshair: &'a mut [usize; 3],
 }
 
 pub struct ShapecastApp {
     gpu: Option<GpuContext>,
+    options: AppOptions,
     status: AppStatus,
     published: Option<AppStatus>,
-    step: Step,
-    volume: Option<Arc<Volume>>,
-    gpu_volume: Option<GpuVolume>,
-    axis_mip: Option<AxisMip>,
-    mip: Option<MipView>,
-    mip_axis: usize,
-    /// Display window (lo, hi) in physical units.
-    window: (f32, f32),
-    /// The shared crosshair, voxel index.
+    started: bool,
+
+    load: Option<LoadJob>,
+    /// (fraction, what) of the load in progress, including the browser's file reads.
+    load_progress: Option<(f32, String)>,
+    scene: Option<Scene>,
+    generation: u64,
+    /// Errors for the user, newest last; each can be dismissed.
+    errors: Vec<String>,
+    /// Things the loader and the feature computation want the user to know.
+    notes: Vec<String>,
+
+    features: FeatureManager,
+    /// The parameters the panel edits.
+    params: FeatureParams,
+    /// The parameters the displayed features were (or are being) computed with.
+    applied: FeatureParams,
+    mode: DisplayMode,
+    display: FeatureDisplay,
+
+    window: Window,
     crosshair: [usize; 3],
+    hover: Option<[usize; 3]>,
+    layout: Layout,
+    /// The layout to go back to from a maximised pane.
+    multi_layout: Layout,
     panes: [SlicePane; 3],
+    slice_renderer: Option<SliceRenderer>,
+    mip_pane: AxisMipPane,
+    probe: probe::ProbeState,
+
+    show_about: bool,
+    drop_hover: bool,
+    #[cfg(not(target_arch = "wasm32"))]
+    open_path: String,
 }
 
 impl ShapecastApp {
+    /// The app as the page and the native window start it (URL parameters on the web).
     pub fn new(cc: &eframe::CreationContext<'_>) -> Self {
+        Self::with_options(cc, AppOptions::from_environment())
+    }
+
+    pub fn with_options(cc: &eframe::CreationContext<'_>, options: AppOptions) -> Self {
         // Radiologists read in a dark room: dark theme regardless of the system's.
         cc.egui_ctx.set_theme(egui::Theme::Dark);
         let gpu = cc
@@ -112,33 +290,73 @@ impl ShapecastApp {
                 status.error = Some("eframe started without a wgpu renderer".to_owned());
             }
         }
-        Self::with_gpu(gpu, status)
-    }
-
-    fn with_gpu(gpu: Option<GpuContext>, status: AppStatus) -> Self {
+        let preset = options.preset.unwrap_or(match options.start {
+            StartWith::DemoCt => Preset::Vessels,
+            _ => Preset::default(),
+        });
+        let params = FeatureParams::from_preset(preset);
+        let slice_renderer = gpu.as_ref().and_then(|g| match SliceRenderer::new(g) {
+            Ok(r) => Some(r),
+            Err(e) => {
+                log::error!("slice kernel: {e}");
+                None
+            }
+        });
         Self {
             gpu,
+            mode: options.mode,
+            options,
             status,
             published: None,
-            step: Step::LoadDemo,
-            volume: None,
-            gpu_volume: None,
-            axis_mip: None,
-            mip: None,
-            mip_axis: 1,
-            window: (-160.0, 240.0),
+            started: false,
+            load: None,
+            load_progress: None,
+            scene: None,
+            generation: 0,
+            errors: Vec::new(),
+            notes: Vec::new(),
+            features: FeatureManager::default(),
+            applied: params.clone(),
+            params,
+            display: FeatureDisplay::default(),
+            window: WindowPreset::Abdomen.window(),
             crosshair: [0; 3],
-            panes: [
-                SlicePane::new(SliceAxis::Axial),
-                SlicePane::new(SliceAxis::Coronal),
-                SlicePane::new(SliceAxis::Sagittal),
-            ],
+            hover: None,
+            layout: Layout::MipAndSlices,
+            multi_layout: Layout::MipAndSlices,
+            panes: SliceKind::ALL.map(SlicePane::new),
+            slice_renderer,
+            mip_pane: AxisMipPane::new(),
+            probe: probe::ProbeState::default(),
+            show_about: false,
+            drop_hover: false,
+            #[cfg(not(target_arch = "wasm32"))]
+            open_path: String::new(),
         }
     }
+
+    // ---- State for tests and automation -------------------------------------------------
 
     /// The shared crosshair, voxel index.
     pub fn crosshair(&self) -> [usize; 3] {
         self.crosshair
+    }
+
+    pub fn set_crosshair(&mut self, voxel: [usize; 3]) {
+        if let Some(s) = &self.scene {
+            self.crosshair =
+                std::array::from_fn(|a| voxel[a].min(s.volume.dims[a].saturating_sub(1)));
+        }
+    }
+
+    /// The crosshair in patient space (LPS, mm): the MIP's slab centre and marker.
+    pub fn crosshair_lps_mm(&self) -> Option<glam::DVec3> {
+        let v = self.volume()?;
+        let [i, j, k] = self.crosshair;
+        Some(
+            v.world_from_voxel()
+                .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64)),
+        )
     }
 
     /// The status as `window.shapecastStatus` shows it.
@@ -146,217 +364,569 @@ impl ShapecastApp {
         &self.status
     }
 
-    fn fail(&mut self, message: String) {
-        log::error!("{message}");
-        self.status.phase = Phase::Error;
-        self.status.error = Some(message);
-        self.step = Step::Idle;
+    pub fn window(&self) -> Window {
+        self.window
     }
 
-    /// Advances loading and computing by one step.
-    fn advance(&mut self, frame: &mut eframe::Frame) {
-        if self.status.phase == Phase::Error && self.gpu.is_none() {
+    pub fn set_window(&mut self, window: Window) {
+        self.window = window;
+    }
+
+    pub fn volume(&self) -> Option<&Volume> {
+        self.scene.as_ref().map(|s| s.volume.as_ref())
+    }
+
+    /// The errors shown (not dismissed), oldest first.
+    pub fn errors(&self) -> &[String] {
+        &self.errors
+    }
+
+    pub fn mode(&self) -> DisplayMode {
+        self.mode
+    }
+
+    pub fn layout(&self) -> Layout {
+        self.layout
+    }
+
+    pub fn set_layout(&mut self, layout: Layout) {
+        self.layout = layout;
+        if !matches!(layout, Layout::Single(_)) {
+            self.multi_layout = layout;
+        }
+    }
+
+    /// The slice a pane shows (its index along the pane's fixed voxel axis).
+    pub fn pane_slice(&self, kind: SliceKind) -> Option<usize> {
+        let v = self.volume()?;
+        Some(self.crosshair[slices::pane_axes(v, kind).fixed])
+    }
+
+    /// Where a pane's image was drawn in the last frame (screen points).
+    pub fn pane_rect(&self, kind: SliceKind) -> Option<egui::Rect> {
+        self.panes.iter().find(|p| p.kind == kind)?.image_rect
+    }
+
+    /// The voxel under a screen point of a pane's image, as the pane maps it.
+    pub fn pane_voxel_at(&self, kind: SliceKind, pos: egui::Pos2) -> Option<[usize; 3]> {
+        let v = self.volume()?;
+        let rect = self.pane_rect(kind)?;
+        let axes = slices::pane_axes(v, kind);
+        let (u, w) = axes.voxel_at(rect, pos, v.dims[axes.across], v.dims[axes.vertical])?;
+        let mut p = self.crosshair;
+        p[axes.across] = u;
+        p[axes.vertical] = w;
+        Some(p)
+    }
+
+    /// Feature values (V, A, B) at the crosshair as last read back from the GPU.
+    pub fn features_at_crosshair(&self) -> Option<[f32; 3]> {
+        let entry = self.displayed_entry()?;
+        self.probe.value_at(entry.id, self.crosshair)
+    }
+
+    /// Starts loading a volume (the current one stays until the new one is ready).
+    pub fn open(&mut self, source: LoadSource) {
+        self.load_progress = Some((0.0, format!("opening {}", source.label())));
+        self.load = Some(LoadJob::new(source));
+    }
+
+    /// Switches the display mode; computes its features if they are not kept yet.
+    pub fn set_mode(&mut self, mode: DisplayMode) {
+        self.mode = mode;
+        self.ensure_features();
+    }
+
+    /// Applies the edited parameters and computes the displayed method with them.
+    pub fn recompute(&mut self) {
+        self.applied = self.params.clone();
+        self.ensure_features();
+    }
+
+    pub fn params_mut(&mut self) -> &mut FeatureParams {
+        &mut self.params
+    }
+
+    /// Whether a feature computation is running.
+    pub fn computing(&self) -> bool {
+        self.features.running_request().is_some()
+    }
+
+    pub fn cancel_features(&mut self) {
+        self.features.cancel();
+    }
+
+    // ---- Per-frame work ------------------------------------------------------------------
+
+    fn displayed_request(&self) -> Option<Request> {
+        self.mode.method().map(|m| self.applied.request(m))
+    }
+
+    fn displayed_entry(&self) -> Option<&FeatureEntry> {
+        self.features.find(&self.displayed_request()?)
+    }
+
+    fn error(&mut self, message: String) {
+        log::error!("{message}");
+        if self.errors.last() != Some(&message) {
+            self.errors.push(message);
+        }
+        // Keep the list short: the newest matter.
+        if self.errors.len() > 5 {
+            self.errors.remove(0);
+        }
+    }
+
+    /// Starts computing the displayed method if its features are neither kept nor running.
+    fn ensure_features(&mut self) {
+        let Some(request) = self.displayed_request() else {
+            return;
+        };
+        if self.features.find(&request).is_some()
+            || self.features.running_request() == Some(&request)
+        {
             return;
         }
-        match self.step {
-            Step::LoadDemo => {
-                self.status.phase = Phase::Loading;
-                self.set_volume(crate::phantom::demo());
-                self.step = Step::Upload;
+        let (Some(gpu), Some(scene)) = (&self.gpu, &self.scene) else {
+            return;
+        };
+        if let Err(e) = self.features.start(gpu, &scene.volume, request) {
+            self.error(e);
+        }
+    }
+
+    fn start_once(&mut self, ctx: &egui::Context) {
+        if self.started {
+            return;
+        }
+        self.started = true;
+        #[cfg(target_arch = "wasm32")]
+        if let Err(e) = web_files::install(ctx) {
+            self.error(format!("drag and drop is unavailable: {e}"));
+        }
+        let _ = ctx;
+        match self.options.start.clone() {
+            StartWith::DemoCt => {
+                #[cfg(target_arch = "wasm32")]
+                {
+                    self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
+                    web_files::fetch_demo();
+                }
+                #[cfg(not(target_arch = "wasm32"))]
+                self.open(demo::demo_source());
             }
-            Step::Upload => {
-                self.status.phase = Phase::Computing;
-                self.status.progress = 0.0;
-                let (Some(gpu), Some(volume)) = (&self.gpu, &self.volume) else {
-                    return;
-                };
-                match GpuVolume::upload(gpu, volume) {
-                    Ok(v) => {
-                        self.gpu_volume = Some(v);
-                        self.status.progress = 0.5;
-                        self.step = Step::Project;
+            StartWith::Phantom(name) => self.open(LoadSource::Phantom(name)),
+            #[cfg(not(target_arch = "wasm32"))]
+            StartWith::Paths(paths) => self.open(LoadSource::Paths(paths)),
+            StartWith::Nothing => {}
+        }
+    }
+
+    /// Files dropped on the window (native) or read by the page (web).
+    fn take_external_files(&mut self, ctx: &egui::Context) {
+        #[cfg(not(target_arch = "wasm32"))]
+        {
+            let (dropped, hovering) =
+                ctx.input(|i| (i.raw.dropped_files.clone(), !i.raw.hovered_files.is_empty()));
+            self.drop_hover = hovering;
+            if !dropped.is_empty() {
+                let paths: Vec<std::path::PathBuf> = dropped
+                    .iter()
+                    .map(|f| f.path().to_path_buf())
+                    .filter(|p| !p.as_os_str().is_empty())
+                    .collect();
+                if paths.len() == dropped.len() {
+                    self.open(LoadSource::Paths(paths));
+                } else {
+                    let mut files = Vec::new();
+                    for f in &dropped {
+                        let name = f.path().display().to_string();
+                        match f.bytes() {
+                            Ok(bytes) => files.push(crate::io::InputFile::new(name, bytes)),
+                            Err(e) => return self.error(format!("{name}: cannot read: {e}")),
+                        }
                     }
-                    Err(e) => self.fail(format!("{e}")),
+                    let label = format!("{} dropped files", files.len());
+                    self.open(LoadSource::Files { label, files });
                 }
             }
-            Step::Project => self.project(frame),
-            Step::Idle => {}
+        }
+        #[cfg(target_arch = "wasm32")]
+        {
+            let _ = ctx;
+            for event in web_files::take_events() {
+                match event {
+                    web_files::WebEvent::Hover(on) => self.drop_hover = on,
+                    web_files::WebEvent::Progress { label, done, total } => {
+                        let f = if total > 0.0 {
+                            (done / total) as f32
+                        } else {
+                            0.0
+                        };
+                        let what = if total > 0.0 {
+                            format!(
+                                "reading {label} ({:.0} of {:.0} MB)",
+                                done / 1e6,
+                                total / 1e6
+                            )
+                        } else {
+                            format!("reading {label}")
+                        };
+                        self.load_progress = Some((0.5 * f, what));
+                    }
+                    web_files::WebEvent::Files { label, files } => {
+                        self.open(LoadSource::Files { label, files });
+                    }
+                    web_files::WebEvent::Failed { message } => {
+                        self.load_progress = None;
+                        self.error(message);
+                    }
+                }
+            }
         }
     }
 
-    fn project(&mut self, frame: &mut eframe::Frame) {
+    /// Advances loading and computing by one step each.
+    fn advance(&mut self) {
+        if let Some(job) = &mut self.load {
+            match job.step() {
+                LoadStep::Working { fraction, what } => {
+                    self.load_progress = Some((fraction, what));
+                }
+                LoadStep::Done(loaded) => {
+                    self.load = None;
+                    self.load_progress = None;
+                    self.install(*loaded);
+                }
+                LoadStep::Failed(message) => {
+                    self.load = None;
+                    self.load_progress = None;
+                    self.error(message);
+                }
+            }
+        }
+        if let Some(gpu) = &self.gpu {
+            match self.features.step(gpu) {
+                Some(JobEvent::Finished { method, notes }) => {
+                    for n in notes {
+                        self.notes
+                            .push(format!("{}: {n}", features::method_name(method)));
+                    }
+                }
+                Some(JobEvent::Failed(message)) => self.error(message),
+                None => {}
+            }
+        }
+        if let Some(request) = self.displayed_request() {
+            self.features.touch(&request);
+        }
+    }
+
+    /// Makes a loaded volume the displayed one (or says why it cannot be shown).
+    fn install(&mut self, loaded: crate::io::Loaded) {
         let Some(gpu) = &self.gpu else { return };
-        let Some(gpu_volume) = &self.gpu_volume else {
-            return;
+        let volume = loaded.volume;
+        let render = match RenderVolume::upload(gpu, &volume) {
+            Ok(r) => r,
+            Err(e) => return self.error(format!("{}: {e}", volume.source)),
         };
-        if self.axis_mip.is_none() {
-            match AxisMip::new(gpu) {
-                Ok(k) => self.axis_mip = Some(k),
-                Err(e) => return self.fail(format!("{e}")),
-            }
-        }
-        let Some(kernel) = &self.axis_mip else { return };
-        let output = kernel.run(gpu, gpu_volume, self.mip_axis, self.window);
-        let Some(render_state) = frame.wgpu_render_state() else {
-            return self.fail("no wgpu render state to draw the projection with".to_owned());
-        };
-        let mut renderer = render_state.renderer.write();
-        let texture_id = match self.mip.take() {
-            Some(old) => {
-                renderer.update_egui_texture_from_wgpu_texture(
-                    &gpu.device,
-                    &output.view,
-                    wgpu::FilterMode::Linear,
-                    old.texture_id,
-                );
-                old.texture_id
-            }
-            None => renderer.register_native_texture(
-                &gpu.device,
-                &output.view,
-                wgpu::FilterMode::Linear,
-            ),
-        };
-        self.mip = Some(MipView {
-            output,
-            texture_id,
-            axis: self.mip_axis,
-        });
-        self.status.progress = 1.0;
-        self.status.phase = Phase::Ready;
-        self.step = Step::Idle;
-    }
-
-    fn set_volume(&mut self, volume: Volume) {
+        self.generation += 1;
+        self.window = window_level::default_window(&volume);
         self.crosshair = volume.dims.map(|d| d / 2);
-        self.status.volume = Some(VolumeStatus {
-            dims: volume.dims,
-            spacing_mm: volume.spacing_mm,
-            source: volume.source.clone(),
+        self.hover = None;
+        self.features.clear();
+        self.probe = probe::ProbeState::default();
+        self.notes = loaded.notes;
+        self.notes.extend(volume.warnings.iter().cloned());
+        let range = volume.value_range();
+        self.scene = Some(Scene {
+            is_ct: window_level::looks_like_ct(&volume, range),
+            volume: Arc::new(volume),
+            render,
+            generation: self.generation,
         });
-        self.volume = Some(Arc::new(volume));
-        self.gpu_volume = None;
-        for pane in &mut self.panes {
-            pane.invalidate();
+        if self.options.compute_on_load {
+            self.ensure_features();
         }
     }
 
-    fn top_bar_ui(&mut self, ui: &mut egui::Ui) {
-        ui.horizontal(|ui| {
-            ui.heading("Shapecast");
-            ui.separator();
-            if let Some(v) = &self.status.volume {
-                ui.label(&v.source);
-            }
-            ui.separator();
-            ui.label("MIP view:");
-            let before = self.mip_axis;
-            ui.selectable_value(&mut self.mip_axis, 1, "anterior");
-            ui.selectable_value(&mut self.mip_axis, 0, "lateral");
-            ui.selectable_value(&mut self.mip_axis, 2, "superior");
-            if before != self.mip_axis && self.gpu_volume.is_some() {
-                self.step = Step::Project;
-            }
-        });
+    fn overlay(&self) -> Option<Overlay> {
+        let entry = self.displayed_entry()?;
+        self.display.overlay_on_slices.then(|| Overlay {
+            scale: self.display.scales(entry.texture.max),
+            opacity: self.display.opacity,
+        })
     }
 
-    fn status_bar_ui(&self, ui: &mut egui::Ui) {
-        ui.horizontal(|ui| {
-            ui.label(self.status.phase.as_str());
-            if let Some(a) = &self.status.adapter {
-                ui.separator();
-                ui.label(format!("GPU: {} ({})", a.name, a.backend));
-            }
-            if let Some(volume) = &self.volume {
-                ui.separator();
-                let [i, j, k] = self.crosshair;
-                let p = volume
-                    .world_from_voxel()
-                    .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64));
-                ui.label(format!(
-                    "crosshair voxel ({i}, {j}, {k})  LPS ({:.1}, {:.1}, {:.1}) mm  value {:.0}",
-                    p.x,
-                    p.y,
-                    p.z,
-                    volume.value_at(i, j, k)
-                ));
-            }
-            if let Some(e) = &self.status.error {
-                ui.separator();
-                ui.colored_label(ui.visuals().error_fg_color, e);
+    fn update_status(&mut self) {
+        let s = &mut self.status;
+        s.volume = self.scene.as_ref().map(|sc| VolumeStatus {
+            dims: sc.volume.dims,
+            spacing_mm: sc.volume.spacing_mm,
+            source: sc.volume.source.clone(),
+            modality: sc.volume.modality.as_str().to_owned(),
+        });
+        s.crosshair = self.scene.as_ref().map(|sc| {
+            let [i, j, k] = self.crosshair;
+            let p = sc
+                .volume
+                .world_from_voxel()
+                .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64));
+            CrosshairStatus {
+                voxel: self.crosshair,
+                lps_mm: [p.x, p.y, p.z],
             }
         });
+        let request = self.mode.method().map(|m| self.applied.request(m));
+        let (state, fraction) = match &request {
+            None => ("none", 1.0),
+            Some(r) if self.features.find(r).is_some() => ("done", 1.0),
+            Some(r) if self.features.running_request() == Some(r) => {
+                ("running", self.features.progress().map_or(0.0, |(f, _)| f))
+            }
+            Some(r) => match self.features.outcome(r) {
+                Some(JobOutcome::Cancelled) => ("cancelled", 0.0),
+                Some(JobOutcome::Failed(_)) => ("failed", 0.0),
+                _ => ("none", 0.0),
+            },
+        };
+        s.features = Some(FeatureStatus {
+            method: self.mode.name().to_owned(),
+            preset: self.applied.preset.name().to_owned(),
+            state: state.to_owned(),
+            fraction,
+            cached: self.features.len(),
+        });
+        s.layout = self.layout.name().to_owned();
+        s.error = self.errors.last().cloned();
+        let computing = self.features.running_request().is_some();
+        if let Some((f, what)) = &self.load_progress {
+            s.phase = Phase::Loading;
+            s.progress = *f;
+            s.task = Some(what.clone());
+        } else if computing {
+            s.phase = Phase::Computing;
+            let (f, stage) = self.features.progress().unwrap_or((0.0, ""));
+            s.progress = f;
+            s.task = Some(format!(
+                "computing {} features: {stage}",
+                self.features
+                    .running_request()
+                    .map_or("", |r| features::method_name(r.method))
+            ));
+        } else {
+            s.task = None;
+            s.progress = 1.0;
+            s.phase = if self.gpu.is_none() || (self.scene.is_none() && !self.errors.is_empty()) {
+                Phase::Error
+            } else {
+                Phase::Ready
+            };
+        }
+        if self.gpu.is_none() {
+            s.phase = Phase::Error;
+            s.error = Some("eframe started without a wgpu renderer".to_owned());
+        }
     }
 
-    fn mip_ui(&mut self, ui: &mut egui::Ui) {
-        let Some(mip) = &self.mip else {
+    /// The panes of the current layout, each in its rectangle.
+    fn panes_ui(&mut self, ui: &mut egui::Ui, frame: &eframe::Frame) {
+        let area = ui.available_rect_before_wrap();
+        let Some(scene) = &self.scene else {
             ui.centered_and_justified(|ui| {
-                ui.spinner();
+                if self.load_progress.is_some() {
+                    ui.spinner();
+                } else {
+                    ui.label("Drop a CT or MR volume here (NIfTI, NRRD, MetaImage, a DICOM folder), or open one from the menu.");
+                }
             });
             return;
         };
-        let Some(volume) = &self.volume else { return };
-        let [w, h] = mip.output.size;
-        // The image's u and v run along the two remaining axes; show them at their true size in mm.
-        let (su, sv) = match mip.axis {
-            0 => (volume.spacing_mm[1], volume.spacing_mm[2]),
-            1 => (volume.spacing_mm[0], volume.spacing_mm[2]),
-            _ => (volume.spacing_mm[0], volume.spacing_mm[1]),
+        let (Some(gpu), Some(render_state), Some(renderer)) =
+            (&self.gpu, frame.wgpu_render_state(), &self.slice_renderer)
+        else {
+            ui.label("no GPU renderer");
+            return;
         };
-        let size_mm = egui::vec2(w as f32 * su as f32, h as f32 * sv as f32);
-        let avail = ui.available_size();
-        let scale = (avail.x / size_mm.x).min(avail.y / size_mm.y).max(0.01);
-        // k (superior) points up on screen for the anterior and lateral views.
-        let uv = if mip.axis == 2 {
-            egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0))
-        } else {
-            egui::Rect::from_min_max(egui::pos2(0.0, 1.0), egui::pos2(1.0, 0.0))
+        let gap = 4.0;
+        let rects: Vec<(PaneId, egui::Rect)> = match self.layout {
+            Layout::MipAndSlices => {
+                let split = area.left() + area.width() * 0.58;
+                let mip = egui::Rect::from_min_max(
+                    area.min,
+                    egui::pos2(split - gap * 0.5, area.bottom()),
+                );
+                let col =
+                    egui::Rect::from_min_max(egui::pos2(split + gap * 0.5, area.top()), area.max);
+                let h = (col.height() - 2.0 * gap) / 3.0;
+                let mut v = vec![(PaneId::Mip, mip)];
+                for (n, kind) in SliceKind::ALL.into_iter().enumerate() {
+                    let top = col.top() + n as f32 * (h + gap);
+                    v.push((
+                        PaneId::Slice(kind),
+                        egui::Rect::from_min_size(
+                            egui::pos2(col.left(), top),
+                            egui::vec2(col.width(), h),
+                        ),
+                    ));
+                }
+                v
+            }
+            Layout::Grid => {
+                let w = (area.width() - gap) / 2.0;
+                let h = (area.height() - gap) / 2.0;
+                let cell = |c: f32, r: f32| {
+                    egui::Rect::from_min_size(
+                        egui::pos2(area.left() + c * (w + gap), area.top() + r * (h + gap)),
+                        egui::vec2(w, h),
+                    )
+                };
+                vec![
+                    (PaneId::Mip, cell(0.0, 0.0)),
+                    (PaneId::Slice(SliceKind::Axial), cell(1.0, 0.0)),
+                    (PaneId::Slice(SliceKind::Coronal), cell(0.0, 1.0)),
+                    (PaneId::Slice(SliceKind::Sagittal), cell(1.0, 1.0)),
+                ]
+            }
+            Layout::Single(p) => vec![(p, area)],
         };
-        ui.centered_and_justified(|ui| {
-            ui.add(
-                egui::Image::new((mip.texture_id, size_mm * scale))
-                    .uv(uv)
-                    .fit_to_exact_size(size_mm * scale),
-            );
-        });
+        // Panes not shown keep no stale rectangle.
+        for pane in &mut self.panes {
+            pane.image_rect = None;
+        }
+        let maximised = matches!(self.layout, Layout::Single(_));
+        let entry = self
+            .displayed_request()
+            .and_then(|r| self.features.find(&r));
+        let overlay = self.overlay();
+        let inputs = PaneInputs {
+            gpu,
+            render_state,
+            renderer,
+            volume: &scene.volume,
+            render_volume: &scene.render,
+            generation: scene.generation,
+            features: entry.map(|e| (&e.texture, e.id)),
+            overlay,
+            window: self.window.range(),
+        };
+        let mut hover = None;
+        let mut toggle = None;
+        let mut window_drag = egui::Vec2::ZERO;
+        let mut errors = Vec::new();
+        for (id, rect) in rects {
+            let frame_rect = rect.shrink(1.0);
+            ui.scope_builder(egui::UiBuilder::new().max_rect(frame_rect), |ui| {
+                ui.set_clip_rect(frame_rect);
+                egui::Frame::new()
+                    .stroke(egui::Stroke::new(1.0, egui::Color32::from_gray(60)))
+                    .inner_margin(2.0)
+                    .show(ui, |ui| {
+                        ui.set_min_size(frame_rect.size() - egui::vec2(6.0, 6.0));
+                        match id {
+                            PaneId::Slice(kind) => {
+                                if let Some(pane) = self.panes.iter_mut().find(|p| p.kind == kind) {
+                                    let r = pane.ui(ui, &inputs, &mut self.crosshair, maximised);
+                                    hover = hover.or(r.hovered);
+                                    window_drag += r.window_drag;
+                                    if r.toggle_maximise {
+                                        toggle = Some(id);
+                                    }
+                                    errors.extend(r.error);
+                                }
+                            }
+                            PaneId::Mip => {
+                                // The MIP pane. The ray caster's widget (src/app/mip_view.rs,
+                                // branch `render`) replaces this stand-in here, fed from the
+                                // same `MipInputs`: its scene is `scene.render` plus `entry`'s
+                                // texture under `self.mode.label()` (or every kept entry,
+                                // `self.features.entries()`); before drawing,
+                                // `set_crosshair(self.crosshair_lps_mm())`; a finished pick sets
+                                // `self.crosshair` to the pick's voxel. Its maximise button
+                                // sets `toggle = Some(id)`.
+                                let clicked = self.mip_pane.ui(
+                                    ui,
+                                    MipInputs {
+                                        gpu,
+                                        render_state,
+                                        volume: &scene.volume,
+                                        render_volume: &scene.render,
+                                        generation: scene.generation,
+                                        mode: self.mode,
+                                        features: entry,
+                                        display: &self.display,
+                                        window: self.window.range(),
+                                        crosshair: &mut self.crosshair,
+                                    },
+                                    maximised,
+                                );
+                                if clicked {
+                                    toggle = Some(id);
+                                }
+                            }
+                        }
+                    });
+            });
+        }
+        self.hover = hover;
+        if window_drag != egui::Vec2::ZERO {
+            self.window = self.window.dragged(window_drag);
+        }
+        for e in errors {
+            self.error(e);
+        }
+        if let Some(id) = toggle {
+            if maximised {
+                self.layout = self.multi_layout;
+            } else {
+                self.multi_layout = self.layout;
+                self.layout = Layout::Single(id);
+            }
+        }
     }
 }
 
 impl eframe::App for ShapecastApp {
     fn logic(&mut self, ctx: &egui::Context, _frame: &mut eframe::Frame) {
-        if self.step != Step::Idle {
+        if self.load.is_some() || self.features.running_request().is_some() || self.probe.busy() {
             ctx.request_repaint();
         }
     }
 
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
-        self.advance(frame);
+        let ctx = ui.ctx().clone();
+        self.start_once(&ctx);
+        self.take_external_files(&ctx);
+        self.advance();
         self.status.frames += 1;
 
         egui::Panel::top("top").show(ui, |ui| self.top_bar_ui(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status_bar_ui(ui));
-        egui::Panel::right("slices")
+        egui::Panel::left("controls")
             .resizable(true)
-            .default_size(ui.available_width() * 0.45)
+            .default_size(290.0)
             .show(ui, |ui| {
-                if let Some(volume) = self.volume.clone() {
-                    let h = ui.available_height() / 3.0 - 4.0;
-                    for pane in &mut self.panes {
-                        let size = egui::vec2(ui.available_width(), h);
-                        ui.allocate_ui(size, |ui| {
-                            pane.ui(ui, &volume, &mut self.crosshair, self.window);
-                        });
-                    }
-                }
+                egui::ScrollArea::vertical().show(ui, |ui| self.side_panel_ui(ui));
             });
-        egui::CentralPanel::default().show(ui, |ui| self.mip_ui(ui));
+        egui::CentralPanel::default().show(ui, |ui| {
+            self.errors_ui(ui);
+            self.panes_ui(ui, frame);
+        });
+        self.about_ui(&ctx);
+        self.drop_overlay(&ctx);
 
+        self.update_probe();
+        self.update_status();
         if self.published.as_ref() != Some(&self.status) {
             self.status.publish();
             self.published = Some(self.status.clone());
         }
-        if self.status.phase != Phase::Ready && self.status.phase != Phase::Error {
-            ui.ctx().request_repaint();
+        if self.load.is_some()
+            || self.load_progress.is_some()
+            || self.features.running_request().is_some()
+            || self.probe.busy()
+        {
+            ctx.request_repaint();
         }
     }
 }

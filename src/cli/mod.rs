@@ -20,8 +20,9 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Open the viewer in a native window (the default without a subcommand).
-    View,
+    /// Open the viewer in a native window (the default without a subcommand): on the given files
+    /// and folders (a volume, a header with its data file, a DICOM folder), else on the demo CT.
+    View(ViewArgs),
     /// Print the GPU adapter this machine offers and the limits Shapecast requests from it.
     Gpu,
     /// Write one of the paper's phantoms (anti-aliased, in HU) as NIfTI.
@@ -36,10 +37,57 @@ pub enum Command {
     Reproduce(reproduce::ReproduceArgs),
 }
 
+#[derive(clap::Args, Debug, Default)]
+pub struct ViewArgs {
+    /// Files and folders to open (read together as one volume).
+    pub paths: Vec<std::path::PathBuf>,
+    /// Open a phantom instead: sphere, cylinder, bifurcation, airway, ... (see `phantom`).
+    #[arg(long, conflicts_with = "paths")]
+    pub phantom: Option<String>,
+    /// The display mode to open in: intensity, hessian, rst, li, frangi or gst.
+    #[arg(long, default_value = "rst")]
+    pub method: String,
+    /// The feature preset: lymph-nodes, lung-nodules, airways or vessels.
+    #[arg(long)]
+    pub preset: Option<String>,
+}
+
+fn view(args: ViewArgs) -> anyhow::Result<()> {
+    use crate::app::{AppOptions, DisplayMode, StartWith};
+    let mode = DisplayMode::from_name(&args.method).ok_or_else(|| {
+        anyhow::anyhow!(
+            "--method {}: one of intensity, hessian, rst, li, frangi, gst",
+            args.method
+        )
+    })?;
+    let preset = match &args.preset {
+        Some(p) => Some(crate::cpu::tf::Preset::from_name(p).ok_or_else(|| {
+            anyhow::anyhow!("--preset {p}: one of lymph-nodes, lung-nodules, airways, vessels")
+        })?),
+        None => None,
+    };
+    let start = match (args.phantom, args.paths.is_empty()) {
+        (Some(name), _) => StartWith::Phantom(name),
+        (None, true) => StartWith::DemoCt,
+        (None, false) => StartWith::Paths(args.paths),
+    };
+    crate::app::run_native(AppOptions {
+        start,
+        mode,
+        preset,
+        ..AppOptions::default()
+    })
+}
+
 /// Runs a parsed command line; the error is printed by `main` as one line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
-    match cli.command.unwrap_or(Command::View) {
-        Command::View => crate::app::run_native(),
+    match cli.command.unwrap_or_else(|| {
+        Command::View(ViewArgs {
+            method: "rst".to_owned(),
+            ..ViewArgs::default()
+        })
+    }) {
+        Command::View(args) => view(args),
         Command::Gpu => gpu_info(),
         Command::Phantom(args) => phantom::run(args),
         Command::Features(args) => features::run(args),
@@ -53,4 +101,30 @@ fn gpu_info() -> anyhow::Result<()> {
     let ctx = pollster::block_on(crate::gpu::GpuContext::new_headless())?;
     println!("{}", ctx.describe());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn view_takes_paths_or_a_phantom() {
+        let parse = |args: &[&str]| Cli::try_parse_from(args).map(|c| c.command);
+        match parse(&["shapecast", "view", "a.nii.gz", "dicom/"]) {
+            Ok(Some(Command::View(v))) => {
+                assert_eq!(v.paths.len(), 2);
+                assert_eq!(v.method, "rst");
+            }
+            other => panic!("{other:?}"),
+        }
+        match parse(&["shapecast", "view", "--phantom", "sphere", "--method", "li"]) {
+            Ok(Some(Command::View(v))) => {
+                assert_eq!(v.phantom.as_deref(), Some("sphere"));
+                assert_eq!(v.method, "li");
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(parse(&["shapecast", "view", "--phantom", "sphere", "a.nii"]).is_err());
+        assert!(matches!(parse(&["shapecast"]), Ok(None)));
+    }
 }

@@ -12,6 +12,7 @@ pub mod kernel;
 pub mod noise;
 pub mod pack;
 pub mod pipeline;
+pub mod probe;
 pub mod readback;
 pub mod render_volume;
 pub mod resample;
@@ -19,6 +20,7 @@ pub mod rst;
 pub mod shaders;
 pub mod slab;
 pub mod structure_tensor;
+pub mod slice;
 pub mod volume;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};

@@ -30,6 +30,7 @@ pub const FILES: &[(&str, &str)] = &[
     ("resample.wgsl", include_str!("../../shaders/resample.wgsl")),
     ("gradient.wgsl", include_str!("../../shaders/gradient.wgsl")),
     ("rst.wgsl", include_str!("../../shaders/rst.wgsl")),
+    ("slice.wgsl", include_str!("../../shaders/slice.wgsl")),
 ];
 
 /// Why a shader source could not be assembled.

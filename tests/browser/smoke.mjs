@@ -1,8 +1,15 @@
 // Browser test: serves the trunk-built dist/ on 127.0.0.1, drives Debian's headless Chromium
 // (WebGPU on SwiftShader) with playwright-core, and checks that
-//  1. the app reports WebGPU up, the demo volume loaded and frames drawn (window.shapecastStatus),
+//  1. the app reports WebGPU up, the demo CT (fetched from dist/demo/) loaded, its features
+//     computed, and frames drawn (window.shapecastStatus),
 //  2. the screenshot is not blank,
-//  3. a browser without WebGPU gets a plain-words message instead of a blank canvas.
+//  3. the page's file inputs and drag and drop load volumes: a corrupt file gives an error that
+//     names it and keeps the volume; a DICOM folder (the "Open folder" input); a detached-header
+//     NRRD with its data file dropped together,
+//  4. a browser without WebGPU gets a plain-words message instead of a blank canvas.
+//
+// The page is opened with ?method=li: the Hessian (Li map) features finish in seconds even where
+// the feature pipeline runs on the CPU; the default mode (RST) is the heavier one.
 // It never downloads a browser. Under CI=true a missing browser or dist/ is a failure (it always
 // is here: there is no skip path).
 import { chromium } from 'playwright-core';
@@ -18,6 +25,7 @@ const root = path.resolve(here, '..', '..');
 const dist = path.join(root, 'dist');
 const outDir = path.join(here, 'out');
 const chromiumPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
+const DEMO_DIMS = [120, 126, 164];
 const timeoutMs = Number(process.env.SHAPECAST_BROWSER_TIMEOUT_MS ?? 300000);
 
 let passed = 0;
@@ -128,10 +136,10 @@ function screenshotStats(buffer) {
 
 fs.mkdirSync(outDir, { recursive: true });
 try {
-  // 1 and 2: the app on WebGPU.
+  // 1, 2 and 3: the app on WebGPU.
   await withBrowser([...baseArgs, ...webgpuArgs], async (page) => {
     const t0 = Date.now();
-    await page.goto(url);
+    await page.goto(`${url}?method=li`);
     let status;
     try {
       // The wasm must start within two minutes even on SwiftShader; a page that never leaves
@@ -141,7 +149,9 @@ try {
       await page.waitForFunction(
         () => {
           const s = window.shapecastStatus;
-          return s && (s.phase === 'error' || (s.phase === 'ready' && s.frames >= 3));
+          const f = s?.features?.state;
+          return s && (s.phase === 'error'
+            || (s.phase === 'ready' && s.frames >= 3 && s.volume && (f === 'done' || f === 'failed')));
         },
         null,
         { timeout: timeoutMs, polling: 250 },
@@ -154,8 +164,13 @@ try {
     console.log(`  window.shapecastStatus after ${seconds} s: ${JSON.stringify(status)}`);
     check('app reports ready', status?.phase === 'ready', `phase ${status?.phase}, error ${status?.error}`);
     check('WebGPU adapter reported', !!status?.adapter?.name, `${status?.adapter?.name} (${status?.adapter?.backend})`);
-    check('demo volume loaded', Array.isArray(status?.volume?.dims) && status.volume.dims.every((d) => d > 1),
-      `${JSON.stringify(status?.volume?.dims)} at ${JSON.stringify(status?.volume?.spacing_mm)} mm`);
+    check('demo CT loaded', JSON.stringify(status?.volume?.dims) === JSON.stringify(DEMO_DIMS)
+      && /aorta_ct_cropped/.test(status?.volume?.source ?? ''),
+      `${JSON.stringify(status?.volume?.dims)} at ${JSON.stringify(status?.volume?.spacing_mm)} mm from ${status?.volume?.source}`);
+    check('features computed', status?.features?.method === 'li' && status?.features?.state === 'done',
+      JSON.stringify(status?.features));
+    check('crosshair at the centre', JSON.stringify(status?.crosshair?.voxel) === '[60,63,82]',
+      JSON.stringify(status?.crosshair));
     check('frames drawn', (status?.frames ?? 0) >= 3, `${status?.frames} frames`);
     // Give the compositor a moment to present the last frame before the screenshot.
     await page.waitForTimeout(500);
@@ -163,9 +178,59 @@ try {
     const stats = screenshotStats(shot);
     check('screenshot is not blank', stats.colours >= 64 && stats.std >= 8,
       `${stats.colours} colours, luminance mean ${stats.mean.toFixed(1)} std ${stats.std.toFixed(1)} (${path.join(outDir, 'app.png')})`);
+
+    // Waits until `pred(status)` holds (or an error appears), returns the status.
+    const waitStatus = async (pred, what, timeout = 120000) => {
+      try {
+        await page.waitForFunction(pred, null, { timeout, polling: 200 });
+      } catch (e) {
+        console.log(`  timed out waiting for ${what}`);
+      }
+      return page.evaluate(() => window.shapecastStatus);
+    };
+
+    // 3a: a corrupt file through the "Open files" input: an error naming it, the demo kept.
+    await page.setInputFiles('#shapecast_open_files', {
+      name: 'broken.nii', mimeType: 'application/octet-stream', buffer: Buffer.alloc(600, 0xab),
+    });
+    status = await waitStatus(() => /broken\.nii/.test(window.shapecastStatus?.error ?? ''), 'the error');
+    check('corrupt file: error names it', /broken\.nii/.test(status?.error ?? ''), status?.error);
+    check('corrupt file: the volume is kept', JSON.stringify(status?.volume?.dims) === JSON.stringify(DEMO_DIMS)
+      && status?.phase !== 'error', `${JSON.stringify(status?.volume?.dims)}, phase ${status?.phase}`);
+    await page.screenshot({ path: path.join(outDir, 'error.png') });
+
+    // 3b: a DICOM series through the "Open folder" input (webkitdirectory).
+    const series = path.join(root, 'tests', 'data', 'dicom', 'ct-head-64px');
+    await page.setInputFiles('#shapecast_open_folder', series);
+    status = await waitStatus(() => JSON.stringify(window.shapecastStatus?.volume?.dims) === '[64,64,6]',
+      'the DICOM series');
+    check('folder input: DICOM series loaded', JSON.stringify(status?.volume?.dims) === '[64,64,6]',
+      `${JSON.stringify(status?.volume?.dims)} from ${status?.volume?.source}; error ${status?.error}`);
+
+    // 3c: a detached-header NRRD and its data file dropped together on the canvas.
+    await page.evaluate(() => {
+      const [nx, ny, nz] = [10, 12, 8];
+      const header = `NRRD0004\ntype: short\ndimension: 3\nsizes: ${nx} ${ny} ${nz}\n`
+        + 'spacings: 0.8 0.8 2.5\nencoding: raw\nendian: little\ndata file: drop.raw\n\n';
+      const data = new Int16Array(nx * ny * nz);
+      for (let i = 0; i < data.length; i += 1) data[i] = (i % 97) * 10 - 200;
+      const dt = new DataTransfer();
+      dt.items.add(new File([header], 'drop.nhdr'));
+      dt.items.add(new File([data.buffer], 'drop.raw'));
+      const canvas = document.getElementById('shapecast_canvas');
+      canvas.dispatchEvent(new DragEvent('dragover', { dataTransfer: dt, bubbles: true, cancelable: true }));
+      canvas.dispatchEvent(new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
+    });
+    status = await waitStatus(() => JSON.stringify(window.shapecastStatus?.volume?.dims) === '[10,12,8]',
+      'the dropped NRRD');
+    check('drop: NRRD header + data file loaded', JSON.stringify(status?.volume?.dims) === '[10,12,8]'
+      && JSON.stringify(status?.volume?.spacing_mm) === '[0.8,0.8,2.5]',
+      `${JSON.stringify(status?.volume?.dims)} at ${JSON.stringify(status?.volume?.spacing_mm)} from ${status?.volume?.source}; error ${status?.error}`);
+    await page.waitForTimeout(500);
+    await page.screenshot({ path: path.join(outDir, 'dropped.png') });
   });
 
-  // 3: a browser without WebGPU.
+  // 4: a browser without WebGPU.
   await withBrowser(baseArgs, async (page) => {
     await page.addInitScript(() => {
       Object.defineProperty(Navigator.prototype, 'gpu', { get: () => undefined, configurable: true });

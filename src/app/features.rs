@@ -1,0 +1,601 @@
+//! The features the app computes and keeps: the display mode (intensity, Hessian, RST, Li,
+//! Frangi, GST), the parameters (preset, scales, rays, transfer function, map), the cache of
+//! computed [`FeatureTexture`]s keyed by method and parameters (switching modes never recomputes
+//! what exists), and the one running [`FeatureJob`], stepped once per frame and cancellable.
+
+use crate::cpu::features::FeatureMap;
+use crate::cpu::pipeline::{Method, Request};
+use crate::cpu::rays::RAY_COUNTS;
+use crate::cpu::rst::DEFAULT_STEP_MM;
+use crate::cpu::tf::{Preset, TransferFunction};
+use crate::gpu::GpuContext;
+use crate::gpu::pipeline::{FeatureJob, JobState};
+use crate::gpu::render_volume::FeatureTexture;
+use crate::volume::Volume;
+
+/// What the MIP and the slice overlay show.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DisplayMode {
+    Intensity,
+    Features(Method),
+}
+
+impl DisplayMode {
+    pub const ALL: [Self; 6] = [
+        Self::Intensity,
+        Self::Features(Method::Hessian),
+        Self::Features(Method::Rst),
+        Self::Features(Method::Li),
+        Self::Features(Method::Frangi),
+        Self::Features(Method::Gst),
+    ];
+
+    /// The name the status and URLs use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Intensity => "intensity",
+            Self::Features(m) => method_name(m),
+        }
+    }
+
+    /// The label of its button.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Intensity => "Intensity",
+            Self::Features(Method::Hessian) => "Hessian",
+            Self::Features(Method::Rst) => "RST",
+            Self::Features(Method::Li) => "Li",
+            Self::Features(Method::Frangi) => "Frangi",
+            Self::Features(Method::Gst) => "GST",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    pub fn method(self) -> Option<Method> {
+        match self {
+            Self::Intensity => None,
+            Self::Features(m) => Some(m),
+        }
+    }
+}
+
+pub fn method_name(m: Method) -> &'static str {
+    match m {
+        Method::Hessian => "hessian",
+        Method::Rst => "rst",
+        Method::Li => "li",
+        Method::Frangi => "frangi",
+        Method::Gst => "gst",
+    }
+}
+
+/// The mode the app opens on: RST (the paper's method), with blobness on the Li map.
+pub const DEFAULT_MODE: DisplayMode = DisplayMode::Features(Method::Rst);
+
+/// The parameters the panel edits; a [`Request`] per method is made from them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FeatureParams {
+    pub preset: Preset,
+    /// Hessian scales (and the structure tensor's neighbourhood scales), mm.
+    pub sigma_min_mm: f64,
+    pub sigma_max_mm: f64,
+    pub sigma_count: usize,
+    pub rays: usize,
+    pub radius_mm: f64,
+    pub step_mm: f64,
+    /// `None`: the automatic transfer function (the preset refined by the measured noise).
+    pub tf: Option<TransferFunction>,
+    /// Eq. 1 or Li's map, for the RST and the structure tensor.
+    pub map: FeatureMap,
+}
+
+impl FeatureParams {
+    pub fn from_preset(preset: Preset) -> Self {
+        let s = preset.sigmas_mm();
+        Self {
+            preset,
+            sigma_min_mm: s.first().copied().unwrap_or(1.0),
+            sigma_max_mm: s.last().copied().unwrap_or(4.0),
+            sigma_count: s.len().max(1),
+            rays: 42,
+            radius_mm: preset.radius_mm(),
+            step_mm: DEFAULT_STEP_MM,
+            tf: None,
+            map: FeatureMap::Li,
+        }
+    }
+
+    /// The scales: the preset's own list when the range is the preset's, else geometric from
+    /// min to max.
+    pub fn sigmas_mm(&self) -> Vec<f64> {
+        let preset = self.preset.sigmas_mm();
+        if preset.first() == Some(&self.sigma_min_mm)
+            && preset.last() == Some(&self.sigma_max_mm)
+            && preset.len() == self.sigma_count
+        {
+            return preset;
+        }
+        let n = self.sigma_count.max(1);
+        let (lo, hi) = (self.sigma_min_mm, self.sigma_max_mm.max(self.sigma_min_mm));
+        if n == 1 || hi <= lo {
+            return vec![lo];
+        }
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / (n - 1) as f64;
+                let s = lo * (hi / lo).powf(t);
+                (s * 1000.0).round() / 1000.0
+            })
+            .collect()
+    }
+
+    /// The request for `method`, with only the parameters that method uses (so that changing
+    /// the RST's rays does not make the Hessian look stale).
+    pub fn request(&self, method: Method) -> Request {
+        let mut r = Request::new(method);
+        r.preset = self.preset;
+        match method {
+            Method::Rst => {
+                r.rays = Some(self.rays);
+                r.radius_mm = Some(self.radius_mm);
+                r.step_mm = Some(self.step_mm);
+                r.tf = self.tf;
+                r.rst_map = self.map;
+            }
+            Method::Gst => {
+                r.sigmas_mm = Some(self.sigmas_mm());
+                r.rst_map = self.map;
+            }
+            Method::Hessian | Method::Li | Method::Frangi => {
+                r.sigmas_mm = Some(self.sigmas_mm());
+            }
+        }
+        r
+    }
+}
+
+/// On/off and gain of each feature (V, A, B) and the overlay's opacity on the slices.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FeatureDisplay {
+    pub enabled: [bool; 3],
+    pub gain: [f32; 3],
+    pub overlay_on_slices: bool,
+    pub opacity: f32,
+}
+
+impl Default for FeatureDisplay {
+    fn default() -> Self {
+        Self {
+            enabled: [true; 3],
+            gain: [1.0; 3],
+            overlay_on_slices: true,
+            opacity: 1.0,
+        }
+    }
+}
+
+impl FeatureDisplay {
+    /// Per feature: opacity = clamp(value * scale, 0, 1) with scale = gain / the feature's
+    /// maximum, as the MIP composites it (gain 1: the maximum is full colour; 2: half of it).
+    /// While the maximum is unknown (0), 100 units stand in for it.
+    pub fn scales(&self, max: [f32; 3]) -> [f32; 3] {
+        std::array::from_fn(|c| {
+            if !self.enabled[c] {
+                return 0.0;
+            }
+            let reference = if max[c] > 0.0 { max[c] } else { 100.0 };
+            self.gain[c] / reference
+        })
+    }
+}
+
+/// One computed method, kept on the GPU.
+pub struct FeatureEntry {
+    pub request: Request,
+    pub texture: FeatureTexture,
+    pub notes: Vec<String>,
+    /// Unique per computation (slice panes redraw when it changes).
+    pub id: u64,
+    last_used: u64,
+}
+
+struct Running {
+    request: Request,
+    job: FeatureJob,
+    fraction: f32,
+    stage: String,
+}
+
+/// How the last job ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum JobOutcome {
+    Done,
+    Cancelled,
+    Failed(String),
+}
+
+/// What [`FeatureManager::step`] reports.
+pub enum JobEvent {
+    Finished { method: Method, notes: Vec<String> },
+    Failed(String),
+}
+
+/// Features kept on the GPU for the loaded volume, and the job computing one more.
+pub struct FeatureManager {
+    entries: Vec<FeatureEntry>,
+    running: Option<Running>,
+    last: Option<(Request, JobOutcome)>,
+    next_id: u64,
+    clock: u64,
+    /// Bytes of feature textures kept at most (the newest is always kept).
+    budget_bytes: u64,
+}
+
+impl Default for FeatureManager {
+    fn default() -> Self {
+        Self {
+            entries: Vec::new(),
+            running: None,
+            last: None,
+            next_id: 1,
+            clock: 0,
+            budget_bytes: 1 << 30,
+        }
+    }
+}
+
+impl FeatureManager {
+    /// Forgets everything (a new volume).
+    pub fn clear(&mut self) {
+        self.entries.clear();
+        self.running = None;
+        self.last = None;
+    }
+
+    pub fn find(&self, request: &Request) -> Option<&FeatureEntry> {
+        self.entries.iter().find(|e| &e.request == request)
+    }
+
+    /// Marks an entry as used now (for eviction), returning it.
+    pub fn touch(&mut self, request: &Request) -> Option<&FeatureEntry> {
+        self.clock += 1;
+        let clock = self.clock;
+        let e = self.entries.iter_mut().find(|e| &e.request == request)?;
+        e.last_used = clock;
+        Some(e)
+    }
+
+    /// Every method kept (for a MIP widget that offers them by name).
+    pub fn entries(&self) -> impl Iterator<Item = &FeatureEntry> {
+        self.entries.iter()
+    }
+
+    /// How many methods are kept.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    pub fn running_request(&self) -> Option<&Request> {
+        self.running.as_ref().map(|r| &r.request)
+    }
+
+    /// (fraction, stage) of the running job.
+    pub fn progress(&self) -> Option<(f32, &str)> {
+        self.running
+            .as_ref()
+            .map(|r| (r.fraction, r.stage.as_str()))
+    }
+
+    /// How the last job for `request` ended, if it was the last one.
+    pub fn outcome(&self, request: &Request) -> Option<&JobOutcome> {
+        self.last
+            .as_ref()
+            .filter(|(r, _)| r == request)
+            .map(|(_, o)| o)
+    }
+
+    /// Starts computing `request` (cancelling any other job).
+    pub fn start(
+        &mut self,
+        ctx: &GpuContext,
+        volume: &Volume,
+        request: Request,
+    ) -> Result<(), String> {
+        self.cancel();
+        match FeatureJob::new(ctx, volume, &request) {
+            Ok(job) => {
+                let (fraction, stage) = match job.state() {
+                    JobState::Running { fraction, stage } => (fraction, stage),
+                    JobState::Done => (1.0, "done".to_owned()),
+                };
+                self.running = Some(Running {
+                    request,
+                    job,
+                    fraction,
+                    stage,
+                });
+                Ok(())
+            }
+            Err(e) => {
+                let message = format!("{}: {e}", method_name(request.method));
+                self.last = Some((request, JobOutcome::Failed(message.clone())));
+                Err(message)
+            }
+        }
+    }
+
+    pub fn cancel(&mut self) {
+        if let Some(r) = self.running.take() {
+            self.last = Some((r.request, JobOutcome::Cancelled));
+        }
+    }
+
+    /// Advances the running job by one step.
+    pub fn step(&mut self, ctx: &GpuContext) -> Option<JobEvent> {
+        let running = self.running.as_mut()?;
+        match running.job.step(ctx) {
+            Ok(JobState::Running { fraction, stage }) => {
+                running.fraction = fraction;
+                running.stage = stage;
+                None
+            }
+            Ok(JobState::Done) => {
+                let r = self.running.take()?;
+                let notes = r.job.notes().to_vec();
+                let method = r.request.method;
+                match r.job.finish() {
+                    Some(texture) => {
+                        self.insert(r.request.clone(), texture, notes.clone());
+                        self.last = Some((r.request, JobOutcome::Done));
+                        Some(JobEvent::Finished { method, notes })
+                    }
+                    None => {
+                        let message = format!(
+                            "{}: the computation ended without a result",
+                            method_name(method)
+                        );
+                        self.last = Some((r.request, JobOutcome::Failed(message.clone())));
+                        Some(JobEvent::Failed(message))
+                    }
+                }
+            }
+            Err(e) => {
+                let r = self.running.take()?;
+                let message = format!("{}: {e}", method_name(r.request.method));
+                self.last = Some((r.request, JobOutcome::Failed(message.clone())));
+                Some(JobEvent::Failed(message))
+            }
+        }
+    }
+
+    fn insert(&mut self, request: Request, texture: FeatureTexture, notes: Vec<String>) {
+        self.entries.retain(|e| e.request != request);
+        self.clock += 1;
+        let bytes_each = texture_bytes(&texture);
+        self.entries.push(FeatureEntry {
+            request,
+            texture,
+            notes,
+            id: self.next_id,
+            last_used: self.clock,
+        });
+        self.next_id += 1;
+        // Evict the least recently used until the rest fits (never the newest).
+        while self.entries.len() > 1 && self.entries.len() as u64 * bytes_each > self.budget_bytes {
+            let Some(oldest) = self
+                .entries
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, e)| e.last_used)
+                .map(|(i, _)| i)
+            else {
+                break;
+            };
+            self.entries.remove(oldest);
+        }
+    }
+}
+
+fn texture_bytes(t: &FeatureTexture) -> u64 {
+    t.dims.iter().map(|&d| u64::from(d)).product::<u64>() * 8
+}
+
+/// The parameter panel. Returns true when the user asked to recompute.
+pub fn params_ui(ui: &mut egui::Ui, params: &mut FeatureParams, method: Option<Method>) -> bool {
+    let mut recompute = false;
+    egui::Grid::new("feature params")
+        .num_columns(2)
+        .spacing([8.0, 4.0])
+        .show(ui, |ui| {
+            let label = ui.label("Preset");
+            let before = params.preset;
+            egui::ComboBox::from_id_salt("preset")
+                .selected_text(preset_label(params.preset))
+                .show_ui(ui, |ui| {
+                    for p in Preset::ALL {
+                        ui.selectable_value(&mut params.preset, p, preset_label(p));
+                    }
+                })
+                .response
+                .labelled_by(label.id);
+            if params.preset != before {
+                *params = FeatureParams::from_preset(params.preset);
+            }
+            ui.end_row();
+
+            let uses_sigmas = !matches!(method, Some(Method::Rst));
+            let uses_rays = matches!(method, Some(Method::Rst));
+            let label = ui.label("Scales σ (mm)").on_hover_text(
+                "Hessian scales (Hessian, Li, Frangi) and neighbourhood scales (GST): \
+                 the range, spaced geometrically",
+            );
+            ui.add_enabled_ui(uses_sigmas, |ui| {
+                ui.horizontal(|ui| {
+                    ui.add(
+                        egui::DragValue::new(&mut params.sigma_min_mm)
+                            .range(0.3..=30.0)
+                            .speed(0.05)
+                            .max_decimals(2),
+                    )
+                    .labelled_by(label.id);
+                    let to = ui.label("to");
+                    ui.add(
+                        egui::DragValue::new(&mut params.sigma_max_mm)
+                            .range(0.3..=30.0)
+                            .speed(0.05)
+                            .max_decimals(2),
+                    )
+                    .labelled_by(to.id);
+                    let count = ui.label("scales:");
+                    ui.add(egui::DragValue::new(&mut params.sigma_count).range(1..=12))
+                        .labelled_by(count.id);
+                });
+            });
+            ui.end_row();
+
+            let label = ui.label("Rays");
+            ui.add_enabled_ui(uses_rays, |ui| {
+                egui::ComboBox::from_id_salt("rays")
+                    .selected_text(params.rays.to_string())
+                    .show_ui(ui, |ui| {
+                        for n in RAY_COUNTS {
+                            ui.selectable_value(&mut params.rays, n, n.to_string());
+                        }
+                    })
+                    .response
+                    .labelled_by(label.id);
+            });
+            ui.end_row();
+
+            let label = ui.label("Ray length R (mm)");
+            ui.add_enabled(
+                uses_rays,
+                egui::DragValue::new(&mut params.radius_mm)
+                    .range(1.0..=100.0)
+                    .speed(0.2),
+            )
+            .labelled_by(label.id);
+            ui.end_row();
+
+            let label = ui.label("Step (mm)");
+            ui.add_enabled(
+                uses_rays,
+                egui::DragValue::new(&mut params.step_mm)
+                    .range(0.05..=5.0)
+                    .speed(0.01)
+                    .max_decimals(3),
+            )
+            .labelled_by(label.id);
+            ui.end_row();
+
+            ui.label("Transfer function");
+            ui.add_enabled_ui(uses_rays, |ui| {
+                ui.horizontal(|ui| {
+                    let mut auto = params.tf.is_none();
+                    if ui
+                        .checkbox(&mut auto, "auto")
+                        .on_hover_text("the preset's, raised to 2σ/4σ of the measured noise")
+                        .changed()
+                    {
+                        params.tf = if auto {
+                            None
+                        } else {
+                            Some(params.preset.transfer_function())
+                        };
+                    }
+                    if let Some(tf) = &mut params.tf {
+                        let l = ui.label("d_min");
+                        ui.add(egui::DragValue::new(&mut tf.d_min).range(0.0..=2000.0))
+                            .labelled_by(l.id);
+                        let l = ui.label("d_max");
+                        ui.add(egui::DragValue::new(&mut tf.d_max).range(0.0..=4000.0))
+                            .labelled_by(l.id);
+                    }
+                });
+            });
+            ui.end_row();
+
+            ui.label("Map");
+            ui.add_enabled_ui(matches!(method, Some(Method::Rst | Method::Gst)), |ui| {
+                ui.horizontal(|ui| {
+                    ui.selectable_value(&mut params.map, FeatureMap::Simple, "eq. 1")
+                        .on_hover_text("V, A, B = |λ| of the paper's eq. 1");
+                    ui.selectable_value(&mut params.map, FeatureMap::Li, "Li (eq. 2)")
+                        .on_hover_text("Li et al.'s map: cuts blob speckle in the lung ~10x");
+                });
+            });
+            ui.end_row();
+        });
+    ui.horizontal(|ui| {
+        if ui
+            .add_enabled(method.is_some(), egui::Button::new("Recompute"))
+            .on_hover_text("compute the selected method with these parameters")
+            .clicked()
+        {
+            recompute = true;
+        }
+        if ui.button("Preset defaults").clicked() {
+            *params = FeatureParams::from_preset(params.preset);
+        }
+    });
+    recompute
+}
+
+pub fn preset_label(p: Preset) -> &'static str {
+    match p {
+        Preset::LymphNodes => "Lymph nodes / soft tissue",
+        Preset::LungNodules => "Lung nodules",
+        Preset::Airways => "Airways",
+        Preset::Vessels => "Vessels / CTA",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn requests_carry_only_what_the_method_uses() {
+        let mut p = FeatureParams::from_preset(Preset::LungNodules);
+        let h = p.request(Method::Hessian);
+        let r = p.request(Method::Rst);
+        assert_eq!(h.sigmas_mm, Some(Preset::LungNodules.sigmas_mm()));
+        assert_eq!(r.radius_mm, Some(25.0));
+        assert_eq!(r.rst_map, FeatureMap::Li);
+        p.rays = 98;
+        assert_eq!(
+            p.request(Method::Hessian),
+            h,
+            "rays do not touch the Hessian"
+        );
+        assert_ne!(p.request(Method::Rst), r);
+        p.sigma_min_mm = 1.0;
+        p.sigma_max_mm = 8.0;
+        p.sigma_count = 4;
+        assert_eq!(p.sigmas_mm(), vec![1.0, 2.0, 4.0, 8.0]);
+    }
+
+    #[test]
+    fn mode_names_round_trip() {
+        for m in DisplayMode::ALL {
+            assert_eq!(DisplayMode::from_name(m.name()), Some(m));
+        }
+        assert_eq!(DisplayMode::from_name("nope"), None);
+    }
+
+    #[test]
+    fn display_scales() {
+        let mut d = FeatureDisplay::default();
+        assert_eq!(d.scales([100.0, 0.0, 40.0]), [0.01, 0.01, 0.025]);
+        d.enabled[1] = false;
+        d.gain[2] = 2.0;
+        assert_eq!(d.scales([100.0, 0.0, 40.0]), [0.01, 0.0, 0.05]);
+    }
+}

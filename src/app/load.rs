@@ -1,0 +1,350 @@
+//! Getting a volume into the app without freezing it: a [`LoadJob`] reads and decodes in steps,
+//! one per frame. Natively it reads dropped or given paths (files and folders) a bounded number
+//! of bytes per step; in the browser the files arrive already read (asynchronously, by
+//! `web_files`), and the job only decodes. Decoding is one step, announced a frame before it
+//! starts so the progress bar says what is being decoded.
+
+use crate::io::{InputFile, Loaded};
+use crate::volume::Volume;
+
+/// Spacing the app renders the paper's phantoms at (as `shapecast phantom` does by default).
+pub const PHANTOM_SPACING_MM: f64 = 0.5;
+
+/// Where a volume comes from.
+#[derive(Clone, Debug)]
+pub enum LoadSource {
+    /// Files already in memory (the browser's reads, the demo CT, tests).
+    Files {
+        label: String,
+        files: Vec<InputFile>,
+    },
+    /// Paths on this machine: files and folders (walked recursively), read step by step.
+    #[cfg(not(target_arch = "wasm32"))]
+    Paths(Vec<std::path::PathBuf>),
+    /// One of the paper's phantoms by name (`crate::phantom::NAMES`, "fig8-sphere"), or "demo".
+    Phantom(String),
+}
+
+impl LoadSource {
+    /// What the user is told is being loaded.
+    pub fn label(&self) -> String {
+        match self {
+            Self::Files { label, .. } => label.clone(),
+            #[cfg(not(target_arch = "wasm32"))]
+            Self::Paths(paths) => match paths.as_slice() {
+                [one] => one.display().to_string(),
+                many => format!("{} files and folders", many.len()),
+            },
+            Self::Phantom(name) => format!("phantom {name}"),
+        }
+    }
+}
+
+/// What one step of a job came to.
+#[derive(Debug)]
+pub enum LoadStep {
+    /// Still working: `fraction` (0..1) done, now doing `what`.
+    Working {
+        fraction: f32,
+        what: String,
+    },
+    Done(Box<Loaded>),
+    /// The message names the file and the problem.
+    Failed(String),
+}
+
+enum Stage {
+    #[cfg(not(target_arch = "wasm32"))]
+    Listing(Vec<std::path::PathBuf>),
+    #[cfg(not(target_arch = "wasm32"))]
+    Reading {
+        queue: std::collections::VecDeque<(std::path::PathBuf, u64)>,
+        files: Vec<InputFile>,
+        done_bytes: u64,
+        total_bytes: u64,
+    },
+    Decode {
+        files: Vec<InputFile>,
+        announced: bool,
+    },
+    Phantom {
+        name: String,
+        announced: bool,
+    },
+    Finished,
+}
+
+/// A load in progress.
+pub struct LoadJob {
+    label: String,
+    stage: Stage,
+}
+
+impl LoadJob {
+    pub fn new(source: LoadSource) -> Self {
+        let label = source.label();
+        let stage = match source {
+            LoadSource::Files { files, .. } => Stage::Decode {
+                files,
+                announced: false,
+            },
+            #[cfg(not(target_arch = "wasm32"))]
+            LoadSource::Paths(paths) => Stage::Listing(paths),
+            LoadSource::Phantom(name) => Stage::Phantom {
+                name,
+                announced: false,
+            },
+        };
+        Self { label, stage }
+    }
+
+    pub fn label(&self) -> &str {
+        &self.label
+    }
+
+    /// Does the next bounded piece of work.
+    pub fn step(&mut self) -> LoadStep {
+        match std::mem::replace(&mut self.stage, Stage::Finished) {
+            #[cfg(not(target_arch = "wasm32"))]
+            Stage::Listing(paths) => match native::list(&paths) {
+                Ok(queue) => {
+                    let total_bytes = queue.iter().map(|(_, n)| n).sum();
+                    let what = format!("reading {} files", queue.len());
+                    self.stage = Stage::Reading {
+                        queue: queue.into(),
+                        files: Vec::new(),
+                        done_bytes: 0,
+                        total_bytes,
+                    };
+                    LoadStep::Working {
+                        fraction: 0.0,
+                        what,
+                    }
+                }
+                Err(e) => LoadStep::Failed(e),
+            },
+            #[cfg(not(target_arch = "wasm32"))]
+            Stage::Reading {
+                mut queue,
+                mut files,
+                mut done_bytes,
+                total_bytes,
+            } => {
+                if let Err(e) = native::read_some(&mut queue, &mut files, &mut done_bytes) {
+                    return LoadStep::Failed(e);
+                }
+                if queue.is_empty() {
+                    self.stage = Stage::Decode {
+                        files,
+                        announced: false,
+                    };
+                    return self.step();
+                }
+                let fraction = done_bytes as f32 / total_bytes.max(1) as f32;
+                let what = format!(
+                    "reading {} of {} files ({:.0} of {:.0} MB)",
+                    files.len(),
+                    files.len() + queue.len(),
+                    done_bytes as f64 / 1e6,
+                    total_bytes as f64 / 1e6
+                );
+                self.stage = Stage::Reading {
+                    queue,
+                    files,
+                    done_bytes,
+                    total_bytes,
+                };
+                LoadStep::Working {
+                    fraction: 0.5 * fraction,
+                    what,
+                }
+            }
+            Stage::Decode { files, announced } => {
+                if !announced {
+                    let what = match files.as_slice() {
+                        [one] => format!("decoding {}", crate::io::base_name(&one.name)),
+                        many => format!("decoding {} files", many.len()),
+                    };
+                    self.stage = Stage::Decode {
+                        files,
+                        announced: true,
+                    };
+                    return LoadStep::Working {
+                        fraction: 0.5,
+                        what,
+                    };
+                }
+                match crate::io::load(&files) {
+                    Ok(loaded) => LoadStep::Done(Box::new(loaded)),
+                    Err(e) => LoadStep::Failed(e.to_string()),
+                }
+            }
+            Stage::Phantom { name, announced } => {
+                if !announced {
+                    let what = format!("rendering phantom {name}");
+                    self.stage = Stage::Phantom {
+                        name,
+                        announced: true,
+                    };
+                    return LoadStep::Working {
+                        fraction: 0.3,
+                        what,
+                    };
+                }
+                match phantom_volume(&name) {
+                    Some(volume) => LoadStep::Done(Box::new(Loaded {
+                        volume,
+                        notes: Vec::new(),
+                    })),
+                    None => LoadStep::Failed(format!(
+                        "unknown phantom {name:?}; known: {}, {}",
+                        crate::phantom::NAMES.join(", "),
+                        crate::phantom::EXTRA_NAMES.join(", ")
+                    )),
+                }
+            }
+            Stage::Finished => LoadStep::Failed("internal: the load already finished".to_owned()),
+        }
+    }
+}
+
+/// A phantom as the app shows it: the paper's objects at 0.5 mm with their default noise, or
+/// the synthetic demo.
+pub fn phantom_volume(name: &str) -> Option<Volume> {
+    if name == "demo" {
+        return Some(crate::phantom::demo());
+    }
+    let p = crate::phantom::Phantom::by_name(name, None)?;
+    let noise = p.default_noise_hu;
+    Some(p.render_noisy([PHANTOM_SPACING_MM; 3], noise, 1))
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+mod native {
+    use std::collections::VecDeque;
+    use std::path::PathBuf;
+
+    use crate::io::InputFile;
+
+    /// Bytes read per step: a frame or two of disk time.
+    const BYTES_PER_STEP: u64 = 48 << 20;
+
+    /// Expands folders (recursively, skipping hidden entries) into files with their sizes.
+    pub fn list(paths: &[PathBuf]) -> Result<Vec<(PathBuf, u64)>, String> {
+        let mut out = Vec::new();
+        let mut stack: Vec<PathBuf> = paths.iter().rev().cloned().collect();
+        while let Some(p) = stack.pop() {
+            let meta =
+                std::fs::metadata(&p).map_err(|e| format!("{}: cannot open: {e}", p.display()))?;
+            if meta.is_dir() {
+                let mut children: Vec<PathBuf> = std::fs::read_dir(&p)
+                    .map_err(|e| format!("{}: cannot list the folder: {e}", p.display()))?
+                    .filter_map(|e| e.ok())
+                    .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
+                    .map(|e| e.path())
+                    .collect();
+                if children.is_empty() {
+                    return Err(format!("{}: the folder holds no files", p.display()));
+                }
+                children.sort();
+                stack.extend(children.into_iter().rev());
+            } else {
+                out.push((p, meta.len()));
+            }
+        }
+        if out.is_empty() {
+            return Err("no files were given".to_owned());
+        }
+        Ok(out)
+    }
+
+    /// Reads files from the front of `queue` until about [`BYTES_PER_STEP`] are read.
+    pub fn read_some(
+        queue: &mut VecDeque<(PathBuf, u64)>,
+        files: &mut Vec<InputFile>,
+        done_bytes: &mut u64,
+    ) -> Result<(), String> {
+        let mut budget = BYTES_PER_STEP;
+        while let Some((path, size)) = queue.pop_front() {
+            let bytes = std::fs::read(&path)
+                .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+            *done_bytes += size;
+            files.push(InputFile::new(path.to_string_lossy(), bytes));
+            budget = budget.saturating_sub(size.max(1));
+            if budget == 0 {
+                break;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+
+    fn run(mut job: LoadJob) -> (Vec<String>, Result<Box<Loaded>, String>) {
+        let mut said = Vec::new();
+        for _ in 0..1000 {
+            match job.step() {
+                LoadStep::Working { what, fraction } => {
+                    assert!((0.0..=1.0).contains(&fraction));
+                    said.push(what);
+                }
+                LoadStep::Done(l) => return (said, Ok(l)),
+                LoadStep::Failed(e) => return (said, Err(e)),
+            }
+        }
+        panic!("the job never finished");
+    }
+
+    #[test]
+    fn decoding_is_announced_before_it_runs() {
+        let volume = crate::phantom::Phantom::by_name("sphere", None)
+            .unwrap()
+            .render([2.0; 3]);
+        let bytes = crate::io::nifti::write_volume("s.nii", &volume).unwrap();
+        let (said, r) = run(LoadJob::new(LoadSource::Files {
+            label: "s.nii".into(),
+            files: vec![InputFile::new("s.nii", bytes)],
+        }));
+        assert_eq!(said, vec!["decoding s.nii".to_owned()]);
+        assert_eq!(r.unwrap().volume.dims, volume.dims);
+    }
+
+    #[test]
+    fn errors_name_the_file() {
+        let (_, r) = run(LoadJob::new(LoadSource::Files {
+            label: "x".into(),
+            files: vec![InputFile::new("broken.nii", vec![7; 400])],
+        }));
+        let e = r.unwrap_err();
+        assert!(e.contains("broken.nii"), "{e}");
+        let (_, r) = run(LoadJob::new(LoadSource::Phantom("no-such".into())));
+        assert!(r.unwrap_err().contains("unknown phantom"));
+    }
+
+    #[test]
+    fn folders_are_walked_and_missing_paths_named() {
+        let dir = std::env::temp_dir().join(format!("shapecast-load-{}", std::process::id()));
+        let sub = dir.join("sub");
+        std::fs::create_dir_all(&sub).unwrap();
+        let volume = crate::phantom::Phantom::by_name("sphere", None)
+            .unwrap()
+            .render([2.0; 3]);
+        let bytes = crate::io::nifti::write_volume("a.nii", &volume).unwrap();
+        std::fs::write(sub.join("a.nii"), bytes).unwrap();
+        std::fs::write(dir.join(".hidden"), b"x").unwrap();
+        let (said, r) = run(LoadJob::new(LoadSource::Paths(vec![dir.clone()])));
+        assert!(
+            said.iter().any(|s| s.starts_with("reading 1 files")),
+            "{said:?}"
+        );
+        assert_eq!(r.unwrap().volume.dims, volume.dims);
+        let missing = dir.join("missing.nii");
+        let (_, r) = run(LoadJob::new(LoadSource::Paths(vec![missing])));
+        assert!(r.unwrap_err().contains("missing.nii"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

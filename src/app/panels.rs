@@ -1,0 +1,466 @@
+//! The app's bars and panels: the top bar (open, demo and phantom menu, mode, layout, about),
+//! the side panel (features and their parameters, display gains, window), the status bar
+//! (mouse and crosshair readouts, progress), the error messages, the about window and the drop
+//! overlay.
+
+use super::features::{self, DisplayMode};
+use super::{Layout, LoadSource, PaneId, ShapecastApp, SliceKind, WindowPreset, demo};
+
+const FEATURE_NAMES: [&str; 3] = ["vesselness", "airwayness", "blobness"];
+
+impl ShapecastApp {
+    pub(super) fn top_bar_ui(&mut self, ui: &mut egui::Ui) {
+        egui::MenuBar::new().ui(ui, |ui| {
+            ui.heading("Shapecast");
+            ui.separator();
+            self.open_menu_ui(ui);
+            ui.menu_button("Demo", |ui| {
+                if ui.button("Demo CT (chest CTA, 1.5 mm)").clicked() {
+                    self.open_demo_ct();
+                    ui.close();
+                }
+                ui.separator();
+                ui.label("Phantoms of the paper (0.5 mm, HU):");
+                for name in crate::phantom::NAMES
+                    .iter()
+                    .chain(crate::phantom::EXTRA_NAMES.iter())
+                {
+                    if ui.button(*name).clicked() {
+                        self.open(LoadSource::Phantom((*name).to_owned()));
+                        ui.close();
+                    }
+                }
+            });
+            ui.separator();
+            ui.label("Mode:");
+            for m in DisplayMode::ALL {
+                let r = ui.selectable_label(self.mode == m, m.label());
+                let r = match m.method() {
+                    Some(method) => {
+                        let cached = self.features.find(&self.applied.request(method)).is_some();
+                        r.on_hover_text(if cached {
+                            "computed: switches at once"
+                        } else {
+                            "computes the features with the current parameters"
+                        })
+                    }
+                    None => r.on_hover_text("grey values only"),
+                };
+                if r.clicked() && self.mode != m {
+                    self.set_mode(m);
+                }
+            }
+            ui.separator();
+            ui.label("Layout:");
+            let before = self.layout;
+            for (layout, label) in [
+                (Layout::MipAndSlices, "MIP + slices"),
+                (Layout::Grid, "2×2"),
+                (Layout::Single(PaneId::Mip), "MIP"),
+                (Layout::Single(PaneId::Slice(SliceKind::Axial)), "Axial"),
+                (Layout::Single(PaneId::Slice(SliceKind::Coronal)), "Coronal"),
+                (
+                    Layout::Single(PaneId::Slice(SliceKind::Sagittal)),
+                    "Sagittal",
+                ),
+            ] {
+                if ui.selectable_label(self.layout == layout, label).clicked() {
+                    self.layout = layout;
+                }
+            }
+            if self.layout != before && !matches!(self.layout, Layout::Single(_)) {
+                self.multi_layout = self.layout;
+            }
+            ui.separator();
+            if ui.button("About & data").clicked() {
+                self.show_about = !self.show_about;
+            }
+        });
+    }
+
+    fn open_demo_ct(&mut self) {
+        #[cfg(target_arch = "wasm32")]
+        {
+            self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
+            super::web_files::fetch_demo();
+        }
+        #[cfg(not(target_arch = "wasm32"))]
+        self.open(demo::demo_source());
+    }
+
+    #[cfg(target_arch = "wasm32")]
+    fn open_menu_ui(&mut self, ui: &mut egui::Ui) {
+        if ui
+            .button("Open files…")
+            .on_hover_text("a volume file, a header with its data file, or DICOM slices")
+            .clicked()
+        {
+            super::web_files::open_dialog(false);
+        }
+        if ui
+            .button("Open folder…")
+            .on_hover_text("a folder holding a DICOM series")
+            .clicked()
+        {
+            super::web_files::open_dialog(true);
+        }
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    fn open_menu_ui(&mut self, ui: &mut egui::Ui) {
+        ui.menu_button("Open", |ui| {
+            ui.label("A file or a folder (DICOM series), or drop them on the window:");
+            let r = ui.add(
+                egui::TextEdit::singleline(&mut self.open_path)
+                    .hint_text("/path/to/volume.nii.gz or /path/to/dicom-folder")
+                    .desired_width(360.0),
+            );
+            let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+            if (ui.button("Open").clicked() || enter) && !self.open_path.trim().is_empty() {
+                let path = std::path::PathBuf::from(self.open_path.trim());
+                self.open(LoadSource::Paths(vec![path]));
+                ui.close();
+            }
+        });
+    }
+
+    pub(super) fn side_panel_ui(&mut self, ui: &mut egui::Ui) {
+        egui::CollapsingHeader::new("Data")
+            .default_open(true)
+            .show(ui, |ui| {
+                match &self.scene {
+                    Some(s) => {
+                        let v = &s.volume;
+                        ui.label(&v.source);
+                        ui.label(format!(
+                            "{} × {} × {} voxels, {:.3} × {:.3} × {:.3} mm, {}",
+                            v.dims[0],
+                            v.dims[1],
+                            v.dims[2],
+                            v.spacing_mm[0],
+                            v.spacing_mm[1],
+                            v.spacing_mm[2],
+                            v.modality.as_str()
+                        ));
+                    }
+                    None => {
+                        ui.label("nothing loaded");
+                    }
+                }
+                if !self.notes.is_empty() {
+                    egui::CollapsingHeader::new(format!("Notes ({})", self.notes.len()))
+                        .id_salt("notes")
+                        .show(ui, |ui| {
+                            for n in &self.notes {
+                                ui.label(egui::RichText::new(n).small());
+                            }
+                        });
+                }
+            });
+
+        egui::CollapsingHeader::new("Features")
+            .default_open(true)
+            .show(ui, |ui| {
+                ui.horizontal_wrapped(|ui| {
+                    for m in DisplayMode::ALL {
+                        if ui.selectable_label(self.mode == m, m.label()).clicked()
+                            && self.mode != m
+                        {
+                            self.set_mode(m);
+                        }
+                    }
+                });
+                let method = self.mode.method();
+                if features::params_ui(ui, &mut self.params, method) {
+                    self.recompute();
+                }
+                if let Some(m) = method
+                    && self.params.request(m) != self.applied.request(m)
+                {
+                    ui.colored_label(
+                        ui.visuals().warn_fg_color,
+                        "parameters changed: Recompute to apply",
+                    );
+                }
+                if let Some((fraction, stage)) =
+                    self.features.progress().map(|(f, s)| (f, s.to_owned()))
+                {
+                    let name = self
+                        .features
+                        .running_request()
+                        .map_or("", |r| features::method_name(r.method));
+                    ui.horizontal(|ui| {
+                        ui.add(
+                            egui::ProgressBar::new(fraction)
+                                .desired_width(180.0)
+                                .text(format!("{name}: {stage}")),
+                        );
+                        if ui.button("Cancel").clicked() {
+                            self.features.cancel();
+                        }
+                    });
+                }
+                ui.label(
+                    egui::RichText::new(format!(
+                        "{} method(s) computed and kept; switching to them is instant",
+                        self.features.len()
+                    ))
+                    .small(),
+                );
+                if let Some(e) = self.displayed_entry()
+                    && !e.notes.is_empty()
+                {
+                    egui::CollapsingHeader::new("How they were computed")
+                        .id_salt("feature notes")
+                        .show(ui, |ui| {
+                            for n in &e.notes {
+                                ui.label(egui::RichText::new(n).small());
+                            }
+                        });
+                }
+            });
+
+        egui::CollapsingHeader::new("Display")
+            .default_open(true)
+            .show(ui, |ui| {
+                let rgb = crate::gpu::slice::FEATURE_RGB;
+                for c in 0..3 {
+                    ui.horizontal(|ui| {
+                        let col = egui::Color32::from_rgb(
+                            (rgb[c][0] * 255.0) as u8,
+                            (rgb[c][1] * 255.0) as u8,
+                            (rgb[c][2] * 255.0) as u8,
+                        );
+                        let (r, _) =
+                            ui.allocate_exact_size(egui::vec2(12.0, 12.0), egui::Sense::hover());
+                        ui.painter().rect_filled(r, 2.0, col);
+                        ui.checkbox(&mut self.display.enabled[c], FEATURE_NAMES[c]);
+                        ui.add(
+                            egui::Slider::new(&mut self.display.gain[c], 0.1..=10.0)
+                                .logarithmic(true)
+                                .text("gain"),
+                        );
+                    });
+                }
+                ui.checkbox(&mut self.display.overlay_on_slices, "overlay on the slices");
+                ui.add_enabled(
+                    self.display.overlay_on_slices,
+                    egui::Slider::new(&mut self.display.opacity, 0.0..=1.0).text("opacity"),
+                );
+            });
+
+        egui::CollapsingHeader::new("Window")
+            .default_open(true)
+            .show(ui, |ui| {
+                ui.horizontal_wrapped(|ui| {
+                    for p in WindowPreset::ALL {
+                        let w = p.window();
+                        if ui
+                            .selectable_label(self.window == w, p.name())
+                            .on_hover_text(format!("W {} L {}", w.width, w.level))
+                            .clicked()
+                        {
+                            self.window = w;
+                        }
+                    }
+                    if ui
+                        .button("auto")
+                        .on_hover_text("the volume's default")
+                        .clicked()
+                        && let Some(s) = &self.scene
+                    {
+                        self.window = super::window_level::default_window(&s.volume);
+                    }
+                });
+                ui.horizontal(|ui| {
+                    let l = ui.label("W");
+                    ui.add(
+                        egui::DragValue::new(&mut self.window.width)
+                            .range(1.0..=100_000.0)
+                            .speed(2.0),
+                    )
+                    .labelled_by(l.id);
+                    let l = ui.label("L");
+                    ui.add(egui::DragValue::new(&mut self.window.level).speed(2.0))
+                        .labelled_by(l.id);
+                });
+                ui.label(
+                    egui::RichText::new(
+                        "right-drag (or ctrl-drag) on a slice: sideways = width, up/down = level",
+                    )
+                    .small(),
+                );
+            });
+    }
+
+    /// One line of the status bar: voxel, LPS position, value, features.
+    fn readout(&self, voxel: [usize; 3]) -> String {
+        let Some(scene) = &self.scene else {
+            return String::new();
+        };
+        let v = &scene.volume;
+        if (0..3).any(|a| voxel[a] >= v.dims[a]) {
+            return String::new();
+        }
+        let [i, j, k] = voxel;
+        let p = v
+            .world_from_voxel()
+            .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64));
+        let value = v.value_at(i, j, k);
+        let unit = if scene.is_ct { "HU" } else { "" };
+        let mut s = format!(
+            "voxel ({i}, {j}, {k})   LPS ({:.1}, {:.1}, {:.1}) mm   {value:.0} {unit}",
+            p.x, p.y, p.z
+        );
+        if let Some(entry) = self.displayed_entry() {
+            match self.probe.value_at(entry.id, voxel) {
+                Some([a, b, c]) => s.push_str(&format!(
+                    "   {}: V {a:.1}  A {b:.1}  B {c:.1}",
+                    self.mode.label()
+                )),
+                None => s.push_str(&format!("   {}: …", self.mode.label())),
+            }
+        }
+        s
+    }
+
+    pub(super) fn status_bar_ui(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            ui.label(self.status.phase.as_str());
+            if let Some((f, what)) = &self.load_progress {
+                ui.add(
+                    egui::ProgressBar::new(*f)
+                        .desired_width(260.0)
+                        .text(what.as_str()),
+                );
+            } else if let Some((f, stage)) =
+                self.features.progress().map(|(f, s)| (f, s.to_owned()))
+            {
+                let name = self
+                    .features
+                    .running_request()
+                    .map_or("", |r| features::method_name(r.method));
+                ui.add(
+                    egui::ProgressBar::new(f)
+                        .desired_width(260.0)
+                        .text(format!("{name}: {stage}")),
+                );
+                if ui.small_button("Cancel").clicked() {
+                    self.features.cancel();
+                }
+            }
+            if let Some(a) = &self.status.adapter {
+                ui.separator();
+                ui.label(egui::RichText::new(format!("GPU: {} ({})", a.name, a.backend)).small());
+            }
+            ui.separator();
+            ui.label(format!(
+                "W {:.0} L {:.0}",
+                self.window.width, self.window.level
+            ));
+        });
+        let mono = egui::TextStyle::Monospace;
+        ui.horizontal(|ui| {
+            ui.label(egui::RichText::new("mouse     ").text_style(mono.clone()));
+            if let Some(h) = self.hover {
+                ui.label(egui::RichText::new(self.readout(h)).text_style(mono.clone()));
+            }
+        });
+        ui.horizontal(|ui| {
+            ui.label(egui::RichText::new("crosshair ").text_style(mono.clone()));
+            if self.scene.is_some() {
+                ui.label(egui::RichText::new(self.readout(self.crosshair)).text_style(mono));
+            }
+        });
+    }
+
+    pub(super) fn errors_ui(&mut self, ui: &mut egui::Ui) {
+        let mut dismiss = None;
+        for (n, e) in self.errors.iter().enumerate() {
+            egui::Frame::new()
+                .fill(egui::Color32::from_rgb(70, 25, 25))
+                .inner_margin(6.0)
+                .corner_radius(4.0)
+                .show(ui, |ui| {
+                    ui.with_layout(egui::Layout::right_to_left(egui::Align::TOP), |ui| {
+                        if ui.button("Dismiss").clicked() {
+                            dismiss = Some(n);
+                        }
+                        ui.with_layout(egui::Layout::left_to_right(egui::Align::TOP), |ui| {
+                            ui.colored_label(egui::Color32::from_rgb(255, 170, 160), "Error:");
+                            ui.add(egui::Label::new(e).wrap());
+                        });
+                    });
+                });
+        }
+        if let Some(n) = dismiss {
+            self.errors.remove(n);
+        }
+    }
+
+    pub(super) fn about_ui(&mut self, ctx: &egui::Context) {
+        let mut open = self.show_about;
+        egui::Window::new("About & data")
+            .open(&mut open)
+            .default_width(520.0)
+            .show(ctx, |ui| {
+                ui.label(
+                    "Shapecast shows shape features of CT and MR volumes (Hessian and radial \
+                     structure tensor, after Wiemker et al. 2013) as colour-coded maximum \
+                     intensity projections beside linked slice panes. Everything runs on this \
+                     machine's GPU; no data leaves it.",
+                );
+                ui.separator();
+                ui.heading("Demo data");
+                ui.label(demo::ATTRIBUTION);
+                ui.hyperlink_to("Apache License 2.0", demo::LICENCE_URL);
+                ui.hyperlink_to(
+                    "TotalSegmentator on GitHub",
+                    "https://github.com/wasserth/TotalSegmentator",
+                );
+                ui.separator();
+                ui.label(demo::PHANTOM_NOTE);
+                ui.separator();
+                ui.label(
+                    "Use: click a slice to move the crosshair; wheel to change slice; \
+                     right-drag (or ctrl-drag) for window/level; 'maximise' shows one pane alone.",
+                );
+            });
+        self.show_about = open;
+    }
+
+    pub(super) fn drop_overlay(&self, ctx: &egui::Context) {
+        if !self.drop_hover {
+            return;
+        }
+        let screen = ctx.content_rect();
+        let painter = ctx.layer_painter(egui::LayerId::new(
+            egui::Order::Foreground,
+            egui::Id::unique("drop overlay"),
+        ));
+        painter.rect_filled(screen, 0.0, egui::Color32::from_black_alpha(170));
+        painter.text(
+            screen.center(),
+            egui::Align2::CENTER_CENTER,
+            "Drop files or a folder to open them",
+            egui::FontId::proportional(24.0),
+            egui::Color32::WHITE,
+        );
+    }
+
+    /// Keeps the status bar's feature readback going.
+    pub(super) fn update_probe(&mut self) {
+        let Some(gpu) = &self.gpu else { return };
+        let entry = self
+            .displayed_request()
+            .and_then(|r| self.features.find(&r));
+        let mut voxels = vec![self.crosshair];
+        if let Some(h) = self.hover
+            && h != self.crosshair
+        {
+            voxels.push(h);
+        }
+        self.probe
+            .update(gpu, entry.map(|e| (&e.texture, e.id)), voxels);
+    }
+}

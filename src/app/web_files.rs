@@ -1,0 +1,404 @@
+//! Files in the browser (wasm only): drag and drop of files and folders, the page's two file
+//! inputs (files, and a folder with `webkitdirectory`), and fetching the demo CT. Everything is
+//! asynchronous (promises awaited with `spawn_local`); results are queued as [`WebEvent`]s that
+//! the app takes once per frame, so nothing ever blocks the page.
+//!
+//! eframe's own drop handling is bypassed: it does not walk folders. Our listeners sit on the
+//! window in the capture phase and stop the drag events there, walk dropped folders with
+//! `webkitGetAsEntry` and `FileSystemDirectoryReader`, and read every file with
+//! `Blob.arrayBuffer()`.
+
+use std::cell::RefCell;
+use std::collections::VecDeque;
+
+use wasm_bindgen::JsCast as _;
+use wasm_bindgen::JsValue;
+use wasm_bindgen::closure::Closure;
+use wasm_bindgen_futures::JsFuture;
+
+use crate::io::InputFile;
+
+/// The page's hidden file inputs (web/index.html).
+pub const OPEN_FILES_INPUT: &str = "shapecast_open_files";
+pub const OPEN_FOLDER_INPUT: &str = "shapecast_open_folder";
+
+/// What happened outside the app's frame loop.
+pub enum WebEvent {
+    /// Files are dragged over the page (true) or not any more (false).
+    Hover(bool),
+    /// Reading `label`: `done` of `total` bytes (`total` 0 while unknown).
+    Progress {
+        label: String,
+        done: f64,
+        total: f64,
+    },
+    /// All files of one drop, one input selection or the demo, read.
+    Files {
+        label: String,
+        files: Vec<InputFile>,
+    },
+    /// Reading failed; the message names the file.
+    Failed { message: String },
+}
+
+thread_local! {
+    static INBOX: RefCell<VecDeque<WebEvent>> = const { RefCell::new(VecDeque::new()) };
+    static CONTEXT: RefCell<Option<egui::Context>> = const { RefCell::new(None) };
+    static HOVERING: RefCell<bool> = const { RefCell::new(false) };
+}
+
+fn push(event: WebEvent) {
+    INBOX.with(|q| q.borrow_mut().push_back(event));
+    CONTEXT.with(|c| {
+        if let Some(ctx) = c.borrow().as_ref() {
+            ctx.request_repaint();
+        }
+    });
+}
+
+fn set_hover(on: bool) {
+    let changed = HOVERING.with(|h| std::mem::replace(&mut *h.borrow_mut(), on) != on);
+    if changed {
+        push(WebEvent::Hover(on));
+    }
+}
+
+/// The events since the last call.
+pub fn take_events() -> Vec<WebEvent> {
+    INBOX.with(|q| q.borrow_mut().drain(..).collect())
+}
+
+fn js_error(e: &JsValue) -> String {
+    e.as_string()
+        .or_else(|| {
+            js_sys::Reflect::get(e, &JsValue::from_str("message"))
+                .ok()
+                .and_then(|m| m.as_string())
+        })
+        .unwrap_or_else(|| format!("{e:?}"))
+}
+
+/// Installs the drag-and-drop listeners and the file inputs' change listeners (once).
+pub fn install(ctx: &egui::Context) -> Result<(), String> {
+    CONTEXT.with(|c| *c.borrow_mut() = Some(ctx.clone()));
+    let window = web_sys::window().ok_or("no window object")?;
+    let document = window.document().ok_or("no document object")?;
+
+    let over = Closure::<dyn FnMut(web_sys::DragEvent)>::new(|event: web_sys::DragEvent| {
+        event.prevent_default();
+        event.stop_propagation();
+        if let Some(dt) = event.data_transfer() {
+            dt.set_drop_effect("copy");
+        }
+        set_hover(true);
+    });
+    for name in ["dragenter", "dragover"] {
+        window
+            .add_event_listener_with_callback_and_bool(name, over.as_ref().unchecked_ref(), true)
+            .map_err(|e| js_error(&e))?;
+    }
+    over.forget();
+
+    let leave = Closure::<dyn FnMut(web_sys::DragEvent)>::new(|event: web_sys::DragEvent| {
+        event.prevent_default();
+        event.stop_propagation();
+        // Leaving one element for another inside the page has a related target.
+        if event.related_target().is_none() {
+            set_hover(false);
+        }
+    });
+    window
+        .add_event_listener_with_callback_and_bool(
+            "dragleave",
+            leave.as_ref().unchecked_ref(),
+            true,
+        )
+        .map_err(|e| js_error(&e))?;
+    leave.forget();
+
+    let drop = Closure::<dyn FnMut(web_sys::DragEvent)>::new(|event: web_sys::DragEvent| {
+        event.prevent_default();
+        event.stop_propagation();
+        set_hover(false);
+        if let Some(dt) = event.data_transfer() {
+            on_drop(&dt);
+        }
+    });
+    window
+        .add_event_listener_with_callback_and_bool("drop", drop.as_ref().unchecked_ref(), true)
+        .map_err(|e| js_error(&e))?;
+    drop.forget();
+
+    for id in [OPEN_FILES_INPUT, OPEN_FOLDER_INPUT] {
+        let Some(input) = document
+            .get_element_by_id(id)
+            .and_then(|e| e.dyn_into::<web_sys::HtmlInputElement>().ok())
+        else {
+            log::warn!("the page has no <input id={id}>: its Open button will do nothing");
+            continue;
+        };
+        let target = input.clone();
+        let change = Closure::<dyn FnMut(web_sys::Event)>::new(move |_event: web_sys::Event| {
+            let files = file_list(target.files());
+            // Clear it so that choosing the same file again fires `change` again.
+            target.set_value("");
+            if !files.is_empty() {
+                wasm_bindgen_futures::spawn_local(read_all(files));
+            }
+        });
+        input
+            .add_event_listener_with_callback("change", change.as_ref().unchecked_ref())
+            .map_err(|e| js_error(&e))?;
+        change.forget();
+    }
+    Ok(())
+}
+
+/// Opens the browser's file chooser (files, or a folder). Browsers allow it only shortly after a
+/// user gesture, which a click on the app's button is.
+pub fn open_dialog(folder: bool) {
+    let id = if folder {
+        OPEN_FOLDER_INPUT
+    } else {
+        OPEN_FILES_INPUT
+    };
+    if let Some(input) = web_sys::window()
+        .and_then(|w| w.document())
+        .and_then(|d| d.get_element_by_id(id))
+        .and_then(|e| e.dyn_into::<web_sys::HtmlElement>().ok())
+    {
+        input.click();
+    }
+}
+
+/// A file with the path the user sees (relative path inside a dropped or chosen folder).
+struct Named {
+    name: String,
+    file: web_sys::File,
+}
+
+fn file_list(list: Option<web_sys::FileList>) -> Vec<Named> {
+    let Some(list) = list else {
+        return Vec::new();
+    };
+    (0..list.length())
+        .filter_map(|i| list.get(i))
+        .map(|file| {
+            let relative = js_sys::Reflect::get(&file, &JsValue::from_str("webkitRelativePath"))
+                .ok()
+                .and_then(|v| v.as_string())
+                .filter(|s| !s.is_empty());
+            Named {
+                name: relative.unwrap_or_else(|| file.name()),
+                file,
+            }
+        })
+        .collect()
+}
+
+/// Takes what was dropped. Entries must be taken while the event is being handled; reading
+/// them happens afterwards.
+fn on_drop(dt: &web_sys::DataTransfer) {
+    let items = dt.items();
+    let mut entries = Vec::new();
+    let mut plain = Vec::new();
+    for i in 0..items.length() {
+        let Some(item) = items.get(i) else { continue };
+        if item.kind() != "file" {
+            continue;
+        }
+        match item.webkit_get_as_entry() {
+            Ok(Some(entry)) => entries.push(entry),
+            _ => {
+                if let Ok(Some(file)) = item.get_as_file() {
+                    plain.push(Named {
+                        name: file.name(),
+                        file,
+                    });
+                }
+            }
+        }
+    }
+    if entries.is_empty() && plain.is_empty() {
+        plain = file_list(dt.files());
+    }
+    if entries.is_empty() && plain.is_empty() {
+        return;
+    }
+    wasm_bindgen_futures::spawn_local(async move {
+        let label = drop_label(&entries, &plain);
+        push(WebEvent::Progress {
+            label: label.clone(),
+            done: 0.0,
+            total: 0.0,
+        });
+        match walk(entries).await {
+            Ok(mut files) => {
+                files.extend(plain);
+                if files.is_empty() {
+                    push(WebEvent::Failed {
+                        message: format!("{label}: the dropped folder holds no files"),
+                    });
+                } else {
+                    read_all(files).await;
+                }
+            }
+            Err(message) => push(WebEvent::Failed { message }),
+        }
+    });
+}
+
+fn drop_label(entries: &[web_sys::FileSystemEntry], plain: &[Named]) -> String {
+    match (entries, plain) {
+        ([one], []) => one.name(),
+        ([], [one]) => one.name.clone(),
+        _ => format!("{} dropped items", entries.len() + plain.len()),
+    }
+}
+
+/// Files under the dropped entries (folders walked depth first, hidden entries skipped).
+async fn walk(entries: Vec<web_sys::FileSystemEntry>) -> Result<Vec<Named>, String> {
+    let mut out = Vec::new();
+    let mut stack: Vec<web_sys::FileSystemEntry> = entries.into_iter().rev().collect();
+    while let Some(entry) = stack.pop() {
+        if entry.name().starts_with('.') {
+            continue;
+        }
+        let path = entry.full_path();
+        let name = path.trim_start_matches('/').to_owned();
+        if entry.is_file() {
+            let fe: web_sys::FileSystemFileEntry = entry.unchecked_into();
+            let promise = js_sys::Promise::new(&mut |resolve, reject| {
+                fe.file_with_callback_and_callback(&resolve, &reject);
+            });
+            let file = JsFuture::from(promise)
+                .await
+                .map_err(|e| format!("{name}: cannot open: {}", js_error(&e)))?;
+            out.push(Named {
+                name,
+                file: file.unchecked_into(),
+            });
+        } else if entry.is_directory() {
+            let dir: web_sys::FileSystemDirectoryEntry = entry.unchecked_into();
+            let reader = dir.create_reader();
+            let mut children = Vec::new();
+            // readEntries returns the entries in batches until an empty one.
+            loop {
+                let promise = js_sys::Promise::new(&mut |resolve, reject| {
+                    if let Err(e) =
+                        reader.read_entries_with_callback_and_callback(&resolve, &reject)
+                    {
+                        let _ = reject.call1(&JsValue::NULL, &e);
+                    }
+                });
+                let batch = JsFuture::from(promise)
+                    .await
+                    .map_err(|e| format!("{name}: cannot list the folder: {}", js_error(&e)))?;
+                let batch: js_sys::Array = batch.unchecked_into();
+                if batch.length() == 0 {
+                    break;
+                }
+                children.extend(
+                    batch
+                        .iter()
+                        .map(|e| e.unchecked_into::<web_sys::FileSystemEntry>()),
+                );
+            }
+            children.sort_by_key(|e| e.name());
+            stack.extend(children.into_iter().rev());
+        }
+    }
+    Ok(out)
+}
+
+/// Reads every file (in order), reporting progress, then queues them as one load.
+async fn read_all(files: Vec<Named>) {
+    let label = match files.as_slice() {
+        [one] => one.name.clone(),
+        many => {
+            // A chosen or dropped folder: name it by its top-level folder.
+            let top = many
+                .first()
+                .and_then(|f| f.name.split('/').next().map(str::to_owned))
+                .filter(|t| many.iter().all(|f| f.name.starts_with(&format!("{t}/"))));
+            match top {
+                Some(t) => format!("{t} ({} files)", many.len()),
+                None => format!("{} files", many.len()),
+            }
+        }
+    };
+    let total: f64 = files.iter().map(|f| f.file.size()).sum();
+    let mut done = 0.0;
+    let mut out = Vec::with_capacity(files.len());
+    for f in files {
+        push(WebEvent::Progress {
+            label: label.clone(),
+            done,
+            total,
+        });
+        match JsFuture::from(f.file.array_buffer()).await {
+            Ok(buffer) => {
+                let bytes = js_sys::Uint8Array::new(&buffer).to_vec();
+                done += f.file.size();
+                out.push(InputFile::new(f.name, bytes));
+            }
+            Err(e) => {
+                push(WebEvent::Failed {
+                    message: format!("{}: cannot read: {}", f.name, js_error(&e)),
+                });
+                return;
+            }
+        }
+    }
+    push(WebEvent::Files { label, files: out });
+}
+
+/// Fetches the demo CT (a static file next to the page).
+pub fn fetch_demo() {
+    wasm_bindgen_futures::spawn_local(async {
+        let label = "demo CT".to_owned();
+        push(WebEvent::Progress {
+            label: label.clone(),
+            done: 0.0,
+            total: 0.0,
+        });
+        match fetch_bytes(super::demo::DEMO_URL).await {
+            Ok(bytes) => push(WebEvent::Files {
+                label,
+                files: vec![InputFile::new(super::demo::DEMO_FILE, bytes)],
+            }),
+            Err(e) => push(WebEvent::Failed {
+                message: format!(
+                    "{}: could not fetch the demo CT: {e}",
+                    super::demo::DEMO_URL
+                ),
+            }),
+        }
+    });
+}
+
+async fn fetch_bytes(url: &str) -> Result<Vec<u8>, String> {
+    let window = web_sys::window().ok_or("no window object")?;
+    let response = JsFuture::from(window.fetch_with_str(url))
+        .await
+        .map_err(|e| js_error(&e))?;
+    let response: web_sys::Response = response.unchecked_into();
+    if !response.ok() {
+        return Err(format!("HTTP {}", response.status()));
+    }
+    let buffer = JsFuture::from(response.array_buffer().map_err(|e| js_error(&e))?)
+        .await
+        .map_err(|e| js_error(&e))?;
+    Ok(js_sys::Uint8Array::new(&buffer).to_vec())
+}
+
+/// A parameter of the page's URL (`?phantom=sphere&method=li`).
+pub fn query_param(name: &str) -> Option<String> {
+    let search = web_sys::window()?.location().search().ok()?;
+    search
+        .trim_start_matches('?')
+        .split('&')
+        .filter_map(|kv| kv.split_once('=').or(Some((kv, ""))))
+        .find(|(k, _)| *k == name)
+        .map(|(_, v)| v.to_owned())
+}

@@ -1,0 +1,360 @@
+//! Slices for the slice panes, rendered on the GPU (shaders/slice.wgsl) from the textures the MIP
+//! reads: the intensity (`RenderVolume`, windowed to grey) and optionally one method's features
+//! (`FeatureTexture`), composited as the MIP does: over the grey, in this order, red =
+//! vesselness, blue = airwayness, yellow = blobness, each with opacity
+//! `clamp(value * scale, 0, 1) * opacity` (scale = gain / the feature's maximum, as in the MIP).
+//! The result is an `Rgba8Unorm` texture the app registers with egui. Its CPU twin is
+//! [`cpu_twin`].
+//!
+//! Image layout: pixel (x, y) is the voxel whose `across` index is x and `vertical` index is y on
+//! slice `index` of the `fixed` axis (no flips; the pane flips for patient orientation).
+
+use crate::cpu::Components3;
+use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
+use crate::gpu::{GpuContext, shaders};
+
+/// Colours of vesselness, airwayness and blobness: the MIP's (`gpu::raycast::CHANNEL_COLOURS`
+/// on the render branch; as in shaders/slice.wgsl).
+pub const FEATURE_RGB: [[f32; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 0.4, 1.0], [1.0, 1.0, 0.0]];
+
+/// Mirrors `Params` in slice.wgsl (keep in sync).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    dims: [u32; 3],
+    fixed_axis: u32,
+    across_axis: u32,
+    vertical_axis: u32,
+    index: u32,
+    overlay: u32,
+    out_size: [u32; 2],
+    window_lo: f32,
+    window_hi: f32,
+    scale: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<Params>() == 64);
+
+/// Which plane of the volume: the voxel axis held fixed at `index`, and the voxel axes that run
+/// across (image x) and vertically (image y).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SlicePlane {
+    pub fixed: usize,
+    pub across: usize,
+    pub vertical: usize,
+    pub index: u32,
+}
+
+impl SlicePlane {
+    /// Image width and height for a volume of `dims`.
+    pub fn size(&self, dims: [u32; 3]) -> [u32; 2] {
+        [dims[self.across.min(2)], dims[self.vertical.min(2)]]
+    }
+
+    fn valid(&self) -> bool {
+        let mut axes = [self.fixed, self.across, self.vertical];
+        axes.sort_unstable();
+        axes == [0, 1, 2]
+    }
+}
+
+/// How the features are composited over the grey.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Overlay {
+    /// Per feature (V, A, B): opacity = clamp(value * scale, 0, 1) * `opacity`; 0 switches it
+    /// off.
+    pub scale: [f32; 3],
+    /// Opacity of a feature at full weight, 0..1.
+    pub opacity: f32,
+}
+
+/// Everything one slice image depends on, apart from the textures.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SliceRequest {
+    pub plane: SlicePlane,
+    /// Display window (lo, hi) in physical units.
+    pub window: (f32, f32),
+    pub overlay: Option<Overlay>,
+}
+
+/// A rendered slice on the GPU.
+pub struct SliceImage {
+    pub texture: wgpu::Texture,
+    pub view: wgpu::TextureView,
+    pub size: [u32; 2],
+}
+
+/// Why a slice could not be rendered.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum SliceError {
+    #[error("slice axes {0:?} are not a permutation of 0, 1, 2")]
+    Axes([usize; 3]),
+    #[error("slice {index} is outside the volume ({count} slices along axis {axis})")]
+    Index { index: u32, count: u32, axis: usize },
+    #[error("the feature texture ({0:?}) is not on the volume's grid ({1:?})")]
+    FeatureDims([u32; 3], [u32; 3]),
+}
+
+/// The slice kernel's pipeline and a 1-voxel stand-in for "no features".
+pub struct SliceRenderer {
+    pipeline: wgpu::ComputePipeline,
+    no_features: wgpu::TextureView,
+}
+
+impl SliceRenderer {
+    pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
+        let module = shaders::create_module(&ctx.device, "slice.wgsl")?;
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("slice"),
+                layout: None,
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        let none = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("slice: no features"),
+            size: wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: crate::gpu::render_volume::FEATURE_FORMAT,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let no_features = none.create_view(&wgpu::TextureViewDescriptor::default());
+        Ok(Self {
+            pipeline,
+            no_features,
+        })
+    }
+
+    /// Renders one slice. `reuse` is written into when it has the right size (the egui
+    /// registration of its view stays valid); otherwise a new image is made.
+    pub fn render(
+        &self,
+        ctx: &GpuContext,
+        volume: &RenderVolume,
+        features: Option<&FeatureTexture>,
+        request: &SliceRequest,
+        reuse: Option<SliceImage>,
+    ) -> Result<SliceImage, SliceError> {
+        let plane = request.plane;
+        if !plane.valid() {
+            return Err(SliceError::Axes([
+                plane.fixed,
+                plane.across,
+                plane.vertical,
+            ]));
+        }
+        let count = volume.dims[plane.fixed];
+        if plane.index >= count {
+            return Err(SliceError::Index {
+                index: plane.index,
+                count,
+                axis: plane.fixed,
+            });
+        }
+        if let Some(f) = features
+            && f.dims != volume.dims
+        {
+            return Err(SliceError::FeatureDims(f.dims, volume.dims));
+        }
+        let size = plane.size(volume.dims);
+        let image = match reuse {
+            Some(image) if image.size == size => image,
+            _ => new_image(ctx, size),
+        };
+        let overlay = request.overlay.filter(|_| features.is_some());
+        let scale = overlay.map_or([0.0; 4], |o| {
+            [
+                o.scale[0],
+                o.scale[1],
+                o.scale[2],
+                o.opacity.clamp(0.0, 1.0),
+            ]
+        });
+        let params = Params {
+            dims: volume.dims,
+            fixed_axis: plane.fixed as u32,
+            across_axis: plane.across as u32,
+            vertical_axis: plane.vertical as u32,
+            index: plane.index,
+            overlay: u32::from(overlay.is_some()),
+            out_size: size,
+            window_lo: request.window.0,
+            window_hi: request.window.1,
+            scale,
+        };
+        let device = &ctx.device;
+        let params_buf = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("slice params"),
+            size: std::mem::size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        ctx.queue
+            .write_buffer(&params_buf, 0, bytemuck::bytes_of(&params));
+        let feature_view = features.map_or(&self.no_features, |f| &f.view);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("slice"),
+            layout: &self.pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&volume.intensity_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(feature_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&image.view),
+                },
+            ],
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("slice"),
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("slice"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(size[0].div_ceil(8), size[1].div_ceil(8), 1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        Ok(image)
+    }
+}
+
+fn new_image(ctx: &GpuContext, size: [u32; 2]) -> SliceImage {
+    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("slice image"),
+        size: wgpu::Extent3d {
+            width: size[0].max(1),
+            height: size[1].max(1),
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba8Unorm,
+        usage: wgpu::TextureUsages::STORAGE_BINDING
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+    SliceImage {
+        texture,
+        view,
+        size,
+    }
+}
+
+/// The value a half-float texture holds for `v` (what the GPU reads).
+fn as_f16(v: f32) -> f32 {
+    half::f16::from_f32(v).to_f32()
+}
+
+/// The CPU twin of the kernel: the same image from physical `values` and feature `components`
+/// on `dims` (rounded through half floats as the GPU textures hold them), row-major, RGBA8.
+pub fn cpu_twin(
+    values: &[f32],
+    dims: [usize; 3],
+    features: Option<&Components3>,
+    request: &SliceRequest,
+) -> Vec<[u8; 4]> {
+    let plane = request.plane;
+    let (w, h) = (dims[plane.across], dims[plane.vertical]);
+    let (lo, hi) = request.window;
+    let mut out = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let mut p = [0usize; 3];
+            p[plane.fixed] = plane.index as usize;
+            p[plane.across] = x;
+            p[plane.vertical] = y;
+            let n = p[0] + dims[0] * (p[1] + dims[1] * p[2]);
+            let v = as_f16(values[n]);
+            let g = ((v - lo) / (hi - lo).max(1e-6)).clamp(0.0, 1.0);
+            let mut rgb = [g; 3];
+            if let (Some(o), Some(f)) = (request.overlay, features) {
+                for (c, colour) in FEATURE_RGB.iter().enumerate() {
+                    let a =
+                        (as_f16(f[c][n]) * o.scale[c]).clamp(0.0, 1.0) * o.opacity.clamp(0.0, 1.0);
+                    for (out, col) in rgb.iter_mut().zip(colour) {
+                        *out += (col - *out) * a;
+                    }
+                }
+            }
+            let u8c = |x: f32| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
+            out.push([u8c(rgb[0]), u8c(rgb[1]), u8c(rgb[2]), 255]);
+        }
+    }
+    out
+}
+
+/// Native only (tests, export): reads a slice image back, row-major RGBA8, blocking.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn read_image_blocking(
+    ctx: &GpuContext,
+    image: &SliceImage,
+) -> Result<Vec<[u8; 4]>, crate::gpu::readback::ReadbackError> {
+    let [w, h] = image.size;
+    let row =
+        (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let size = u64::from(row) * u64::from(h);
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("slice readback"),
+        size,
+        usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("slice readback"),
+        });
+    encoder.copy_texture_to_buffer(
+        image.texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(h),
+            },
+        },
+        wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
+    );
+    ctx.queue.submit([encoder.finish()]);
+    let bytes = crate::gpu::readback::read_bytes_blocking(ctx, &buffer, size)?;
+    let mut out = Vec::with_capacity((w * h) as usize);
+    for y in 0..h as usize {
+        let start = y * row as usize;
+        for x in 0..w as usize {
+            let p = start + 4 * x;
+            out.push([bytes[p], bytes[p + 1], bytes[p + 2], bytes[p + 3]]);
+        }
+    }
+    Ok(out)
+}
