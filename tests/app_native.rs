@@ -33,18 +33,23 @@ fn harness(options: AppOptions) -> Option<Harness<'static, ShapecastApp>> {
     Some(harness)
 }
 
-/// Steps until `done`, or fails naming `what` after `max` frames.
+/// Steps until `done`, or fails naming `what` after `max` frames and at least 120 s (GPU work
+/// runs asynchronously to the frames; lavapipe takes its time).
 fn run_until(
     harness: &mut Harness<'static, ShapecastApp>,
     what: &str,
     max: usize,
     done: impl Fn(&ShapecastApp) -> bool,
 ) {
-    for _ in 0..max {
+    let started = std::time::Instant::now();
+    let mut frames = 0;
+    while frames < max || started.elapsed() < std::time::Duration::from_secs(120) {
         harness.step();
+        frames += 1;
         if done(harness.state()) {
             return;
         }
+        std::thread::sleep(std::time::Duration::from_millis(5));
     }
     panic!(
         "not {what} after {max} frames: {:?}",
