@@ -5,6 +5,7 @@ pub mod axis_mip;
 pub mod context;
 pub mod kernel;
 pub mod pipeline;
+pub mod raycast;
 pub mod readback;
 pub mod render_volume;
 pub mod shaders;
