@@ -689,6 +689,94 @@ fn entry(binding: u32, resource: wgpu::BindingResource<'_>) -> wgpu::BindGroupEn
     wgpu::BindGroupEntry { binding, resource }
 }
 
+/// Copies the feature texel of `voxel` into a small buffer (8 bytes: four half floats).
+fn copy_feature_texel(
+    ctx: &GpuContext,
+    features: &FeatureTexture,
+    voxel: [usize; 3],
+) -> Option<wgpu::Buffer> {
+    let v: [u32; 3] = std::array::from_fn(|a| u32::try_from(voxel[a]).unwrap_or(u32::MAX));
+    if (0..3).any(|a| v[a] >= features.dims[a]) {
+        return None;
+    }
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("feature texel"),
+        size: 8,
+        usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("feature texel"),
+        });
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture: &features.texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d {
+                x: v[0],
+                y: v[1],
+                z: v[2],
+            },
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: None,
+                rows_per_image: None,
+            },
+        },
+        wgpu::Extent3d {
+            width: 1,
+            height: 1,
+            depth_or_array_layers: 1,
+        },
+    );
+    ctx.queue.submit([encoder.finish()]);
+    Some(buffer)
+}
+
+fn decode_texel(bytes: &[u8]) -> [f32; 4] {
+    std::array::from_fn(|c| {
+        let b = [
+            bytes.get(2 * c).copied().unwrap_or(0),
+            bytes.get(2 * c + 1).copied().unwrap_or(0),
+        ];
+        half::f16::from_le_bytes(b).to_f32()
+    })
+}
+
+/// The feature values `(V, A, B, 0)` the GPU holds at `voxel` (for the status bar and
+/// `--pick`); zeros outside the volume. Awaited (works on wasm).
+pub async fn read_feature_texel(
+    ctx: &GpuContext,
+    features: &FeatureTexture,
+    voxel: [usize; 3],
+) -> Result<[f32; 4], RaycastError> {
+    let Some(buffer) = copy_feature_texel(ctx, features, voxel) else {
+        return Ok([0.0; 4]);
+    };
+    Ok(decode_texel(&readback::read_bytes(ctx, &buffer, 8).await?))
+}
+
+/// Native only: [`read_feature_texel`], waiting for the GPU.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn read_feature_texel_blocking(
+    ctx: &GpuContext,
+    features: &FeatureTexture,
+    voxel: [usize; 3],
+) -> Result<[f32; 4], RaycastError> {
+    let Some(buffer) = copy_feature_texel(ctx, features, voxel) else {
+        return Ok([0.0; 4]);
+    };
+    Ok(decode_texel(&readback::read_bytes_blocking(
+        ctx, &buffer, 8,
+    )?))
+}
+
 /// The data of the CPU twin: exactly the values the GPU textures hold (half floats, features
 /// clamped to the half range as [`FeatureTexture::from_components`] does), as f32.
 pub struct TwinScene {
