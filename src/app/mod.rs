@@ -1,6 +1,7 @@
 //! The viewer app (eframe, wgpu renderer): the same code runs in the browser and in a native
 //! window. It owns the loaded volume, the GPU context it takes from eframe, and the panes.
 
+pub mod mip_view;
 mod slices;
 
 use std::sync::Arc;
