@@ -133,8 +133,16 @@ fn mip_view_renders_turns_zooms_pans_and_picks_a_nodule() {
         h.hover_at(centre + egui::vec2(dx, 0.4 * dx));
         h.step();
     }
+    assert!(
+        h.state().view.showing_preview(),
+        "a drag draws the reduced-resolution preview"
+    );
     h.drop_at(centre + egui::vec2(70.0, 28.0));
     h.run_steps(2);
+    assert!(
+        !h.state().view.showing_preview(),
+        "full resolution when the mouse stops"
+    );
     let angle = h
         .state()
         .view

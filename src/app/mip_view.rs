@@ -74,10 +74,16 @@ pub struct MipView {
     pub mode: Option<String>,
     /// The shared crosshair in LPS mm, drawn as a marker; the slab's centre.
     pub crosshair_mm: Option<DVec3>,
+    /// Resolution (fraction of the full one) of the frames drawn while a drag or the wheel
+    /// moves the view; the full resolution follows when the mouse stops. 1 turns it off.
+    pub interactive_scale: f32,
     mode_chosen: bool,
     caster: Option<Raycaster>,
-    target: Option<RaycastTarget>,
-    texture_id: Option<egui::TextureId>,
+    /// Full resolution (0) and the preview drawn while the mouse moves the view (1).
+    targets: [Option<RaycastTarget>; 2],
+    texture_ids: [Option<egui::TextureId>; 2],
+    /// Which target the user sees.
+    shown: usize,
     last: Option<FrameKey>,
     pending: Option<PendingPick>,
     error: Option<String>,
@@ -95,14 +101,20 @@ impl MipView {
     pub fn new() -> Self {
         Self {
             camera: Camera::default(),
-            settings: RenderSettings::default(),
+            settings: RenderSettings {
+                // One trilinear fetch by the texture unit per sample: the interactive path.
+                hardware_filtering: true,
+                ..RenderSettings::default()
+            },
             slab_mm: None,
             mode: None,
             crosshair_mm: None,
+            interactive_scale: 0.5,
             mode_chosen: false,
             caster: None,
-            target: None,
-            texture_id: None,
+            targets: [None, None],
+            texture_ids: [None, None],
+            shown: 0,
             last: None,
             pending: None,
             error: None,
@@ -132,6 +144,11 @@ impl MipView {
         self.error.as_deref()
     }
 
+    /// Whether the reduced-resolution frame of a drag or wheel move is shown.
+    pub fn showing_preview(&self) -> bool {
+        self.shown == 1
+    }
+
     /// Whether a pick is being read back.
     pub fn pick_pending(&self) -> bool {
         self.pending.is_some()
@@ -139,7 +156,7 @@ impl MipView {
 
     /// The screen position of a world point in the last frame (e.g. to click it in a test).
     pub fn screen_pos_of(&self, world_mm: DVec3) -> Option<egui::Pos2> {
-        let view = self.target.as_ref()?.rendered()?;
+        let view = self.shown_target()?.rendered()?;
         let (p, _) = view.camera.project(world_mm, view.size);
         let rect = self.image_rect;
         let x = rect.left() + (p.x as f32 / view.size[0] as f32) * rect.width();
@@ -148,9 +165,13 @@ impl MipView {
         rect.contains(pos).then_some(pos)
     }
 
+    fn shown_target(&self) -> Option<&RaycastTarget> {
+        self.targets[self.shown].as_ref()
+    }
+
     /// The image pixel under a screen position.
     pub fn pixel_at(&self, pos: egui::Pos2) -> Option<[u32; 2]> {
-        let target = self.target.as_ref()?;
+        let target = self.shown_target()?;
         let rect = self.image_rect;
         if !rect.contains(pos) || rect.width() <= 0.0 || rect.height() <= 0.0 {
             return None;
@@ -301,7 +322,8 @@ impl MipView {
         self.image_rect = rect;
         let ppp = ui.ctx().pixels_per_point();
         let max = gpu.limits.max_texture_dimension_2d.max(1);
-        let size = [
+        // Input works in full-resolution pixels, whatever resolution is drawn.
+        let full = [
             ((rect.width() * ppp).round() as u32).clamp(1, max),
             ((rect.height() * ppp).round() as u32).clamp(1, max),
         ];
@@ -329,9 +351,9 @@ impl MipView {
                 if response.dragged_by(egui::PointerButton::Middle)
                     || (shift && response.dragged_by(egui::PointerButton::Primary))
                 {
-                    self.camera.pan(to.x - from.x, to.y - from.y, size);
+                    self.camera.pan(to.x - from.x, to.y - from.y, full);
                 } else if response.dragged_by(egui::PointerButton::Primary) {
-                    self.camera.arcball(from, to, size);
+                    self.camera.arcball(from, to, full);
                 } else if response.dragged_by(egui::PointerButton::Secondary) {
                     let (lo, hi) = self.settings.window;
                     let width = (hi - lo + 2.0 * delta.x).max(1.0);
@@ -341,11 +363,13 @@ impl MipView {
             }
         }
         if response.clicked()
-            && let (Some(pos), Some(gpu_target)) = (response.interact_pointer_pos(), &self.target)
+            && let (Some(pos), Some(gpu_target)) =
+                (response.interact_pointer_pos(), self.shown_target())
             && let Some(px) = self.pixel_at(pos)
         {
             self.pending = gpu_target.start_pick(gpu, px);
         }
+        let mut wheeled = false;
         if response.hovered() {
             let wheel: f32 = ui.input(|i| {
                 i.events
@@ -364,7 +388,8 @@ impl MipView {
                 && let Some(pos) = response.hover_pos()
             {
                 self.camera
-                    .zoom_at((f64::from(wheel) * 0.002).exp(), to_px(pos), size);
+                    .zoom_at((f64::from(wheel) * 0.002).exp(), to_px(pos), full);
+                wheeled = true;
             }
         }
         if let Some(pending) = &mut self.pending {
@@ -381,7 +406,23 @@ impl MipView {
             }
         }
 
-        // Render if anything changed.
+        // Render if anything changed; a reduced resolution while the mouse moves the view.
+        let interacting = response.dragged() || wheeled;
+        let scale = if self.interactive_scale.is_finite() {
+            self.interactive_scale.clamp(0.1, 1.0)
+        } else {
+            1.0
+        };
+        let slot = usize::from(interacting && scale < 1.0);
+        let size = if slot == 1 {
+            full.map(|s| ((s as f32 * scale).round() as u32).max(1))
+        } else {
+            full
+        };
+        if interacting {
+            // The full frame follows when the mouse stops.
+            ui.ctx().request_repaint();
+        }
         let features = self.features(scene);
         let mut settings = self.settings;
         settings.slab = self.slab_mm.map(|t| Slab {
@@ -397,8 +438,17 @@ impl MipView {
         };
         let mut rendered = false;
         if self.last.as_ref() != Some(&key) {
-            match self.render(gpu, render_state, scene.volume, features, &settings, size) {
+            match self.render(
+                gpu,
+                render_state,
+                scene.volume,
+                features,
+                &settings,
+                slot,
+                size,
+            ) {
                 Ok(()) => {
+                    self.shown = slot;
                     rendered = true;
                     self.frames += 1;
                     self.error = None;
@@ -411,7 +461,7 @@ impl MipView {
         // Draw.
         let painter = ui.painter_at(rect);
         painter.rect_filled(rect, 0.0, egui::Color32::BLACK);
-        if let Some(id) = self.texture_id {
+        if let Some(id) = self.texture_ids[self.shown] {
             painter.image(
                 id,
                 rect,
@@ -442,6 +492,7 @@ impl MipView {
         self.image_ui(ui, gpu, render_state, scene)
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn render(
         &mut self,
         gpu: &GpuContext,
@@ -449,16 +500,17 @@ impl MipView {
         volume: &RenderVolume,
         features: Option<&FeatureTexture>,
         settings: &RenderSettings,
+        slot: usize,
         size: [u32; 2],
     ) -> Result<(), String> {
         if self.caster.is_none() {
             self.caster = Some(Raycaster::new(gpu).map_err(|e| e.to_string())?);
         }
-        let resized = self.target.as_ref().is_none_or(|t| t.size != size);
+        let resized = self.targets[slot].as_ref().is_none_or(|t| t.size != size);
         if resized {
-            self.target = Some(RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?);
+            self.targets[slot] = Some(RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?);
         }
-        let (Some(caster), Some(target)) = (&self.caster, &mut self.target) else {
+        let (Some(caster), Some(target)) = (&self.caster, &mut self.targets[slot]) else {
             return Err("the ray caster is not ready".to_owned());
         };
         caster
@@ -466,7 +518,7 @@ impl MipView {
             .map_err(|e| e.to_string())?;
         if resized {
             let mut renderer = render_state.renderer.write();
-            match self.texture_id {
+            match self.texture_ids[slot] {
                 Some(id) => renderer.update_egui_texture_from_wgpu_texture(
                     &gpu.device,
                     &target.view,
@@ -474,7 +526,7 @@ impl MipView {
                     id,
                 ),
                 None => {
-                    self.texture_id = Some(renderer.register_native_texture(
+                    self.texture_ids[slot] = Some(renderer.register_native_texture(
                         &gpu.device,
                         &target.view,
                         wgpu::FilterMode::Linear,

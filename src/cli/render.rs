@@ -94,6 +94,10 @@ pub struct RenderArgs {
     /// Leave the grey intensity out.
     #[arg(long)]
     pub no_intensity: bool,
+    /// Trilinear interpolation by the texture unit instead of in the shader (faster; the
+    /// default shader path matches the CPU twin exactly).
+    #[arg(long)]
+    pub hw_filter: bool,
     /// Voxel spacing of a `phantom:` input, mm: one value or X,Y,Z.
     #[arg(long, value_delimiter = ',', default_value = "0.5")]
     pub spacing_mm: Vec<f64>,
@@ -293,6 +297,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         Projection::Mip
     };
     settings.show_intensity = !args.no_intensity;
+    settings.hardware_filtering = args.hw_filter;
     if let Some(t) = args.slab_mm {
         if !(t.is_finite() && t > 0.0) {
             bail!("--slab-mm must be positive");
