@@ -456,3 +456,104 @@ fn hardware_filtering_matches_the_twin_within_tolerance() {
         );
     }
 }
+
+/// The frame time of the MIP for a 256^3 volume at 768x768 (a benchmark, not a timed test):
+/// `cargo test --test gpu_raycast -- --ignored --nocapture bench`. Synthetic spheres and
+/// cylinders with synthetic features (the features' content does not change the cost: every
+/// sample loads them). Each frame turns the view by 2 degrees, as a drag does, and waits for
+/// the GPU.
+#[test]
+#[ignore = "benchmark: run explicitly"]
+fn bench_256_cubed_at_768() {
+    let Some(ctx) = test_context() else { return };
+    let n = 256usize;
+    let dims = [n; 3];
+    let mut values = vec![0.0f32; n * n * n];
+    let mut comps = [
+        vec![0.0f32; n * n * n],
+        vec![0.0f32; n * n * n],
+        vec![0.0f32; n * n * n],
+    ];
+    let spheres = [
+        ([80.0, 100.0, 128.0], 14.0),
+        ([170.0, 150.0, 100.0], 10.0),
+        ([128.0, 190.0, 180.0], 18.0),
+    ];
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                let p = [i as f64, j as f64, k as f64];
+                let idx = i + n * (j + n * k);
+                let in_vessel = ((p[0] - 128.0).powi(2) + (p[1] - 128.0).powi(2)).sqrt() < 8.0
+                    || ((p[1] - 90.0).powi(2) + (p[2] - 140.0).powi(2)).sqrt() < 6.0;
+                let in_sphere = spheres.iter().any(|(c, r)| {
+                    ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt()
+                        < *r
+                });
+                values[idx] = if in_vessel || in_sphere {
+                    200.0
+                } else {
+                    40.0 + ((idx * 7919) % 23) as f32
+                };
+                comps[0][idx] = if in_vessel { 50.0 } else { 0.0 };
+                comps[2][idx] = if in_sphere { 30.0 } else { 0.0 };
+            }
+        }
+    }
+    let volume = Volume::from_f32(dims, [0.7, 0.7, 0.7], values);
+    let caster = Raycaster::new(&ctx).expect("shader");
+    let rv = RenderVolume::upload(&ctx, &volume).expect("upload");
+    let features =
+        FeatureTexture::from_components(&ctx, [256; 3], &comps, "bench").expect("features");
+    drop(comps);
+    let size = [768, 768];
+    let mut target = RaycastTarget::new(&ctx, size).expect("target");
+    let frames = 3;
+    eprintln!("adapter: {}", ctx.adapter_label());
+    for (name, hw, with_features, zoom) in [
+        ("intensity, shader trilinear", false, false, 1.0),
+        ("intensity, hardware trilinear", true, false, 1.0),
+        ("intensity + features, shader trilinear", false, true, 1.0),
+        ("intensity + features, hardware trilinear", true, true, 1.0),
+        (
+            "intensity + features, hardware trilinear, volume fills the view",
+            true,
+            true,
+            1.7,
+        ),
+    ] {
+        let settings = RenderSettings {
+            window: (0.0, 250.0),
+            hardware_filtering: hw,
+            ..Default::default()
+        };
+        let mut camera =
+            Camera::for_volume(&volume.world_from_voxel(), [256; 3], ViewPreset::Anterior);
+        camera.zoom = zoom;
+        let feats = with_features.then_some(&features);
+        // Warm-up frame: pipeline compilation.
+        caster
+            .render(&ctx, &rv, feats, &camera, &settings, &mut target)
+            .expect("render");
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .expect("poll");
+        let mut times = Vec::new();
+        for _ in 0..frames {
+            camera.orbit(2.0, 0.0);
+            let t = std::time::Instant::now();
+            caster
+                .render(&ctx, &rv, feats, &camera, &settings, &mut target)
+                .expect("render");
+            ctx.device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .expect("poll");
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        let mean = times.iter().sum::<f64>() / times.len() as f64;
+        let min = times.iter().copied().fold(f64::INFINITY, f64::min);
+        eprintln!(
+            "bench 256^3 @ 768x768, {name} (zoom {zoom}): mean {mean:.0} ms, min {min:.0} ms over {frames} frames"
+        );
+    }
+}
