@@ -32,7 +32,7 @@ struct Params {
     mode: u32,
     dims: vec3<u32>,
     // Bit 0: sample the feature texture. Bit 1: show the intensity (grey). Bit 2: hardware
-    // trilinear filtering.
+    // trilinear filtering. Bit 3: skip bricks (bindings 6 and 7).
     flags: u32,
     // Opacity per unit feature value (gain / feature maximum; 0 = channel off).
     feature_scale: vec3<f32>,
@@ -51,8 +51,53 @@ struct Params {
 @group(0) @binding(4) var<storage, read_write> pick: array<vec2<f32>>;
 // Linear, clamp-to-edge: the hardware trilinear path (flag bit 2).
 @group(0) @binding(5) var linear_clamp: sampler;
+// Brick extrema (raycast_bricks.wgsl): intensity (max, min), features (max V, max A, max B).
+// Flag bit 3: skip bricks that cannot raise any running extreme (exact: a skipped sample could
+// not have replaced one, as updates need a strictly larger value).
+@group(0) @binding(6) var intensity_bricks: texture_3d<f32>;
+@group(0) @binding(7) var feature_bricks: texture_3d<f32>;
 
 const BIG: f32 = 3.0e38;
+const BRICK: i32 = 8;
+
+// The brick holding a sample (by its clamped position; on a face, either brick holds it).
+fn brick_of(c: Cell) -> vec3<i32> {
+    let nb = vec3<i32>(textureDimensions(intensity_bricks));
+    return min(c.i0 / BRICK, nb - vec3<i32>(1));
+}
+
+// Where the ray o + t d leaves the region whose clamped positions lie in brick b.
+fn brick_exit(o: vec3<f32>, d: vec3<f32>, b: vec3<i32>) -> f32 {
+    let nb = vec3<i32>(textureDimensions(intensity_bricks));
+    var te = BIG;
+    for (var a = 0; a < 3; a = a + 1) {
+        if d[a] > 1e-20 && b[a] < nb[a] - 1 {
+            te = min(te, (f32((b[a] + 1) * BRICK) - o[a]) / d[a]);
+        } else if d[a] < -1e-20 && b[a] > 0 {
+            te = min(te, (f32(b[a] * BRICK) - o[a]) / d[a]);
+        }
+    }
+    return te;
+}
+
+fn intensity_skippable(b: vec3<i32>, best_i: f32, minip: bool) -> bool {
+    let bi = textureLoad(intensity_bricks, b, 0);
+    if minip {
+        return bi.y >= best_i;
+    }
+    return bi.x <= best_i;
+}
+
+// Only the channels shown count: a hidden channel's extreme never colours or picks.
+fn features_skippable(b: vec3<i32>, best_f: vec3<f32>) -> bool {
+    let bf = textureLoad(feature_bricks, b, 0);
+    for (var ch = 0; ch < 3; ch = ch + 1) {
+        if params.feature_scale[ch] > 0.0 && bf[ch] > best_f[ch] {
+            return false;
+        }
+    }
+    return true;
+}
 
 // The t interval of the ray o + t d inside the box [-0.5, n - 0.5] (empty if x > y).
 fn box_interval(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
@@ -178,21 +223,51 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var t_i = 0.0;
     var best_f = vec3<f32>(-BIG);
     var t_f = vec3<f32>(0.0);
-    for (var n = 0; n < count; n = n + 1) {
+    let skip = (params.flags & 8u) != 0u;
+    var last_brick = vec3<i32>(-1);
+    // Within the current brick: whether its intensity / features cannot raise the running
+    // extremes, so their loads are skipped (exact: updates need a strictly larger value).
+    var skip_i = false;
+    var skip_f = false;
+    var n = 0;
+    loop {
+        if n >= count {
+            break;
+        }
         let t = f32(k0 + n) * params.step_mm;
         let q = o + d * t;
         let c = cell_of(q);
-        let v = intensity_at(c, q);
-        if minip {
-            if v < best_i {
+        if skip {
+            let b = brick_of(c);
+            if any(b != last_brick) {
+                last_brick = b;
+                skip_i = intensity_skippable(b, best_i, minip);
+                skip_f = !use_features || features_skippable(b, best_f);
+                if skip_i && skip_f {
+                    // Jump to the last sample still inside the brick (a margin keeps rounding
+                    // from skipping a sample beyond it).
+                    let te = min(brick_exit(o, d, b), t1) - 0.01 * params.step_mm;
+                    let next = i32(floor(te / params.step_mm)) - k0;
+                    if next > n {
+                        n = next;
+                        continue;
+                    }
+                }
+            }
+        }
+        if !skip_i {
+            let v = intensity_at(c, q);
+            if minip {
+                if v < best_i {
+                    best_i = v;
+                    t_i = t;
+                }
+            } else if v > best_i {
                 best_i = v;
                 t_i = t;
             }
-        } else if v > best_i {
-            best_i = v;
-            t_i = t;
         }
-        if use_features {
+        if use_features && !skip_f {
             let f = features_at(c, q);
             if f.x > best_f.x {
                 best_f.x = f.x;
@@ -207,6 +282,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 t_f.z = t;
             }
         }
+        n = n + 1;
     }
 
     var g = window01(best_i, params.window_lo, params.window_hi);

@@ -7,8 +7,8 @@ use shapecast::camera::{Camera, ViewPreset};
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
 use shapecast::gpu::raycast::{
-    Channel, ChannelDisplay, Projection, RaycastTarget, Raycaster, RenderSettings, Slab, TwinScene,
-    VolumeGeometry, cpu_twin, params,
+    Channel, ChannelDisplay, Projection, RaycastTarget, Raycaster, RenderSettings, Scene, Slab,
+    TwinScene, VolumeGeometry, cpu_twin, params,
 };
 use shapecast::gpu::render_volume::{FeatureTexture, RenderVolume};
 use shapecast::volume::Volume;
@@ -83,6 +83,7 @@ fn both(
     settings: &RenderSettings,
     size: [u32; 2],
     with_features: bool,
+    skip: bool,
 ) -> (
     Vec<u8>,
     Vec<u8>,
@@ -92,8 +93,17 @@ fn both(
 ) {
     let mut target = RaycastTarget::new(&g.ctx, size).expect("target");
     let feats = with_features.then_some(&g.features);
+    let bricks = skip.then(|| g.caster.intensity_bricks(&g.ctx, &g.volume));
+    let feature_bricks = skip.then(|| g.caster.feature_bricks(&g.ctx, &g.features));
+    let scene = Scene {
+        volume: &g.volume,
+        features: feats,
+        bricks: bricks.as_ref(),
+        feature_bricks: feature_bricks.as_ref(),
+    };
+    assert_eq!(scene.skipping(), skip);
     g.caster
-        .render(&g.ctx, &g.volume, feats, camera, settings, &mut target)
+        .render(&g.ctx, &scene, camera, settings, &mut target)
         .expect("render");
     let image = target.read_image_blocking(&g.ctx).expect("image");
     let depths = target.read_depths_blocking(&g.ctx).expect("depths");
@@ -104,6 +114,7 @@ fn both(
         size,
         feats.map(|f| f.max),
     );
+    let p = if skip { p.with_skipping() } else { p };
     let t = cpu_twin(twin, &p);
     (image, t.rgba, depths, t.depths, target)
 }
@@ -169,8 +180,12 @@ fn gpu_matches_cpu_twin_images_and_picks() {
             true,
         ),
     ];
-    for (name, camera, settings, size, with_features) in cases {
-        let (gi, ti, gd, td, target) = both(&g, &twin, &camera, &settings, size, with_features);
+    for ((name, camera, settings, size, with_features), skip) in
+        cases.into_iter().flat_map(|c| [(c, false), (c, true)])
+    {
+        let name = format!("{name}{}", if skip { ", skipping" } else { "" });
+        let (gi, ti, gd, td, target) =
+            both(&g, &twin, &camera, &settings, size, with_features, skip);
         assert_eq!(gi.len(), ti.len());
         let diffs: Vec<u8> = gi.iter().zip(&ti).map(|(a, b)| a.abs_diff(*b)).collect();
         let max = diffs.iter().copied().max().unwrap_or(0);
@@ -285,7 +300,13 @@ fn bright_spot_lands_where_the_camera_projects_it() {
         camera.zoom = zoom;
         let mut target = RaycastTarget::new(&g.ctx, size).expect("target");
         g.caster
-            .render(&g.ctx, &g.volume, None, &camera, &settings, &mut target)
+            .render(
+                &g.ctx,
+                &Scene::new(&g.volume, None),
+                &camera,
+                &settings,
+                &mut target,
+            )
             .expect("render");
         let image = target.read_image_blocking(&g.ctx).expect("image");
         let px = camera
@@ -350,7 +371,13 @@ fn slab_minip_and_misses() {
     let render = |settings: RenderSettings| {
         let mut target = RaycastTarget::new(&g.ctx, size).expect("target");
         g.caster
-            .render(&g.ctx, &g.volume, None, &camera, &settings, &mut target)
+            .render(
+                &g.ctx,
+                &Scene::new(&g.volume, None),
+                &camera,
+                &settings,
+                &mut target,
+            )
             .expect("render");
         let image = target.read_image_blocking(&g.ctx).expect("image");
         let pick = target.pick_blocking(&g.ctx, centre_px).expect("readback");
@@ -425,7 +452,7 @@ fn hardware_filtering_matches_the_twin_within_tolerance() {
         ("oblique", oblique, settings, [41, 35]),
         ("oblique minip", oblique, minip, [29, 31]),
     ] {
-        let (gi, ti, gd, td, target) = both(&g, &twin, &camera, &settings, size, true);
+        let (gi, ti, gd, td, target) = both(&g, &twin, &camera, &settings, size, true, true);
         let diffs: Vec<u8> = gi.iter().zip(&ti).map(|(a, b)| a.abs_diff(*b)).collect();
         let max = diffs.iter().copied().max().unwrap_or(0);
         let over2 = diffs.iter().filter(|&&d| d > 2).count();
@@ -510,16 +537,52 @@ fn bench_256_cubed_at_768() {
     let mut target = RaycastTarget::new(&ctx, size).expect("target");
     let frames = 3;
     eprintln!("adapter: {}", ctx.adapter_label());
-    for (name, hw, with_features, zoom) in [
-        ("intensity, shader trilinear", false, false, 1.0),
-        ("intensity, hardware trilinear", true, false, 1.0),
-        ("intensity + features, shader trilinear", false, true, 1.0),
-        ("intensity + features, hardware trilinear", true, true, 1.0),
+    let bricks = caster.intensity_bricks(&ctx, &rv);
+    let feature_bricks = caster.feature_bricks(&ctx, &features);
+    for (name, hw, with_features, zoom, skip) in [
+        ("intensity, shader trilinear", false, false, 1.0, false),
         (
-            "intensity + features, hardware trilinear, volume fills the view",
+            "intensity, shader trilinear, skipping",
+            false,
+            false,
+            1.0,
+            true,
+        ),
+        ("intensity, hardware trilinear", true, false, 1.0, false),
+        (
+            "intensity, hardware trilinear, skipping",
+            true,
+            false,
+            1.0,
+            true,
+        ),
+        (
+            "intensity + features, shader trilinear",
+            false,
+            true,
+            1.0,
+            false,
+        ),
+        (
+            "intensity + features, hardware trilinear",
+            true,
+            true,
+            1.0,
+            false,
+        ),
+        (
+            "intensity + features, hardware trilinear, skipping",
+            true,
+            true,
+            1.0,
+            true,
+        ),
+        (
+            "intensity + features, hardware trilinear, skipping, volume fills the view",
             true,
             true,
             1.7,
+            true,
         ),
     ] {
         let settings = RenderSettings {
@@ -531,9 +594,15 @@ fn bench_256_cubed_at_768() {
             Camera::for_volume(&volume.world_from_voxel(), [256; 3], ViewPreset::Anterior);
         camera.zoom = zoom;
         let feats = with_features.then_some(&features);
+        let scene = Scene {
+            volume: &rv,
+            features: feats,
+            bricks: skip.then_some(&bricks),
+            feature_bricks: skip.then_some(&feature_bricks),
+        };
         // Warm-up frame: pipeline compilation.
         caster
-            .render(&ctx, &rv, feats, &camera, &settings, &mut target)
+            .render(&ctx, &scene, &camera, &settings, &mut target)
             .expect("render");
         ctx.device
             .poll(wgpu::PollType::wait_indefinitely())
@@ -543,7 +612,7 @@ fn bench_256_cubed_at_768() {
             camera.orbit(2.0, 0.0);
             let t = std::time::Instant::now();
             caster
-                .render(&ctx, &rv, feats, &camera, &settings, &mut target)
+                .render(&ctx, &scene, &camera, &settings, &mut target)
                 .expect("render");
             ctx.device
                 .poll(wgpu::PollType::wait_indefinitely())
@@ -555,5 +624,151 @@ fn bench_256_cubed_at_768() {
         eprintln!(
             "bench 256^3 @ 768x768, {name} (zoom {zoom}): mean {mean:.0} ms, min {min:.0} ms over {frames} frames"
         );
+    }
+}
+
+/// Empty-space skipping is exact: with and without bricks the GPU draws the same picture and
+/// depths, the twin too, and the twin evaluates far fewer samples. The brick kernel matches its
+/// CPU twin exactly.
+#[test]
+fn skipping_is_exact_and_skips() {
+    let dims = [41usize, 36, 23];
+    let n = dims[0] * dims[1] * dims[2];
+    let mut rng = Lcg(11);
+    let mut values = Vec::with_capacity(n);
+    let mut comps = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
+    let spheres = [
+        ([10.0, 12.0, 8.0], 4.0),
+        ([30.0, 20.0, 15.0], 5.0),
+        ([22.0, 28.0, 5.0], 3.0),
+    ];
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p = [i as f32, j as f32, k as f32];
+                let idx = i + dims[0] * (j + dims[1] * k);
+                let vessel = ((p[0] - 20.0).powi(2) + (p[2] - 11.0).powi(2)).sqrt() < 2.5;
+                let sphere = spheres.iter().any(|(c, r)| {
+                    ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt()
+                        < *r
+                });
+                // Noise in the lower half only: homogeneous tissue above (as in a noise-free
+                // phantom), where intensity bricks skip too.
+                let noise = if k < 12 { 20.0 * rng.next() } else { 0.0 };
+                values.push(if vessel || sphere {
+                    300.0
+                } else {
+                    20.0 + noise
+                });
+                comps[0][idx] = if vessel { 40.0 + rng.next() } else { 0.0 };
+                comps[2][idx] = if sphere { 25.0 + rng.next() } else { 0.0 };
+            }
+        }
+    }
+    let mut volume = Volume::from_f32(dims, [0.8, 0.6, 1.9], values);
+    volume.direction = DMat3::from_quat(DQuat::from_euler(glam::EulerRot::YXZ, 0.2, -0.3, 0.1));
+    volume.origin_mm = [5.0, -7.0, 30.0];
+    let Some(g) = gpu(&volume, &comps) else {
+        return;
+    };
+    let twin = TwinScene::new(&volume, Some(&comps));
+    // The brick kernel.
+    let b = g.caster.intensity_bricks(&g.ctx, &g.volume);
+    let fb = g.caster.feature_bricks(&g.ctx, &g.features);
+    assert_eq!(b.dims, [5, 5, 3]);
+    let (gb, gfb) = (
+        b.read_blocking(&g.ctx).expect("bricks"),
+        fb.read_blocking(&g.ctx).expect("bricks"),
+    );
+    let tb = twin.bricks.as_ref().expect("twin bricks");
+    let tfb = twin.feature_bricks.as_ref().expect("twin feature bricks");
+    for (n, (x, y)) in gb.iter().zip(tb).enumerate() {
+        assert_eq!((x[0], x[1]), (y[0], y[1]), "intensity brick {n}");
+    }
+    for (n, (x, y)) in gfb.iter().zip(tfb).enumerate() {
+        assert_eq!(x[..3], y[..3], "feature brick {n}");
+    }
+
+    let base = Camera::for_volume(
+        &volume.world_from_voxel(),
+        g.volume.dims,
+        ViewPreset::Anterior,
+    );
+    let mut oblique = base;
+    oblique.orbit(40.0, -25.0);
+    oblique.zoom = 1.4;
+    let settings = RenderSettings {
+        window: (0.0, 300.0),
+        ..Default::default()
+    };
+    let mut only_blobs = settings;
+    only_blobs.channels[0].on = false;
+    let cases = [
+        ("anterior", base, settings, true),
+        ("oblique", oblique, settings, true),
+        ("oblique intensity only", oblique, settings, false),
+        ("oblique blobness only", oblique, only_blobs, true),
+        (
+            "superior minip",
+            base.with_orbit(ViewPreset::Superior, 10.0, 0.0),
+            RenderSettings {
+                projection: Projection::MinIp,
+                ..settings
+            },
+            true,
+        ),
+        (
+            "left slab",
+            base.with_orbit(ViewPreset::Left, 0.0, 0.0),
+            RenderSettings {
+                slab: Some(Slab {
+                    centre_mm: volume
+                        .world_from_voxel()
+                        .transform_point3(DVec3::new(20.0, 18.0, 11.0)),
+                    thickness_mm: 9.0,
+                }),
+                ..settings
+            },
+            true,
+        ),
+    ];
+    let size = [47, 39];
+    for (name, camera, settings, with_features) in cases {
+        let (gi0, ti0, gd0, _, _) = both(&g, &twin, &camera, &settings, size, with_features, false);
+        let (gi1, ti1, gd1, td1, _) =
+            both(&g, &twin, &camera, &settings, size, with_features, true);
+        assert_eq!(gi0, gi1, "{name}: skipping changed the GPU picture");
+        assert_eq!(gd0, gd1, "{name}: skipping changed the GPU depths");
+        assert_eq!(ti0, ti1, "{name}: skipping changed the twin's picture");
+        assert_eq!(gi1, ti1, "{name}: GPU and twin differ with skipping");
+        assert_eq!(gd1, td1, "{name}: GPU and twin depths differ with skipping");
+        let p = params(
+            &VolumeGeometry::of(&g.volume),
+            &camera,
+            &settings,
+            size,
+            with_features.then_some(g.features.max),
+        );
+        let all = cpu_twin(&twin, &p);
+        let skipped = cpu_twin(&twin, &p.with_skipping());
+        eprintln!(
+            "{name}: skipping evaluates {} of {} intensity samples, {} of {} feature samples",
+            skipped.samples, all.samples, skipped.feature_samples, all.feature_samples
+        );
+        assert!(all.samples > 10_000, "{name}: {} samples", all.samples);
+        assert!(
+            skipped.samples * 10 < all.samples * 9,
+            "{name}: {} of {} intensity samples",
+            skipped.samples,
+            all.samples
+        );
+        if with_features {
+            assert!(
+                skipped.feature_samples * 10 < all.feature_samples * 7,
+                "{name}: {} of {} feature samples",
+                skipped.feature_samples,
+                all.feature_samples
+            );
+        }
     }
 }

@@ -28,7 +28,8 @@ use glam::{DVec2, DVec3};
 use crate::camera::{Camera, ViewPreset};
 use crate::gpu::GpuContext;
 use crate::gpu::raycast::{
-    CHANNEL_COLOURS, PendingPick, Pick, Projection, RaycastTarget, Raycaster, RenderSettings, Slab,
+    Bricks, CHANNEL_COLOURS, PendingPick, Pick, Projection, RaycastTarget, Raycaster,
+    RenderSettings, Scene, Slab,
 };
 use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
 use crate::volume::orientation_label;
@@ -79,6 +80,9 @@ pub struct MipView {
     pub interactive_scale: f32,
     mode_chosen: bool,
     caster: Option<Raycaster>,
+    /// Brick extrema of the textures last shown (empty-space skipping), remade when they change.
+    bricks: Option<Bricks>,
+    feature_bricks: Option<Bricks>,
     /// Full resolution (0) and the preview drawn while the mouse moves the view (1).
     targets: [Option<RaycastTarget>; 2],
     texture_ids: [Option<egui::TextureId>; 2],
@@ -112,6 +116,8 @@ impl MipView {
             interactive_scale: 0.5,
             mode_chosen: false,
             caster: None,
+            bricks: None,
+            feature_bricks: None,
             targets: [None, None],
             texture_ids: [None, None],
             shown: 0,
@@ -513,8 +519,29 @@ impl MipView {
         let (Some(caster), Some(target)) = (&self.caster, &mut self.targets[slot]) else {
             return Err("the ray caster is not ready".to_owned());
         };
+        if !self
+            .bricks
+            .as_ref()
+            .is_some_and(|b| b.of(&volume.intensity))
+        {
+            self.bricks = Some(caster.intensity_bricks(gpu, volume));
+        }
+        if let Some(f) = features
+            && !self
+                .feature_bricks
+                .as_ref()
+                .is_some_and(|b| b.of(&f.texture))
+        {
+            self.feature_bricks = Some(caster.feature_bricks(gpu, f));
+        }
+        let scene = Scene {
+            volume,
+            features,
+            bricks: self.bricks.as_ref(),
+            feature_bricks: self.feature_bricks.as_ref(),
+        };
         caster
-            .render(gpu, volume, features, &self.camera, settings, target)
+            .render(gpu, &scene, &self.camera, settings, target)
             .map_err(|e| e.to_string())?;
         if resized {
             let mut renderer = render_state.renderer.write();

@@ -13,7 +13,9 @@ use crate::cpu::Preset;
 use crate::cpu::pipeline::{Method, Request};
 use crate::gpu::GpuContext;
 use crate::gpu::pipeline::{FeatureJob, JobState};
-use crate::gpu::raycast::{self, Pick, Projection, RaycastTarget, Raycaster, RenderSettings, Slab};
+use crate::gpu::raycast::{
+    self, Pick, Projection, RaycastTarget, Raycaster, RenderSettings, Scene, Slab,
+};
 use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
 use crate::io;
 use crate::phantom::{self, Phantom};
@@ -98,6 +100,9 @@ pub struct RenderArgs {
     /// default shader path matches the CPU twin exactly).
     #[arg(long)]
     pub hw_filter: bool,
+    /// Do not skip empty space (same picture, slower; for comparisons).
+    #[arg(long)]
+    pub no_skip: bool,
     /// Voxel spacing of a `phantom:` input, mm: one value or X,Y,Z.
     #[arg(long, value_delimiter = ',', default_value = "0.5")]
     pub spacing_mm: Vec<f64>,
@@ -309,22 +314,25 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     }
 
     let caster = Raycaster::new(&ctx)?;
+    let bricks = (!args.no_skip).then(|| caster.intensity_bricks(&ctx, &render_volume));
+    let feature_bricks = match (&features, args.no_skip) {
+        (Some(f), false) => Some(caster.feature_bricks(&ctx, f)),
+        _ => None,
+    };
+    let scene = Scene {
+        volume: &render_volume,
+        features: features.as_ref(),
+        bricks: bricks.as_ref(),
+        feature_bricks: feature_bricks.as_ref(),
+    };
     let mut target = RaycastTarget::new(&ctx, size)?;
-    caster.render(
-        &ctx,
-        &render_volume,
-        features.as_ref(),
-        &camera,
-        &settings,
-        &mut target,
-    )?;
+    caster.render(&ctx, &scene, &camera, &settings, &mut target)?;
 
     if let Some(frames) = args.bench {
         bench(
             &ctx,
             &caster,
-            &render_volume,
-            features.as_ref(),
+            &scene,
             &camera,
             &settings,
             &mut target,
@@ -358,12 +366,10 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
 fn bench(
     ctx: &GpuContext,
     caster: &Raycaster,
-    volume: &RenderVolume,
-    features: Option<&FeatureTexture>,
+    scene: &Scene<'_>,
     camera: &Camera,
     settings: &RenderSettings,
     target: &mut RaycastTarget,
@@ -379,7 +385,7 @@ fn bench(
         // Turn a little every frame, as a drag does.
         cam.orbit(2.0, 0.0);
         let t = web_time::Instant::now();
-        caster.render(ctx, volume, features, &cam, settings, target)?;
+        caster.render(ctx, scene, &cam, settings, target)?;
         ctx.device
             .poll(wgpu::PollType::wait_indefinitely())
             .context("waiting for the GPU")?;
@@ -392,11 +398,12 @@ fn bench(
         times.len(),
         target.size[0],
         target.size[1],
-        volume.dims,
-        if features.is_some() {
-            "intensity + features"
-        } else {
-            "intensity only"
+        scene.volume.dims,
+        match (scene.features.is_some(), scene.skipping()) {
+            (true, true) => "intensity + features, skipping empty space",
+            (true, false) => "intensity + features, no skipping",
+            (false, true) => "intensity only, skipping empty space",
+            (false, false) => "intensity only, no skipping",
         },
         ctx.adapter_label()
     );

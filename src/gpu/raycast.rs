@@ -55,9 +55,27 @@ pub struct Params {
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 112);
 
+impl Params {
+    /// The same frame with empty-space skipping on (the shader then reads the bricks; the CPU
+    /// twin skips as it does when its scene has bricks).
+    pub fn with_skipping(mut self) -> Self {
+        self.flags |= FLAG_BRICKS;
+        self
+    }
+}
+
 const FLAG_FEATURES: u32 = 1;
 const FLAG_INTENSITY: u32 = 2;
 const FLAG_FILTERED: u32 = 4;
+const FLAG_BRICKS: u32 = 8;
+
+/// Edge of the bricks of the empty-space skipping, voxels (raycast_bricks.wgsl).
+pub const BRICK: u32 = 8;
+
+/// Brick counts per axis for a volume of `dims` (brick b covers positions `[8b, 8b + 8]`).
+pub fn brick_dims(dims: [u32; 3]) -> [u32; 3] {
+    dims.map(|n| n.saturating_sub(1).div_ceil(BRICK).max(1))
+}
 const BIG: f32 = 3.0e38;
 
 /// Colours of the feature channels (linear 0..1 RGB): vesselness, airwayness, blobness.
@@ -589,6 +607,105 @@ pub struct Raycaster {
     pipeline: wgpu::ComputePipeline,
     no_features: wgpu::TextureView,
     linear_clamp: wgpu::Sampler,
+    bricks_intensity: wgpu::ComputePipeline,
+    bricks_features: wgpu::ComputePipeline,
+}
+
+/// Brick extrema of one texture (the volume's intensity, or one method's features), for
+/// empty-space skipping: made once per texture with [`Raycaster::intensity_bricks`] or
+/// [`Raycaster::feature_bricks`], used every frame. Holds a handle of its source, so it is only
+/// ever used with that texture.
+pub struct Bricks {
+    pub dims: [u32; 3],
+    pub texture: wgpu::Texture,
+    pub view: wgpu::TextureView,
+    source: wgpu::Texture,
+}
+
+impl Bricks {
+    /// Native only: the brick values (tests), brick x fastest.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn read_blocking(&self, ctx: &GpuContext) -> Result<Vec<[f32; 4]>, RaycastError> {
+        let [w, h, d] = self.dims;
+        let row = w * 8;
+        let padded =
+            row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("bricks copy"),
+            size: u64::from(padded) * u64::from(h) * u64::from(d),
+            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("bricks copy"),
+            });
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(padded),
+                    rows_per_image: Some(h),
+                },
+            },
+            wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: d,
+            },
+        );
+        ctx.queue.submit([encoder.finish()]);
+        let bytes = readback::read_bytes_blocking(ctx, &buffer, buffer.size())?;
+        Ok(bytes
+            .chunks(padded as usize)
+            .flat_map(|r| r[..row as usize].chunks_exact(8).map(decode_texel))
+            .collect())
+    }
+
+    /// Whether these are the bricks of `texture`.
+    pub fn of(&self, texture: &wgpu::Texture) -> bool {
+        self.source == *texture
+    }
+}
+
+/// What a frame projects: the volume, optionally one method's features, and optionally their
+/// bricks (skipping is on when the bricks of every texture used are given).
+#[derive(Clone, Copy)]
+pub struct Scene<'a> {
+    pub volume: &'a RenderVolume,
+    pub features: Option<&'a FeatureTexture>,
+    pub bricks: Option<&'a Bricks>,
+    pub feature_bricks: Option<&'a Bricks>,
+}
+
+impl<'a> Scene<'a> {
+    /// A scene without bricks (no skipping).
+    pub fn new(volume: &'a RenderVolume, features: Option<&'a FeatureTexture>) -> Self {
+        Self {
+            volume,
+            features,
+            bricks: None,
+            feature_bricks: None,
+        }
+    }
+
+    /// Whether the bricks given belong to the textures used, so that skipping is exact.
+    pub fn skipping(&self) -> bool {
+        let volume_ok = self.bricks.is_some_and(|b| b.of(&self.volume.intensity));
+        let features_ok = match self.features {
+            None => true,
+            Some(f) => self.feature_bricks.is_some_and(|b| b.of(&f.texture)),
+        };
+        volume_ok && features_ok
+    }
 }
 
 impl Raycaster {
@@ -631,23 +748,117 @@ impl Raycaster {
             mipmap_filter: wgpu::MipmapFilterMode::Nearest,
             ..Default::default()
         });
+        let bricks_module = shaders::create_module(&ctx.device, "raycast_bricks.wgsl")?;
+        let make = |entry: &str| {
+            ctx.device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: None,
+                    module: &bricks_module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+        };
         Ok(Self {
             pipeline,
             no_features,
             linear_clamp,
+            bricks_intensity: make("bricks_intensity"),
+            bricks_features: make("bricks_features"),
         })
     }
 
-    /// Renders one frame into `target` (submitted; not waited for).
+    /// The brick extrema of the volume's intensity (one small compute pass).
+    pub fn intensity_bricks(&self, ctx: &GpuContext, volume: &RenderVolume) -> Bricks {
+        self.bricks(
+            ctx,
+            &self.bricks_intensity,
+            &volume.intensity,
+            &volume.intensity_view,
+            volume.dims,
+        )
+    }
+
+    /// The brick extrema of one method's features.
+    pub fn feature_bricks(&self, ctx: &GpuContext, features: &FeatureTexture) -> Bricks {
+        self.bricks(
+            ctx,
+            &self.bricks_features,
+            &features.texture,
+            &features.view,
+            features.dims,
+        )
+    }
+
+    fn bricks(
+        &self,
+        ctx: &GpuContext,
+        pipeline: &wgpu::ComputePipeline,
+        source: &wgpu::Texture,
+        source_view: &wgpu::TextureView,
+        dims: [u32; 3],
+    ) -> Bricks {
+        let nb = brick_dims(dims);
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("raycast bricks"),
+            size: wgpu::Extent3d {
+                width: nb[0],
+                height: nb[1],
+                depth_or_array_layers: nb[2],
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::Rgba16Float,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("raycast bricks"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                entry(0, wgpu::BindingResource::TextureView(source_view)),
+                entry(1, wgpu::BindingResource::TextureView(&view)),
+            ],
+        });
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("raycast bricks"),
+            });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("raycast bricks"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(nb[0].div_ceil(4), nb[1].div_ceil(4), nb[2].div_ceil(4));
+        }
+        ctx.queue.submit([encoder.finish()]);
+        Bricks {
+            dims: nb,
+            texture,
+            view,
+            source: source.clone(),
+        }
+    }
+
+    /// Renders one frame into `target` (submitted; not waited for). Bricks in the scene turn
+    /// on empty-space skipping, which does not change the picture or the picks.
     pub fn render(
         &self,
         ctx: &GpuContext,
-        volume: &RenderVolume,
-        features: Option<&FeatureTexture>,
+        scene: &Scene<'_>,
         camera: &Camera,
         settings: &RenderSettings,
         target: &mut RaycastTarget,
     ) -> Result<(), RaycastError> {
+        let (volume, features) = (scene.volume, scene.features);
         if let Some(f) = features
             && f.dims != volume.dims
         {
@@ -664,9 +875,18 @@ impl Raycaster {
             target.size,
             features.map(|f| f.max),
         );
+        let skipping = scene.skipping();
+        let p = if skipping { p.with_skipping() } else { p };
         ctx.queue
             .write_buffer(&target.params, 0, bytemuck::bytes_of(&p));
         let feature_view = features.map_or(&self.no_features, |f| &f.view);
+        let (brick_view, feature_brick_view) = match (skipping, scene.bricks) {
+            (true, Some(b)) => (
+                &b.view,
+                scene.feature_bricks.map_or(&self.no_features, |f| &f.view),
+            ),
+            _ => (&self.no_features, &self.no_features),
+        };
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("raycast"),
             layout: &self.pipeline.get_bind_group_layout(0),
@@ -680,6 +900,8 @@ impl Raycaster {
                 entry(3, wgpu::BindingResource::TextureView(&target.view)),
                 entry(4, target.pick.as_entire_binding()),
                 entry(5, wgpu::BindingResource::Sampler(&self.linear_clamp)),
+                entry(6, wgpu::BindingResource::TextureView(brick_view)),
+                entry(7, wgpu::BindingResource::TextureView(feature_brick_view)),
             ],
         });
         let mut encoder = ctx
@@ -805,14 +1027,18 @@ pub struct TwinScene {
     pub intensity: Vec<f32>,
     pub features: Option<Vec<[f32; 4]>>,
     pub feature_max: Option<[f32; 3]>,
+    /// Brick extrema ([`cpu_bricks`]): intensity `(max, min)`, features `(max V, A, B)`; the
+    /// twin skips bricks as the shader does when the params ask for it.
+    pub bricks: Option<Vec<[f32; 4]>>,
+    pub feature_bricks: Option<Vec<[f32; 4]>>,
 }
 
 impl TwinScene {
     /// The scene [`RenderVolume::upload`] and [`FeatureTexture::from_components`] would make.
     pub fn new(volume: &crate::Volume, components: Option<&crate::cpu::Components3>) -> Self {
         let half = |v: f32| half::f16::from_f32(v).to_f32();
-        let intensity = volume.to_f32().into_iter().map(half).collect();
-        let features = components.map(|c| {
+        let intensity: Vec<f32> = volume.to_f32().into_iter().map(half).collect();
+        let features: Option<Vec<[f32; 4]>> = components.map(|c| {
             (0..volume.voxel_count())
                 .map(|n| {
                     [
@@ -826,19 +1052,62 @@ impl TwinScene {
         });
         let feature_max =
             components.map(|c| std::array::from_fn(|k| c[k].iter().copied().fold(0.0, f32::max)));
+        let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
+        let bricks = cpu_bricks(dims, &intensity, |v: &f32| [*v, *v, *v]);
+        let feature_bricks = features
+            .as_ref()
+            .map(|f| cpu_bricks(dims, f, |v: &[f32; 4]| [v[0], v[1], v[2]]));
         Self {
-            dims: volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX)),
+            dims,
             intensity,
             features,
             feature_max,
+            bricks: Some(bricks.into_iter().map(|b| [b[0], b[1], 0.0, 0.0]).collect()),
+            feature_bricks: feature_bricks
+                .map(|fb| fb.into_iter().map(|b| [b[0], b[2], b[3], 0.0]).collect()),
         }
     }
+}
+
+/// The CPU twin of raycast_bricks.wgsl. For each brick: `[max c0, min c0, max c1, max c2]` of
+/// the three values `get` gives per voxel (intensity: all three the same).
+pub fn cpu_bricks<T>(dims: [u32; 3], values: &[T], get: impl Fn(&T) -> [f32; 3]) -> Vec<[f32; 4]> {
+    let nb = brick_dims(dims);
+    let d = dims.map(|x| x as usize);
+    let mut out = Vec::with_capacity(nb.iter().map(|&x| x as usize).product());
+    for bz in 0..nb[2] {
+        for by in 0..nb[1] {
+            for bx in 0..nb[0] {
+                let b = [bx, by, bz];
+                let lo: [usize; 3] = std::array::from_fn(|a| (b[a] * BRICK) as usize);
+                let hi: [usize; 3] =
+                    std::array::from_fn(|a| (lo[a] + BRICK as usize).min(d[a].saturating_sub(1)));
+                let mut e = [-BIG, BIG, -BIG, -BIG];
+                for k in lo[2]..=hi[2] {
+                    for j in lo[1]..=hi[1] {
+                        for i in lo[0]..=hi[0] {
+                            let v = get(&values[i + d[0] * (j + d[1] * k)]);
+                            e[0] = e[0].max(v[0]);
+                            e[1] = e[1].min(v[0]);
+                            e[2] = e[2].max(v[1]);
+                            e[3] = e[3].max(v[2]);
+                        }
+                    }
+                }
+                out.push(e);
+            }
+        }
+    }
+    out
 }
 
 /// The CPU twin's frame: RGBA8 rows (top first) and `(depth, channel code)` per pixel.
 pub struct TwinImage {
     pub rgba: Vec<u8>,
     pub depths: Vec<[f32; 2]>,
+    /// Intensity and feature samples evaluated (what skipping saves).
+    pub samples: u64,
+    pub feature_samples: u64,
 }
 
 /// The CPU twin of raycast.wgsl: the same f32 arithmetic, sample by sample.
@@ -847,6 +1116,8 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
     let n = w as usize * h as usize;
     let mut rgba = vec![0u8; n * 4];
     let mut depths = vec![[0.0f32, -1.0]; n];
+    let mut samples = 0u64;
+    let mut feature_samples = 0u64;
     let dims = p.dims;
     let top = [
         dims[0] as f32 - 1.0,
@@ -901,7 +1172,12 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
             let mut t_i = 0.0f32;
             let mut best_f = [-BIG; 3];
             let mut t_f = [0.0f32; 3];
-            for s in 0..count {
+            let skip = p.flags & FLAG_BRICKS != 0 && scene.bricks.is_some();
+            let nb = brick_dims(dims).map(|x| x as i32);
+            let mut last_brick = [-1i32; 3];
+            let (mut skip_i, mut skip_f) = (false, false);
+            let mut s = 0i32;
+            while s < count {
                 let t = (k0 + s) as f32 * p.step_mm;
                 let q: [f32; 3] = std::array::from_fn(|a| o[a] + d[a] * t);
                 let qc: [f32; 3] = std::array::from_fn(|a| q[a].clamp(0.0, top[a]));
@@ -909,6 +1185,42 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
                 let i0: [i32; 3] = std::array::from_fn(|a| base[a] as i32);
                 let i1: [i32; 3] = std::array::from_fn(|a| (i0[a] + 1).min(dims[a] as i32 - 1));
                 let f: [f32; 3] = std::array::from_fn(|a| qc[a] - base[a]);
+                if skip && let Some(bricks) = &scene.bricks {
+                    let b: [i32; 3] =
+                        std::array::from_fn(|a| (i0[a] / BRICK as i32).min(nb[a] - 1));
+                    if b != last_brick {
+                        last_brick = b;
+                        let bidx = (b[0] + nb[0] * (b[1] + nb[1] * b[2])) as usize;
+                        let bi = bricks[bidx];
+                        skip_i = if minip {
+                            bi[1] >= best_i
+                        } else {
+                            bi[0] <= best_i
+                        };
+                        skip_f = !use_features
+                            || scene.feature_bricks.as_ref().is_some_and(|fb| {
+                                (0..3)
+                                    .all(|c| !(p.feature_scale[c] > 0.0 && fb[bidx][c] > best_f[c]))
+                            });
+                        let ok = skip_i && skip_f;
+                        if ok {
+                            let mut te = BIG;
+                            for a in 0..3 {
+                                if d[a] > 1e-20 && b[a] < nb[a] - 1 {
+                                    te = te.min((((b[a] + 1) * BRICK as i32) as f32 - o[a]) / d[a]);
+                                } else if d[a] < -1e-20 && b[a] > 0 {
+                                    te = te.min(((b[a] * BRICK as i32) as f32 - o[a]) / d[a]);
+                                }
+                            }
+                            let te = te.min(t1) - 0.01 * p.step_mm;
+                            let next = (te / p.step_mm).floor() as i32 - k0;
+                            if next > s {
+                                s = next;
+                                continue;
+                            }
+                        }
+                    }
+                }
                 let corner = |cx: bool, cy: bool, cz: bool| {
                     index([
                         if cx { i1[0] } else { i0[0] },
@@ -939,17 +1251,24 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
                     );
                     lerp(lerp(v00, v10, f[1]), lerp(v01, v11, f[1]), f[2])
                 };
-                let v = tri(&|idx| scene.intensity[idx]);
-                if minip {
-                    if v < best_i {
+                if !skip_i {
+                    samples += 1;
+                    let v = tri(&|idx| scene.intensity[idx]);
+                    if minip {
+                        if v < best_i {
+                            best_i = v;
+                            t_i = t;
+                        }
+                    } else if v > best_i {
                         best_i = v;
                         t_i = t;
                     }
-                } else if v > best_i {
-                    best_i = v;
-                    t_i = t;
                 }
-                if use_features && let Some(feats) = &scene.features {
+                if use_features
+                    && !skip_f
+                    && let Some(feats) = &scene.features
+                {
+                    feature_samples += 1;
                     for c in 0..3 {
                         let fv = tri(&|idx| feats[idx][c]);
                         if fv > best_f[c] {
@@ -958,6 +1277,7 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
                         }
                     }
                 }
+                s += 1;
             }
             let show = p.flags & FLAG_INTENSITY != 0;
             let g = if show {
@@ -1004,7 +1324,12 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
             depths[pixel] = pick;
         }
     }
-    TwinImage { rgba, depths }
+    TwinImage {
+        rgba,
+        depths,
+        samples,
+        feature_samples,
+    }
 }
 
 /// The continuous pixel under a point of the widget/image (helper for callers mapping UI

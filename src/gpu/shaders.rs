@@ -6,6 +6,10 @@ pub const FILES: &[(&str, &str)] = &[
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("axis_mip.wgsl", include_str!("../../shaders/axis_mip.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
+    (
+        "raycast_bricks.wgsl",
+        include_str!("../../shaders/raycast_bricks.wgsl"),
+    ),
 ];
 
 /// Why a shader source could not be assembled.
