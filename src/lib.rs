@@ -4,6 +4,7 @@
 //! ARCHITECTURE.md at the repository root is the map of this crate.
 
 pub mod app;
+pub mod camera;
 pub mod cpu;
 pub mod gpu;
 pub mod io;

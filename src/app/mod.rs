@@ -10,6 +10,7 @@ mod axis_mip_pane;
 pub mod demo;
 pub mod features;
 pub mod load;
+pub mod mip_view;
 mod panels;
 mod probe;
 pub mod slices;

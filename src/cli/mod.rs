@@ -6,6 +6,7 @@ pub mod bench;
 pub mod features;
 pub mod info;
 pub mod phantom;
+pub mod render;
 pub mod reproduce;
 
 /// Shape-encoding MIPs of CT and MRI: Hessian and radial structure tensor features.
@@ -33,6 +34,9 @@ pub enum Command {
     Bench(bench::BenchArgs),
     /// Print a volume's dimensions, spacing, orientation, intensity range, modality and warnings.
     Info(info::InfoArgs),
+    /// Render a shape-encoding MIP to PNG (the viewer's ray caster); --pick PX,PY prints where
+    /// a pixel's maximum came from.
+    Render(render::RenderArgs),
     /// Reproduce the paper's experiments on the phantoms: Markdown report and PNG plots.
     Reproduce(reproduce::ReproduceArgs),
 }
@@ -92,6 +96,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Phantom(args) => phantom::run(args),
         Command::Features(args) => features::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Render(args) => render::run(args),
         Command::Reproduce(args) => reproduce::run(args),
         Command::Info(args) => info::run(&args),
     }

@@ -13,6 +13,7 @@ pub mod noise;
 pub mod pack;
 pub mod pipeline;
 pub mod probe;
+pub mod raycast;
 pub mod readback;
 pub mod render_volume;
 pub mod resample;

@@ -31,6 +31,11 @@ pub const FILES: &[(&str, &str)] = &[
     ("gradient.wgsl", include_str!("../../shaders/gradient.wgsl")),
     ("rst.wgsl", include_str!("../../shaders/rst.wgsl")),
     ("slice.wgsl", include_str!("../../shaders/slice.wgsl")),
+    ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
+    (
+        "raycast_bricks.wgsl",
+        include_str!("../../shaders/raycast_bricks.wgsl"),
+    ),
 ];
 
 /// Why a shader source could not be assembled.

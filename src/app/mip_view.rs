@@ -1,0 +1,620 @@
+//! The shape-encoding MIP viewport: an egui widget that owns the camera and the render settings,
+//! draws the GPU ray caster's image ([`crate::gpu::raycast`]) and turns mouse input into camera
+//! moves and picks. It re-renders only when something that changes the picture changed (camera,
+//! settings, size, the textures), so an idle viewer costs nothing.
+//!
+//! Mouse: left drag turns the volume (arcball), middle drag or shift + left drag pans, the
+//! wheel zooms towards the pointer, right drag sets the grey window (horizontal: width,
+//! vertical: level). A left click (press and release without moving: egui's click, not a drag)
+//! asks where that pixel's maximum came from; the answer arrives a frame or two later in
+//! [`MipViewOutput::pick`] (GPU readback with `map_async`, never blocking).
+//!
+//! Use (the app owns the GPU textures, the crosshair and the slice panes):
+//! ```ignore
+//! // once
+//! let mut mip = MipView::new();
+//! // every frame
+//! let scene = MipScene { volume: &render_volume, features: &[("RST", &rst), ("Hessian", &hes)] };
+//! mip.controls_ui(ui, &scene);
+//! let out = mip.image_ui(ui, &gpu, render_state, &scene);
+//! if let Some(pick) = out.pick {
+//!     crosshair = pick.voxel;                 // move the slice panes
+//!     mip.set_crosshair(Some(pick.world_mm)); // marker, and the slab's centre
+//! }
+//! ```
+
+use glam::{DVec2, DVec3};
+
+use crate::camera::{Camera, ViewPreset};
+use crate::gpu::GpuContext;
+use crate::gpu::raycast::{
+    Bricks, CHANNEL_COLOURS, PendingPick, Pick, Projection, RaycastTarget, Raycaster,
+    RenderSettings, Scene, Slab,
+};
+use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
+use crate::volume::orientation_label;
+
+/// What the viewport shows: the intensity and the feature sets computed so far, by name
+/// (e.g. "RST", "Hessian"). Switching between them never recomputes anything.
+pub struct MipScene<'a> {
+    pub volume: &'a RenderVolume,
+    pub features: &'a [(&'a str, &'a FeatureTexture)],
+}
+
+/// What happened in the viewport this frame.
+pub struct MipViewOutput {
+    /// The image's response (hover, clicks, drags).
+    pub response: egui::Response,
+    /// A pick that finished this frame: move the crosshair there.
+    pub pick: Option<Pick>,
+    /// The image pixel under the pointer.
+    pub hover_pixel: Option<[u32; 2]>,
+    /// Whether a new frame was rendered this frame.
+    pub rendered: bool,
+}
+
+/// Everything that changes the picture: a new frame is rendered only when it differs.
+#[derive(Clone, PartialEq)]
+struct FrameKey {
+    camera: Camera,
+    settings: RenderSettings,
+    size: [u32; 2],
+    volume: wgpu::Texture,
+    features: Option<(wgpu::Texture, [f32; 3])>,
+}
+
+/// The MIP viewport widget (see the module documentation).
+pub struct MipView {
+    pub camera: Camera,
+    /// Projection, window, grey and channel toggles and gains, step. Its `slab` is derived from
+    /// [`Self::slab_mm`] and the crosshair each frame.
+    pub settings: RenderSettings,
+    /// Slab thickness around the crosshair (or the view's centre), mm; `None`: whole volume.
+    pub slab_mm: Option<f64>,
+    /// The feature set shown, by name; `None`: intensity only.
+    pub mode: Option<String>,
+    /// The shared crosshair in LPS mm, drawn as a marker; the slab's centre.
+    pub crosshair_mm: Option<DVec3>,
+    /// Resolution (fraction of the full one) of the frames drawn while a drag or the wheel
+    /// moves the view; the full resolution follows when the mouse stops. 1 turns it off.
+    pub interactive_scale: f32,
+    mode_chosen: bool,
+    caster: Option<Raycaster>,
+    /// Brick extrema of the textures last shown (empty-space skipping), remade when they change.
+    bricks: Option<Bricks>,
+    feature_bricks: Option<Bricks>,
+    /// Full resolution (0) and the preview drawn while the mouse moves the view (1).
+    targets: [Option<RaycastTarget>; 2],
+    texture_ids: [Option<egui::TextureId>; 2],
+    /// Which target the user sees.
+    shown: usize,
+    last: Option<FrameKey>,
+    pending: Option<PendingPick>,
+    error: Option<String>,
+    frames: u64,
+    image_rect: egui::Rect,
+}
+
+impl Default for MipView {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl MipView {
+    pub fn new() -> Self {
+        Self {
+            camera: Camera::default(),
+            settings: RenderSettings {
+                // One trilinear fetch by the texture unit per sample: the interactive path.
+                hardware_filtering: true,
+                ..RenderSettings::default()
+            },
+            slab_mm: None,
+            mode: None,
+            crosshair_mm: None,
+            interactive_scale: 0.5,
+            mode_chosen: false,
+            caster: None,
+            bricks: None,
+            feature_bricks: None,
+            targets: [None, None],
+            texture_ids: [None, None],
+            shown: 0,
+            last: None,
+            pending: None,
+            error: None,
+            frames: 0,
+            image_rect: egui::Rect::NOTHING,
+        }
+    }
+
+    /// Moves the crosshair marker (and with it a slab's centre).
+    pub fn set_crosshair(&mut self, world_mm: Option<DVec3>) {
+        self.crosshair_mm = world_mm;
+    }
+
+    /// Frames the volume again (anterior view, zoom 1).
+    pub fn reset_view(&mut self, volume: &RenderVolume) {
+        self.camera =
+            Camera::for_volume(&volume.world_from_voxel, volume.dims, ViewPreset::Anterior);
+    }
+
+    /// How many frames the ray caster has rendered (tests: nothing re-renders when idle).
+    pub fn frames_rendered(&self) -> u64 {
+        self.frames
+    }
+
+    /// The last error (shader, readback, size), shown in the viewport too.
+    pub fn error(&self) -> Option<&str> {
+        self.error.as_deref()
+    }
+
+    /// Whether the reduced-resolution frame of a drag or wheel move is shown.
+    pub fn showing_preview(&self) -> bool {
+        self.shown == 1
+    }
+
+    /// Whether a pick is being read back.
+    pub fn pick_pending(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// The screen position of a world point in the last frame (e.g. to click it in a test).
+    pub fn screen_pos_of(&self, world_mm: DVec3) -> Option<egui::Pos2> {
+        let view = self.shown_target()?.rendered()?;
+        let (p, _) = view.camera.project(world_mm, view.size);
+        let rect = self.image_rect;
+        let x = rect.left() + (p.x as f32 / view.size[0] as f32) * rect.width();
+        let y = rect.top() + (p.y as f32 / view.size[1] as f32) * rect.height();
+        let pos = egui::pos2(x, y);
+        rect.contains(pos).then_some(pos)
+    }
+
+    fn shown_target(&self) -> Option<&RaycastTarget> {
+        self.targets[self.shown].as_ref()
+    }
+
+    /// The image pixel under a screen position.
+    pub fn pixel_at(&self, pos: egui::Pos2) -> Option<[u32; 2]> {
+        let target = self.shown_target()?;
+        let rect = self.image_rect;
+        if !rect.contains(pos) || rect.width() <= 0.0 || rect.height() <= 0.0 {
+            return None;
+        }
+        let u = f64::from((pos.x - rect.left()) / rect.width());
+        let v = f64::from((pos.y - rect.top()) / rect.height());
+        crate::gpu::raycast::pixel_of_uv(DVec2::new(u, v), target.size)
+    }
+
+    /// The feature texture of the current mode, if the scene has it.
+    fn features<'a>(&self, scene: &MipScene<'a>) -> Option<&'a FeatureTexture> {
+        let name = self.mode.as_deref()?;
+        scene
+            .features
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, f)| *f)
+    }
+
+    /// The toolbar: mode, preset views, projection, channels and gains, window, slab.
+    pub fn controls_ui(&mut self, ui: &mut egui::Ui, scene: &MipScene<'_>) {
+        // The first feature set the scene offers is shown unless somebody chose a mode.
+        if !self.mode_chosen
+            && self.mode.is_none()
+            && let Some((name, _)) = scene.features.first()
+        {
+            self.mode = Some((*name).to_owned());
+            self.mode_chosen = true;
+        }
+        ui.horizontal_wrapped(|ui| {
+            let selected = self.mode.clone().unwrap_or_else(|| "Intensity".to_owned());
+            egui::ComboBox::from_id_salt("mip mode")
+                .selected_text(selected)
+                .show_ui(ui, |ui| {
+                    if ui
+                        .selectable_label(self.mode.is_none(), "Intensity")
+                        .clicked()
+                    {
+                        self.mode = None;
+                        self.mode_chosen = true;
+                    }
+                    for (name, _) in scene.features {
+                        let on = self.mode.as_deref() == Some(*name);
+                        if ui.selectable_label(on, *name).clicked() {
+                            self.mode = Some((*name).to_owned());
+                            self.mode_chosen = true;
+                        }
+                    }
+                })
+                .response
+                .on_hover_text("what the colours show: intensity only, or a feature set");
+            ui.separator();
+            for (label, preset) in [
+                ("A", ViewPreset::Anterior),
+                ("P", ViewPreset::Posterior),
+                ("L", ViewPreset::Left),
+                ("R", ViewPreset::Right),
+                ("S", ViewPreset::Superior),
+                ("I", ViewPreset::Inferior),
+            ] {
+                if ui
+                    .small_button(label)
+                    .on_hover_text(format!("{} view", preset.name()))
+                    .clicked()
+                {
+                    self.camera.set_preset(preset);
+                }
+            }
+            if ui
+                .small_button("Reset")
+                .on_hover_text("frame the volume, anterior view")
+                .clicked()
+            {
+                self.reset_view(scene.volume);
+            }
+            ui.separator();
+            let mut minip = self.settings.projection == Projection::MinIp;
+            if ui
+                .checkbox(&mut minip, "MinIP")
+                .on_hover_text("minimum intensity projection of the grey (airways)")
+                .changed()
+            {
+                self.settings.projection = if minip {
+                    Projection::MinIp
+                } else {
+                    Projection::Mip
+                };
+            }
+            ui.checkbox(&mut self.settings.show_intensity, "Grey");
+            if self.features(scene).is_some() {
+                ui.separator();
+                for (c, name) in ["Vessels", "Airways", "Blobs"].iter().enumerate() {
+                    let [r, g, b] = CHANNEL_COLOURS[c].map(|x| (x * 255.0) as u8);
+                    let ch = &mut self.settings.channels[c];
+                    ui.checkbox(
+                        &mut ch.on,
+                        egui::RichText::new(*name).color(egui::Color32::from_rgb(r, g, b)),
+                    );
+                    ui.add(
+                        egui::DragValue::new(&mut ch.gain)
+                            .range(0.05..=50.0)
+                            .speed(0.02)
+                            .prefix("x"),
+                    )
+                    .on_hover_text("gain: 1 shows the feature's maximum at full colour");
+                }
+            }
+            ui.separator();
+            ui.label("W");
+            let (mut lo, mut hi) = self.settings.window;
+            ui.add(egui::DragValue::new(&mut lo).speed(5.0))
+                .on_hover_text("grey window: lowest value (black)");
+            ui.add(egui::DragValue::new(&mut hi).speed(5.0))
+                .on_hover_text("grey window: highest value (white)");
+            if hi > lo {
+                self.settings.window = (lo, hi);
+            }
+            ui.separator();
+            let mut slab = self.slab_mm.is_some();
+            ui.checkbox(&mut slab, "Slab")
+                .on_hover_text("only what lies within the slab around the crosshair");
+            if slab {
+                let mut t = self.slab_mm.unwrap_or(10.0);
+                ui.add(
+                    egui::DragValue::new(&mut t)
+                        .range(0.5..=2000.0)
+                        .speed(0.5)
+                        .suffix(" mm"),
+                )
+                .on_hover_text("slab thickness");
+                self.slab_mm = Some(t);
+            } else {
+                self.slab_mm = None;
+            }
+        });
+    }
+
+    /// The image: fills the available space, handles the mouse, renders if needed.
+    pub fn image_ui(
+        &mut self,
+        ui: &mut egui::Ui,
+        gpu: &GpuContext,
+        render_state: &eframe::egui_wgpu::RenderState,
+        scene: &MipScene<'_>,
+    ) -> MipViewOutput {
+        let (rect, response) =
+            ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
+        self.image_rect = rect;
+        let ppp = ui.ctx().pixels_per_point();
+        let max = gpu.limits.max_texture_dimension_2d.max(1);
+        // Input works in full-resolution pixels, whatever resolution is drawn.
+        let full = [
+            ((rect.width() * ppp).round() as u32).clamp(1, max),
+            ((rect.height() * ppp).round() as u32).clamp(1, max),
+        ];
+        let new_volume = self
+            .last
+            .as_ref()
+            .is_none_or(|k| k.volume != scene.volume.intensity);
+        if new_volume {
+            self.reset_view(scene.volume);
+        }
+
+        // Input, against the frame the user is looking at.
+        let mut pick = None;
+        let to_px = |p: egui::Pos2| {
+            DVec2::new(
+                f64::from((p.x - rect.left()) * ppp),
+                f64::from((p.y - rect.top()) * ppp),
+            )
+        };
+        let shift = ui.input(|i| i.modifiers.shift);
+        if let Some(pos) = response.interact_pointer_pos() {
+            let delta = response.drag_delta();
+            if delta != egui::Vec2::ZERO {
+                let (from, to) = (to_px(pos - delta), to_px(pos));
+                if response.dragged_by(egui::PointerButton::Middle)
+                    || (shift && response.dragged_by(egui::PointerButton::Primary))
+                {
+                    self.camera.pan(to.x - from.x, to.y - from.y, full);
+                } else if response.dragged_by(egui::PointerButton::Primary) {
+                    self.camera.arcball(from, to, full);
+                } else if response.dragged_by(egui::PointerButton::Secondary) {
+                    let (lo, hi) = self.settings.window;
+                    let width = (hi - lo + 2.0 * delta.x).max(1.0);
+                    let level = 0.5 * (lo + hi) - 2.0 * delta.y;
+                    self.settings.window = (level - 0.5 * width, level + 0.5 * width);
+                }
+            }
+        }
+        if response.clicked()
+            && let (Some(pos), Some(gpu_target)) =
+                (response.interact_pointer_pos(), self.shown_target())
+            && let Some(px) = self.pixel_at(pos)
+        {
+            self.pending = gpu_target.start_pick(gpu, px);
+        }
+        let mut wheeled = false;
+        if response.hovered() {
+            let wheel: f32 = ui.input(|i| {
+                i.events
+                    .iter()
+                    .map(|e| match e {
+                        egui::Event::MouseWheel { unit, delta, .. } => match unit {
+                            egui::MouseWheelUnit::Point => delta.y,
+                            egui::MouseWheelUnit::Line => delta.y * 40.0,
+                            egui::MouseWheelUnit::Page => delta.y * 400.0,
+                        },
+                        _ => 0.0,
+                    })
+                    .sum()
+            });
+            if wheel != 0.0
+                && let Some(pos) = response.hover_pos()
+            {
+                self.camera
+                    .zoom_at((f64::from(wheel) * 0.002).exp(), to_px(pos), full);
+                wheeled = true;
+            }
+        }
+        if let Some(pending) = &mut self.pending {
+            match pending.poll() {
+                None => ui.ctx().request_repaint(),
+                Some(Ok(p)) => {
+                    pick = p;
+                    self.pending = None;
+                }
+                Some(Err(e)) => {
+                    self.error = Some(format!("pick: {e}"));
+                    self.pending = None;
+                }
+            }
+        }
+
+        // Render if anything changed; a reduced resolution while the mouse moves the view.
+        let interacting = response.dragged() || wheeled;
+        let scale = if self.interactive_scale.is_finite() {
+            self.interactive_scale.clamp(0.1, 1.0)
+        } else {
+            1.0
+        };
+        let slot = usize::from(interacting && scale < 1.0);
+        let size = if slot == 1 {
+            full.map(|s| ((s as f32 * scale).round() as u32).max(1))
+        } else {
+            full
+        };
+        if interacting {
+            // The full frame follows when the mouse stops.
+            ui.ctx().request_repaint();
+        }
+        let features = self.features(scene);
+        let mut settings = self.settings;
+        settings.slab = self.slab_mm.map(|t| Slab {
+            centre_mm: self.crosshair_mm.unwrap_or(self.camera.centre_mm),
+            thickness_mm: t,
+        });
+        let key = FrameKey {
+            camera: self.camera,
+            settings,
+            size,
+            volume: scene.volume.intensity.clone(),
+            features: features.map(|f| (f.texture.clone(), f.max)),
+        };
+        let mut rendered = false;
+        if self.last.as_ref() != Some(&key) {
+            match self.render(
+                gpu,
+                render_state,
+                scene.volume,
+                features,
+                &settings,
+                slot,
+                size,
+            ) {
+                Ok(()) => {
+                    self.shown = slot;
+                    rendered = true;
+                    self.frames += 1;
+                    self.error = None;
+                }
+                Err(e) => self.error = Some(e),
+            }
+            self.last = Some(key);
+        }
+
+        // Draw.
+        let painter = ui.painter_at(rect);
+        painter.rect_filled(rect, 0.0, egui::Color32::BLACK);
+        if let Some(id) = self.texture_ids[self.shown] {
+            painter.image(
+                id,
+                rect,
+                egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0)),
+                egui::Color32::WHITE,
+            );
+        }
+        self.draw_overlay(&painter, rect);
+
+        let hover_pixel = response.hover_pos().and_then(|p| self.pixel_at(p));
+        MipViewOutput {
+            response,
+            pick,
+            hover_pixel,
+            rendered,
+        }
+    }
+
+    /// Toolbar above, image below: the whole viewport.
+    pub fn ui(
+        &mut self,
+        ui: &mut egui::Ui,
+        gpu: &GpuContext,
+        render_state: &eframe::egui_wgpu::RenderState,
+        scene: &MipScene<'_>,
+    ) -> MipViewOutput {
+        self.controls_ui(ui, scene);
+        self.image_ui(ui, gpu, render_state, scene)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn render(
+        &mut self,
+        gpu: &GpuContext,
+        render_state: &eframe::egui_wgpu::RenderState,
+        volume: &RenderVolume,
+        features: Option<&FeatureTexture>,
+        settings: &RenderSettings,
+        slot: usize,
+        size: [u32; 2],
+    ) -> Result<(), String> {
+        if self.caster.is_none() {
+            self.caster = Some(Raycaster::new(gpu).map_err(|e| e.to_string())?);
+        }
+        let resized = self.targets[slot].as_ref().is_none_or(|t| t.size != size);
+        if resized {
+            self.targets[slot] = Some(RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?);
+        }
+        let (Some(caster), Some(target)) = (&self.caster, &mut self.targets[slot]) else {
+            return Err("the ray caster is not ready".to_owned());
+        };
+        if !self
+            .bricks
+            .as_ref()
+            .is_some_and(|b| b.of(&volume.intensity))
+        {
+            self.bricks = Some(caster.intensity_bricks(gpu, volume));
+        }
+        if let Some(f) = features
+            && !self
+                .feature_bricks
+                .as_ref()
+                .is_some_and(|b| b.of(&f.texture))
+        {
+            self.feature_bricks = Some(caster.feature_bricks(gpu, f));
+        }
+        let scene = Scene {
+            volume,
+            features,
+            bricks: self.bricks.as_ref(),
+            feature_bricks: self.feature_bricks.as_ref(),
+        };
+        caster
+            .render(gpu, &scene, &self.camera, settings, target)
+            .map_err(|e| e.to_string())?;
+        if resized {
+            let mut renderer = render_state.renderer.write();
+            match self.texture_ids[slot] {
+                Some(id) => renderer.update_egui_texture_from_wgpu_texture(
+                    &gpu.device,
+                    &target.view,
+                    wgpu::FilterMode::Linear,
+                    id,
+                ),
+                None => {
+                    self.texture_ids[slot] = Some(renderer.register_native_texture(
+                        &gpu.device,
+                        &target.view,
+                        wgpu::FilterMode::Linear,
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Orientation letters on the four edges, the crosshair marker, errors.
+    fn draw_overlay(&self, painter: &egui::Painter, rect: egui::Rect) {
+        let (right, up, _) = self.camera.basis();
+        let font = egui::FontId::proportional(14.0);
+        let colour = egui::Color32::from_rgb(230, 200, 80);
+        let edge = 6.0;
+        for (dir, anchor, pos) in [
+            (
+                right,
+                egui::Align2::RIGHT_CENTER,
+                egui::pos2(rect.right() - edge, rect.center().y),
+            ),
+            (
+                -right,
+                egui::Align2::LEFT_CENTER,
+                egui::pos2(rect.left() + edge, rect.center().y),
+            ),
+            (
+                up,
+                egui::Align2::CENTER_TOP,
+                egui::pos2(rect.center().x, rect.top() + edge),
+            ),
+            (
+                -up,
+                egui::Align2::CENTER_BOTTOM,
+                egui::pos2(rect.center().x, rect.bottom() - edge),
+            ),
+        ] {
+            painter.text(pos, anchor, orientation_label(dir), font.clone(), colour);
+        }
+        if let Some(c) = self.crosshair_mm
+            && let Some(p) = self.screen_pos_of(c)
+        {
+            let stroke = egui::Stroke::new(1.5, egui::Color32::from_rgb(80, 220, 80));
+            for (a, b) in [
+                (egui::vec2(-10.0, 0.0), egui::vec2(-3.0, 0.0)),
+                (egui::vec2(3.0, 0.0), egui::vec2(10.0, 0.0)),
+                (egui::vec2(0.0, -10.0), egui::vec2(0.0, -3.0)),
+                (egui::vec2(0.0, 3.0), egui::vec2(0.0, 10.0)),
+            ] {
+                painter.line_segment([p + a, p + b], stroke);
+            }
+        }
+        if let Some(e) = &self.error {
+            painter.text(
+                rect.left_bottom() + egui::vec2(edge, -edge),
+                egui::Align2::LEFT_BOTTOM,
+                e,
+                font,
+                egui::Color32::from_rgb(255, 90, 90),
+            );
+        }
+    }
+}

@@ -1,0 +1,450 @@
+//! `shapecast render INPUT --out MIP.png`: the viewer's ray caster headless. Features come from
+//! [`FeatureJob`] (the same job the app runs), the picture from [`Raycaster`]; `--pick PX,PY`
+//! prints as JSON where that pixel's maximum came from (click-to-navigate without a browser),
+//! `--bench N` times N frames.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use glam::DVec3;
+
+use crate::camera::{Camera, ViewPreset};
+use crate::cpu::Preset;
+use crate::cpu::pipeline::{Method, Request};
+use crate::gpu::GpuContext;
+use crate::gpu::pipeline::{FeatureJob, JobState};
+use crate::gpu::raycast::{
+    self, Pick, Projection, RaycastTarget, Raycaster, RenderSettings, Scene, Slab,
+};
+use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
+use crate::io;
+use crate::phantom::{self, Phantom};
+use crate::volume::{Modality, Volume};
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RenderMethod {
+    /// Intensity only (no features).
+    Intensity,
+    Hessian,
+    Li,
+    Frangi,
+    Gst,
+    Rst,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ViewArg {
+    Anterior,
+    Posterior,
+    Left,
+    Right,
+    Superior,
+    Inferior,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OnlyArg {
+    Vesselness,
+    Airwayness,
+    Blobness,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// A volume file or folder (as `shapecast features` reads them), or `phantom:NAME`
+    /// (e.g. phantom:bifurcation-nodules-far, phantom:demo).
+    pub input: String,
+    #[arg(long, value_enum, default_value = "rst")]
+    pub method: RenderMethod,
+    /// Preset view (radiological convention; see src/camera.rs).
+    #[arg(long, value_enum, default_value = "anterior")]
+    pub view: ViewArg,
+    /// Turn the view: positive yaw moves the viewer to the screen's right, degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub yaw_deg: f64,
+    /// Turn the view: positive pitch moves the viewer up, degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub pitch_deg: f64,
+    /// Magnification (1 = the volume's bounding sphere fills the shorter side).
+    #[arg(long, default_value_t = 1.0)]
+    pub zoom: f64,
+    /// Image size, WxH.
+    #[arg(long, default_value = "512x512")]
+    pub size: String,
+    /// Show only this feature (over the grey intensity).
+    #[arg(long, value_enum)]
+    pub only: Option<OnlyArg>,
+    /// Slab thickness around the centre along the view, mm (default: the whole volume).
+    #[arg(long)]
+    pub slab_mm: Option<f64>,
+    /// Centre of the view and of the slab, LPS mm X,Y,Z (default: the volume's centre).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub centre_mm: Option<Vec<f64>>,
+    /// lymph-nodes, lung-nodules, airways or vessels: the features' preset.
+    #[arg(long, default_value = "lymph-nodes")]
+    pub preset: String,
+    /// Grey window LO,HI in HU (default: mediastinum for CT, lung for the lung and airway
+    /// presets, the value range otherwise).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub window: Option<Vec<f32>>,
+    /// Feature gains: one for all, or V,A,B (1 = each feature's maximum is full colour).
+    #[arg(long, value_delimiter = ',')]
+    pub gain: Option<Vec<f32>>,
+    /// Minimum intensity projection for the grey (airways).
+    #[arg(long)]
+    pub minip: bool,
+    /// Leave the grey intensity out.
+    #[arg(long)]
+    pub no_intensity: bool,
+    /// Trilinear interpolation by the texture unit instead of in the shader (faster; the
+    /// default shader path matches the CPU twin exactly).
+    #[arg(long)]
+    pub hw_filter: bool,
+    /// Do not skip empty space (same picture, slower; for comparisons).
+    #[arg(long)]
+    pub no_skip: bool,
+    /// Voxel spacing of a `phantom:` input, mm: one value or X,Y,Z.
+    #[arg(long, value_delimiter = ',', default_value = "0.5")]
+    pub spacing_mm: Vec<f64>,
+    /// Output PNG.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print, as JSON, where pixel PX,PY's maximum came from.
+    #[arg(long, value_delimiter = ',')]
+    pub pick: Option<Vec<u32>>,
+    /// Render this many frames and print the frame time.
+    #[arg(long)]
+    pub bench: Option<u32>,
+}
+
+fn parse_size(s: &str) -> anyhow::Result<[u32; 2]> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("--size {s:?}: expected WxH, e.g. 768x768"))?;
+    let w: u32 = w.trim().parse().with_context(|| format!("--size {s:?}"))?;
+    let h: u32 = h.trim().parse().with_context(|| format!("--size {s:?}"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        bail!("--size {s:?}: each side must be 1..16384");
+    }
+    Ok([w, h])
+}
+
+/// Loads `INPUT`: a file or folder, or `phantom:NAME`.
+pub fn load_input(input: &str, spacing_mm: &[f64]) -> anyhow::Result<Volume> {
+    if let Some(name) = input.strip_prefix("phantom:") {
+        if name == "demo" {
+            return Ok(phantom::demo());
+        }
+        let p = Phantom::by_name(name, None).with_context(|| {
+            format!(
+                "unknown phantom {name:?}; known: {}, {}",
+                phantom::NAMES.join(", "),
+                phantom::EXTRA_NAMES.join(", ")
+            )
+        })?;
+        let spacing = crate::cli::phantom::spacing3(spacing_mm)?;
+        return Ok(p.render_noisy(spacing, p.default_noise_hu, 1));
+    }
+    let path = PathBuf::from(input);
+    let files = crate::cli::features::read_input(&path)?;
+    let loaded = io::load(&files).with_context(|| format!("loading {input}"))?;
+    for n in &loaded.notes {
+        eprintln!("note: {n}");
+    }
+    for w in &loaded.volume.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(loaded.volume)
+}
+
+fn method(m: RenderMethod) -> Option<Method> {
+    match m {
+        RenderMethod::Intensity => None,
+        RenderMethod::Hessian => Some(Method::Hessian),
+        RenderMethod::Li => Some(Method::Li),
+        RenderMethod::Frangi => Some(Method::Frangi),
+        RenderMethod::Gst => Some(Method::Gst),
+        RenderMethod::Rst => Some(Method::Rst),
+    }
+}
+
+fn preset_view(v: ViewArg) -> ViewPreset {
+    match v {
+        ViewArg::Anterior => ViewPreset::Anterior,
+        ViewArg::Posterior => ViewPreset::Posterior,
+        ViewArg::Left => ViewPreset::Left,
+        ViewArg::Right => ViewPreset::Right,
+        ViewArg::Superior => ViewPreset::Superior,
+        ViewArg::Inferior => ViewPreset::Inferior,
+    }
+}
+
+/// The grey window a radiologist would start with.
+pub fn default_window(volume: &Volume, preset: Preset) -> (f32, f32) {
+    if volume.modality == Modality::Ct {
+        match preset {
+            Preset::LungNodules | Preset::Airways => (-1350.0, 150.0),
+            _ => (-160.0, 240.0),
+        }
+    } else {
+        volume.value_range().unwrap_or((0.0, 1.0))
+    }
+}
+
+/// Runs the feature job to the end, printing its progress to stderr.
+pub fn compute_features(
+    ctx: &GpuContext,
+    volume: &Volume,
+    request: &Request,
+) -> anyhow::Result<FeatureTexture> {
+    let mut job = FeatureJob::new(ctx, volume, request)?;
+    let started = web_time::Instant::now();
+    loop {
+        match job.step(ctx)? {
+            JobState::Done => break,
+            JobState::Running { fraction, stage } => {
+                eprint!("\r{stage}: {:3.0}%", 100.0 * fraction);
+            }
+        }
+    }
+    for n in job.notes() {
+        eprintln!("{n}");
+    }
+    eprintln!(
+        "{:?} features on {:?} voxels in {:.1} s",
+        request.method,
+        volume.dims,
+        started.elapsed().as_secs_f64()
+    );
+    job.finish()
+        .context("the feature job finished without features")
+}
+
+pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    if args.out.is_none() && args.pick.is_none() && args.bench.is_none() {
+        bail!("nothing to do: give --out MIP.png, --pick PX,PY or --bench N");
+    }
+    let size = parse_size(&args.size)?;
+    let preset = Preset::from_name(&args.preset).with_context(|| {
+        let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
+        format!(
+            "unknown preset {:?}; known: {}",
+            args.preset,
+            names.join(", ")
+        )
+    })?;
+    let pick_pixel = match args.pick.as_deref() {
+        None => None,
+        Some([x, y]) if *x < size[0] && *y < size[1] => Some([*x, *y]),
+        Some(p) => bail!("--pick {p:?}: expected PX,PY inside the {size:?} image"),
+    };
+    if !(args.zoom.is_finite() && args.zoom > 0.0) {
+        bail!("--zoom must be positive");
+    }
+    let volume = load_input(&args.input, &args.spacing_mm)?;
+    let ctx = pollster::block_on(GpuContext::new_headless())?;
+    let render_volume = RenderVolume::upload(&ctx, &volume)?;
+    let features = match method(args.method) {
+        None => None,
+        Some(m) => {
+            let mut request = Request::new(m);
+            request.preset = preset;
+            Some(compute_features(&ctx, &volume, &request)?)
+        }
+    };
+
+    let mut camera = Camera::for_volume(
+        &render_volume.world_from_voxel,
+        render_volume.dims,
+        preset_view(args.view),
+    );
+    if let Some(c) = &args.centre_mm {
+        let [x, y, z] = c[..] else {
+            bail!("--centre-mm takes X,Y,Z");
+        };
+        camera.centre_mm = DVec3::new(x, y, z);
+    }
+    camera.orbit(args.yaw_deg, args.pitch_deg);
+    camera.zoom = args.zoom;
+
+    let mut settings = RenderSettings {
+        window: default_window(&volume, preset),
+        ..Default::default()
+    };
+    if let Some(w) = &args.window {
+        let [lo, hi] = w[..] else {
+            bail!("--window takes LO,HI");
+        };
+        if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+            bail!("--window {lo},{hi}: need LO < HI");
+        }
+        settings.window = (lo, hi);
+    }
+    if let Some(g) = &args.gain {
+        let gains = match g[..] {
+            [x] => [x; 3],
+            [v, a, b] => [v, a, b],
+            _ => bail!("--gain takes one value or V,A,B"),
+        };
+        for (c, gain) in settings.channels.iter_mut().zip(gains) {
+            c.gain = gain;
+        }
+    }
+    if let Some(only) = args.only {
+        let keep = only as usize;
+        for (c, ch) in settings.channels.iter_mut().enumerate() {
+            ch.on = c == keep;
+        }
+    }
+    settings.projection = if args.minip {
+        Projection::MinIp
+    } else {
+        Projection::Mip
+    };
+    settings.show_intensity = !args.no_intensity;
+    settings.hardware_filtering = args.hw_filter;
+    if let Some(t) = args.slab_mm {
+        if !(t.is_finite() && t > 0.0) {
+            bail!("--slab-mm must be positive");
+        }
+        settings.slab = Some(Slab {
+            centre_mm: camera.centre_mm,
+            thickness_mm: t,
+        });
+    }
+
+    let caster = Raycaster::new(&ctx)?;
+    let bricks = (!args.no_skip).then(|| caster.intensity_bricks(&ctx, &render_volume));
+    let feature_bricks = match (&features, args.no_skip) {
+        (Some(f), false) => Some(caster.feature_bricks(&ctx, f)),
+        _ => None,
+    };
+    let scene = Scene {
+        volume: &render_volume,
+        features: features.as_ref(),
+        bricks: bricks.as_ref(),
+        feature_bricks: feature_bricks.as_ref(),
+    };
+    let mut target = RaycastTarget::new(&ctx, size)?;
+    caster.render(&ctx, &scene, &camera, &settings, &mut target)?;
+
+    if let Some(frames) = args.bench {
+        bench(
+            &ctx,
+            &caster,
+            &scene,
+            &camera,
+            &settings,
+            &mut target,
+            frames,
+        )?;
+    }
+    if let Some(out) = &args.out {
+        let rgba = target.read_image_blocking(&ctx)?;
+        image::save_buffer(
+            out,
+            &rgba,
+            size[0],
+            size[1],
+            image::ExtendedColorType::Rgba8,
+        )
+        .with_context(|| format!("writing {}", out.display()))?;
+        eprintln!(
+            "{} {:?} {}x{} -> {}",
+            volume.source,
+            args.method,
+            size[0],
+            size[1],
+            out.display()
+        );
+    }
+    if let Some(pixel) = pick_pixel {
+        let pick = target.pick_blocking(&ctx, pixel)?;
+        let json = pick_json(&ctx, &volume, features.as_ref(), args.method, pixel, pick)?;
+        println!("{}", serde_json::to_string_pretty(&json)?);
+    }
+    Ok(())
+}
+
+fn bench(
+    ctx: &GpuContext,
+    caster: &Raycaster,
+    scene: &Scene<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    target: &mut RaycastTarget,
+    frames: u32,
+) -> anyhow::Result<()> {
+    // The first frame (already submitted) compiles the pipeline: wait for it before timing.
+    ctx.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .context("waiting for the GPU")?;
+    let mut times = Vec::new();
+    let mut cam = *camera;
+    for _ in 0..frames.max(1) {
+        // Turn a little every frame, as a drag does.
+        cam.orbit(2.0, 0.0);
+        let t = web_time::Instant::now();
+        caster.render(ctx, scene, &cam, settings, target)?;
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .context("waiting for the GPU")?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let mean = times.iter().sum::<f64>() / times.len() as f64;
+    let min = times.iter().copied().fold(f64::INFINITY, f64::min);
+    eprintln!(
+        "bench: {} frames of {}x{} over {:?} voxels ({}) on {}: mean {mean:.1} ms, min {min:.1} ms",
+        times.len(),
+        target.size[0],
+        target.size[1],
+        scene.volume.dims,
+        match (scene.features.is_some(), scene.skipping()) {
+            (true, true) => "intensity + features, skipping empty space",
+            (true, false) => "intensity + features, no skipping",
+            (false, true) => "intensity only, skipping empty space",
+            (false, false) => "intensity only, no skipping",
+        },
+        ctx.adapter_label()
+    );
+    println!(
+        "{{\"frame_ms_mean\": {mean:.3}, \"frame_ms_min\": {min:.3}, \"frames\": {}}}",
+        times.len()
+    );
+    Ok(())
+}
+
+fn pick_json(
+    ctx: &GpuContext,
+    volume: &Volume,
+    features: Option<&FeatureTexture>,
+    method: RenderMethod,
+    pixel: [u32; 2],
+    pick: Option<Pick>,
+) -> anyhow::Result<serde_json::Value> {
+    use serde_json::json;
+    let Some(p) = pick else {
+        return Ok(json!({ "pixel": pixel, "hit": false }));
+    };
+    let [i, j, k] = p.voxel;
+    let mut out = json!({
+        "pixel": pixel,
+        "hit": true,
+        "channel": p.channel.name(),
+        "depth_mm": p.depth_mm,
+        "lps_mm": [p.world_mm.x, p.world_mm.y, p.world_mm.z],
+        "voxel": p.voxel,
+        "voxel_continuous": [p.voxel_f.x, p.voxel_f.y, p.voxel_f.z],
+        "intensity": volume.value_at(i, j, k),
+    });
+    if let Some(f) = features {
+        let v = raycast::read_feature_texel_blocking(ctx, f, p.voxel)?;
+        out["method"] = json!(format!("{method:?}").to_lowercase());
+        out["features"] = json!({
+            "vesselness": v[0],
+            "airwayness": v[1],
+            "blobness": v[2],
+        });
+    }
+    Ok(out)
+}
