@@ -6,7 +6,6 @@
 //! one bounded step (`advance`), then draws. A failed load shows a dismissable message and keeps
 //! the previous volume.
 
-mod axis_mip_pane;
 pub mod demo;
 pub mod features;
 pub mod load;
@@ -20,7 +19,7 @@ pub mod window_level;
 
 use std::sync::Arc;
 
-use eframe::egui_wgpu::RenderState;
+use crate::gpu::render_volume::FeatureTexture;
 
 use crate::cpu::pipeline::Request;
 use crate::cpu::tf::Preset;
@@ -37,9 +36,9 @@ pub use load::LoadSource;
 pub use slices::SliceKind;
 pub use window_level::{Window, WindowPreset};
 
-use axis_mip_pane::AxisMipPane;
 use features::{FeatureManager, JobEvent};
 use load::{LoadJob, LoadStep};
+use mip_view::{MipScene, MipView};
 use slices::{PaneInputs, SlicePane};
 
 /// The eframe/egui wgpu configuration both targets use: the adapter's own limits and features
@@ -197,26 +196,6 @@ struct Scene {
     is_ct: bool,
 }
 
-/// What the MIP pane gets every frame. The ray caster's widget (`src/app/mip_view.rs`, branch
-/// `render`) takes these in place of the axis-MIP stand-in: the intensity texture, the
-/// displayed method's feature texture, the gains and toggles, the window, and the shared
-/// crosshair (voxel index; the slab centre, and where a click on a MIP pixel moves it).
-pub struct MipInputs<'a> {
-    pub gpu: &'a GpuContext,
-    pub render_state: &'a RenderState,
-    pub volume: &'a Volume,
-    pub render_volume: &'a RenderVolume,
-    /// Changes with every loaded volume.
-    pub generation: u64,
-    pub mode: DisplayMode,
-    /// The displayed method's features, once computed (`texture`, `id` changes per computation).
-    pub features: Option<&'a FeatureEntry>,
-    pub display: &'a FeatureDisplay,
-    /// Grey window (lo, hi), physical units.
-    pub window: (f32, f32),
-    pub crosshair: &'a mut [usize; 3],
-}
-
 pub struct ShapecastApp {
     gpu: Option<GpuContext>,
     options: AppOptions,
@@ -250,7 +229,7 @@ pub struct ShapecastApp {
     multi_layout: Layout,
     panes: [SlicePane; 3],
     slice_renderer: Option<SliceRenderer>,
-    mip_pane: AxisMipPane,
+    mip_view: MipView,
     probe: probe::ProbeState,
 
     show_about: bool,
@@ -327,7 +306,7 @@ impl ShapecastApp {
             multi_layout: Layout::MipAndSlices,
             panes: SliceKind::ALL.map(SlicePane::new),
             slice_renderer,
-            mip_pane: AxisMipPane::new(),
+            mip_view: MipView::new(),
             probe: probe::ProbeState::default(),
             show_about: false,
             drop_hover: false,
@@ -837,30 +816,46 @@ impl ShapecastApp {
                                 }
                             }
                             PaneId::Mip => {
-                                // The MIP pane. The ray caster's widget (src/app/mip_view.rs,
-                                // branch `render`) replaces this stand-in here, fed from the
-                                // same `MipInputs`: its scene is `scene.render` plus `entry`'s
-                                // texture under `self.mode.label()` (or every kept entry,
-                                // `self.features.entries()`); before drawing,
-                                // `set_crosshair(self.crosshair_lps_mm())`; a finished pick sets
-                                // `self.crosshair` to the pick's voxel. Its maximise button
-                                // sets `toggle = Some(id)`.
-                                let clicked = self.mip_pane.ui(
-                                    ui,
-                                    MipInputs {
-                                        gpu,
-                                        render_state,
-                                        volume: &scene.volume,
-                                        render_volume: &scene.render,
-                                        generation: scene.generation,
-                                        mode: self.mode,
-                                        features: entry,
-                                        display: &self.display,
-                                        window: self.window.range(),
-                                        crosshair: &mut self.crosshair,
-                                    },
-                                    maximised,
+                                // The shape MIP (paper section 5): the displayed method's
+                                // features over the windowed intensity; a click moves the
+                                // crosshair to the 3D point the pixel's maximum came from.
+                                let clicked = ui
+                                    .horizontal(|ui| {
+                                        ui.label(egui::RichText::new("MIP").strong());
+                                        let (icon, tip) = if maximised {
+                                            ("restore", "back to all panes")
+                                        } else {
+                                            ("maximise", "show this pane alone")
+                                        };
+                                        ui.small_button(icon).on_hover_text(tip).clicked()
+                                    })
+                                    .inner;
+                                let label = self.mode.label();
+                                let feats: Vec<(&str, &FeatureTexture)> =
+                                    entry.map(|e| (label, &e.texture)).into_iter().collect();
+                                self.mip_view.mode = entry.map(|_| label.to_owned());
+                                self.mip_view.settings.window = self.window.range();
+                                for c in 0..3 {
+                                    self.mip_view.settings.channels[c].on = self.display.enabled[c];
+                                    self.mip_view.settings.channels[c].gain = self.display.gain[c];
+                                }
+                                let [i, j, k] = self.crosshair;
+                                let centre = scene.volume.world_from_voxel().transform_point3(
+                                    glam::DVec3::new(i as f64, j as f64, k as f64),
                                 );
+                                self.mip_view.set_crosshair(Some(centre));
+                                let out = self.mip_view.ui(
+                                    ui,
+                                    gpu,
+                                    render_state,
+                                    &MipScene {
+                                        volume: &scene.render,
+                                        features: &feats,
+                                    },
+                                );
+                                if let Some(pick) = out.pick {
+                                    self.crosshair = pick.voxel;
+                                }
                                 if clicked {
                                     toggle = Some(id);
                                 }

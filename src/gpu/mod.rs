@@ -20,8 +20,8 @@ pub mod resample;
 pub mod rst;
 pub mod shaders;
 pub mod slab;
-pub mod structure_tensor;
 pub mod slice;
+pub mod structure_tensor;
 pub mod volume;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};
