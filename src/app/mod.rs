@@ -230,6 +230,8 @@ pub struct ShapecastApp {
     panes: [SlicePane; 3],
     slice_renderer: Option<SliceRenderer>,
     mip_view: MipView,
+    /// The volume generation the MIP window was set for.
+    mip_window_for: Option<u64>,
     probe: probe::ProbeState,
 
     show_about: bool,
@@ -307,6 +309,7 @@ impl ShapecastApp {
             panes: SliceKind::ALL.map(SlicePane::new),
             slice_renderer,
             mip_view: MipView::new(),
+            mip_window_for: None,
             probe: probe::ProbeState::default(),
             show_about: false,
             drop_hover: false,
@@ -834,7 +837,17 @@ impl ShapecastApp {
                                 let feats: Vec<(&str, &FeatureTexture)> =
                                     entry.map(|e| (label, &e.texture)).into_iter().collect();
                                 self.mip_view.mode = entry.map(|_| label.to_owned());
-                                self.mip_view.settings.window = self.window.range();
+                                // The MIP has its own window (set per volume; its W fields
+                                // change it): a soft-tissue window saturates a CT's MIP, where
+                                // contrast, vessels and bone are what should stay apart.
+                                if self.mip_window_for != Some(scene.generation) {
+                                    self.mip_window_for = Some(scene.generation);
+                                    self.mip_view.settings.window = if scene.is_ct {
+                                        (-100.0, 900.0)
+                                    } else {
+                                        self.window.range()
+                                    };
+                                }
                                 for c in 0..3 {
                                     self.mip_view.settings.channels[c].on = self.display.enabled[c];
                                     self.mip_view.settings.channels[c].gain = self.display.gain[c];
