@@ -141,7 +141,10 @@ fn gaussian_multi_order_and_fallback_match_cpu() {
             }
         }
     }
-    assert_eq!(fallbacks, 2, "x and y of the sigma 40 mm case need the fallback");
+    assert_eq!(
+        fallbacks, 2,
+        "x and y of the sigma 40 mm case need the fallback"
+    );
     eprintln!(
         "multi-order passes and fallback: worst max error {worst:.2e} of the output's scale (bound 1e-5)"
     );
