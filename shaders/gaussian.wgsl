@@ -2,9 +2,24 @@
 // src/cpu/gaussian.rs): out[i] = sum_t w[t] in[clamp(i + t - r)], taps w uploaded from the CPU's
 // own `derivative_kernel` (keep Params in sync with src/gpu/gaussian.rs).
 //
-// f32 care: the sum is taken about the centre value, out = v_c * sum(w) + sum w (v - v_c), with
-// sum(w) computed in f64 on the CPU: exact for constants (smoothing gives v_c, derivatives 0),
-// and a large offset (air at -1000 HU) does not cost the derivatives their precision.
+// Three entry points:
+// - `convolve_block`: each invocation computes BLOCK consecutive outputs along the pass axis
+//   from one sliding window of inputs (BLOCK + 2r loads for BLOCK outputs instead of (2r + 1)
+//   per output), taps in a uniform array. The window lives in vec4 registers and the loop is
+//   written out by hand: on lavapipe (llvmpipe) every storage-buffer load is a per-lane scalar
+//   loop, so loads and stores are what costs, and a private array indexed in a loop would be
+//   spilled to memory.
+// - `convolve_block3`: the same with BLOCK3 outputs and up to three kernels of one axis at once
+//   (taps .x, .y, .z: e.g. orders 0, 1, 2), written to dst, dst1, dst2: one read of the input
+//   for three results.
+// - `convolve`: one output per invocation, taps in a storage buffer: the fallback for kernels
+//   longer than MAX_TAPS (radius > 127).
+//
+// f32 care: the sum is taken about a reference value v_ref of the line (the centre voxel in
+// `convolve`, the block's first output voxel in the block kernels),
+// out = v_ref * sum(w) + sum w (v - v_ref), with sum(w) computed in f64 on the CPU: exact for
+// constants (smoothing gives the constant, derivatives 0), and a large offset (air at -1000 HU)
+// does not cost the derivatives their precision.
 #import common.wgsl
 
 struct Params {
@@ -13,15 +28,33 @@ struct Params {
     axis: u32,
     // The kernel has 2 radius + 1 taps.
     radius: u32,
-    tap_sum: f32,
+    // convolve_block3: how many of dst, dst1, dst2 to write (1..3).
+    outputs: u32,
     _pad0: u32,
     _pad1: u32,
+    // Sum of each kernel's taps (x: the only kernel of `convolve` and `convolve_block`).
+    tap_sum: vec4<f32>,
+}
+
+// Outputs per invocation of convolve_block (4 vec4 windows) and convolve_block3 (3 vec4
+// windows, 3 kernels: 9 vec4 accumulators); keep in sync with src/gpu/gaussian.rs.
+const BLOCK: u32 = 16u;
+const BLOCK3: u32 = 12u;
+// Taps the uniform array holds (radius <= 127).
+const MAX_TAPS: u32 = 256u;
+
+struct UniformTaps {
+    // w[t] = taps of offset t - radius, one kernel per component.
+    w: array<vec4<f32>, MAX_TAPS>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
 @group(0) @binding(2) var<storage, read> taps: array<f32>;
 @group(0) @binding(3) var<storage, read_write> dst: array<f32>;
+@group(0) @binding(4) var<uniform> utaps: UniformTaps;
+@group(0) @binding(5) var<storage, read_write> dst1: array<f32>;
+@group(0) @binding(6) var<storage, read_write> dst2: array<f32>;
 
 @compute @workgroup_size(8, 8, 1)
 fn convolve(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -51,5 +84,212 @@ fn convolve(@builtin(global_invocation_id) gid: vec3<u32>) {
         let q = u32(clamp(i32(pos) + t - r, 0, last));
         acc = acc + taps[t] * (src[base + q * stride] - vc);
     }
-    dst[centre] = vc * params.tap_sum + acc;
+    dst[centre] = vc * params.tap_sum.x + acc;
+}
+
+// One line of voxels along the pass axis, and the first output voxel of this invocation's block.
+struct Line {
+    base: u32,
+    stride: u32,
+    n: u32,
+    start: u32,
+    ok: bool,
+}
+
+// The block kernels run over (a, b, block): a and b the two other axes (a the faster one), the
+// block along the pass axis.
+fn line_of(gid: vec3<u32>, block: u32) -> Line {
+    let d = params.dims;
+    var l: Line;
+    var na = d.x;
+    var nb = d.y;
+    var sa = 1u;
+    var sb = d.x;
+    l.stride = d.x * d.y;
+    l.n = d.z;
+    if params.axis == 0u {
+        na = d.y;
+        nb = d.z;
+        sa = d.x;
+        sb = d.x * d.y;
+        l.stride = 1u;
+        l.n = d.x;
+    } else if params.axis == 1u {
+        na = d.x;
+        nb = d.z;
+        sa = 1u;
+        sb = d.x * d.y;
+        l.stride = d.x;
+        l.n = d.y;
+    }
+    l.base = gid.x * sa + gid.y * sb;
+    l.start = gid.z * block;
+    l.ok = gid.x < na && gid.y < nb && l.start < l.n;
+    return l;
+}
+
+// The input at position p of the line, borders replicated, minus v_ref.
+fn at(l: Line, p: i32, vref: f32) -> f32 {
+    return src[l.base + u32(clamp(p, 0, i32(l.n) - 1)) * l.stride] - vref;
+}
+
+fn window4(l: Line, p: i32, vref: f32) -> vec4<f32> {
+    return vec4<f32>(at(l, p, vref), at(l, p + 1, vref), at(l, p + 2, vref), at(l, p + 3, vref));
+}
+
+// Writes the outputs m .. m + 3 of the block (those inside the line).
+fn store4(l: Line, m: u32, v: vec4<f32>) {
+    let p = l.start + m;
+    let i = l.base + p * l.stride;
+    if p < l.n {
+        dst[i] = v.x;
+    }
+    if p + 1u < l.n {
+        dst[i + l.stride] = v.y;
+    }
+    if p + 2u < l.n {
+        dst[i + 2u * l.stride] = v.z;
+    }
+    if p + 3u < l.n {
+        dst[i + 3u * l.stride] = v.w;
+    }
+}
+
+fn store4_1(l: Line, m: u32, v: vec4<f32>) {
+    let p = l.start + m;
+    let i = l.base + p * l.stride;
+    if p < l.n {
+        dst1[i] = v.x;
+    }
+    if p + 1u < l.n {
+        dst1[i + l.stride] = v.y;
+    }
+    if p + 2u < l.n {
+        dst1[i + 2u * l.stride] = v.z;
+    }
+    if p + 3u < l.n {
+        dst1[i + 3u * l.stride] = v.w;
+    }
+}
+
+fn store4_2(l: Line, m: u32, v: vec4<f32>) {
+    let p = l.start + m;
+    let i = l.base + p * l.stride;
+    if p < l.n {
+        dst2[i] = v.x;
+    }
+    if p + 1u < l.n {
+        dst2[i + l.stride] = v.y;
+    }
+    if p + 2u < l.n {
+        dst2[i + 2u * l.stride] = v.z;
+    }
+    if p + 3u < l.n {
+        dst2[i + 3u * l.stride] = v.w;
+    }
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn convolve_block(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let l = line_of(gid, BLOCK);
+    if !l.ok {
+        return;
+    }
+    let r = i32(params.radius);
+    // Input position under tap 0 for output 0; output m at step t reads p0 + m + t.
+    let p0 = i32(l.start) - r;
+    let vref = src[l.base + l.start * l.stride];
+    // Window: w0..w3 hold the inputs under tap t for outputs 0..15.
+    var w0 = window4(l, p0, vref);
+    var w1 = window4(l, p0 + 4, vref);
+    var w2 = window4(l, p0 + 8, vref);
+    var w3 = window4(l, p0 + 12, vref);
+    var a0 = vec4<f32>(0.0);
+    var a1 = vec4<f32>(0.0);
+    var a2 = vec4<f32>(0.0);
+    var a3 = vec4<f32>(0.0);
+    for (var t = 0; t < 2 * r; t = t + 1) {
+        let w = utaps.w[t].x;
+        a0 += w * w0;
+        a1 += w * w1;
+        a2 += w * w2;
+        a3 += w * w3;
+        w0 = vec4<f32>(w0.yzw, w1.x);
+        w1 = vec4<f32>(w1.yzw, w2.x);
+        w2 = vec4<f32>(w2.yzw, w3.x);
+        w3 = vec4<f32>(w3.yzw, at(l, p0 + i32(BLOCK) + t, vref));
+    }
+    let w = utaps.w[2 * r].x;
+    a0 += w * w0;
+    a1 += w * w1;
+    a2 += w * w2;
+    a3 += w * w3;
+    let c = vref * params.tap_sum.x;
+    store4(l, 0u, c + a0);
+    store4(l, 4u, c + a1);
+    store4(l, 8u, c + a2);
+    store4(l, 12u, c + a3);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn convolve_block3(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let l = line_of(gid, BLOCK3);
+    if !l.ok {
+        return;
+    }
+    let r = i32(params.radius);
+    let p0 = i32(l.start) - r;
+    let vref = src[l.base + l.start * l.stride];
+    var w0 = window4(l, p0, vref);
+    var w1 = window4(l, p0 + 4, vref);
+    var w2 = window4(l, p0 + 8, vref);
+    // a<kernel>_<window>
+    var ax0 = vec4<f32>(0.0);
+    var ax1 = vec4<f32>(0.0);
+    var ax2 = vec4<f32>(0.0);
+    var ay0 = vec4<f32>(0.0);
+    var ay1 = vec4<f32>(0.0);
+    var ay2 = vec4<f32>(0.0);
+    var az0 = vec4<f32>(0.0);
+    var az1 = vec4<f32>(0.0);
+    var az2 = vec4<f32>(0.0);
+    for (var t = 0; t < 2 * r; t = t + 1) {
+        let w = utaps.w[t];
+        ax0 += w.x * w0;
+        ax1 += w.x * w1;
+        ax2 += w.x * w2;
+        ay0 += w.y * w0;
+        ay1 += w.y * w1;
+        ay2 += w.y * w2;
+        az0 += w.z * w0;
+        az1 += w.z * w1;
+        az2 += w.z * w2;
+        w0 = vec4<f32>(w0.yzw, w1.x);
+        w1 = vec4<f32>(w1.yzw, w2.x);
+        w2 = vec4<f32>(w2.yzw, at(l, p0 + i32(BLOCK3) + t, vref));
+    }
+    let w = utaps.w[2 * r];
+    ax0 += w.x * w0;
+    ax1 += w.x * w1;
+    ax2 += w.x * w2;
+    ay0 += w.y * w0;
+    ay1 += w.y * w1;
+    ay2 += w.y * w2;
+    az0 += w.z * w0;
+    az1 += w.z * w1;
+    az2 += w.z * w2;
+    let c = vref * params.tap_sum;
+    store4(l, 0u, c.x + ax0);
+    store4(l, 4u, c.x + ax1);
+    store4(l, 8u, c.x + ax2);
+    if params.outputs > 1u {
+        store4_1(l, 0u, c.y + ay0);
+        store4_1(l, 4u, c.y + ay1);
+        store4_1(l, 8u, c.y + ay2);
+    }
+    if params.outputs > 2u {
+        store4_2(l, 0u, c.z + az0);
+        store4_2(l, 4u, c.z + az1);
+        store4_2(l, 8u, c.z + az2);
+    }
 }

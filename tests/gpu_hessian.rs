@@ -64,6 +64,92 @@ fn gaussian_passes_match_cpu() {
     eprintln!("gaussian passes: worst max error {worst:.2e} of the output's range (bound 1e-5)");
 }
 
+/// The block kernels with one, two and three kernels per pass (`record_axis_multi`, as the
+/// Hessian uses them) along every axis of a slab with long lines (several blocks per line, the
+/// last one partial), including the zero-padded mix of radii at sigma 0 (identity and central
+/// differences), against the CPU's `convolve_axis` per order; and kernels too long for the
+/// uniform array (radius > 127), which fall back to one output per invocation.
+#[test]
+fn gaussian_multi_order_and_fallback_match_cpu() {
+    use shapecast::cpu::gaussian::convolve_axis;
+    use shapecast::gpu::gaussian::{AxisTapSet, MAX_TAPS};
+    let Some(ctx) = test_context() else { return };
+    let gauss = Gaussian::new(&ctx).expect("shader");
+    // Relative to the output's range (as gaussian_passes_match_cpu), or for nearly constant
+    // outputs to the input's range times the kernel's absolute sum (what f32 rounding scales with).
+    let check = |what: &str, gpu: &[f32], cpu: &[f32], input: &[f32], k: &[f64]| -> f32 {
+        let abs_sum: f64 = k.iter().map(|w| w.abs()).sum();
+        let scale = range(cpu).max(abs_sum as f32 * range(input));
+        let rel = max_err(gpu, cpu) / scale.max(f32::MIN_POSITIVE);
+        assert!(rel < 1e-5, "{what}: max error {rel:e} of {scale:e}");
+        rel
+    };
+    let mut worst = 0.0f32;
+    let mut fallbacks = 0;
+    // 25 x 52 x 37 voxels: every axis longer than BLOCK and BLOCK3, none a multiple of them.
+    let (long, long_values) = phantom_at([0.3, 0.25, 0.3]);
+    let (small, small_values) = phantom();
+    let cases: [(&shapecast::cpu::Grid, &Vec<f32>, f64, f64); 4] = [
+        (&long, &long_values, 1.0, 1.0),
+        (&long, &long_values, 0.0, 2.5),
+        // sigma 0.5 mm: radius 3 on x (0.3 mm voxels), 2 on y.
+        (&long, &long_values, 0.5, 1.0),
+        // Radii 201 (x), 151 (y): past MAX_TAPS, the fallback; 111 (z): the block kernels.
+        (&small, &small_values, 40.0, 1.0),
+    ];
+    for (grid, values, sigma, scale) in cases {
+        let sg = slab_grid(grid);
+        let n = grid.len();
+        let shifted: Vec<f32> = values.iter().map(|v| v - 1000.0).collect();
+        for axis in 0..3 {
+            let set = AxisTapSet::new(&ctx, sigma, grid.spacing_mm[axis], scale);
+            if 2 * set.radius() as usize + 1 > MAX_TAPS {
+                fallbacks += 1;
+            }
+            let kernels: Vec<Vec<f64>> = O
+                .iter()
+                .map(|&o| {
+                    derivative_kernel(sigma, grid.spacing_mm[axis], o)
+                        .into_iter()
+                        .map(|w| w * scale)
+                        .collect()
+                })
+                .collect();
+            for input in [values, &shifted] {
+                let src = upload(&ctx, input);
+                let cpu: Vec<Vec<f32>> = kernels
+                    .iter()
+                    .map(|k| convolve_axis(grid, input, axis, k))
+                    .collect();
+                for outputs in 1..=3 {
+                    let dst: Vec<wgpu::Buffer> = (0..outputs).map(|_| buffer(&ctx, n)).collect();
+                    let refs: Vec<&wgpu::Buffer> = dst.iter().collect();
+                    let mut enc = encoder(&ctx);
+                    gauss
+                        .record_axis_multi(&ctx, &mut enc, &sg, axis, &set, &src, &refs)
+                        .expect("record");
+                    submit(&ctx, enc);
+                    for (o, d) in dst.iter().enumerate() {
+                        let what = format!(
+                            "{:?} sigma {sigma} axis {axis} order {o} of {outputs}",
+                            grid.dims
+                        );
+                        let gpu = read(&ctx, d, n);
+                        worst = worst.max(check(&what, &gpu, &cpu[o], input, &kernels[o]));
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(
+        fallbacks, 2,
+        "x and y of the sigma 40 mm case need the fallback"
+    );
+    eprintln!(
+        "multi-order passes and fallback: worst max error {worst:.2e} of the output's scale (bound 1e-5)"
+    );
+}
+
 use shapecast::cpu::eigen::{eigenvalues_sorted, frobenius};
 use shapecast::cpu::features::{
     FeatureMap, HessianMethod, frangi_default_c, hessian_eigen_multiscale,

@@ -3,8 +3,17 @@
 //! twin's own [`crate::cpu::derivative_kernel`] (same taps, including the tail mass on the end
 //! taps), so the GPU and `crate::cpu::gaussian` compute the same sums (f32 against f64).
 //!
-//! Taps are uploaded once per (sigma, spacing, order) as an [`AxisTaps`] and reused for every
-//! slab; `record_*` methods only record into the caller's encoder (no submit).
+//! Taps are uploaded once per (sigma, spacing, order) as an [`AxisTaps`] (or several orders of
+//! one axis as an [`AxisTapSet`]) and reused for every slab; `record_*` methods only record into
+//! the caller's encoder (no submit).
+//!
+//! Speed (lavapipe, where every storage-buffer load or store is a per-lane scalar loop): each
+//! invocation of the block kernels computes [`BLOCK`] consecutive outputs along the pass axis from
+//! one sliding window of inputs, so a pass costs about `(BLOCK + 2 radius) / BLOCK` loads per
+//! voxel instead of `2 radius + 1`, with the taps in a uniform array;
+//! [`Gaussian::record_axis_multi`] applies up to three kernels of one axis (e.g. orders 0, 1, 2)
+//! in one read of the input. Kernels longer than [`MAX_TAPS`] fall back to one output per
+//! invocation with the taps in a storage buffer.
 
 use crate::cpu::gaussian::{GaussianOrder, derivative_kernel, kernel_radius_vox};
 use crate::gpu::checks::{self, RecordError};
@@ -18,15 +27,51 @@ struct Params {
     dims: [u32; 3],
     axis: u32,
     radius: u32,
-    tap_sum: f32,
+    outputs: u32,
     _pad: [u32; 2],
+    tap_sum: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 32);
+const _: () = assert!(std::mem::size_of::<Params>() == 48);
+
+/// Outputs per invocation of `convolve_block` along the pass axis (`BLOCK` in gaussian.wgsl).
+pub const BLOCK: u32 = 16;
+/// Outputs per invocation of `convolve_block3` (`BLOCK3` in gaussian.wgsl).
+pub const BLOCK3: u32 = 12;
+/// Taps the block kernels' uniform array holds (`MAX_TAPS` in gaussian.wgsl): radius <= 127.
+pub const MAX_TAPS: usize = 256;
+
+/// The uniform array of the block kernels: `MAX_TAPS` vec4, kernel `c` in component `c`, or
+/// `None` when a kernel is too long for it.
+fn uniform_taps(ctx: &GpuContext, kernels: &[&[f64]], radius: usize) -> Option<wgpu::Buffer> {
+    if 2 * radius + 1 > MAX_TAPS || kernels.len() > 4 {
+        return None;
+    }
+    let mut data = vec![0.0f32; 4 * MAX_TAPS];
+    for (c, k) in kernels.iter().enumerate() {
+        // Centred kernels of any radius <= `radius`, zero-padded to it.
+        let pad = radius.checked_sub(k.len() / 2)?;
+        for (t, &w) in k.iter().enumerate() {
+            data[4 * (t + pad) + c] = w as f32;
+        }
+    }
+    use wgpu::util::DeviceExt as _;
+    Some(
+        ctx.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("gaussian taps (uniform)"),
+                contents: bytemuck::cast_slice(&data),
+                usage: wgpu::BufferUsages::UNIFORM,
+            }),
+    )
+}
 
 /// One 1-D kernel on the GPU: `2 radius + 1` f32 taps for offsets `-radius..=radius`.
 #[derive(Debug)]
 pub struct AxisTaps {
+    /// Storage buffer (the fallback kernel).
     buffer: wgpu::Buffer,
+    /// Uniform array (the block kernel), when the kernel fits.
+    uniform: Option<wgpu::Buffer>,
     radius: u32,
     sum: f32,
 }
@@ -42,25 +87,71 @@ impl AxisTaps {
         order: GaussianOrder,
         scale: f64,
     ) -> Self {
-        let w: Vec<f64> = derivative_kernel(sigma_mm, spacing_mm, order)
-            .into_iter()
-            .map(|v| v * scale)
-            .collect();
-        Self::from_weights(ctx, &w)
+        Self::from_weights(ctx, &scaled_kernel(sigma_mm, spacing_mm, order, scale))
     }
 
     /// Any odd-length centred kernel (correlation weights for offsets `-r..=r`).
     pub fn from_weights(ctx: &GpuContext, weights: &[f64]) -> Self {
         let taps: Vec<f32> = weights.iter().map(|&w| w as f32).collect();
         let sum = weights.iter().sum::<f64>() as f32;
+        let radius = weights.len() / 2;
         Self {
             buffer: crate::gpu::kernel::f32_buffer_init(&ctx.device, "gaussian taps", &taps),
-            radius: (weights.len() / 2) as u32,
+            uniform: uniform_taps(ctx, &[weights], radius),
+            radius: radius as u32,
             sum,
         }
     }
 
     /// Kernel radius in voxels (the halo one pass along this axis needs).
+    pub fn radius(&self) -> u32 {
+        self.radius
+    }
+}
+
+fn scaled_kernel(sigma_mm: f64, spacing_mm: f64, order: GaussianOrder, scale: f64) -> Vec<f64> {
+    derivative_kernel(sigma_mm, spacing_mm, order)
+        .into_iter()
+        .map(|v| v * scale)
+        .collect()
+}
+
+/// The kernels of orders 0, 1 and 2 of one axis (same sigma, spacing and scale), each usable
+/// alone ([`Self::order`]) and all together by [`Gaussian::record_axis_multi`], which reads the
+/// input once for up to three of them.
+#[derive(Debug)]
+pub struct AxisTapSet {
+    orders: [AxisTaps; 3],
+    /// The three kernels in components x, y, z, zero-padded to the longest.
+    packed: Option<wgpu::Buffer>,
+    radius: u32,
+    sums: [f32; 3],
+}
+
+impl AxisTapSet {
+    /// Orders 0, 1, 2 for `sigma_mm` on an axis of `spacing_mm`, times `scale`.
+    pub fn new(ctx: &GpuContext, sigma_mm: f64, spacing_mm: f64, scale: f64) -> Self {
+        const ORDERS: [GaussianOrder; 3] = [
+            GaussianOrder::Smooth,
+            GaussianOrder::First,
+            GaussianOrder::Second,
+        ];
+        let w = ORDERS.map(|o| scaled_kernel(sigma_mm, spacing_mm, o, scale));
+        let radius = w.iter().map(|k| k.len() / 2).max().unwrap_or(0);
+        Self {
+            packed: uniform_taps(ctx, &[&w[0], &w[1], &w[2]], radius),
+            radius: radius as u32,
+            sums: std::array::from_fn(|o| w[o].iter().sum::<f64>() as f32),
+            orders: std::array::from_fn(|o| AxisTaps::from_weights(ctx, &w[o])),
+        }
+    }
+
+    /// The kernel of one order (0, 1 or 2; larger values give order 2).
+    pub fn order(&self, order: usize) -> &AxisTaps {
+        &self.orders[order.min(2)]
+    }
+
+    /// The longest radius of the three kernels.
     pub fn radius(&self) -> u32 {
         self.radius
     }
@@ -110,17 +201,147 @@ pub fn halo_slices(sigma_mm: f64, spacing_z_mm: f64) -> u32 {
 /// output and one temporary, f32 each.
 pub const SEPARABLE_BYTES_PER_VOXEL: u64 = 8;
 
-/// The convolution pipeline.
+/// The convolution pipelines.
 pub struct Gaussian {
-    pipeline: wgpu::ComputePipeline,
+    /// One output per invocation, storage taps (kernels longer than [`MAX_TAPS`]).
+    fallback: wgpu::ComputePipeline,
+    block: wgpu::ComputePipeline,
+    block3: wgpu::ComputePipeline,
+    /// Bound to the outputs `convolve_block3` does not write.
+    unused: wgpu::Buffer,
+}
+
+/// Which kernel a pass applies: the bindings and uniforms that differ between passes.
+struct PassTaps<'a> {
+    storage: Option<&'a wgpu::Buffer>,
+    uniform: Option<&'a wgpu::Buffer>,
+    radius: u32,
+    sums: [f32; 4],
 }
 
 impl Gaussian {
     pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
         let module = shaders::create_module(&ctx.device, "gaussian.wgsl")?;
         Ok(Self {
-            pipeline: checks::pipeline(ctx, &module, "convolve"),
+            fallback: checks::pipeline(ctx, &module, "convolve"),
+            block: checks::pipeline(ctx, &module, "convolve_block"),
+            block3: checks::pipeline(ctx, &module, "convolve_block3"),
+            unused: crate::gpu::kernel::f32_buffer(&ctx.device, "gaussian unused output", 4),
         })
+    }
+
+    fn check_pass(
+        ctx: &GpuContext,
+        grid: &SlabGrid,
+        axis: usize,
+        src: &wgpu::Buffer,
+        dst: &[&wgpu::Buffer],
+    ) -> Result<(), RecordError> {
+        if axis > 2 {
+            return Err(RecordError::Invalid("axis must be 0, 1 or 2"));
+        }
+        if dst.contains(&src) {
+            return Err(RecordError::Invalid(
+                "a convolution cannot run in place (src == dst)",
+            ));
+        }
+        for (n, a) in dst.iter().enumerate() {
+            if dst[n + 1..].contains(a) {
+                return Err(RecordError::Invalid(
+                    "a convolution's outputs must be different buffers",
+                ));
+            }
+        }
+        if grid.is_empty() {
+            return Ok(());
+        }
+        let bytes = checks::f32_bytes(grid.len(), 1);
+        checks::buffer(ctx, "gaussian src", src, bytes)?;
+        for d in dst {
+            checks::buffer(ctx, "gaussian dst", d, bytes)?;
+        }
+        Ok(())
+    }
+
+    /// Records one dispatch: the block kernel (`outputs` 1: `convolve_block`, 2 or 3:
+    /// `convolve_block3`) when `taps.uniform` is there, else the fallback (one output).
+    #[allow(clippy::too_many_arguments)]
+    fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        axis: usize,
+        taps: &PassTaps<'_>,
+        src: &wgpu::Buffer,
+        dst: &[&wgpu::Buffer],
+    ) -> Result<(), RecordError> {
+        let params = Params {
+            dims: grid.dims,
+            axis: axis as u32,
+            radius: taps.radius,
+            outputs: dst.len() as u32,
+            _pad: [0; 2],
+            tap_sum: taps.sums,
+        };
+        let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "gaussian params", &params);
+        let d = grid.dims;
+        // (a, b) = the other two axes, the faster first.
+        let (a, b) = match axis {
+            0 => (d[1], d[2]),
+            1 => (d[0], d[2]),
+            _ => (d[0], d[1]),
+        };
+        let (pipeline, entries, groups) = match (taps.uniform, dst) {
+            (Some(u), [d0]) => (
+                &self.block,
+                vec![
+                    checks::entry(0, &params),
+                    checks::entry(1, src),
+                    checks::entry(3, d0),
+                    checks::entry(4, u),
+                ],
+                [a.div_ceil(8), b.div_ceil(8), d[axis].div_ceil(BLOCK)],
+            ),
+            (Some(u), [d0, d1, rest @ ..]) => (
+                &self.block3,
+                vec![
+                    checks::entry(0, &params),
+                    checks::entry(1, src),
+                    checks::entry(3, d0),
+                    checks::entry(4, u),
+                    checks::entry(5, d1),
+                    checks::entry(6, rest.first().copied().unwrap_or(&self.unused)),
+                ],
+                [a.div_ceil(8), b.div_ceil(8), d[axis].div_ceil(BLOCK3)],
+            ),
+            (None, [d0]) => match taps.storage {
+                Some(t) => (
+                    &self.fallback,
+                    vec![
+                        checks::entry(0, &params),
+                        checks::entry(1, src),
+                        checks::entry(2, t),
+                        checks::entry(3, d0),
+                    ],
+                    grid.workgroups(WORKGROUP),
+                ),
+                None => return Err(RecordError::Invalid("gaussian: no taps for this pass")),
+            },
+            _ => {
+                return Err(RecordError::Invalid(
+                    "gaussian: one to three outputs per pass",
+                ));
+            }
+        };
+        let groups = checks::workgroups(ctx, "gaussian", groups.map(|g| g.max(1)))?;
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("gaussian"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        checks::dispatch(encoder, "gaussian", pipeline, &bind_group, groups);
+        Ok(())
     }
 
     /// Records `dst = src (*) taps` along `axis` (0, 1, 2) of the slab `grid`; `src` and `dst`
@@ -136,41 +357,60 @@ impl Gaussian {
         src: &wgpu::Buffer,
         dst: &wgpu::Buffer,
     ) -> Result<(), RecordError> {
-        if axis > 2 {
-            return Err(RecordError::Invalid("axis must be 0, 1 or 2"));
-        }
-        if src == dst {
-            return Err(RecordError::Invalid(
-                "a convolution cannot run in place (src == dst)",
-            ));
-        }
+        Self::check_pass(ctx, grid, axis, src, &[dst])?;
         if grid.is_empty() {
             return Ok(());
         }
-        let bytes = checks::f32_bytes(grid.len(), 1);
-        checks::buffer(ctx, "gaussian src", src, bytes)?;
-        checks::buffer(ctx, "gaussian dst", dst, bytes)?;
-        let groups = checks::workgroups(ctx, "gaussian", grid.workgroups(WORKGROUP))?;
-        let params = Params {
-            dims: grid.dims,
-            axis: axis as u32,
+        let pass = PassTaps {
+            storage: Some(&taps.buffer),
+            uniform: taps.uniform.as_ref(),
             radius: taps.radius,
-            tap_sum: taps.sum,
-            _pad: [0; 2],
+            sums: [taps.sum, 0.0, 0.0, 0.0],
         };
-        let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "gaussian params", &params);
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("gaussian"),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &[
-                checks::entry(0, &params),
-                checks::entry(1, src),
-                checks::entry(2, &taps.buffer),
-                checks::entry(3, dst),
-            ],
-        });
-        checks::dispatch(encoder, "gaussian", &self.pipeline, &bind_group, groups);
-        Ok(())
+        self.dispatch(ctx, encoder, grid, axis, &pass, src, &[dst])
+    }
+
+    /// Records `dst[o] = src (*) taps of order o` along `axis` for `o < dst.len()` (one to three
+    /// outputs): one read of `src` for all of them. `src` and the outputs hold `grid.len()` f32
+    /// each and must all be different buffers.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_axis_multi(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        axis: usize,
+        taps: &AxisTapSet,
+        src: &wgpu::Buffer,
+        dst: &[&wgpu::Buffer],
+    ) -> Result<(), RecordError> {
+        if dst.is_empty() || dst.len() > 3 {
+            return Err(RecordError::Invalid(
+                "gaussian: one to three outputs per pass",
+            ));
+        }
+        Self::check_pass(ctx, grid, axis, src, dst)?;
+        if grid.is_empty() {
+            return Ok(());
+        }
+        match (&taps.packed, dst) {
+            (Some(u), [_, _, ..]) => {
+                let pass = PassTaps {
+                    storage: None,
+                    uniform: Some(u),
+                    radius: taps.radius,
+                    sums: [taps.sums[0], taps.sums[1], taps.sums[2], 0.0],
+                };
+                self.dispatch(ctx, encoder, grid, axis, &pass, src, dst)
+            }
+            // One output, or kernels too long for the uniform array: one pass per order.
+            _ => {
+                for (o, d) in dst.iter().enumerate() {
+                    self.record_axis(ctx, encoder, grid, axis, &taps.orders[o], src, d)?;
+                }
+                Ok(())
+            }
+        }
     }
 
     /// Records the separable filter `kernel` (x, then y, then z, as the CPU's `separable`):

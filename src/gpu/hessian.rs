@@ -2,14 +2,14 @@
 //! derivative kernels (twin: [`crate::cpu::hessian_volume`]; not finite differences), written to
 //! six separate f32 buffers `[xx, yy, zz, xy, xz, yz]` (each must fit one binding).
 //!
-//! Passes are shared: the z pass of orders 0, 1, 2 runs once on the input, then one y pass and
-//! one x pass per component (15 passes, the minimum for six separable components), and the
-//! sigma^2 normalisation is folded into the x taps. The z results are parked in output buffers
-//! not yet written, so the working set is one temporary plus the six outputs.
+//! Passes are shared: one z pass reads the input once for orders 0, 1, 2; one y pass per z result
+//! computes every y order that result needs (3, 2 and 1 orders, each reading its input once);
+//! then one x pass per component (10 dispatches, 15 convolutions; the x passes cannot share an
+//! input). The sigma^2 normalisation is folded into the x taps. Intermediate results are parked
+//! in output buffers not yet written, so the working set is one temporary plus the six outputs.
 
-use crate::cpu::gaussian::GaussianOrder;
 use crate::gpu::checks::RecordError;
-use crate::gpu::gaussian::{AxisTaps, Gaussian};
+use crate::gpu::gaussian::{AxisTapSet, Gaussian};
 use crate::gpu::kernel::SlabGrid;
 use crate::gpu::{GpuContext, shaders};
 
@@ -17,8 +17,8 @@ use crate::gpu::{GpuContext, shaders};
 /// reused for every slab.
 #[derive(Debug)]
 pub struct HessianKernels {
-    /// `taps[axis][order]`; the x (axis 0) taps carry the sigma^2 normalisation.
-    taps: [[AxisTaps; 3]; 3],
+    /// `taps[axis]`, orders 0, 1, 2; the x (axis 0) taps carry the sigma^2 normalisation.
+    taps: [AxisTapSet; 3],
     sigma_mm: f64,
 }
 
@@ -26,16 +26,11 @@ impl HessianKernels {
     /// Kernels for `sigma_mm` on a grid of `spacing_mm`; `normalised` multiplies the result by
     /// sigma^2 (Lindeberg's gamma = 1, as the features use).
     pub fn new(ctx: &GpuContext, sigma_mm: f64, spacing_mm: [f64; 3], normalised: bool) -> Self {
-        const ORDERS: [GaussianOrder; 3] = [
-            GaussianOrder::Smooth,
-            GaussianOrder::First,
-            GaussianOrder::Second,
-        ];
         let norm = if normalised { sigma_mm * sigma_mm } else { 1.0 };
         Self {
             taps: std::array::from_fn(|axis| {
                 let scale = if axis == 0 { norm } else { 1.0 };
-                ORDERS.map(|o| AxisTaps::new(ctx, sigma_mm, spacing_mm[axis], o, scale))
+                AxisTapSet::new(ctx, sigma_mm, spacing_mm[axis], scale)
             }),
             sigma_mm,
         }
@@ -47,7 +42,7 @@ impl HessianKernels {
 
     /// Radius of the z kernels: the halo (slices) a slab needs on each side.
     pub fn halo_slices(&self) -> u32 {
-        self.taps[2].iter().map(AxisTaps::radius).max().unwrap_or(0)
+        self.taps[2].radius()
     }
 }
 
@@ -70,7 +65,7 @@ pub fn halo_slices_multiscale(sigmas_mm: &[f64], spacing_z_mm: f64) -> u32 {
 /// temporary, f32 each.
 pub const BYTES_PER_VOXEL: u64 = 7 * 4;
 
-/// The Hessian passes (the Gaussian convolution pipeline, driven 15 times).
+/// The Hessian passes (the Gaussian convolution pipelines, driven 10 times).
 pub struct Hessian {
     gaussian: Gaussian,
 }
@@ -107,27 +102,29 @@ impl Hessian {
         let [x, y, z] = &kernels.taps;
         let [xx, yy, zz, xy, xz, yz] = out;
         let g = &self.gaussian;
-        let mut pass = |axis: usize, taps: &AxisTaps, src: &wgpu::Buffer, dst: &wgpu::Buffer| {
-            g.record_axis(ctx, encoder, grid, axis, taps, src, dst)
+        // xx = x2 y0 z0, yy = x0 y2 z0, zz = x0 y0 z2, xy = x1 y1 z0, xz = x1 y0 z1,
+        // yz = x0 y1 z1. Every pass reads a buffer no output of the same pass aliases, and
+        // overwrites only results already consumed.
+        let mut multi = |axis: usize, src: &wgpu::Buffer, dst: &[&wgpu::Buffer]| {
+            let taps = [x, y, z][axis];
+            g.record_axis_multi(ctx, encoder, grid, axis, taps, src, dst)
         };
-        // z passes of orders 0, 1, 2, parked in outputs written last.
+        // z orders 0, 1, 2 of the input, parked in outputs written last.
+        multi(2, input, &[yz, xz, xy])?;
         let (z0, z1, z2) = (yz, xz, xy);
-        pass(2, &z[0], input, z0)?;
-        pass(2, &z[1], input, z1)?;
-        pass(2, &z[2], input, z2)?;
-        // Each component: y pass into tmp, x pass into its output. The order frees the parked
-        // z results before their buffers are overwritten.
-        pass(1, &y[0], z0, tmp)?;
-        pass(0, &x[2], tmp, xx)?;
-        pass(1, &y[2], z0, tmp)?;
-        pass(0, &x[0], tmp, yy)?;
-        pass(1, &y[0], z2, tmp)?;
-        pass(0, &x[0], tmp, zz)?;
-        pass(1, &y[1], z0, tmp)?;
-        pass(0, &x[1], tmp, xy)?; // z2 (in xy) no longer needed
-        pass(1, &y[1], z1, tmp)?;
-        pass(0, &x[0], tmp, yz)?; // z0 (in yz) no longer needed
-        pass(1, &y[0], z1, tmp)?;
-        pass(0, &x[1], tmp, xz) // z1 (in xz) read by the y pass just before
+        // zz = x0 y0 z2.
+        multi(1, z2, &[tmp])?;
+        multi(0, tmp, &[zz])?;
+        // y orders 0, 1, 2 of z0 (z2, in xy, is consumed): xx, xy, yy.
+        multi(1, z0, &[yy, tmp, xy])?;
+        let (z0y0, z0y1, z0y2) = (yy, tmp, xy);
+        g.record_axis(ctx, encoder, grid, 0, x.order(2), z0y0, xx)?;
+        g.record_axis(ctx, encoder, grid, 0, x.order(0), z0y2, yy)?;
+        g.record_axis(ctx, encoder, grid, 0, x.order(1), z0y1, xy)?;
+        // y orders 0, 1 of z1 (z0, in yz, is consumed): xz, yz.
+        g.record_axis_multi(ctx, encoder, grid, 1, y, z1, &[yz, tmp])?;
+        let (z1y0, z1y1) = (yz, tmp);
+        g.record_axis(ctx, encoder, grid, 0, x.order(1), z1y0, xz)?;
+        g.record_axis(ctx, encoder, grid, 0, x.order(0), z1y1, yz)
     }
 }

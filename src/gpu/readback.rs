@@ -70,6 +70,17 @@ fn finish_read(staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, ReadbackErr
     Ok(bytes)
 }
 
+/// Native only: the mapping's result once the device has been polled to idle. When several
+/// threads share the device (the tests), another thread's poll may have taken this mapping's
+/// callback and not run it yet, so the result can arrive just after our poll returns: block on
+/// it (a dropped sender means the device was lost).
+#[cfg(not(target_arch = "wasm32"))]
+fn wait_mapped(
+    receiver: futures_channel::oneshot::Receiver<Result<(), wgpu::BufferAsyncError>>,
+) -> Result<(), ReadbackError> {
+    Ok(pollster::block_on(receiver).map_err(|_| ReadbackError::Lost)??)
+}
+
 /// Native only: reads a buffer back, blocking until the GPU is done.
 #[cfg(not(target_arch = "wasm32"))]
 pub fn read_bytes_blocking(
@@ -77,12 +88,9 @@ pub fn read_bytes_blocking(
     src: &wgpu::Buffer,
     size: u64,
 ) -> Result<Vec<u8>, ReadbackError> {
-    let (staging, mut receiver) = start_read(ctx, src, size);
+    let (staging, receiver) = start_read(ctx, src, size);
     ctx.device.poll(wgpu::PollType::wait_indefinitely())?;
-    match receiver.try_recv() {
-        Ok(Some(result)) => result?,
-        Ok(None) | Err(_) => return Err(ReadbackError::Lost),
-    }
+    wait_mapped(receiver)?;
     finish_read(&staging, size)
 }
 
@@ -135,8 +143,9 @@ impl PendingRead {
 
     /// Native only: waits for the bytes.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn wait(mut self, ctx: &GpuContext) -> Result<Vec<u8>, ReadbackError> {
+    pub fn wait(self, ctx: &GpuContext) -> Result<Vec<u8>, ReadbackError> {
         ctx.device.poll(wgpu::PollType::wait_indefinitely())?;
-        self.poll(ctx).unwrap_or(Err(ReadbackError::Lost))
+        wait_mapped(self.receiver)?;
+        finish_read(&self.staging, self.size)
     }
 }
