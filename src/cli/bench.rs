@@ -199,7 +199,20 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         let hessian = Hessian::new(&ctx)?;
         let eigen = EigenFeatures::new(&ctx)?;
         let comps: Vec<wgpu::Buffer> = (0..6).map(|_| f32_buffer(d, "bench hessian", n)).collect();
-        let out = f32_buffer(d, "bench features", 3 * n);
+        // Output in z-blocks, each within the binding limit (the whole 256^3 output is not).
+        let plane = u64::from(slab.dims[0]) * u64::from(slab.dims[1]);
+        let block = ((limit / (12 * plane)).max(1) as u32).min(slab.dims[2]);
+        let blocks: Vec<(u32, u32, wgpu::Buffer)> = (0..slab.dims[2])
+            .step_by(block as usize)
+            .map(|z0| {
+                let nz = block.min(slab.dims[2] - z0);
+                (
+                    z0,
+                    nz,
+                    f32_buffer(d, "bench features", 3 * plane * u64::from(nz)),
+                )
+            })
+            .collect();
         let kernels: Vec<HessianKernels> = sigmas
             .iter()
             .map(|&s| HessianKernels::new(&ctx, s, volume.spacing_mm, true))
@@ -208,16 +221,18 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             for (i, k) in kernels.iter().enumerate() {
                 let c: [&wgpu::Buffer; 6] = std::array::from_fn(|j| &comps[j]);
                 hessian.record(&ctx, e, &slab, k, &input, &tmp, c)?;
-                eigen.record(
-                    &ctx,
-                    e,
-                    &slab,
-                    c,
-                    (0, slab.dims[2]),
-                    TensorOutput::hessian(Mapping::Map(FeatureMap::Simple)),
-                    i > 0,
-                    &out,
-                )?;
+                for (z0, nz, out) in &blocks {
+                    eigen.record(
+                        &ctx,
+                        e,
+                        &slab,
+                        c,
+                        (*z0, *nz),
+                        TensorOutput::hessian(Mapping::Map(FeatureMap::Simple)),
+                        i > 0,
+                        out,
+                    )?;
+                }
             }
             Ok(())
         })?;
@@ -243,12 +258,15 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             ),
         });
         let t = Instant::now();
-        let back = read_f32_blocking(&ctx, &out, 3 * n as usize)?;
+        let mut bytes = 0;
+        for (_, nz, out) in &blocks {
+            bytes += read_f32_blocking(&ctx, out, (3 * plane * u64::from(*nz)) as usize)?.len() * 4;
+        }
         rows.push(Row {
             stage: "readback (3 features)",
             gpu: Some(t.elapsed()),
             cpu: None,
-            note: format!("{} MB", (back.len() * 4) >> 20),
+            note: format!("{} MB", bytes >> 20),
         });
         python_sigmas = Some(sigmas.clone());
     }
