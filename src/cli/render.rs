@@ -199,11 +199,19 @@ pub fn compute_features(
 ) -> anyhow::Result<FeatureTexture> {
     let mut job = FeatureJob::new(ctx, volume, request)?;
     let started = web_time::Instant::now();
+    let mut shown = String::new();
     loop {
         match job.step(ctx)? {
             JobState::Done => break,
             JobState::Running { fraction, stage } => {
-                eprint!("\r{stage}: {:3.0}%", 100.0 * fraction);
+                // One line per stage, not per poll.
+                if stage != shown {
+                    eprintln!("{stage}: {:3.0}%", 100.0 * fraction);
+                    shown = stage;
+                }
+                ctx.device
+                    .poll(wgpu::PollType::wait_indefinitely())
+                    .map_err(|e| anyhow::anyhow!("waiting for the GPU: {e}"))?;
             }
         }
     }
