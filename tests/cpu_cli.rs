@@ -153,20 +153,41 @@ fn eigen_output_and_auto_transfer_function() {
 }
 
 #[test]
-fn gpu_backend_says_when_it_arrives() {
-    let out = bin()
-        .args([
-            "features",
-            "nowhere.nii",
-            "--method",
+fn gpu_and_cpu_backends_write_the_same_features() {
+    let input = tmp("backends.nii.gz");
+    run(bin()
+        .args(["phantom", "sphere", "--spacing-mm", "1,1,1.6", "--out"])
+        .arg(&input));
+    for (method, extra) in [
+        ("li", vec!["--sigma-mm", "2,3"]),
+        (
             "rst",
-            "--backend",
-            "gpu",
-            "--out",
-            "x.nii",
-        ])
-        .output()
-        .expect("runs");
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("issue 5"));
+            vec!["--radius-mm", "6", "--step-mm", "0.5", "--rays", "26"],
+        ),
+    ] {
+        let mut outs = Vec::new();
+        for backend in ["cpu", "gpu"] {
+            let out = tmp(&format!("{method}-{backend}.nii.gz"));
+            let text = run(bin()
+                .args(["features"])
+                .arg(&input)
+                .args(["--method", method, "--backend", backend])
+                .args(&extra)
+                .arg("--out")
+                .arg(&out));
+            assert!(text.contains(&format!("({backend})")), "{text}");
+            outs.push(load(&out).to_f32());
+        }
+        let max = outs[0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let worst = outs[0]
+            .iter()
+            .zip(&outs[1])
+            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+        eprintln!("{method}: max {max}, worst |gpu - cpu| {worst}");
+        assert!(max > 1.0, "{method}: no features");
+        assert!(
+            worst <= 1e-3 * max,
+            "{method}: gpu and cpu differ by {worst} (max {max})"
+        );
+    }
 }
