@@ -845,6 +845,34 @@ impl FeatureJob {
         }
     }
 
+    /// Eigenvalues or features of the six tensor components in `work[first..first + 6]` for the
+    /// core slices, into `out_core` (the multi-scale maximum from the second scale on).
+    fn record_features_of_tensor(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        first: usize,
+        core: (u32, u32),
+        part: usize,
+    ) -> Result<(), PipelineError> {
+        let b = &self.buffers;
+        let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[first + c]);
+        self.kernels
+            .eigen
+            .record(
+                ctx,
+                encoder,
+                grid,
+                tensor,
+                core,
+                self.tensor_output(part),
+                part > 0,
+                &b.out_core,
+            )
+            .map_err(dispatch_err)
+    }
+
     fn record_compute(
         &mut self,
         ctx: &GpuContext,
@@ -867,21 +895,7 @@ impl FeatureJob {
                     self.sigmas_mm[part]
                 );
                 self.record_hessian(ctx, encoder, &grid, part)?;
-                let b = &self.buffers;
-                let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
-                self.kernels
-                    .eigen
-                    .record(
-                        ctx,
-                        encoder,
-                        &grid,
-                        tensor,
-                        core,
-                        self.tensor_output(part),
-                        part > 0,
-                        &b.out_core,
-                    )
-                    .map_err(dispatch_err)?;
+                self.record_features_of_tensor(ctx, encoder, &grid, 0, core, part)?;
             }
             Method::Gst => {
                 self.stage = format!(
@@ -906,19 +920,7 @@ impl FeatureJob {
                     tensor,
                 )
                 .map_err(dispatch_err)?;
-                self.kernels
-                    .eigen
-                    .record(
-                        ctx,
-                        encoder,
-                        &grid,
-                        tensor,
-                        core,
-                        self.tensor_output(part),
-                        part > 0,
-                        &b.out_core,
-                    )
-                    .map_err(dispatch_err)?;
+                self.record_features_of_tensor(ctx, encoder, &grid, 4, core, part)?;
             }
             Method::Rst => self.record_rst(ctx, encoder, s, part, grid)?,
         }
