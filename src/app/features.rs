@@ -9,9 +9,10 @@ use crate::cpu::rays::RAY_COUNTS;
 use crate::cpu::rst::DEFAULT_STEP_MM;
 use crate::cpu::tf::{Preset, TransferFunction};
 use crate::gpu::GpuContext;
-use crate::gpu::pipeline::{FeatureJob, JobState};
+use crate::gpu::pipeline::{FeatureJob, JobOptions, JobState};
 use crate::gpu::render_volume::FeatureTexture;
 use crate::volume::Volume;
+use std::sync::Arc;
 
 /// What the MIP and the slice overlay show.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -305,11 +306,13 @@ impl FeatureManager {
     pub fn start(
         &mut self,
         ctx: &GpuContext,
-        volume: &Volume,
+        volume: &Arc<Volume>,
         request: Request,
     ) -> Result<(), String> {
         self.cancel();
-        match FeatureJob::new(ctx, volume, &request) {
+        // The job reads its slices from the loaded volume itself (no copy per computation).
+        let job = FeatureJob::shared(ctx, Arc::clone(volume), &request, JobOptions::default());
+        match job {
             Ok(job) => {
                 let (fraction, stage) = match job.state() {
                     JobState::Running { fraction, stage } => (fraction, stage),

@@ -13,9 +13,9 @@ use crate::cpu::Components3;
 use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
 use crate::gpu::{GpuContext, shaders};
 
-/// Colours of vesselness, airwayness and blobness: the MIP's (`gpu::raycast::CHANNEL_COLOURS`
-/// on the render branch; as in shaders/slice.wgsl).
-pub const FEATURE_RGB: [[f32; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 0.4, 1.0], [1.0, 1.0, 0.0]];
+/// Colours of vesselness, airwayness and blobness: the MIP's (`gpu::raycast::CHANNEL_COLOURS`;
+/// shaders/slice.wgsl and raycast.wgsl repeat them as WGSL constants).
+pub const FEATURE_RGB: [[f32; 3]; 3] = crate::gpu::raycast::CHANNEL_COLOURS;
 
 /// Mirrors `Params` in slice.wgsl (keep in sync).
 #[repr(C)]
