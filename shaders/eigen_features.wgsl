@@ -15,7 +15,7 @@
 //   whose normalised Hessian has the largest Frobenius norm, first scale on a tie, as the CPU).
 // Without `accumulate` the values are written (use it for the first scale).
 //
-// `max_norm` folds the largest Frobenius norm over the output slices into one u32 holding the
+// `max_norm` folds the largest Frobenius norm over the output slices (and rows) into one u32 holding the
 // f32's bits (atomicMax on the bits orders non-negative floats correctly), for Frangi's default
 // c = half the largest norm over the WHOLE volume (every slab's output slices into one atomic).
 #import common.wgsl
@@ -31,8 +31,9 @@ struct Params {
     accumulate: u32,
     frangi_c: f32,
     negate: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // max_norm only: the rows row0 .. row0 + n_rows count (a brick's core; n_rows 0 = all).
+    row0: u32,
+    n_rows: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -109,7 +110,9 @@ fn max_norm(
         atomicStore(&wg_max, 0u);
     }
     workgroupBarrier();
-    if inside(gid) {
+    let in_rows = params.n_rows == 0u
+        || (gid.y >= params.row0 && gid.y - params.row0 < params.n_rows);
+    if inside(gid) && in_rows {
         let idx = slab_index(gid);
         let norm = sym_frobenius(diag(idx), offdiag(idx));
         // NaN fails the test (its bits would beat every number).

@@ -1,10 +1,18 @@
 // Packs a block of features (3 components, component-major f32, as the feature kernels write
-// them) into slices z0.. of a method's Rgba16Float feature texture (V, A, B, 0), and keeps the
+// them) into a box of a method's Rgba16Float feature texture (V, A, B, 0), and keeps the
 // largest value of each component (non-negative floats order like their bits) for default gains.
+// The box is `dims` voxels at texel (0, y0, z0); it is read from rows src_y0.. of the source
+// block of `src_dims` (a brick's features with its halo rows).
 
 struct Params {
-    dims: vec3<u32>, // the block: nx, ny, nz
-    z0: u32,         // first texture slice it goes to
+    dims: vec3<u32>,     // the box written: nx, ny, nz
+    z0: u32,             // first texture slice it goes to
+    src_dims: vec3<u32>, // the source block
+    src_y0: u32,         // first source row of the box
+    y0: u32,             // first texture row it goes to
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
@@ -31,14 +39,15 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     }
     workgroupBarrier();
     if all(id < p.dims) {
-        let n = p.dims.x * p.dims.y * p.dims.z;
-        let idx = id.x + p.dims.x * (id.y + p.dims.y * id.z);
+        let s = p.src_dims;
+        let n = s.x * s.y * s.z;
+        let idx = id.x + s.x * (id.y + p.src_y0 + s.y * id.z);
         let v = vec3<f32>(
             finite_or_zero(src[idx]),
             finite_or_zero(src[n + idx]),
             finite_or_zero(src[2u * n + idx]),
         );
-        textureStore(dst, vec3<u32>(id.x, id.y, id.z + p.z0), vec4<f32>(v, 0.0));
+        textureStore(dst, vec3<u32>(id.x, id.y + p.y0, id.z + p.z0), vec4<f32>(v, 0.0));
         for (var c = 0u; c < 3u; c++) {
             atomicMax(&wg_max[c], bitcast<u32>(max(v[c], 0.0)));
         }

@@ -72,13 +72,14 @@ fn phantom_is_deterministic_and_keeps_its_spacing() {
 #[test]
 fn features_write_three_components_on_the_input_grid() {
     let input = tmp("thick.nii.gz");
-    // A thick z axis (2 mm) is resampled to <= 1.25 mm for the features and written back.
+    // A thick z axis (2 mm): the Hessian with a scale below it refines z by an integer factor
+    // and takes the features back at the input voxels; the RST runs on the input grid.
     run(bin()
         .args(["phantom", "sphere", "--spacing-mm", "1,1,2", "--out"])
         .arg(&input));
     let vin = load(&input);
     for (method, extra) in [
-        ("hessian", vec!["--sigma-mm", "2,3"]),
+        ("hessian", vec!["--sigma-mm", "1,3"]),
         ("frangi", vec!["--sigma-mm", "2", "--frangi-c", "20"]),
         (
             "rst",
@@ -102,7 +103,8 @@ fn features_write_three_components_on_the_input_grid() {
             .args(&extra)
             .arg("--out")
             .arg(&out));
-        assert!(text.contains("resampled"), "{method}: {text}");
+        let refined = text.contains("refined for the Hessian by [1, 1, 2]");
+        assert_eq!(refined, method == "hessian", "{method}: {text}");
         let v = load(&out);
         assert_eq!(v.dims, vin.dims);
         assert_eq!(v.spacing_mm, vin.spacing_mm);

@@ -97,3 +97,38 @@ fn cylinder_along_an_axis_and_a_diagonal_agree() {
     println!("vesselness along z {:.3}, along (1,1,1) {:.3}", v[0], v[1]);
     assert!((v[1] / v[0] - 1.0).abs() <= 0.08, "{v:?}");
 }
+
+/// Blobness of one physical sphere through the pipeline users run (`cpu::pipeline::compute`,
+/// the same rule as the GPU job: the RST is never resampled), at the voxel nearest its centre,
+/// for thin, thick and very thick slices (issue 13: spread max / min <= 1.10).
+#[test]
+fn blobness_through_the_pipeline_is_invariant_to_thick_slices() {
+    use shapecast::cpu::pipeline::{Method, Request, compute};
+    use shapecast::cpu::{FeatureMap, Grid, TransferFunction};
+    let mut req = Request::new(Method::Rst);
+    req.tf = Some(TransferFunction::PAPER_CT);
+    req.rst_map = FeatureMap::Simple;
+    req.rays = Some(42);
+    // Rays from the centre stop at the sphere's edge (4.7 mm); 8 mm keeps the rest cheap.
+    req.radius_mm = Some(8.0);
+    let mut b = Vec::new();
+    for spacing in [[0.5; 3], [0.7, 0.7, 2.5], [0.9; 3], [0.6, 0.6, 5.0]] {
+        let mut p = phantom::sphere(4.7, 100.0);
+        // Room for the rays to leave the sphere; the centre on a voxel of every grid.
+        p.min_mm = [-9.0, -9.0, -15.0];
+        p.max_mm = [9.0, 9.0, 15.0];
+        let volume = p.render(spacing);
+        let grid = Grid::of(&volume);
+        let centre = grid.nearest_voxel([9.0, 9.0, 15.0]);
+        let out = compute(&grid, &volume.to_f32(), &req).expect("rst");
+        let v = f64::from(out.components[2][grid.index(centre[0], centre[1], centre[2])]);
+        println!("spacing {spacing:?}: blobness {v:.3} at voxel {centre:?}");
+        b.push(v);
+    }
+    let (lo, hi) = b.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &v| {
+        (lo.min(v), hi.max(v))
+    });
+    println!("spread {:.3}", hi / lo);
+    assert!(lo > 5.0, "{b:?}");
+    assert!(hi / lo <= 1.10, "spread {:.3}: {b:?}", hi / lo);
+}

@@ -610,7 +610,7 @@ fn frangi_default_c_matches_cpu() {
         let mut enc = encoder(&ctx);
         ef.record_clear_norm(&mut enc, &bits);
         for z in [(0, 4), (4, 3), (7, 4)] {
-            ef.record_max_norm(&ctx, &mut enc, &sg, refs(&h), z, &bits)
+            ef.record_max_norm(&ctx, &mut enc, &sg, refs(&h), z, None, &bits)
                 .expect("record");
         }
         submit(&ctx, enc);
@@ -626,7 +626,7 @@ fn frangi_default_c_matches_cpu() {
         for z in [(0, 4), (4, 3), (7, 4)] {
             let one = norm_buffer(&ctx);
             let mut enc = encoder(&ctx);
-            ef.record_max_norm(&ctx, &mut enc, &sg, refs(&h), z, &one)
+            ef.record_max_norm(&ctx, &mut enc, &sg, refs(&h), z, None, &one)
                 .expect("record");
             submit(&ctx, enc);
             let raw = shapecast::gpu::readback::read_bytes_blocking(&ctx, &one, 4).expect("read");

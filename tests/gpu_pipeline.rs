@@ -1,10 +1,9 @@
-//! The GPU feature pipeline (issue 5) against the CPU reference pipeline, on lavapipe: every
-//! method on phantoms with anisotropic, thick-slice spacing (so thick axes are resampled), dims
-//! that are not multiples of the workgroup, and slab processing (several slabs) equal to one
-//! piece.
+//! The GPU feature pipeline against the CPU reference pipeline, on lavapipe: every method on
+//! phantoms with anisotropic, thick-slice spacing (so the Hessian refines thick axes), dims
+//! that are not multiples of the workgroup, brick processing (several bricks, tiled in y and z)
+//! equal to one piece, and a 512-wide volume within WebGPU's default limits.
 
 use shapecast::cpu::pipeline::{Method, Request, compute};
-use shapecast::cpu::resample::{MAX_FEATURE_SPACING_MM, refined_grid};
 use shapecast::cpu::{Grid, TransferFunction};
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
@@ -51,10 +50,26 @@ fn run_gpu(
     req: &Request,
     max_slab_voxels: Option<u64>,
 ) -> FeatureResult {
+    run_gpu_with(
+        ctx,
+        volume,
+        req,
+        JobOptions {
+            max_slab_voxels,
+            ..JobOptions::default()
+        },
+    )
+}
+
+fn run_gpu_with(
+    ctx: &GpuContext,
+    volume: &Volume,
+    req: &Request,
+    options: JobOptions,
+) -> FeatureResult {
     let options = JobOptions {
         export: true,
-        max_slab_voxels,
-        ..JobOptions::default()
+        ..options
     };
     let mut job = FeatureJob::with_options(ctx, volume, req, options).expect("job");
     job.run_blocking(ctx).expect("run");
@@ -92,9 +107,9 @@ fn check_method(
 ) {
     let grid = Grid::of(volume);
     let cpu = compute(&grid, &volume.to_f32(), req).expect("cpu");
-    // A part of the compute grid per slab: at least three slabs once halos are counted (the
+    // A part of the compute grid per brick: at least three bricks once halos are counted (the
     // RST's halo, the rays' reach, is the widest).
-    let c = refined_grid(&grid, MAX_FEATURE_SPACING_MM);
+    let c = req.resolve(&grid).expect("request").compute;
     let part = if req.method == Method::Rst {
         0.85
     } else {
@@ -102,7 +117,12 @@ fn check_method(
     };
     let cap = (c.dims[0] * c.dims[1]) as u64 * (part * c.dims[2] as f64) as u64;
     let gpu = run_gpu(ctx, volume, req, Some(cap));
-    assert!(gpu.slabs >= 3, "{:?}: only {} slabs", req.method, gpu.slabs);
+    assert!(
+        gpu.slabs >= 2,
+        "{:?}: only {} bricks",
+        req.method,
+        gpu.slabs
+    );
     let comps = gpu.components.as_ref().expect("exported");
     let (worst, _) = compare(comps, &cpu.components, tol);
     let cmax = cpu
@@ -186,21 +206,23 @@ fn rst_paper_rule_with_an_explicit_transfer_function() {
 }
 
 #[test]
-fn slabs_give_the_same_result_as_one_piece_and_fill_the_texture() {
+fn bricks_give_the_same_result_as_one_piece_and_fill_the_texture() {
     let Some(ctx) = test_context() else { return };
-    let volume = scene([0.8, 0.8, 1.6], 0.0);
+    // 512 x 512 x 7 at 0.7 x 0.7 x 2 mm: refined to 13 slices for sigma 1.5 mm.
+    let volume = wide_scene();
     let mut req = Request::new(Method::Li);
     req.sigmas_mm = Some(vec![1.5]);
     let one = run_gpu(&ctx, &volume, &req, None);
-    let plane = (volume.dims[0] * volume.dims[1]) as u64;
-    let many = run_gpu(
-        &ctx,
-        &volume,
-        &req,
-        Some(plane * 2 * volume.dims[2] as u64 / 3),
-    );
+    let c = req.resolve(&Grid::of(&volume)).expect("request").compute;
+    // A quarter of the compute grid per brick: tiling y as well costs less halo than z alone.
+    let many = run_gpu(&ctx, &volume, &req, Some(c.len() as u64 / 4));
     assert_eq!(one.slabs, 1);
-    assert!(many.slabs >= 3, "{} slabs", many.slabs);
+    assert!(many.slabs >= 3, "{} bricks", many.slabs);
+    assert!(
+        many.bricks.iter().any(|b| b.out[1].start > 0),
+        "no brick tiles y: {:?}",
+        many.bricks
+    );
     let (worst, _) = compare(
         many.components.as_ref().expect("exported"),
         one.components.as_ref().expect("exported"),
@@ -244,5 +266,75 @@ fn a_device_too_small_for_one_slice_is_refused_with_a_message() {
         .err()
         .expect("refused");
     let msg = err.to_string();
-    assert!(msg.contains("slab") || msg.contains("slice"), "{msg}");
+    assert!(
+        msg.contains("bricks") && msg.contains("voxels per buffer"),
+        "{msg}"
+    );
+}
+
+/// A real-size plane: 512 x 512 voxels (a chest CT's field of view) in 0.7 mm, a few slices
+/// of 2 mm, with WebGPU's default limits forced (128 MiB per binding, 256 MiB per buffer) and a
+/// small memory budget, so the volume runs in bricks tiled in y and z.
+fn wide_scene() -> Volume {
+    let p = Phantom::new("wide", [0.0, 0.0, 0.0], [358.0, 358.0, 14.0], 40.0)
+        .with(
+            Shape::Sphere {
+                centre_mm: [180.0, 120.0, 7.0],
+                radius_mm: 4.0,
+            },
+            140.0,
+        )
+        .with(
+            Shape::Cylinder {
+                a_mm: [0.0, 250.0, 2.0],
+                b_mm: [358.0, 250.0, 12.0],
+                radius_mm: 2.0,
+            },
+            150.0,
+        );
+    p.render_noisy([0.7, 0.7, 2.0], 5.0, 3)
+}
+
+#[test]
+fn a_512_wide_volume_runs_in_bricks_within_webgpu_default_limits() {
+    let Some(ctx) = test_context() else { return };
+    let volume = wide_scene();
+    assert_eq!(&volume.dims[..2], &[512, 512]);
+    let grid = Grid::of(&volume);
+    let values = volume.to_f32();
+    let webgpu = JobOptions {
+        limits: Some(wgpu::Limits::default()),
+        memory_budget_bytes: 64 << 20,
+        ..JobOptions::default()
+    };
+    let mut hessian = Request::new(Method::Li);
+    hessian.sigmas_mm = Some(vec![1.5, 3.0]);
+    let mut rst = Request::new(Method::Rst);
+    rst.rays = Some(26);
+    rst.radius_mm = Some(4.0);
+    rst.step_mm = Some(0.5);
+    for (req, tol) in [(hessian, 1e-3), (rst, 1e-2)] {
+        let gpu = run_gpu_with(&ctx, &volume, &req, webgpu.clone());
+        let cpu = compute(&grid, &values, &req).expect("cpu");
+        let (worst, within) = compare(
+            gpu.components.as_ref().expect("exported"),
+            &cpu.components,
+            1e-3,
+        );
+        eprintln!(
+            "{:?} 512-wide: {} bricks, overhead {:.2}, max |gpu-cpu| {worst:.2e}, {:.3}% within 1e-3",
+            req.method,
+            gpu.slabs,
+            gpu.overhead,
+            100.0 * within
+        );
+        assert!(gpu.slabs >= 2, "{:?}: {} bricks", req.method, gpu.slabs);
+        assert!(worst <= tol, "{:?}: {worst:.2e}", req.method);
+        assert!(within >= 0.995, "{:?}: {within}", req.method);
+        assert!(
+            gpu.overhead >= 1.0 && gpu.overhead < 3.0,
+            "{}",
+            gpu.overhead
+        );
+    }
 }

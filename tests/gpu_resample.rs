@@ -1,19 +1,22 @@
-//! Linear resampling (shaders/resample.wgsl) on the test adapter against the CPU twin
-//! `resample_linear`: thick axes refined as `refined_grid` does and back, whole volume and slab
-//! by slab with mm offsets, several components at once.
+//! Refinement by integer factors and subsampling (shaders/resample.wgsl) on the test adapter
+//! against the CPU twins `refine_linear` and `subsample`: whole volume, brick by brick (blocks
+//! in y and z with their whole-grid origins), several components at once; input voxels survive
+//! the round trip bit for bit.
 
 mod gpu_common;
 
 use gpu_common::*;
 use shapecast::cpu::Grid;
-use shapecast::cpu::resample::{MAX_FEATURE_SPACING_MM, refined_grid, resample_linear};
+use shapecast::cpu::resample::{refine_linear, refined_grid, subsample};
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::resample::{Resample, ResampleGeometry, source_slices};
+use shapecast::gpu::resample::{Resample, ResampleGeometry};
+
+const FACTORS: [usize; 3] = [1, 2, 3];
 
 /// The phantom at 0.6 x 1.6 x 2.5 mm (two thick axes) and its refined grid.
 fn thick() -> (Grid, Vec<f32>, Grid) {
     let (grid, values) = phantom_at([0.6, 1.6, 2.5]);
-    let fine = refined_grid(&grid, MAX_FEATURE_SPACING_MM);
+    let fine = refined_grid(&grid, FACTORS);
     assert!(fine.dims[1] > grid.dims[1] && fine.dims[2] > grid.dims[2]);
     assert_eq!(fine.dims[0], grid.dims[0]);
     (grid, values, fine)
@@ -23,19 +26,27 @@ fn dims32(g: &Grid) -> [u32; 3] {
     g.dims.map(|d| d as u32)
 }
 
+fn f32s() -> [u32; 3] {
+    FACTORS.map(|f| f as u32)
+}
+
 #[test]
 fn resample_whole_volume_matches_cpu() {
     let Some(ctx) = test_context() else { return };
     let (grid, values, fine) = thick();
     let rs = Resample::new(&ctx).expect("shader");
-    let cpu_up = resample_linear(&grid, &values, &fine);
-    let cpu_down = resample_linear(&fine, &cpu_up, &grid);
+    let (_, cpu_up) = refine_linear(&grid, &values, FACTORS);
+    let cpu_down = subsample(&fine, &cpu_up, FACTORS, &grid);
+    assert_eq!(
+        cpu_down, values,
+        "the CPU round trip keeps the input voxels"
+    );
     let src = upload(&ctx, &values);
     let up = buffer(&ctx, fine.len());
     let down = buffer(&ctx, grid.len());
     let mut enc = encoder(&ctx);
-    let g_up = ResampleGeometry::same_origin(grid.spacing_mm, fine.spacing_mm);
-    let g_down = ResampleGeometry::same_origin(fine.spacing_mm, grid.spacing_mm);
+    let g_up = ResampleGeometry::refine(f32s(), dims32(&grid));
+    let g_down = ResampleGeometry::subsample(f32s(), dims32(&fine));
     rs.record(
         &ctx,
         &mut enc,
@@ -47,15 +58,10 @@ fn resample_whole_volume_matches_cpu() {
         &g_up,
     )
     .expect("record");
-    submit(&ctx, enc);
-    let gpu_up = read(&ctx, &up, fine.len());
-    // Down from the CPU's fine volume, so the two directions are measured separately.
-    let fine_cpu = upload(&ctx, &cpu_up);
-    let mut enc = encoder(&ctx);
     rs.record(
         &ctx,
         &mut enc,
-        &fine_cpu,
+        &up,
         dims32(&fine),
         &down,
         dims32(&grid),
@@ -64,26 +70,35 @@ fn resample_whole_volume_matches_cpu() {
     )
     .expect("record");
     submit(&ctx, enc);
+    let gpu_up = read(&ctx, &up, fine.len());
     let gpu_down = read(&ctx, &down, grid.len());
     let r = range(&values);
     let e_up = max_err(&gpu_up, &cpu_up) / r;
-    let e_down = max_err(&gpu_down, &cpu_down) / r;
     eprintln!(
-        "resample {:?} -> {:?} voxels: max error {e_up:.2e} of the range; back: {e_down:.2e}",
+        "refine {:?} -> {:?} voxels: max error {e_up:.2e} of the range",
         grid.dims, fine.dims
     );
-    assert!(e_up < 1e-6 && e_down < 1e-6, "up {e_up:e} down {e_down:e}");
+    assert!(e_up < 1e-6, "up {e_up:e}");
+    // Input voxels are grid points of the refined grid: kept exactly, there and back.
+    for k in 0..grid.dims[2] {
+        for j in 0..grid.dims[1] {
+            for i in 0..grid.dims[0] {
+                let v = values[grid.index(i, j, k)];
+                assert_eq!(gpu_up[fine.index(i, 2 * j, 3 * k)], v);
+            }
+        }
+    }
+    assert_eq!(gpu_down, values, "subsampling is exact");
 }
 
-/// The refined grid computed slab by slab (three destination slabs along z, each from the
-/// source slices `source_slices` names, positioned by mm origins), three components at once,
-/// equals the CPU's whole-volume result.
+/// The refined grid computed block by block (tiles in y and z of the refined grid, each from
+/// the input voxels its taps read), three components at once, equals the CPU's whole-volume
+/// result; a block whose source misses one slice differs.
 #[test]
-fn resample_by_slabs_matches_whole_volume() {
+fn resample_by_blocks_matches_whole_volume() {
     let Some(ctx) = test_context() else { return };
     let (grid, values, fine) = thick();
     let rs = Resample::new(&ctx).expect("shader");
-    // Three components: the volume, its negative and its square root of |v|.
     let comps: [Vec<f32>; 3] = [
         values.clone(),
         values.iter().map(|v| -v).collect(),
@@ -91,74 +106,76 @@ fn resample_by_slabs_matches_whole_volume() {
     ];
     let cpu: Vec<Vec<f32>> = comps
         .iter()
-        .map(|c| resample_linear(&grid, c, &fine))
+        .map(|c| refine_linear(&grid, c, FACTORS).1)
         .collect();
-    let plane_src = grid.dims[0] * grid.dims[1];
-    let plane_dst = fine.dims[0] * fine.dims[1];
-    let depth = fine.dims[2];
-    let bounds = [0, depth / 3, 2 * depth / 3 + 1, depth];
+    let [nx, ny, nz] = fine.dims;
+    let ys = [0, ny / 2, ny];
+    let zs = [0, nz / 3, 2 * nz / 3 + 1, nz];
     let mut worst = 0.0f32;
-    for w in bounds.windows(2) {
-        let (d0, dn) = (w[0], w[1] - w[0]);
-        let (s0, sn) = source_slices(
-            grid.spacing_mm[2],
-            grid.dims[2] as u32,
-            fine.spacing_mm[2],
-            d0 as u32,
-            dn as u32,
-        );
-        let (s0, sn) = (s0 as usize, sn as usize);
-        let src: Vec<f32> = comps
-            .iter()
-            .flat_map(|c| c[s0 * plane_src..(s0 + sn) * plane_src].to_vec())
-            .collect();
-        let src_buf = upload(&ctx, &src);
-        let dst = buffer(&ctx, 3 * plane_dst * dn);
-        let geom =
-            ResampleGeometry::z_slabs(grid.spacing_mm, s0 as u32, fine.spacing_mm, d0 as u32);
-        let src_dims = [grid.dims[0] as u32, grid.dims[1] as u32, sn as u32];
-        let dst_dims = [fine.dims[0] as u32, fine.dims[1] as u32, dn as u32];
-        let mut enc = encoder(&ctx);
-        rs.record(&ctx, &mut enc, &src_buf, src_dims, &dst, dst_dims, 3, &geom)
-            .expect("record");
-        submit(&ctx, enc);
-        let gpu = read(&ctx, &dst, 3 * plane_dst * dn);
-        for c in 0..3 {
-            let want = &cpu[c][d0 * plane_dst..(d0 + dn) * plane_dst];
-            let got = &gpu[c * plane_dst * dn..(c + 1) * plane_dst * dn];
-            let e = max_err(got, want) / range(&comps[c]);
-            worst = worst.max(e);
-            assert!(e < 1e-6, "slab {d0}+{dn} component {c}: {e:e}");
+    for wy in ys.windows(2) {
+        for wz in zs.windows(2) {
+            let (y0, y1, z0, z1) = (wy[0], wy[1], wz[0], wz[1]);
+            // Input voxels the block reads: floor(c / f) to the next one.
+            let (sy0, sy1) = (y0 / 2, ((y1 - 1).div_ceil(2) + 1).min(grid.dims[1]));
+            let (sz0, sz1) = (z0 / 3, ((z1 - 1).div_ceil(3) + 1).min(grid.dims[2]));
+            let mut src = Vec::new();
+            for c in &comps {
+                for k in sz0..sz1 {
+                    for j in sy0..sy1 {
+                        let at = grid.index(0, j, k);
+                        src.extend_from_slice(&c[at..at + nx]);
+                    }
+                }
+            }
+            let src_buf = upload(&ctx, &src);
+            let n_dst = nx * (y1 - y0) * (z1 - z0);
+            let dst = buffer(&ctx, 3 * n_dst);
+            let geom = ResampleGeometry::refine(f32s(), dims32(&grid))
+                .blocks([0, sy0 as u32, sz0 as u32], [0, y0 as u32, z0 as u32]);
+            let src_dims = [nx as u32, (sy1 - sy0) as u32, (sz1 - sz0) as u32];
+            let dst_dims = [nx as u32, (y1 - y0) as u32, (z1 - z0) as u32];
+            let mut enc = encoder(&ctx);
+            rs.record(&ctx, &mut enc, &src_buf, src_dims, &dst, dst_dims, 3, &geom)
+                .expect("record");
+            submit(&ctx, enc);
+            let gpu = read(&ctx, &dst, 3 * n_dst);
+            for c in 0..3 {
+                let mut e = 0.0f32;
+                for k in z0..z1 {
+                    for j in y0..y1 {
+                        for i in 0..nx {
+                            let got = gpu[c * n_dst + i + nx * ((j - y0) + (y1 - y0) * (k - z0))];
+                            e = e.max((got - cpu[c][fine.index(i, j, k)]).abs());
+                        }
+                    }
+                }
+                let e = e / range(&comps[c]);
+                worst = worst.max(e);
+                assert!(
+                    e < 1e-6,
+                    "block y {y0}..{y1} z {z0}..{z1} component {c}: {e:e}"
+                );
+            }
         }
-        eprintln!(
-            "destination slices {d0}..{} from source slices {s0}..{}",
-            d0 + dn,
-            s0 + sn
-        );
     }
-    eprintln!("resample by slabs: worst error {worst:.2e} of each component's range");
-    // The source range is not padded at the front: starting the middle slab's source one slice
-    // later (slab origin moved with it) changes its first destination slice.
-    let (d0, dn) = (bounds[1], bounds[2] - bounds[1]);
-    let (s0, sn) = source_slices(
-        grid.spacing_mm[2],
-        grid.dims[2] as u32,
-        fine.spacing_mm[2],
-        d0 as u32,
-        dn as u32,
-    );
-    let (s0, sn) = (s0 as usize + 1, sn as usize - 1);
-    let src_buf = upload(&ctx, &values[s0 * plane_src..(s0 + sn) * plane_src]);
-    let dst = buffer(&ctx, plane_dst * dn);
-    let geom = ResampleGeometry::z_slabs(grid.spacing_mm, s0 as u32, fine.spacing_mm, d0 as u32);
-    let src_dims = [grid.dims[0] as u32, grid.dims[1] as u32, sn as u32];
-    let dst_dims = [fine.dims[0] as u32, fine.dims[1] as u32, dn as u32];
+    eprintln!("refine by blocks: worst error {worst:.2e} of each component's range");
+    // A source one slice short at the front (its origin moved with it) reads the wrong slice.
+    let (z0, z1) = (zs[1], zs[2]);
+    let (sz0, sz1) = (z0 / 3 + 1, ((z1 - 1).div_ceil(3) + 1).min(grid.dims[2]));
+    let plane = grid.dims[0] * grid.dims[1];
+    let src_buf = upload(&ctx, &values[sz0 * plane..sz1 * plane]);
+    let n_dst = nx * ny * (z1 - z0);
+    let dst = buffer(&ctx, n_dst);
+    let geom = ResampleGeometry::refine(f32s(), dims32(&grid))
+        .blocks([0, 0, sz0 as u32], [0, 0, z0 as u32]);
+    let src_dims = [nx as u32, grid.dims[1] as u32, (sz1 - sz0) as u32];
+    let dst_dims = [nx as u32, ny as u32, (z1 - z0) as u32];
     let mut enc = encoder(&ctx);
     rs.record(&ctx, &mut enc, &src_buf, src_dims, &dst, dst_dims, 1, &geom)
         .expect("record");
     submit(&ctx, enc);
-    let short = read(&ctx, &dst, plane_dst);
-    let want = &cpu[0][d0 * plane_dst..(d0 + 1) * plane_dst];
+    let short = read(&ctx, &dst, nx * ny);
+    let want = &cpu[0][z0 * nx * ny..(z0 + 1) * nx * ny];
     assert!(
         max_err(&short, want) > 1e-2 * range(&values),
         "a slice less did not matter"

@@ -52,6 +52,87 @@ pub struct BenchArgs {
     /// Also time scikit-image (python3 with scikit-image and nibabel) on the same volume.
     #[arg(long)]
     pub vs_python: bool,
+    /// Time the whole feature job (bricks, as the app and `features` run it) on INPUT and on
+    /// the synthetic `--size`^3 scene in the same run: voxels/s of both, their ratio, bricks and
+    /// halo overhead. `--method` is then hessian, li or rst.
+    #[arg(long)]
+    pub pipeline: bool,
+    /// With --pipeline: plan with WebGPU's default limits instead of the adapter's.
+    #[arg(long)]
+    pub webgpu_limits: bool,
+}
+
+/// One whole feature job, timed: seconds, bricks, halo overhead.
+fn time_job(
+    ctx: &GpuContext,
+    volume: &Volume,
+    req: &crate::cpu::pipeline::Request,
+    webgpu_limits: bool,
+) -> anyhow::Result<(f64, usize, f64)> {
+    use crate::gpu::pipeline::{FeatureJob, JobOptions};
+    let options = JobOptions {
+        limits: webgpu_limits.then(wgpu::Limits::default),
+        ..JobOptions::default()
+    };
+    let t = Instant::now();
+    let mut job = FeatureJob::with_options(ctx, volume, req, options)?;
+    job.run_blocking(ctx)?;
+    let secs = t.elapsed().as_secs_f64();
+    Ok((secs, job.slab_count(), job.overhead()))
+}
+
+/// `bench --pipeline`: the feature job on the input and on the reference scene.
+fn pipeline_bench(args: &BenchArgs, preset: Preset) -> anyhow::Result<()> {
+    use crate::cpu::pipeline::{Method, Request};
+    let method = match args.method.as_str() {
+        "hessian" | "all" => Method::Hessian,
+        "li" => Method::Li,
+        "rst" => Method::Rst,
+        m => bail!("--pipeline --method {m}: hessian, li or rst"),
+    };
+    let mut req = Request::new(method);
+    req.preset = preset;
+    req.sigmas_mm = args.sigma_mm.clone();
+    req.rays = Some(args.rays);
+    req.step_mm = Some(args.step_mm);
+    let ctx = pollster::block_on(GpuContext::new_headless())?;
+    println!("adapter: {}", ctx.adapter_label());
+    let reference = scene(args.size);
+    let mut rates = Vec::new();
+    let mut inputs: Vec<(String, Volume)> = vec![(format!("scene {0}^3", args.size), reference)];
+    if let Some(path) = &args.input {
+        let t = Instant::now();
+        let files = super::features::read_input(path)?;
+        let volume = crate::io::load(&files)
+            .with_context(|| format!("loading {}", path.display()))?
+            .volume;
+        println!(
+            "loaded {} in {:.1} s",
+            path.display(),
+            t.elapsed().as_secs_f64()
+        );
+        inputs.push((path.display().to_string(), volume));
+    }
+    for (name, volume) in &inputs {
+        let (secs, bricks, overhead) = time_job(&ctx, volume, &req, args.webgpu_limits)?;
+        let n = volume.dims.iter().product::<usize>() as f64;
+        let rate = n / secs;
+        println!(
+            "{method:?} on {name}: {:?} voxels at {:.2?} mm, {secs:.1} s, {:.3} M voxels/s, {bricks} brick(s), halo overhead {overhead:.2}",
+            volume.dims,
+            volume.spacing_mm,
+            rate / 1e6
+        );
+        rates.push(rate);
+    }
+    if let [reference, input] = rates[..] {
+        println!(
+            "input / scene rate: {:.2} (voxels/s of the input over the {}^3 scene's)",
+            input / reference,
+            args.size
+        );
+    }
+    Ok(())
 }
 
 /// A scene of nodules and vessels filling `n` mm at 1 mm, with 10 HU noise.
@@ -121,6 +202,9 @@ fn timed(
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     let preset = Preset::from_name(&args.preset).context("unknown --preset")?;
+    if args.pipeline {
+        return pipeline_bench(&args, preset);
+    }
     let volume = match &args.input {
         Some(path) => {
             let files = super::features::read_input(path)?;

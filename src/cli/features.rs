@@ -232,10 +232,11 @@ pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
             };
             let mut job = FeatureJob::with_options(&ctx, &volume, &req, options)?;
             eprintln!(
-                "GPU: {} ({} slab{})",
+                "GPU: {} ({} brick{}, halo overhead {:.2})",
                 ctx.adapter_label(),
                 job.slab_count(),
-                if job.slab_count() == 1 { "" } else { "s" }
+                if job.slab_count() == 1 { "" } else { "s" },
+                job.overhead()
             );
             job.run_blocking(&ctx)?;
             let result = job.finish_result().context("the GPU job did not finish")?;

@@ -34,7 +34,7 @@ pub use gaussian::{
 };
 pub use hessian::{hessian_at, hessian_volume};
 pub use rays::ray_set;
-pub use resample::{resample_linear, resample_thick_axes};
+pub use resample::{refine_linear, refined_grid, refinement_factors, resample_linear, subsample};
 pub use rst::{
     GradientVolume, OpacityRule, RstParams, rst_eigen, rst_eigen_at, rst_features, rst_tensor_at,
 };

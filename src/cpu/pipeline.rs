@@ -1,12 +1,12 @@
 //! The whole CPU feature computation for one volume, as `shapecast features` runs it: preset
-//! defaults, thick axes resampled to <= 1.25 mm, the automatic transfer function, the chosen
-//! method, and the result put back on the input's grid (SCIENCE.md, "What real scans taught us"
-//! and "Conventions of the command line and the app").
+//! defaults, thick axes refined by an integer factor for the Hessian (cpu::resample), the
+//! automatic transfer function, the chosen method, and the result taken at the input's voxels
+//! (docs/science.md, "Thick slices" and "Conventions of the command line and the app").
 
 use super::features::{
     FeatureMap, HessianMethod, hessian_eigen_multiscale, hessian_features_multiscale,
 };
-use super::resample::{resample_linear, resample_thick_axes};
+use super::resample::{refine_linear, refined_grid, refinement_factors, subsample};
 use super::rst::{
     DEFAULT_SIGMA_G_MM, DEFAULT_STEP_MM, GradientVolume, OpacityRule, RstParams, rst_eigen,
     rst_features,
@@ -93,42 +93,121 @@ pub enum RequestError {
     NotPositive(&'static str),
     #[error("the volume is empty")]
     Empty,
+    #[error("no scales given")]
+    NoScales,
+}
+
+/// A request checked once and resolved against a grid: what both the CPU pipeline and the GPU
+/// job ([`crate::gpu::pipeline::FeatureJob`]) compute with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Resolved {
+    /// Scales (Hessian, structure tensor), mm.
+    pub sigmas_mm: Vec<f64>,
+    /// Ray directions (RST only; empty otherwise).
+    pub rays: Vec<[f64; 3]>,
+    /// Ray length and step (RST only; 0 otherwise), mm.
+    pub radius_mm: f64,
+    pub step_mm: f64,
+    /// Integer refinement per axis ([`super::resample::refinement_factors`]).
+    pub factors: [usize; 3],
+    /// The grid the method computes on: the input refined by `factors`.
+    pub compute: Grid,
+    /// What the user should be told (refinement, scale warnings).
+    pub notes: Vec<String>,
+}
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+impl Request {
+    /// Checks the request and resolves the preset's defaults, the refinement and the warnings
+    /// for a volume on `grid` (the one request check of both pipelines).
+    pub fn resolve(&self, grid: &Grid) -> Result<Resolved, RequestError> {
+        if grid.is_empty() {
+            return Err(RequestError::Empty);
+        }
+        let sigmas_mm = self
+            .sigmas_mm
+            .clone()
+            .unwrap_or_else(|| self.preset.sigmas_mm());
+        if sigmas_mm.is_empty() {
+            return Err(RequestError::NoScales);
+        }
+        if let Some(&s) = sigmas_mm.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
+            return Err(RequestError::Sigma(s));
+        }
+        if !(self.sigma_g_mm.is_finite() && self.sigma_g_mm > 0.0) {
+            return Err(RequestError::NotPositive("--sigma-g-mm"));
+        }
+        let sigma_min = sigmas_mm.iter().copied().fold(f64::INFINITY, f64::min);
+        let factors = match self.method {
+            Method::Hessian | Method::Li | Method::Frangi => refinement_factors(grid, sigma_min),
+            Method::Gst | Method::Rst => [1; 3],
+        };
+        let compute = refined_grid(grid, factors);
+        let mut notes = Vec::new();
+        if compute != *grid {
+            notes.push(format!(
+                "thick axes refined for the Hessian by {factors:?} ({:?} mm -> {:.3?} mm); features taken at the input voxels",
+                grid.spacing_mm, compute.spacing_mm
+            ));
+        }
+        // Scale warnings on the input grid, per axis: what the data can show at that scale.
+        let (scale_name, scales): (&str, Vec<f64>) = match self.method {
+            Method::Hessian | Method::Li | Method::Frangi => ("sigma", sigmas_mm.clone()),
+            Method::Gst | Method::Rst => ("the gradient scale sigma_g", vec![self.sigma_g_mm]),
+        };
+        for s in scales {
+            for a in 0..3 {
+                let sp = grid.spacing_mm[a];
+                if grid.dims[a] > 1 && s < 0.5 * sp {
+                    notes.push(format!(
+                        "warning: {scale_name} {s} mm is below half the {} spacing ({sp:.3} mm) of the input: detail along {} is limited by the slices{}",
+                        AXES[a],
+                        AXES[a],
+                        if factors[a] > 1 {
+                            format!(" (refined by {} for the kernels)", factors[a])
+                        } else {
+                            String::new()
+                        }
+                    ));
+                }
+            }
+        }
+        let (mut rays, mut radius_mm, mut step_mm) = (Vec::new(), 0.0, 0.0);
+        if self.method == Method::Rst {
+            let n_rays = self.rays.unwrap_or(42);
+            rays = rays::ray_set(n_rays).ok_or(RequestError::RayCount(n_rays, rays::RAY_COUNTS))?;
+            radius_mm = self.radius_mm.unwrap_or_else(|| self.preset.radius_mm());
+            // The paper's rule steps one voxel unless told otherwise.
+            step_mm = self.step_mm.unwrap_or(match self.rule {
+                OpacityRule::Consistent => DEFAULT_STEP_MM,
+                OpacityRule::Paper => compute.min_spacing_mm(),
+            });
+            if !(radius_mm.is_finite() && radius_mm > 0.0) {
+                return Err(RequestError::NotPositive("--radius-mm"));
+            }
+            if !(step_mm.is_finite() && step_mm > 0.0) {
+                return Err(RequestError::NotPositive("--step-mm"));
+            }
+        }
+        Ok(Resolved {
+            sigmas_mm,
+            rays,
+            radius_mm,
+            step_mm,
+            factors,
+            compute,
+            notes,
+        })
+    }
 }
 
 /// Runs `req` on `values` (physical values on `grid`).
 pub fn compute(grid: &Grid, values: &[f32], req: &Request) -> Result<Outcome, RequestError> {
-    if grid.is_empty() {
-        return Err(RequestError::Empty);
-    }
-    let mut notes = Vec::new();
-    let sigmas = req
-        .sigmas_mm
-        .clone()
-        .unwrap_or_else(|| req.preset.sigmas_mm());
-    if let Some(&s) = sigmas.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
-        return Err(RequestError::Sigma(s));
-    }
-    let (cgrid, cvalues) = resample_thick_axes(grid, values);
-    if cgrid != *grid {
-        notes.push(format!(
-            "thick axes resampled for the features: {:?} mm -> {:.3?} mm ({:?} voxels); output on the input grid",
-            grid.spacing_mm, cgrid.spacing_mm, cgrid.dims
-        ));
-    }
-    let uses_sigmas = matches!(
-        req.method,
-        Method::Hessian | Method::Li | Method::Frangi | Method::Gst
-    );
-    let max_spacing = cgrid.spacing_mm.iter().copied().fold(0.0, f64::max);
-    if uses_sigmas {
-        for s in &sigmas {
-            if *s < 0.5 * max_spacing {
-                notes.push(format!(
-                    "warning: sigma {s} mm is below half the spacing ({max_spacing:.3} mm)"
-                ));
-            }
-        }
-    }
+    let resolved = req.resolve(grid)?;
+    let mut notes = resolved.notes.clone();
+    let sigmas = resolved.sigmas_mm.clone();
+    let (cgrid, cvalues) = refine_linear(grid, values, resolved.factors);
     let mut tf_used = None;
     let mut noise = None;
     let comps = match req.method {
@@ -174,21 +253,6 @@ pub fn compute(grid: &Grid, values: &[f32], req: &Request) -> Result<Outcome, Re
             }
         }
         Method::Rst => {
-            let n_rays = req.rays.unwrap_or(42);
-            let rays =
-                rays::ray_set(n_rays).ok_or(RequestError::RayCount(n_rays, rays::RAY_COUNTS))?;
-            let radius_mm = req.radius_mm.unwrap_or_else(|| req.preset.radius_mm());
-            // The paper's rule steps one voxel unless told otherwise.
-            let step_mm = req.step_mm.unwrap_or(match req.rule {
-                OpacityRule::Consistent => DEFAULT_STEP_MM,
-                OpacityRule::Paper => cgrid.min_spacing_mm(),
-            });
-            if radius_mm.is_nan() || radius_mm <= 0.0 {
-                return Err(RequestError::NotPositive("--radius-mm"));
-            }
-            if step_mm.is_nan() || step_mm <= 0.0 {
-                return Err(RequestError::NotPositive("--step-mm"));
-            }
             let gv = GradientVolume::new(&cgrid, &cvalues, req.sigma_g_mm);
             let tf = match req.tf {
                 Some(tf) => tf,
@@ -207,9 +271,9 @@ pub fn compute(grid: &Grid, values: &[f32], req: &Request) -> Result<Outcome, Re
             ));
             tf_used = Some(tf);
             let params = RstParams {
-                rays,
-                radius_mm,
-                step_mm,
+                rays: resolved.rays.clone(),
+                radius_mm: resolved.radius_mm,
+                step_mm: resolved.step_mm,
                 tf,
                 rule: req.rule,
             };
@@ -223,7 +287,7 @@ pub fn compute(grid: &Grid, values: &[f32], req: &Request) -> Result<Outcome, Re
     let components = if cgrid == *grid {
         comps
     } else {
-        comps.map(|c| resample_linear(&cgrid, &c, grid))
+        comps.map(|c| subsample(&cgrid, &c, resolved.factors, grid))
     };
     Ok(Outcome {
         components,

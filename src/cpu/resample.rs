@@ -1,29 +1,122 @@
-//! Linear resampling of thick axes to 1.25 mm or finer before features, and back onto the input
-//! grid afterwards (SCIENCE.md, "What real scans taught us", item 4).
+//! Refinement of thick axes by an integer factor before the Hessian features, and the features
+//! taken back at the input voxel centres by subsampling (docs/science.md, "Thick slices").
+//!
+//! The rule (measured, see ARCHITECTURE.md and docs/reproduction.md): only the Hessian family
+//! refines, and only an axis whose spacing exceeds the smallest scale, by
+//! `f = ceil(spacing / sigma_min)` (at most [`MAX_REFINEMENT`]), so that the sampled Gaussian
+//! derivative kernels span at least one voxel per sigma. The refined grid keeps every input
+//! voxel centre as a grid point (voxel `i` becomes voxel `f * i`), values between them are linear
+//! along that axis, and the features are read back at the input centres exactly: never by
+//! interpolating features or eigenvalues (which would break the magnitude order of eigenvalues
+//! and blur peaks). The RST and the structure tensor read their (I, g) by trilinear
+//! interpolation at mm positions and account for the blur of a thick axis in their opacity
+//! length, so they run on the input grid.
 
 use super::{Grid, parallel};
 
-/// The largest spacing features are computed on.
-pub const MAX_FEATURE_SPACING_MM: f64 = 1.25;
+/// The largest refinement factor of one axis (a 5 mm axis with sigma 0.7 mm needs 8).
+pub const MAX_REFINEMENT: usize = 8;
 
-/// The grid with every axis whose spacing exceeds `max_spacing_mm` refined so that the same
-/// extent (first to last voxel centre) is covered with spacing <= `max_spacing_mm`.
-pub fn refined_grid(grid: &Grid, max_spacing_mm: f64) -> Grid {
+/// Per-axis integer refinement factors for scales down to `sigma_min_mm` (1 = as is).
+pub fn refinement_factors(grid: &Grid, sigma_min_mm: f64) -> [usize; 3] {
+    std::array::from_fn(|a| {
+        let s = grid.spacing_mm[a];
+        if grid.dims[a] < 2 || !(sigma_min_mm > 0.0) || !(s > sigma_min_mm) {
+            return 1;
+        }
+        ((s / sigma_min_mm - 1e-9).ceil() as usize).clamp(1, MAX_REFINEMENT)
+    })
+}
+
+/// The grid refined by `factors`: `(n - 1) * f + 1` voxels at spacing `s / f`, the same first
+/// and last voxel centre.
+pub fn refined_grid(grid: &Grid, factors: [usize; 3]) -> Grid {
     let mut out = *grid;
     for a in 0..3 {
-        let (n, s) = (grid.dims[a], grid.spacing_mm[a]);
-        if s > max_spacing_mm && n > 1 {
-            let extent = (n - 1) as f64 * s;
-            let m = (extent / max_spacing_mm - 1e-9).ceil() as usize + 1;
-            out.dims[a] = m;
-            out.spacing_mm[a] = extent / (m - 1) as f64;
+        let f = factors[a].max(1);
+        if f > 1 && grid.dims[a] > 1 {
+            out.dims[a] = (grid.dims[a] - 1) * f + 1;
+            out.spacing_mm[a] = grid.spacing_mm[a] / f as f64;
         }
     }
     out
 }
 
+/// The linear tap of refined index `t` (whole-grid) on a source axis of `n` voxels refined by
+/// `f`: the source voxels `(i0, i1)` and the weight of `i1`. Exact: `t = f * i` gives `(i, _, 0)`.
+pub fn refine_tap(t: usize, f: usize, n: usize) -> (usize, usize, f64) {
+    let f = f.max(1);
+    let last = n.max(1) - 1;
+    let i0 = (t / f).min(last);
+    let rem = if t / f > last { 0 } else { t % f };
+    (i0, (i0 + 1).min(last), rem as f64 / f as f64)
+}
+
+/// `values` on `grid` refined by `factors` (linear along refined axes; input voxels kept
+/// bit for bit).
+pub fn refine_linear(grid: &Grid, values: &[f32], factors: [usize; 3]) -> (Grid, Vec<f32>) {
+    let fine = refined_grid(grid, factors);
+    if fine == *grid {
+        return (*grid, values.to_vec());
+    }
+    let taps: [Vec<(usize, usize, f64)>; 3] = std::array::from_fn(|a| {
+        (0..fine.dims[a])
+            .map(|t| refine_tap(t, factors[a], grid.dims[a]))
+            .collect()
+    });
+    let plane = fine.dims[0] * fine.dims[1];
+    let mut out = vec![0.0f32; fine.len()];
+    parallel::for_each_chunk(&mut out, plane, |k, slice| {
+        let (z0, z1, wz) = taps[2][k];
+        for j in 0..fine.dims[1] {
+            let (y0, y1, wy) = taps[1][j];
+            for i in 0..fine.dims[0] {
+                let (x0, x1, wx) = taps[0][i];
+                slice[i + fine.dims[0] * j] =
+                    trilinear(grid, values, [x0, x1], [y0, y1], [z0, z1], [wx, wy, wz]);
+            }
+        }
+    });
+    (fine, out)
+}
+
+/// Trilinear interpolation with f64 arithmetic; a zero weight takes the first voxel exactly.
+pub fn trilinear(
+    grid: &Grid,
+    values: &[f32],
+    x: [usize; 2],
+    y: [usize; 2],
+    z: [usize; 2],
+    w: [f64; 3],
+) -> f32 {
+    let v = |i: usize, j: usize, k: usize| f64::from(values[grid.index(i, j, k)]);
+    let lerp = |a: f64, b: f64, w: f64| if w == 0.0 { a } else { a + (b - a) * w };
+    let c00 = lerp(v(x[0], y[0], z[0]), v(x[1], y[0], z[0]), w[0]);
+    let c10 = lerp(v(x[0], y[1], z[0]), v(x[1], y[1], z[0]), w[0]);
+    let c01 = lerp(v(x[0], y[0], z[1]), v(x[1], y[0], z[1]), w[0]);
+    let c11 = lerp(v(x[0], y[1], z[1]), v(x[1], y[1], z[1]), w[0]);
+    lerp(lerp(c00, c10, w[1]), lerp(c01, c11, w[1]), w[2]) as f32
+}
+
+/// The values of `fine` (refined from `coarse` by `factors`) at the voxel centres of `coarse`:
+/// voxel `(i, j, k)` takes fine voxel `(f_x i, f_y j, f_z k)`, with no interpolation.
+pub fn subsample(fine: &Grid, values: &[f32], factors: [usize; 3], coarse: &Grid) -> Vec<f32> {
+    let plane = coarse.dims[0] * coarse.dims[1];
+    let mut out = vec![0.0f32; coarse.len()];
+    let f = factors.map(|f| f.max(1));
+    parallel::for_each_chunk(&mut out, plane, |k, slice| {
+        for j in 0..coarse.dims[1] {
+            for i in 0..coarse.dims[0] {
+                slice[i + coarse.dims[0] * j] = values[fine.index(f[0] * i, f[1] * j, f[2] * k)];
+            }
+        }
+    });
+    out
+}
+
 /// Samples `values` (on `from`) at the voxel centres of `to` (same origin, grid mm) by
-/// trilinear interpolation, clamping at the borders. Resampling to a finer or a coarser grid.
+/// trilinear interpolation, clamping at the borders: a general resampler for tests and tools
+/// (the feature pipelines use [`refine_linear`] and [`subsample`]).
 pub fn resample_linear(from: &Grid, values: &[f32], to: &Grid) -> Vec<f32> {
     let plane = to.dims[0] * to.dims[1];
     let mut out = vec![0.0f32; to.len()];
@@ -45,30 +138,12 @@ pub fn resample_linear(from: &Grid, values: &[f32], to: &Grid) -> Vec<f32> {
             let (y0, y1, wy) = taps[1][j];
             for i in 0..to.dims[0] {
                 let (x0, x1, wx) = taps[0][i];
-                let v = |x: usize, y: usize, z: usize| f64::from(values[from.index(x, y, z)]);
-                let lerp = |a: f64, b: f64, w: f64| a + (b - a) * w;
-                let c00 = lerp(v(x0, y0, z0), v(x1, y0, z0), wx);
-                let c10 = lerp(v(x0, y1, z0), v(x1, y1, z0), wx);
-                let c01 = lerp(v(x0, y0, z1), v(x1, y0, z1), wx);
-                let c11 = lerp(v(x0, y1, z1), v(x1, y1, z1), wx);
-                let c0 = lerp(c00, c10, wy);
-                let c1 = lerp(c01, c11, wy);
-                slice[i + to.dims[0] * j] = lerp(c0, c1, wz) as f32;
+                slice[i + to.dims[0] * j] =
+                    trilinear(from, values, [x0, x1], [y0, y1], [z0, z1], [wx, wy, wz]);
             }
         }
     });
     out
-}
-
-/// Resamples thick axes to <= 1.25 mm; returns the grid used and the values on it (a copy of
-/// the input when nothing is thick).
-pub fn resample_thick_axes(grid: &Grid, values: &[f32]) -> (Grid, Vec<f32>) {
-    let fine = refined_grid(grid, MAX_FEATURE_SPACING_MM);
-    if fine == *grid {
-        return (*grid, values.to_vec());
-    }
-    let v = resample_linear(grid, values, &fine);
-    (fine, v)
 }
 
 #[cfg(test)]
@@ -76,22 +151,37 @@ mod tests {
     use super::*;
 
     #[test]
-    fn thick_axis_is_refined_and_linear_data_survives_the_round_trip() {
-        let grid = Grid::new([4, 5, 6], [0.7, 0.7, 5.0]);
-        let fine = refined_grid(&grid, MAX_FEATURE_SPACING_MM);
+    fn only_axes_coarser_than_the_smallest_scale_are_refined_by_an_integer() {
+        let g = Grid::new([4, 5, 6], [0.7, 0.7, 5.0]);
+        assert_eq!(refinement_factors(&g, 1.5), [1, 1, 4]);
+        assert_eq!(refinement_factors(&g, 5.0), [1, 1, 1]);
+        assert_eq!(refinement_factors(&g, 0.1), [7, 7, MAX_REFINEMENT]);
+        let iso = Grid::new([4, 5, 6], [1.5, 1.5, 1.5]);
+        assert_eq!(refinement_factors(&iso, 1.5), [1, 1, 1]);
+        assert_eq!(refinement_factors(&iso, 1.0), [2, 2, 2]);
+        let fine = refined_grid(&g, [1, 1, 4]);
         assert_eq!(fine.dims, [4, 5, 21]);
         assert!((fine.spacing_mm[2] - 1.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn refinement_keeps_input_voxels_and_subsampling_returns_them_bit_for_bit() {
+        let grid = Grid::new([4, 5, 6], [0.7, 2.1, 5.0]);
         let v: Vec<f32> = (0..grid.len())
             .map(|n| {
                 let [i, j, k] = grid.ijk(n);
-                (i + 2 * j) as f32 + 3.0 * k as f32
+                ((i * 7 + j * 3 + k * 11) as f32).sin() * 100.0 + 0.1
             })
             .collect();
-        let (g2, up) = resample_thick_axes(&grid, &v);
-        assert_eq!(g2, fine);
-        let back = resample_linear(&fine, &up, &grid);
-        for (a, b) in v.iter().zip(&back) {
-            assert!((a - b).abs() < 1e-4);
-        }
+        let f = [1, 2, 4];
+        let (fine, up) = refine_linear(&grid, &v, f);
+        assert_eq!(fine.dims, [4, 9, 21]);
+        let back = subsample(&fine, &up, f, &grid);
+        assert_eq!(back, v);
+        // Between input slices the values are linear.
+        let a = up[fine.index(1, 2, 4)];
+        let b = up[fine.index(1, 2, 8)];
+        let mid = up[fine.index(1, 2, 6)];
+        assert!((mid - 0.5 * (a + b)).abs() < 1e-4);
     }
 }

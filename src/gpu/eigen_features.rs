@@ -34,7 +34,8 @@ struct Params {
     accumulate: u32,
     frangi_c: f32,
     negate: u32,
-    _pad: [u32; 2],
+    /// `max_norm` only: rows `[row0, n_rows]` (n_rows 0 = all).
+    rows: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 48);
 
@@ -165,7 +166,7 @@ impl EigenFeatures {
             accumulate: u32::from(accumulate),
             frangi_c: c,
             negate,
-            _pad: [0; 2],
+            rows: [0; 2],
         }
     }
 
@@ -218,8 +219,10 @@ impl EigenFeatures {
     }
 
     /// Records `norm_bits = max(norm_bits, bits of the largest Frobenius norm over the output
-    /// slices)`; `norm_bits` is a 4-byte buffer (e.g. [`norm_buffer`]), cleared once before the
-    /// first slab.
+    /// slices)`, only over the rows `rows = [row0, n_rows]` when given (a brick's core);
+    /// `norm_bits` is a 4-byte buffer (e.g. [`norm_buffer`]), cleared once before the first
+    /// brick.
+    #[allow(clippy::too_many_arguments)]
     pub fn record_max_norm(
         &self,
         ctx: &GpuContext,
@@ -227,6 +230,7 @@ impl EigenFeatures {
         grid: &SlabGrid,
         tensor: [&wgpu::Buffer; 6],
         out_z: (u32, u32),
+        rows: Option<[u32; 2]>,
         norm_bits: &wgpu::Buffer,
     ) -> Result<(), RecordError> {
         let groups = Self::check(ctx, grid, &tensor, out_z)?;
@@ -234,7 +238,8 @@ impl EigenFeatures {
             return Ok(());
         }
         checks::buffer(ctx, "largest norm", norm_bits, 4)?;
-        let params = Self::params(grid, out_z, TensorOutput::Eigen, false);
+        let mut params = Self::params(grid, out_z, TensorOutput::Eigen, false);
+        params.rows = rows.unwrap_or([0, 0]);
         let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "norm params", &params);
         let mut entries = vec![checks::entry(0, &params)];
         entries.extend((0..6).map(|c| checks::entry(c as u32 + 1, tensor[c])));

@@ -1,7 +1,6 @@
 //! Everything that touches wgpu: the shared context, the shader sources, and one module per
 //! kernel that owns its pipeline and the bytemuck structs mirroring its WGSL structs.
 
-pub mod axis_mip;
 pub mod checks;
 pub mod context;
 pub mod eigen_features;
@@ -22,7 +21,5 @@ pub mod shaders;
 pub mod slab;
 pub mod slice;
 pub mod structure_tensor;
-pub mod volume;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};
-pub use volume::GpuVolume;

@@ -12,8 +12,39 @@ use crate::gpu::{GpuContext, shaders};
 struct Params {
     dims: [u32; 3],
     z0: u32,
+    src_dims: [u32; 3],
+    src_y0: u32,
+    y0: u32,
+    _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 16);
+const _: () = assert!(std::mem::size_of::<Params>() == 48);
+
+/// Where a packed box comes from and goes to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PackBox {
+    /// The source block (3 components of these dims, component-major).
+    pub src_dims: [u32; 3],
+    /// First source row of the box.
+    pub src_y0: u32,
+    /// Rows of the box (all of `src_dims`'s x and z).
+    pub ny: u32,
+    /// Texel of the box's first voxel: (0, y0, z0).
+    pub y0: u32,
+    pub z0: u32,
+}
+
+impl PackBox {
+    /// A whole block into slices `z0..` of the texture.
+    pub fn slices(dims: [u32; 3], z0: u32) -> Self {
+        Self {
+            src_dims: dims,
+            src_y0: 0,
+            ny: dims[1],
+            y0: 0,
+            z0,
+        }
+    }
+}
 
 /// The pack pipeline and the running maxima of the features it packed.
 pub struct Pack {
@@ -46,23 +77,26 @@ impl Pack {
         Ok(Self { pipeline, maxima })
     }
 
-    /// Records: the block `src` (3 components of `block.dims`, component-major) into slices
-    /// `z0..z0 + nz` of `dst`.
+    /// Records: the box `at` of the block `src` (3 components, component-major) into `dst`.
     pub fn record(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
-        block: SlabGrid,
         src: &wgpu::Buffer,
         dst: &FeatureTexture,
-        z0: u32,
+        at: PackBox,
     ) {
+        let block = SlabGrid::new([at.src_dims[0], at.ny, at.src_dims[2]], [1.0; 3]);
         let params = uniform_buffer(
             &ctx.device,
             "pack params",
             &Params {
                 dims: block.dims,
-                z0,
+                z0: at.z0,
+                src_dims: at.src_dims,
+                src_y0: at.src_y0,
+                y0: at.y0,
+                _pad: [0; 3],
             },
         );
         let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {

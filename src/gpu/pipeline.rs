@@ -7,11 +7,13 @@
 //! per frame and stays responsive, shows progress, and cancels by dropping the job. Natively,
 //! [`FeatureJob::run_blocking`] drives it to the end.
 //!
-//! What it computes is `crate::cpu::pipeline::compute` (the CPU reference): thick axes resampled
-//! to <= 1.25 mm, the automatic transfer function from the noise of the whole volume, Frangi's
-//! c over the whole volume per scale, the multi-scale maximum, and results on the input grid.
-//! Slabs come from [`crate::gpu::slab::plan`], sized from the device's binding limit and a
-//! memory budget, with halos wide enough for the kernels and the rays.
+//! What it computes is `crate::cpu::pipeline::compute` (the CPU reference), from the same
+//! [`Request::resolve`]: thick axes refined by integer factors for the Hessian, the automatic
+//! transfer function from the noise of the whole volume, Frangi's c over the whole volume per
+//! scale, the multi-scale maximum, and results taken at the input voxels. Bricks (whole rows,
+//! tiled in y and z) come from [`crate::gpu::slab::plan`], sized from the device's binding
+//! limit and a memory budget, with halos wide enough for the kernels and the rays; the RST
+//! casts rays from core voxels only.
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -19,21 +21,20 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::cpu::features::FeatureMap;
 use crate::cpu::gaussian::kernel_radius_vox;
-use crate::cpu::pipeline::{Method, Request, RequestError};
-use crate::cpu::resample::{MAX_FEATURE_SPACING_MM, refined_grid};
-use crate::cpu::rst::{DEFAULT_STEP_MM, OpacityRule};
+use crate::cpu::pipeline::{Method, Request, RequestError, Resolved};
 use crate::cpu::tf::{NOISE_BAND_HU, TransferFunction, auto_transfer_function, median};
-use crate::cpu::{Components3, Grid, rays};
+use crate::cpu::{Components3, Grid};
 use crate::gpu::eigen_features::{EigenFeatures, Mapping, TensorOutput};
 use crate::gpu::gaussian::{Gaussian, SeparableKernel};
 use crate::gpu::gradient::{Gradient, GradientBuffers};
 use crate::gpu::hessian::{Hessian, HessianKernels};
 use crate::gpu::kernel::{SlabGrid, f32_buffer};
+use crate::gpu::pack::PackBox;
 use crate::gpu::readback::{PendingRead, ReadbackError};
 use crate::gpu::render_volume::{FeatureTexture, RenderVolumeError};
 use crate::gpu::resample::{Resample, ResampleGeometry};
 use crate::gpu::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
-use crate::gpu::slab::{PlanError, Slab, plan};
+use crate::gpu::slab::{Brick, BrickLimits, PlanError, plan};
 use crate::gpu::structure_tensor::StructureTensor;
 use crate::gpu::{GpuContext, noise, pack, shaders};
 use crate::volume::Volume;
@@ -46,7 +47,7 @@ pub enum PipelineError {
     Request(#[from] RequestError),
     #[error(transparent)]
     Texture(#[from] RenderVolumeError),
-    #[error("this GPU cannot hold the volume in slabs: {0}")]
+    #[error("this GPU cannot hold the volume in bricks: {0}")]
     Plan(#[from] PlanError),
     #[error("a GPU kernel failed to build: {0}")]
     Shader(#[from] shaders::ShaderSourceError),
@@ -70,10 +71,13 @@ pub enum JobState {
 /// How a job runs (the defaults suit the app).
 #[derive(Clone, Debug)]
 pub struct JobOptions {
-    /// Working memory for slab buffers, bytes.
+    /// Working memory for brick buffers, bytes.
     pub memory_budget_bytes: u64,
-    /// Caps compute voxels per slab below what the budget allows (tests force several slabs).
+    /// Caps compute voxels per brick below what the budget allows (tests force several bricks).
     pub max_slab_voxels: Option<u64>,
+    /// The device limits to plan with, when smaller than the device's (tests force WebGPU's
+    /// defaults on a device that has more).
+    pub limits: Option<wgpu::Limits>,
     /// Also read the features back to the CPU (export, tests).
     pub export: bool,
     /// Output voxels per RST dispatch (a step); `None` picks from the adapter type.
@@ -83,8 +87,9 @@ pub struct JobOptions {
 impl Default for JobOptions {
     fn default() -> Self {
         Self {
-            memory_budget_bytes: 512 << 20,
+            memory_budget_bytes: 768 << 20,
             max_slab_voxels: None,
+            limits: None,
             export: false,
             rst_voxels_per_step: None,
         }
@@ -101,14 +106,18 @@ pub struct FeatureResult {
     pub tf: Option<TransferFunction>,
     /// The measured noise of the smoothed intensity (auto TF), HU.
     pub noise_sigma_hu: Option<f64>,
-    /// Number of slabs the volume was split into.
+    /// Number of bricks the volume was split into.
     pub slabs: usize,
+    /// Computed voxels over delivered (compute-grid) voxels of the features' bricks.
+    pub overhead: f64,
+    /// The bricks.
+    pub bricks: Vec<Brick>,
 }
 
 /// One bounded piece of work.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Task {
-    /// Smoothed intensity of a slab -> noise windows of its measured slices (auto TF).
+    /// Smoothed intensity of a whole-plane slab -> noise windows of its core slices (auto TF).
     Noise(usize),
     /// Median of the window sigmas -> transfer function.
     NoiseDone,
@@ -179,7 +188,12 @@ pub struct FeatureJob {
     request: Request,
     input: Grid,
     compute: Grid,
-    slabs: Vec<Slab>,
+    /// Integer refinement per axis (input voxel `i` is compute voxel `f * i`).
+    factors: [usize; 3],
+    slabs: Vec<Brick>,
+    /// Whole-plane slabs for the noise measurement (windows tile whole slices).
+    noise_slabs: Vec<Brick>,
+    overhead: f64,
     tasks: VecDeque<Task>,
     total_tasks: usize,
     kernels: Kernels,
@@ -215,7 +229,9 @@ pub struct FeatureJob {
 fn bytes_per_voxel(method: Method, resampled: bool) -> u64 {
     let base = match method {
         // input + 6 components + 2 scratch
-        Method::Hessian | Method::Li | Method::Frangi | Method::Gst => 9 * 4,
+        Method::Hessian | Method::Li | Method::Frangi => 9 * 4,
+        // input + gradient (3) + 6 components + 2 scratch
+        Method::Gst => 12 * 4,
         // input + I + 2 scratch + the (I, g) texture
         Method::Rst => 4 * 4 + 16,
     };
@@ -223,15 +239,54 @@ fn bytes_per_voxel(method: Method, resampled: bool) -> u64 {
     base + 12 + if resampled { 4 } else { 0 }
 }
 
+/// Halo in compute voxels per axis (x unused: rows are whole) that `method` needs.
+fn halo_of(req: &Request, r: &Resolved) -> [usize; 3] {
+    let s = r.compute.spacing_mm;
+    std::array::from_fn(|a| match req.method {
+        Method::Hessian | Method::Li | Method::Frangi => r
+            .sigmas_mm
+            .iter()
+            .map(|&sigma| kernel_radius_vox(sigma / s[a]))
+            .max()
+            .unwrap_or(0),
+        Method::Gst => {
+            let rho = r.sigmas_mm.iter().copied().fold(0.0, f64::max);
+            kernel_radius_vox(req.sigma_g_mm / s[a]) + 1 + kernel_radius_vox(rho / s[a])
+        }
+        Method::Rst => {
+            let k = (r.radius_mm / r.step_mm + 1e-6).floor();
+            let reach = k * r.step_mm / s[a];
+            kernel_radius_vox(req.sigma_g_mm / s[a]) + 1 + reach.ceil() as usize + 1
+        }
+    })
+}
+
 fn to_u32(v: usize) -> u32 {
     u32::try_from(v).unwrap_or(u32::MAX)
 }
 
-fn slab_grid(grid: &Grid, nz: usize) -> SlabGrid {
+/// The kernels' grid of a box of `grid` with these ranges' lengths.
+fn box_grid(grid: &Grid, ranges: &[std::ops::Range<usize>; 3]) -> SlabGrid {
     SlabGrid::new(
-        [to_u32(grid.dims[0]), to_u32(grid.dims[1]), to_u32(nz)],
+        std::array::from_fn(|a| to_u32(ranges[a].len())),
         grid.spacing_mm.map(|s| s as f32),
     )
+}
+
+/// The core's slices and rows within its brick: `((z0, nz), (y0, ny))`.
+fn core_in_slab(b: &Brick) -> ((u32, u32), (u32, u32)) {
+    let local = |a: usize| {
+        (
+            to_u32(b.core_c[a].start - b.slab_c[a].start),
+            to_u32(b.core_c[a].len()),
+        )
+    };
+    (local(2), local(1))
+}
+
+/// The first voxel of each range.
+fn starts(ranges: &[std::ops::Range<usize>; 3]) -> [u32; 3] {
+    std::array::from_fn(|a| to_u32(ranges[a].start))
 }
 
 impl FeatureJob {
@@ -262,81 +317,63 @@ impl FeatureJob {
     ) -> Result<Self, PipelineError> {
         let req = request.clone();
         let input = Grid::of(&volume);
-        if input.is_empty() {
-            return Err(RequestError::Empty.into());
-        }
+        let resolved = req.resolve(&input)?;
         let dims = volume.dims.map(to_u32);
         let texture = FeatureTexture::new(ctx, dims, "features")?;
-        let compute = refined_grid(&input, MAX_FEATURE_SPACING_MM);
-        let mut notes = Vec::new();
-        if compute != input {
+        let compute = resolved.compute;
+        let factors = resolved.factors;
+        let mut notes = resolved.notes.clone();
+        let halo = halo_of(&req, &resolved);
+        let resampled = compute != input;
+        let limits = options.limits.as_ref().unwrap_or(&ctx.limits);
+        let binding = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let budget_voxels = options.memory_budget_bytes / bytes_per_voxel(req.method, resampled);
+        // A brick's buffers hold one f32 per voxel; the feature output 3 (4 for eigenvalues
+        // with their scale's norm) per voxel of whole rows of the core slices.
+        let out_components = if req.eigen && req.method != Method::Rst {
+            4
+        } else {
+            3
+        };
+        let mut limits = BrickLimits {
+            slab_voxels: (binding / 4).min(budget_voxels),
+            out_voxels: binding / (4 * out_components),
+        };
+        if let Some(cap) = options.max_slab_voxels {
+            limits.slab_voxels = limits.slab_voxels.min(cap);
+        }
+        let planned = plan(&input, factors, halo, limits, None)?;
+        let overhead = planned.overhead;
+        let slabs = planned.bricks;
+        let noise_slabs = if req.method == Method::Rst && req.tf.is_none() {
+            // Whole planes, but only the input, the smoothed intensity and scratch: 16 bytes
+            // per voxel.
+            let noise_halo = [
+                0,
+                0,
+                kernel_radius_vox(req.sigma_g_mm / compute.spacing_mm[2]),
+            ];
+            let noise_limits = BrickLimits {
+                slab_voxels: (binding / 4).min(options.memory_budget_bytes / 16),
+                out_voxels: u64::MAX,
+            };
+            plan(&input, factors, noise_halo, noise_limits, Some(1))?.bricks
+        } else {
+            Vec::new()
+        };
+        if slabs.len() > 1 {
             notes.push(format!(
-                "thick axes resampled for the features: {:?} mm -> {:.3?} mm ({:?} voxels); output on the input grid",
-                input.spacing_mm, compute.spacing_mm, compute.dims
+                "{} bricks, halo overhead {overhead:.2} (computed / delivered voxels)",
+                slabs.len()
             ));
         }
-        // Parameters, as the CPU pipeline resolves them.
-        let sigmas_mm = req
-            .sigmas_mm
-            .clone()
-            .unwrap_or_else(|| req.preset.sigmas_mm());
-        if let Some(&s) = sigmas_mm.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
-            return Err(RequestError::Sigma(s).into());
-        }
-        let sz = compute.spacing_mm[2];
-        let max_spacing = compute.spacing_mm.iter().copied().fold(0.0, f64::max);
-        let mut rays = Vec::new();
-        let (mut radius_mm, mut step_mm) = (0.0, 0.0);
-        let halo = match req.method {
-            Method::Hessian | Method::Li | Method::Frangi => {
-                for s in &sigmas_mm {
-                    if *s < 0.5 * max_spacing {
-                        notes.push(format!(
-                            "warning: sigma {s} mm is below half the spacing ({max_spacing:.3} mm)"
-                        ));
-                    }
-                }
-                sigmas_mm
-                    .iter()
-                    .map(|&s| kernel_radius_vox(s / sz))
-                    .max()
-                    .unwrap_or(0)
-            }
-            Method::Gst => {
-                let rho = sigmas_mm.iter().copied().fold(0.0, f64::max);
-                kernel_radius_vox(req.sigma_g_mm / sz) + 1 + kernel_radius_vox(rho / sz)
-            }
-            Method::Rst => {
-                let n_rays = req.rays.unwrap_or(42);
-                rays = rays::ray_set(n_rays)
-                    .ok_or(RequestError::RayCount(n_rays, rays::RAY_COUNTS))?;
-                radius_mm = req.radius_mm.unwrap_or_else(|| req.preset.radius_mm());
-                step_mm = req.step_mm.unwrap_or(match req.rule {
-                    OpacityRule::Consistent => DEFAULT_STEP_MM,
-                    OpacityRule::Paper => compute.min_spacing_mm(),
-                });
-                if radius_mm.is_nan() || radius_mm <= 0.0 {
-                    return Err(RequestError::NotPositive("--radius-mm").into());
-                }
-                if step_mm.is_nan() || step_mm <= 0.0 {
-                    return Err(RequestError::NotPositive("--step-mm").into());
-                }
-                let k = (radius_mm / step_mm + 1e-6).floor();
-                let reach = k * step_mm / sz;
-                kernel_radius_vox(req.sigma_g_mm / sz) + 1 + reach.ceil() as usize + 1
-            }
-        };
-        let resampled = compute != input;
-        let binding = ctx
-            .limits
-            .max_storage_buffer_binding_size
-            .min(ctx.limits.max_buffer_size);
-        let budget_voxels = options.memory_budget_bytes / bytes_per_voxel(req.method, resampled);
-        let mut max_slab = (binding / 16).min(budget_voxels);
-        if let Some(cap) = options.max_slab_voxels {
-            max_slab = max_slab.min(cap);
-        }
-        let slabs = plan(&input, &compute, halo, max_slab)?;
+        let Resolved {
+            sigmas_mm,
+            rays,
+            radius_mm,
+            step_mm,
+            ..
+        } = resolved;
         let kernels = Kernels::new(ctx, &req, &compute, &sigmas_mm)?;
         let mut tasks = VecDeque::new();
         let tf = if req.method == Method::Rst {
@@ -345,7 +382,7 @@ impl FeatureJob {
             None
         };
         if req.method == Method::Rst && tf.is_none() {
-            tasks.extend((0..slabs.len()).map(Task::Noise));
+            tasks.extend((0..noise_slabs.len()).map(Task::Noise));
             tasks.push_back(Task::NoiseDone);
         }
         let frangi_default = req.method == Method::Frangi && req.frangi_c.is_none() && !req.eigen;
@@ -354,7 +391,13 @@ impl FeatureJob {
                 tasks.extend((0..slabs.len()).map(|slab| Task::FrangiC { scale, slab }));
             }
         }
-        let plane_c = (compute.dims[0] * compute.dims[1]) as u64;
+        // RST dispatches cover a brick's core rows; a step is at most `per_step` voxels.
+        let core_plane = slabs
+            .iter()
+            .map(|b| (b.core_c[0].len() * b.core_c[1].len()) as u64)
+            .max()
+            .unwrap_or(1);
+        let max_core_rows = slabs.iter().map(|b| b.core_c[1].len()).max().unwrap_or(1);
         let per_step = options.rst_voxels_per_step.unwrap_or(
             if ctx.adapter_info.device_type == wgpu::DeviceType::Cpu {
                 1 << 15
@@ -362,17 +405,23 @@ impl FeatureJob {
                 1 << 20
             },
         );
-        let rst_slices_per_step = ((per_step / plane_c.max(1)) as usize).max(1);
-        let rst_rows_per_step = (per_step < plane_c).then(|| {
-            ((per_step / compute.dims[0].max(1) as u64) as usize).clamp(1, compute.dims[1])
-        });
-        let buffers = Buffers::new(ctx, &input, &compute, &slabs, &req, rst_slices_per_step);
+        let rst_slices_per_step = ((per_step / core_plane.max(1)) as usize).max(1);
+        let rst_rows_per_step = (per_step < core_plane)
+            .then(|| ((per_step / compute.dims[0].max(1) as u64) as usize).clamp(1, max_core_rows));
+        let buffers = Buffers::new(
+            ctx,
+            &slabs,
+            &noise_slabs,
+            resampled,
+            &req,
+            rst_slices_per_step,
+        );
         for (s, slab) in slabs.iter().enumerate() {
             tasks.push_back(Task::Prepare(s));
             let parts = match req.method {
                 Method::Rst => match rst_rows_per_step {
-                    Some(rows) => slab.core_c.len() * compute.dims[1].div_ceil(rows),
-                    None => slab.core_c.len().div_ceil(rst_slices_per_step),
+                    Some(rows) => slab.core_c[2].len() * slab.core_c[1].len().div_ceil(rows),
+                    None => slab.core_c[2].len().div_ceil(rst_slices_per_step),
                 },
                 Method::Gst if req.eigen => 1,
                 _ => sigmas_mm.len(),
@@ -396,7 +445,10 @@ impl FeatureJob {
             request: req,
             input,
             compute,
+            factors,
             slabs,
+            noise_slabs,
+            overhead,
             tasks,
             total_tasks,
             kernels,
@@ -423,9 +475,14 @@ impl FeatureJob {
         })
     }
 
-    /// Number of slabs the volume is processed in.
+    /// Number of bricks the volume is processed in.
     pub fn slab_count(&self) -> usize {
         self.slabs.len()
+    }
+
+    /// Computed voxels over delivered voxels (compute grid) of the feature bricks.
+    pub fn overhead(&self) -> f64 {
+        self.overhead
     }
 
     /// Progress so far, without doing work.
@@ -521,6 +578,7 @@ impl FeatureJob {
             return None;
         }
         let slabs = self.slabs.len();
+        let bricks = self.slabs.clone();
         Some(FeatureResult {
             texture: self.texture,
             components: self.components,
@@ -528,6 +586,8 @@ impl FeatureJob {
             tf: self.tf,
             noise_sigma_hu: self.noise_sigma,
             slabs,
+            overhead: self.overhead,
+            bricks,
         })
     }
 
@@ -541,16 +601,24 @@ impl FeatureJob {
                 self.frangi_c[scale] = self.frangi_c[scale].max(0.5 * f64::from(m));
             }
             ReadFor::Export(s) => {
+                let at = self.pack_box(s);
                 let Some(out) = &mut self.components else {
                     return;
                 };
-                let slab = &self.slabs[s];
-                let plane = self.input.dims[0] * self.input.dims[1];
-                let n = plane * slab.out_z.len();
+                let [sx, sy, sz] = at.src_dims.map(|d| d as usize);
+                let n = sx * sy * sz;
                 let values: Vec<f32> = bytemuck::pod_collect_to_vec(bytes);
+                let grid = self.input;
                 for (c, comp) in out.iter_mut().enumerate() {
-                    if let Some(src) = values.get(c * n..(c + 1) * n) {
-                        comp[slab.out_z.start * plane..slab.out_z.end * plane].copy_from_slice(src);
+                    let Some(src) = values.get(c * n..(c + 1) * n) else {
+                        continue;
+                    };
+                    for z in 0..sz {
+                        for y in 0..at.ny as usize {
+                            let from = sx * (y + at.src_y0 as usize + sy * z);
+                            let to = grid.index(0, y + at.y0 as usize, z + at.z0 as usize);
+                            comp[to..to + sx].copy_from_slice(&src[from..from + sx]);
+                        }
                     }
                 }
             }
@@ -564,44 +632,56 @@ fn dispatch_err(e: impl std::fmt::Display) -> PipelineError {
 }
 
 impl FeatureJob {
-    /// Uploads input slices `range` into `buffers.input` (f32, physical values).
-    fn upload(&self, ctx: &GpuContext, range: std::ops::Range<usize>) {
-        let plane = self.input.dims[0] * self.input.dims[1];
-        // At most 16 MiB of f32 converted at a time.
+    /// Uploads the input box `ranges` (whole rows) into `buffers.input` (f32, physical values).
+    fn upload(&self, ctx: &GpuContext, ranges: &[std::ops::Range<usize>; 3]) {
+        let [nx, ny, _] = self.input.dims;
+        let rows = ranges[1].len();
+        let row = ranges[0].len();
+        if row != nx || rows == 0 {
+            return;
+        }
+        // At most 16 MiB of f32 converted at a time, whole slices of the box at once.
+        let plane = rows * nx;
         let per = ((4usize << 20) / plane.max(1)).max(1);
-        let mut chunk = vec![0f32; plane * per.min(range.len())];
-        let mut z = range.start;
-        while z < range.end {
-            let nz = per.min(range.end - z);
-            let n = plane * nz;
-            self.volume.values_into(z * plane, &mut chunk[..n]);
+        let mut chunk = vec![0f32; plane * per.min(ranges[2].len())];
+        let mut z = ranges[2].start;
+        while z < ranges[2].end {
+            let nz = per.min(ranges[2].end - z);
+            for dz in 0..nz {
+                let first = self.input.index(0, ranges[1].start, z + dz);
+                let dst = &mut chunk[dz * plane..(dz + 1) * plane];
+                if rows == ny {
+                    self.volume.values_into(first, dst);
+                } else {
+                    for (j, out) in dst.chunks_exact_mut(nx).enumerate() {
+                        self.volume.values_into(first + j * nx, out);
+                    }
+                }
+            }
             ctx.queue.write_buffer(
                 &self.buffers.input,
-                ((z - range.start) * plane * 4) as u64,
-                bytemuck::cast_slice(&chunk[..n]),
+                ((z - ranges[2].start) * plane * 4) as u64,
+                bytemuck::cast_slice(&chunk[..nz * plane]),
             );
             z += nz;
         }
     }
 
-    /// Slab `s` on the compute grid in [`Self::vol`]: uploaded, and resampled when needed.
+    /// Brick `b` (of `self.slabs`, or of the noise slabs) on the compute grid in
+    /// [`Self::vol`]: uploaded, and refined when needed.
     fn record_slab_values(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
-        s: usize,
+        brick: &Brick,
     ) -> Result<(), PipelineError> {
-        let slab = &self.slabs[s];
-        self.upload(ctx, slab.in_z.clone());
+        self.upload(ctx, &brick.input);
         if let Some(vol) = &self.buffers.vol {
-            let src = slab_grid(&self.input, slab.in_z.len());
-            let dst = slab_grid(&self.compute, slab.slab_c.len());
-            let geometry = ResampleGeometry::z_slabs(
-                self.input.spacing_mm,
-                to_u32(slab.in_z.start),
-                self.compute.spacing_mm,
-                to_u32(slab.slab_c.start),
-            );
+            let src = box_grid(&self.input, &brick.input);
+            let dst = box_grid(&self.compute, &brick.slab_c);
+            let geometry =
+                ResampleGeometry::refine(self.factors.map(to_u32), self.input.dims.map(to_u32))
+                    .blocks(starts(&brick.input), starts(&brick.slab_c));
             self.kernels
                 .resample
                 .record(
@@ -710,10 +790,11 @@ impl FeatureJob {
         let n_slabs = self.slabs.len();
         match task {
             Task::Noise(s) => {
-                self.stage = format!("measuring noise, slab {}/{n_slabs}", s + 1);
-                let slab = self.slabs[s].clone();
-                let grid = slab_grid(&self.compute, slab.slab_c.len());
-                self.record_slab_values(ctx, encoder, s)?;
+                let n = self.noise_slabs.len();
+                self.stage = format!("measuring noise, slab {}/{n}", s + 1);
+                let slab = self.noise_slabs[s].clone();
+                let grid = box_grid(&self.compute, &slab.slab_c);
+                self.record_slab_values(ctx, encoder, &slab)?;
                 let b = &self.buffers;
                 self.kernels
                     .gaussian
@@ -727,18 +808,9 @@ impl FeatureJob {
                         &b.work[0],
                     )
                     .map_err(dispatch_err)?;
-                // Each compute slice is measured once: from the end of the previous core on.
-                let from = if s == 0 {
-                    0
-                } else {
-                    self.slabs[s - 1].core_c.end.max(slab.core_c.start)
-                };
-                let to = slab.core_c.end;
-                if to <= from {
-                    return Ok(None);
-                }
-                let z0 = to_u32(from - slab.slab_c.start);
-                let nz = to_u32(to - from);
+                // Cores tile the volume: each slice is measured once.
+                let z0 = to_u32(slab.core_c[2].start - slab.slab_c[2].start);
+                let nz = to_u32(slab.core_c[2].len());
                 let len = noise::output_len(grid, nz);
                 if len == 0 {
                     return Ok(None);
@@ -780,34 +852,25 @@ impl FeatureJob {
                     s + 1
                 );
                 let slab = self.slabs[s].clone();
-                let grid = slab_grid(&self.compute, slab.slab_c.len());
-                self.record_slab_values(ctx, encoder, s)?;
+                let grid = box_grid(&self.compute, &slab.slab_c);
+                self.record_slab_values(ctx, encoder, &slab)?;
                 self.record_hessian(ctx, encoder, &grid, scale)?;
                 let b = &self.buffers;
                 let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
                 self.kernels.eigen.record_clear_norm(encoder, &b.norm);
+                let (z, y) = core_in_slab(&slab);
                 self.kernels
                     .eigen
-                    .record_max_norm(
-                        ctx,
-                        encoder,
-                        &grid,
-                        tensor,
-                        (
-                            to_u32(slab.core_c.start - slab.slab_c.start),
-                            to_u32(slab.core_c.len()),
-                        ),
-                        &b.norm,
-                    )
+                    .record_max_norm(ctx, encoder, &grid, tensor, z, Some([y.0, y.1]), &b.norm)
                     .map_err(dispatch_err)?;
                 Ok(Some((b.norm.clone(), 4, ReadFor::FrangiC(scale))))
             }
             Task::Prepare(s) => {
-                self.stage = format!("slab {}/{n_slabs}: upload", s + 1);
+                self.stage = format!("brick {}/{n_slabs}: upload", s + 1);
                 let slab = self.slabs[s].clone();
-                self.record_slab_values(ctx, encoder, s)?;
+                self.record_slab_values(ctx, encoder, &slab)?;
                 if matches!(self.request.method, Method::Rst | Method::Gst) {
-                    let grid = slab_grid(&self.compute, slab.slab_c.len());
+                    let grid = box_grid(&self.compute, &slab.slab_c);
                     self.record_gradient(ctx, encoder, &grid)?;
                 }
                 Ok(None)
@@ -817,7 +880,7 @@ impl FeatureJob {
                 Ok(None)
             }
             Task::Deliver(s) => {
-                self.stage = format!("slab {}/{n_slabs}: storing", s + 1);
+                self.stage = format!("brick {}/{n_slabs}: storing", s + 1);
                 self.record_deliver(ctx, encoder, s)
             }
             Task::Maxima => {
@@ -881,16 +944,13 @@ impl FeatureJob {
         part: usize,
     ) -> Result<(), PipelineError> {
         let slab = self.slabs[s].clone();
-        let grid = slab_grid(&self.compute, slab.slab_c.len());
-        let core = (
-            to_u32(slab.core_c.start - slab.slab_c.start),
-            to_u32(slab.core_c.len()),
-        );
+        let grid = box_grid(&self.compute, &slab.slab_c);
+        let (core, _) = core_in_slab(&slab);
         let n_slabs = self.slabs.len();
         match self.request.method {
             Method::Hessian | Method::Li | Method::Frangi => {
                 self.stage = format!(
-                    "slab {}/{n_slabs}: Hessian, sigma {} mm",
+                    "brick {}/{n_slabs}: Hessian, sigma {} mm",
                     s + 1,
                     self.sigmas_mm[part]
                 );
@@ -899,7 +959,7 @@ impl FeatureJob {
             }
             Method::Gst => {
                 self.stage = format!(
-                    "slab {}/{n_slabs}: structure tensor, rho {} mm",
+                    "brick {}/{n_slabs}: structure tensor, rho {} mm",
                     s + 1,
                     self.sigmas_mm[part]
                 );
@@ -961,25 +1021,28 @@ impl FeatureJob {
             self.kernels.rays = Some(rays);
             self.tf = Some(tf);
         }
+        // Slices `first..last` of the compute grid, rows of the brick's core (brick-local).
+        let (zc, yc) = (&slab.core_c[2], &slab.core_c[1]);
+        let y_local = to_u32(yc.start - slab.slab_c[1].start);
         let (first, last, rows) = match self.rst_rows_per_step {
             Some(per) => {
-                let blocks = self.compute.dims[1].div_ceil(per);
-                let z = slab.core_c.start + part / blocks;
+                let blocks = yc.len().div_ceil(per);
+                let z = zc.start + part / blocks;
                 let j0 = (part % blocks) * per;
-                let nj = per.min(self.compute.dims[1] - j0);
-                (z, z + 1, Some([to_u32(j0), to_u32(nj)]))
+                let nj = per.min(yc.len() - j0);
+                (z, z + 1, [y_local + to_u32(j0), to_u32(nj)])
             }
             None => {
-                let first = slab.core_c.start + part * self.rst_slices_per_step;
+                let first = zc.start + part * self.rst_slices_per_step;
                 (
                     first,
-                    (first + self.rst_slices_per_step).min(slab.core_c.end),
-                    None,
+                    (first + self.rst_slices_per_step).min(zc.end),
+                    [y_local, to_u32(yc.len())],
                 )
             }
         };
         self.stage = format!(
-            "slab {}/{}: RST, slices {}-{} of {}",
+            "brick {}/{}: RST, slices {}-{} of {}",
             s + 1,
             self.slabs.len(),
             first + 1,
@@ -997,9 +1060,9 @@ impl FeatureJob {
         };
         let dispatch = RstDispatch {
             grid,
-            out_z0: to_u32(first - slab.slab_c.start),
+            out_z0: to_u32(first - slab.slab_c[2].start),
             out_nz: to_u32(last - first),
-            rows,
+            rows: Some(rows),
             output,
         };
         let Some((_, volume)) = &self.packed else {
@@ -1012,11 +1075,12 @@ impl FeatureJob {
             .ok_or_else(|| dispatch_err("no RST output buffer"))?;
         rst.record(ctx, encoder, &inputs, &dispatch, chunk)
             .map_err(dispatch_err)?;
-        // Into the core's component-major block.
-        let plane = (self.compute.dims[0] * self.compute.dims[1]) as u64;
+        // Into the core's component-major block (whole brick planes; rows outside the core are
+        // never read).
+        let plane = u64::from(grid.dims[0]) * u64::from(grid.dims[1]);
         let n_chunk = plane * (last - first) as u64;
-        let n_core = plane * slab.core_c.len() as u64;
-        let at = plane * (first - slab.core_c.start) as u64;
+        let n_core = plane * zc.len() as u64;
+        let at = plane * (first - zc.start) as u64;
         for c in 0..3u64 {
             encoder.copy_buffer_to_buffer(
                 chunk,
@@ -1029,6 +1093,37 @@ impl FeatureJob {
         Ok(())
     }
 
+    /// Where brick `s`'s features lie in the buffer [`Self::record_deliver`] packs from, and
+    /// where they go in the texture.
+    fn pack_box(&self, s: usize) -> PackBox {
+        let b = &self.slabs[s];
+        let ny = to_u32(b.out[1].len());
+        let (y0, z0) = (to_u32(b.out[1].start), to_u32(b.out[2].start));
+        if self.buffers.out_in.is_some() {
+            // Subsampled onto the input grid: exactly the delivered box.
+            PackBox {
+                src_dims: [to_u32(self.input.dims[0]), ny, to_u32(b.out[2].len())],
+                src_y0: 0,
+                ny,
+                y0,
+                z0,
+            }
+        } else {
+            // The core's slices with the brick's halo rows.
+            PackBox {
+                src_dims: [
+                    to_u32(self.compute.dims[0]),
+                    to_u32(b.slab_c[1].len()),
+                    to_u32(b.core_c[2].len()),
+                ],
+                src_y0: to_u32(b.core_c[1].start - b.slab_c[1].start),
+                ny,
+                y0,
+                z0,
+            }
+        }
+    }
+
     fn record_deliver(
         &mut self,
         ctx: &GpuContext,
@@ -1037,15 +1132,25 @@ impl FeatureJob {
     ) -> Result<Option<(wgpu::Buffer, u64, ReadFor)>, PipelineError> {
         let slab = self.slabs[s].clone();
         let b = &self.buffers;
-        let block = slab_grid(&self.input, slab.out_z.len());
+        let at = self.pack_box(s);
         let features = match &b.out_in {
             Some(out_in) => {
-                let core = slab_grid(&self.compute, slab.core_c.len());
-                let geometry = ResampleGeometry::z_slabs(
-                    self.compute.spacing_mm,
-                    to_u32(slab.core_c.start),
-                    self.input.spacing_mm,
-                    to_u32(slab.out_z.start),
+                let core_dims = [
+                    to_u32(self.compute.dims[0]),
+                    to_u32(slab.slab_c[1].len()),
+                    to_u32(slab.core_c[2].len()),
+                ];
+                let geometry = ResampleGeometry::subsample(
+                    self.factors.map(to_u32),
+                    self.compute.dims.map(to_u32),
+                )
+                .blocks(
+                    [
+                        0,
+                        to_u32(slab.slab_c[1].start),
+                        to_u32(slab.core_c[2].start),
+                    ],
+                    starts(&slab.out),
                 );
                 self.kernels
                     .resample
@@ -1053,9 +1158,9 @@ impl FeatureJob {
                         ctx,
                         encoder,
                         &b.out_core,
-                        core.dims,
+                        core_dims,
                         out_in,
-                        block.dims,
+                        at.src_dims,
                         3,
                         &geometry,
                     )
@@ -1064,18 +1169,14 @@ impl FeatureJob {
             }
             None => &b.out_core,
         };
-        self.kernels.pack.record(
-            ctx,
-            encoder,
-            block,
-            features,
-            &self.texture,
-            to_u32(slab.out_z.start),
-        );
+        self.kernels
+            .pack
+            .record(ctx, encoder, features, &self.texture, at);
+        let bytes = 3 * at.src_dims.iter().map(|&d| u64::from(d)).product::<u64>() * 4;
         Ok(self
             .options
             .export
-            .then(|| (features.clone(), 3 * block.len() * 4, ReadFor::Export(s))))
+            .then(|| (features.clone(), bytes, ReadFor::Export(s))))
     }
 }
 
@@ -1132,21 +1233,25 @@ impl Kernels {
 impl Buffers {
     fn new(
         ctx: &GpuContext,
-        input: &Grid,
-        compute: &Grid,
-        slabs: &[Slab],
+        bricks: &[Brick],
+        noise_bricks: &[Brick],
+        resampled: bool,
         req: &Request,
         rst_slices: usize,
     ) -> Self {
         let d = &ctx.device;
-        let plane_in = (input.dims[0] * input.dims[1]) as u64;
-        let plane_c = (compute.dims[0] * compute.dims[1]) as u64;
-        let max = |f: &dyn Fn(&Slab) -> usize| slabs.iter().map(f).max().unwrap_or(1) as u64;
-        let in_n = plane_in * max(&|s| s.in_z.len());
-        let slab_n = plane_c * max(&|s| s.slab_c.len());
-        let core_n = plane_c * max(&|s| s.core_c.len());
-        let out_n = plane_in * max(&|s| s.out_z.len());
-        let resampled = input != compute;
+        let all = || bricks.iter().chain(noise_bricks);
+        let in_n = all().map(Brick::input_len).max().unwrap_or(1);
+        let slab_n = all().map(Brick::slab_len).max().unwrap_or(1);
+        let rows = |b: &Brick| (b.slab_c[0].len() * b.slab_c[1].len()) as u64;
+        // Features of a brick's core slices, whole brick planes.
+        let core_n = bricks
+            .iter()
+            .map(|b| rows(b) * b.core_c[2].len() as u64)
+            .max()
+            .unwrap_or(1);
+        let out_n = bricks.iter().map(Brick::out_len).max().unwrap_or(1);
+        let plane_n = bricks.iter().map(rows).max().unwrap_or(1);
         let work_count = match req.method {
             Method::Rst => 1,
             Method::Gst => 10,
@@ -1157,21 +1262,28 @@ impl Buffers {
         } else {
             3
         };
-        let [nwx, nwy] = crate::cpu::tf::noise_window_counts(compute.dims);
-        let noise_n = ((nwx * nwy) as u64 * max(&|s| s.core_c.len())).max(1);
+        let noise_n = all()
+            .map(|b| {
+                let [nwx, nwy] =
+                    crate::cpu::tf::noise_window_counts([b.slab_c[0].len(), b.slab_c[1].len(), 1]);
+                (nwx * nwy * b.core_c[2].len()) as u64
+            })
+            .max()
+            .unwrap_or(1)
+            .max(1);
         Self {
-            input: f32_buffer(d, "slab input", in_n),
-            vol: resampled.then(|| f32_buffer(d, "slab on the compute grid", slab_n)),
+            input: f32_buffer(d, "brick input", in_n),
+            vol: resampled.then(|| f32_buffer(d, "brick on the compute grid", slab_n)),
             tmp: [
-                f32_buffer(d, "slab scratch 0", slab_n),
-                f32_buffer(d, "slab scratch 1", slab_n),
+                f32_buffer(d, "brick scratch 0", slab_n),
+                f32_buffer(d, "brick scratch 1", slab_n),
             ],
             work: (0..work_count)
-                .map(|_| f32_buffer(d, "slab work", slab_n))
+                .map(|_| f32_buffer(d, "brick work", slab_n))
                 .collect(),
-            out_core: f32_buffer(d, "slab features", out_components * core_n),
+            out_core: f32_buffer(d, "brick features", out_components * core_n),
             chunk_out: (req.method == Method::Rst)
-                .then(|| f32_buffer(d, "RST block", 3 * plane_c * rst_slices as u64)),
+                .then(|| f32_buffer(d, "RST block", 3 * plane_n * rst_slices as u64)),
             out_in: resampled.then(|| f32_buffer(d, "features on the input grid", 3 * out_n)),
             small: f32_buffer(d, "noise windows", noise_n),
             norm: crate::gpu::eigen_features::norm_buffer(ctx),

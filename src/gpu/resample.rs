@@ -1,18 +1,14 @@
-//! Linear resampling between two grids with an mm offset (shaders/resample.wgsl), per slab:
-//! thick axes to <= 1.25 mm before the features and the features back onto the input grid
-//! (SCIENCE.md, "What real scans taught us", item 4). Twin: [`crate::cpu::resample_linear`].
+//! Linear resampling between blocks of two grids related by integer factors
+//! (shaders/resample.wgsl), per brick: thick axes refined before the Hessian and the features
+//! taken back at the input voxels by subsampling (docs/science.md, "Thick slices"). Twins:
+//! [`crate::cpu::resample::refine_linear`] and [`crate::cpu::resample::subsample`].
 //!
-//! Convention (the CPU's, grid mm): source voxel `s` of a slab sits at
-//! `src_origin_mm + s * src_spacing_mm`, destination voxel `t` at
-//! `dst_origin_mm + t * dst_spacing_mm`, per axis. The destination reads the source at
-//! `u = (dst_origin + t * dst_spacing - src_origin) / src_spacing` (source voxels), clamped into
-//! `[0, n - 1]`, linear between `floor(u)` and the next voxel. With both origins 0 this is the
-//! CPU's `u = t * to / from` exactly (same f64 expression); [`crate::cpu::resample::refined_grid`]
-//! keeps the first voxel centre and the extent, so whole-volume grids share origin 0. For slabs,
-//! origins are `z0 * spacing` of each slab's first slice in its whole grid, and the source slab
-//! must hold [`source_slices`] of the destination slices (clamping then happens only at the
-//! volume's ends, as on the CPU). The per-axis neighbours and weights are computed here in f64
-//! and uploaded, so the GPU interpolates with the CPU's taps.
+//! Convention: each axis maps whole-grid indices with an integer factor ([`AxisMap`]); a
+//! block's voxel `t` is whole-grid voxel `origin + t`. The neighbours and weights are computed
+//! here with the CPU twin's own integer taps and uploaded, so refining keeps the input voxels
+//! bit for bit and subsampling is a plain copy. The caller uploads a source block that holds
+//! every voxel the destination reads (the brick plan's `input` ranges); clamping happens only at
+//! the whole volume's ends, as on the CPU.
 
 use crate::gpu::checks::{self, RecordError};
 use crate::gpu::kernel::{SlabGrid, WORKGROUP};
@@ -41,46 +37,56 @@ pub struct Tap {
 }
 const _: () = assert!(std::mem::size_of::<Tap>() == 16);
 
-/// Where the two grids lie, per axis, in grid mm.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// How a destination axis maps onto a source axis: whole-grid indices with integer factors, so
+/// that the taps are exact (no mm arithmetic to round).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AxisMap {
+    /// Destination = source refined by `f` ([`crate::cpu::resample::refine_tap`]): destination
+    /// whole-grid voxel `T` reads source voxels `T / f` and the next, weight `(T % f) / f`.
+    Refine { f: u32 },
+    /// Destination = every `f`-th source voxel ([`crate::cpu::resample::subsample`]):
+    /// destination whole-grid voxel `T` is source voxel `f * T` (weight 0).
+    Subsample { f: u32 },
+}
+
+/// Where a source block and a destination block lie in their whole grids, per axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ResampleGeometry {
-    pub src_origin_mm: [f64; 3],
-    pub src_spacing_mm: [f64; 3],
-    pub dst_origin_mm: [f64; 3],
-    pub dst_spacing_mm: [f64; 3],
+    pub map: [AxisMap; 3],
+    /// Whole-grid index of the source block's first voxel, per axis.
+    pub src_origin: [u32; 3],
+    /// Whole-grid index of the destination block's first voxel, per axis.
+    pub dst_origin: [u32; 3],
+    /// Voxels of the source's whole grid per axis (clamping happens at its ends only).
+    pub src_whole: [u32; 3],
 }
 
 impl ResampleGeometry {
-    /// Two whole grids with the same first voxel centre (as `refined_grid` makes them).
-    pub fn same_origin(src_spacing_mm: [f64; 3], dst_spacing_mm: [f64; 3]) -> Self {
+    /// Whole grids refined by `factors`.
+    pub fn refine(factors: [u32; 3], src_whole: [u32; 3]) -> Self {
         Self {
-            src_origin_mm: [0.0; 3],
-            src_spacing_mm,
-            dst_origin_mm: [0.0; 3],
-            dst_spacing_mm,
+            map: factors.map(|f| AxisMap::Refine { f }),
+            src_origin: [0; 3],
+            dst_origin: [0; 3],
+            src_whole,
         }
     }
 
-    /// Slabs along z of two whole grids sharing origin 0: the source slab starts at whole-grid
-    /// slice `src_z0`, the destination slab at `dst_z0`.
-    pub fn z_slabs(
-        src_spacing_mm: [f64; 3],
-        src_z0: u32,
-        dst_spacing_mm: [f64; 3],
-        dst_z0: u32,
-    ) -> Self {
+    /// Whole grids subsampled by `factors`.
+    pub fn subsample(factors: [u32; 3], src_whole: [u32; 3]) -> Self {
         Self {
-            src_origin_mm: [0.0, 0.0, f64::from(src_z0) * src_spacing_mm[2]],
-            src_spacing_mm,
-            dst_origin_mm: [0.0, 0.0, f64::from(dst_z0) * dst_spacing_mm[2]],
-            dst_spacing_mm,
+            map: factors.map(|f| AxisMap::Subsample { f }),
+            src_origin: [0; 3],
+            dst_origin: [0; 3],
+            src_whole,
         }
     }
 
-    /// Source position (voxels, unclamped) of destination index `t` along `axis`.
-    fn position(&self, axis: usize, t: u32) -> f64 {
-        let p = self.dst_origin_mm[axis] + f64::from(t) * self.dst_spacing_mm[axis];
-        (p - self.src_origin_mm[axis]) / self.src_spacing_mm[axis]
+    /// The same mapping between blocks starting at `src_origin` and `dst_origin`.
+    pub fn blocks(mut self, src_origin: [u32; 3], dst_origin: [u32; 3]) -> Self {
+        self.src_origin = src_origin;
+        self.dst_origin = dst_origin;
+        self
     }
 }
 
@@ -89,43 +95,32 @@ pub fn axis_taps(geometry: &ResampleGeometry, axis: usize, n_src: u32, n_dst: u3
     (0..n_dst).map(|t| tap(geometry, axis, n_src, t)).collect()
 }
 
-/// The neighbours and weight along `axis` of destination index `t`.
+/// The neighbours (block-local) and weight along `axis` of destination index `t`, clamped into
+/// the source block of `n_src` voxels.
 fn tap(geometry: &ResampleGeometry, axis: usize, n_src: u32, t: u32) -> Tap {
-    let last = n_src.max(1) - 1;
-    let u = geometry.position(axis, t);
-    // NaN (a zero spacing) reads the first voxel.
-    let u = if u.is_nan() {
-        0.0
-    } else {
-        u.clamp(0.0, f64::from(last))
+    let whole_t = u64::from(geometry.dst_origin[axis]) + u64::from(t);
+    let whole_n = geometry.src_whole[axis].max(1) as usize;
+    let (i0, i1, w) = match geometry.map[axis] {
+        AxisMap::Refine { f } => {
+            crate::cpu::resample::refine_tap(whole_t as usize, f.max(1) as usize, whole_n)
+        }
+        AxisMap::Subsample { f } => {
+            let i = (u64::from(f.max(1)) * whole_t).min(whole_n as u64 - 1) as usize;
+            (i, i, 0.0)
+        }
     };
-    let f = u.floor();
-    let i0 = f as u32;
+    let last = n_src.max(1) - 1;
+    let local = |i: usize| {
+        (i as u64)
+            .saturating_sub(u64::from(geometry.src_origin[axis]))
+            .min(u64::from(last)) as u32
+    };
     Tap {
-        i0,
-        i1: (i0 + 1).min(last),
-        w: (u - f) as f32,
+        i0: local(i0),
+        i1: local(i1),
+        w: w as f32,
         _pad: 0,
     }
-}
-
-/// The whole-grid source slices `(z0, nz)` that destination slices `dst_z0 .. dst_z0 + dst_nz`
-/// read (both grids with origin 0, source depth `src_depth`): the halo of resampling.
-pub fn source_slices(
-    src_spacing_z_mm: f64,
-    src_depth: u32,
-    dst_spacing_z_mm: f64,
-    dst_z0: u32,
-    dst_nz: u32,
-) -> (u32, u32) {
-    let g =
-        ResampleGeometry::same_origin([1.0, 1.0, src_spacing_z_mm], [1.0, 1.0, dst_spacing_z_mm]);
-    if dst_nz == 0 || src_depth == 0 {
-        return (0, 0);
-    }
-    let first = tap(&g, 2, src_depth, dst_z0).i0;
-    let last = tap(&g, 2, src_depth, dst_z0.saturating_add(dst_nz - 1)).i1;
-    (first, last - first + 1)
 }
 
 /// The resampling pipeline.

@@ -4,7 +4,6 @@
 /// Every shader file in `shaders/`, by file name.
 pub const FILES: &[(&str, &str)] = &[
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
-    ("axis_mip.wgsl", include_str!("../../shaders/axis_mip.wgsl")),
     (
         "noise_windows.wgsl",
         include_str!("../../shaders/noise_windows.wgsl"),
