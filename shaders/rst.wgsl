@@ -77,8 +77,8 @@ override EMULATED_WEIGHT_STEPS: f32 = 0.0;
 @group(0) @binding(1) var volume: texture_3d<f32>;
 @group(0) @binding(2) var<storage, read> rays: array<Ray>;
 @group(0) @binding(3) var<storage, read_write> result: array<f32>;
-// Linear and clamp-to-edge with HARDWARE_FILTERING; otherwise a nearest sampler that is never
-// used (the binding exists in both pipelines, so the layout is the same shape).
+// Linear and clamp-to-edge with HARDWARE_FILTERING; otherwise a nearest (non-filtering) sampler
+// that is never used but must be bound (static use does not depend on override values).
 @group(0) @binding(4) var volume_sampler: sampler;
 
 // (I, gx, gy, gz) of voxel (x, y, z).

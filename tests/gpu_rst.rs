@@ -748,6 +748,49 @@ fn hardware_filtering_matches_the_twin_within_tolerance() {
     check_filtered_against_the_twin(&ctx, &rst, "hardware filtering");
 }
 
+/// On a device without FLOAT32_FILTERABLE (the test adapter, asked for no features) hardware
+/// filtering is refused quietly: the exact kernel runs, its layout binds the rgba32float texture
+/// as unfilterable (no validation error), and it gives the exact kernel's bits on the test device.
+#[test]
+fn without_float32_filterable_the_exact_path_runs() {
+    let Some(ctx) = test_context() else { return };
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    let Some(adapter) = adapters.into_iter().find(|a| {
+        let info = a.get_info();
+        info.name == ctx.adapter_info.name && info.backend == ctx.adapter_info.backend
+    }) else {
+        eprintln!("SKIPPED: the test adapter is not enumerable a second time");
+        return;
+    };
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("no float32-filterable"),
+        required_features: wgpu::Features::empty(),
+        required_limits: adapter.limits(),
+        ..Default::default()
+    }))
+    .expect("device");
+    let plain = GpuContext::from_parts(device, queue, adapter.get_info());
+    assert!(!Rst::hardware_filtering_available(&plain));
+    let options = RstOptions {
+        hardware_filtering: true,
+        ..RstOptions::default()
+    };
+    let fallback = Rst::with_options(&plain, options).expect("shader");
+    assert!(!fallback.hardware_filtering());
+    let c = case(4.0);
+    let p = params(26, 3.0, OpacityRule::Consistent);
+    let dispatch = RstDispatch::slices(slab_of(&c.grid), 5, 4, RstOutput::Eigen);
+    let run_on = |ctx: &GpuContext, rst: &Rst| {
+        let inputs = GpuInputs::upload(ctx, &c.gv, 0, c.grid.dims[2]);
+        let rays = RstRays::new(ctx, &p, c.grid.spacing_mm, SIGMA_G_MM).expect("rays");
+        run_rst(ctx, rst, &inputs.inputs(&rays), &dispatch)
+    };
+    let exact = run_on(&ctx, &Rst::new(&ctx).expect("shader"));
+    assert_eq!(run_on(&plain, &fallback), exact);
+}
+
 /// The same bounds with the exact path's trilinear weights truncated to 8 fractional bits, as a
 /// texture unit that filters coarser than lavapipe's computes them: the bounds are meant to hold
 /// on such GPUs too.

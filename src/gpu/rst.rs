@@ -28,6 +28,9 @@
 //! rgba16float, which core WebGPU does filter everywhere: half floats hold I only to 0.5-2 HU in
 //! the CT range (the transfer function's ramp is 10-30 HU) and would change the slab's memory and
 //! the gradient kernel's output format; a device without the feature loses speed, not precision.
+//! Measured on lavapipe (sphere next to cylinder, 42 rays, R 15 mm, dr 0.25 mm, Li features,
+//! ~2,265 ray samples per voxel; `time_exact_against_hardware_filtering` in tests/gpu_rst.rs):
+//! 48^3 voxels 4.47 s of CPU time exact, 2.34 s filtered (1.9x); 64^3 10.5 s and 5.44 s (1.9x).
 //!
 //! Sizing a slab for it: the rays read [`RstRays::halo_slices`] slices of (I, g) beyond each side
 //! of the output range; the gradient needs [`Gradient::HALO_SLICES`] more of smoothed intensity,
