@@ -1,9 +1,10 @@
 // The radial structure tensor ray kernel (twin: `rst_tensor_at` in src/cpu/rst.rs, SCIENCE.md RST
 // items 3-7; keep the structs in sync with src/gpu/rst.rs). One invocation per output voxel casts
 // every ray from the voxel centre, samples the smoothed intensity I and the gradient g by
-// trilinear interpolation done here (8 `textureLoad`s of the packed (I, gx, gy, gz) rgba32float
-// texture that gradient.wgsl writes, positions clamped onto the slab: exactly
-// `GradientVolume::sample`, never hardware filtering), accumulates the opacity
+// trilinear interpolation (by default done here from 8 `textureLoad`s of the packed
+// (I, gx, gy, gz) rgba32float texture that gradient.wgsl writes, positions clamped onto the slab:
+// exactly `GradientVolume::sample`; with HARDWARE_FILTERING one `textureSampleLevel` through the
+// linear sampler instead, see `sample_ig`), accumulates the opacity
 // with the consistent rule or the paper's, stops a ray after the step where alpha >= 0.99, and
 // writes the symmetrised tensor Ts = (T + T^T) / N_R, its eigenvalues, its features, or the
 // number of samples taken, for the slices out_z0 .. out_z0 + out_nz only (and, to split a slice
@@ -58,12 +59,27 @@ struct Ray {
     step_vox: vec4<f32>,
 }
 
+// How the rays read (I, g), fixed per pipeline (src/gpu/rst.rs): false = 8 `textureLoad`s and
+// the twin's weights in f32 (the bit-level twin tests); true = one `textureSampleLevel` with the
+// linear clamp-to-edge sampler (the texture unit's weights: fewer fetches, within a tolerance of
+// the twin). Only for a device with FLOAT32_FILTERABLE (rgba32float is not filterable in core
+// WebGPU); the pipeline layout declares the texture filterable only then.
+override HARDWARE_FILTERING: bool = false;
+// For tests only (0 otherwise): the exact path with its weights truncated to multiples of
+// 1 / EMULATED_WEIGHT_STEPS, as a texture unit with that many fractional steps computes them
+// (CUDA documents 8 bits, 256 steps), to measure what hardware filtering costs on GPUs whose
+// weights are coarser than lavapipe's.
+override EMULATED_WEIGHT_STEPS: f32 = 0.0;
+
 @group(0) @binding(0) var<uniform> params: Params;
-// (I, gx, gy, gz) per voxel of the slab; read with textureLoad only (one load gives all four,
-// several times faster than four storage-buffer loads on lavapipe, and cached in 3D on GPUs).
+// (I, gx, gy, gz) per voxel of the slab (one load gives all four, several times faster than four
+// storage-buffer loads on lavapipe, and cached in 3D on GPUs).
 @group(0) @binding(1) var volume: texture_3d<f32>;
 @group(0) @binding(2) var<storage, read> rays: array<Ray>;
 @group(0) @binding(3) var<storage, read_write> result: array<f32>;
+// Linear and clamp-to-edge with HARDWARE_FILTERING; otherwise a nearest (non-filtering) sampler
+// that is never used but must be bound (static use does not depend on override values).
+@group(0) @binding(4) var volume_sampler: sampler;
 
 // (I, gx, gy, gz) of voxel (x, y, z).
 fn load(x: u32, y: u32, z: u32) -> vec4<f32> {
@@ -75,10 +91,22 @@ fn load(x: u32, y: u32, z: u32) -> vec4<f32> {
 fn sample_ig(u_in: vec3<f32>) -> vec4<f32> {
     let top = params.dims - vec3<u32>(1u);
     let u = clamp(u_in, vec3<f32>(0.0), vec3<f32>(top));
+    if HARDWARE_FILTERING {
+        // Texel centres are at (voxel + 0.5) / dims in texture coordinates, so the texture unit
+        // interpolates between the same 8 voxels with the same fractions (up to its own weight
+        // precision: 8 fractional bits on many GPUs). The position is clamped above, as the twin
+        // clamps it; the sampler's clamp-to-edge then only repeats the last voxel with weight 0
+        // (or the texture unit's rounding of it), like `i1 = min(i0 + 1, top)` below.
+        let uvw = (u + vec3<f32>(0.5)) / vec3<f32>(params.dims);
+        return textureSampleLevel(volume, volume_sampler, uvw, 0.0);
+    }
     let f = floor(u);
     let i0 = vec3<u32>(f);
     let i1 = min(i0 + vec3<u32>(1u), top);
-    let t = u - f;
+    var t = u - f;
+    if EMULATED_WEIGHT_STEPS > 0.0 {
+        t = floor(t * EMULATED_WEIGHT_STEPS) / EMULATED_WEIGHT_STEPS;
+    }
     let s = vec3<f32>(1.0) - t;
     var acc = (s.x * s.y * s.z) * load(i0.x, i0.y, i0.z);
     acc += (t.x * s.y * s.z) * load(i1.x, i0.y, i0.z);
@@ -119,7 +147,14 @@ fn rst(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let x = vec3<f32>(f32(gid.x), f32(j), f32(params.out_z0 + gid.z));
-    let centre = sample_ig(x);
+    // The centre is a voxel: with HARDWARE_FILTERING read it exactly (one load), as the trilinear
+    // weights (1, 0, ...) of the exact path do.
+    var centre: vec4<f32>;
+    if HARDWARE_FILTERING {
+        centre = load(gid.x, j, params.out_z0 + gid.z);
+    } else {
+        centre = sample_ig(x);
+    }
     // Ts = (T + T^T) accumulated as its diagonal (xx, yy, zz) and off-diagonal (xy, xz, yz).
     var diag = vec3<f32>(0.0);
     var off = vec3<f32>(0.0);

@@ -5,7 +5,8 @@
 //! module asks for.
 //!
 //! Tolerances (issue 5): every voxel's eigenvalues within 1e-2 of the largest |eigenvalue| in the
-//! volume, 99.5% of voxels within 1e-3. Volumes are small (the CPU twin takes ~50-200 us per
+//! volume, 99.5% of voxels within 1e-3; the hardware-filtered fetch (issue 11) has its own,
+//! looser bounds ([`filtered_bounds`]). Volumes are small (the CPU twin takes ~50-200 us per
 //! voxel): 21 x 19 x 15 voxels of 0.6 x 0.6 x 0.9 mm, R = 6 mm (3 mm for the halo test).
 
 use shapecast::cpu::rst::opacity_length_mm;
@@ -17,7 +18,7 @@ use shapecast::gpu::context::test_context;
 use shapecast::gpu::gradient::{DispatchError, Gradient, GradientBuffers, packed_texture};
 use shapecast::gpu::kernel::{SlabGrid, f32_buffer, f32_buffer_init};
 use shapecast::gpu::readback::{read_bytes_blocking, read_f32_blocking};
-use shapecast::gpu::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
+use shapecast::gpu::rst::{Rst, RstDispatch, RstInputs, RstOptions, RstOutput, RstRays};
 use shapecast::phantom::{BACKGROUND_HU, CONTRAST_HU, Phantom, Shape};
 
 const SPACING: [f64; 3] = [0.6, 0.6, 0.9];
@@ -241,6 +242,11 @@ impl Stats {
 
     /// The issue's tolerance, and that there was something to compare.
     fn check(&self, what: &str) {
+        self.check_within(what, 1e-2, 0.995);
+    }
+
+    /// At most `max_rel` everywhere, at least the fraction `within` of voxels within 1e-3.
+    fn check_within(&self, what: &str, max_rel: f64, within: f64) {
         eprintln!(
             "{what}: {} voxels, largest |value| {:.4}, max error {:.2e} of it, {:.3}% within 1e-3",
             self.voxels,
@@ -249,8 +255,8 @@ impl Stats {
             100.0 * self.within_1e3
         );
         assert!(self.scale > 1.0, "{what}: nothing to compare ({self:?})");
-        assert!(self.max_rel <= 1e-2, "{what}: {self:?}");
-        assert!(self.within_1e3 >= 0.995, "{what}: {self:?}");
+        assert!(self.max_rel <= max_rel, "{what}: {self:?}");
+        assert!(self.within_1e3 >= within, "{what}: {self:?}");
     }
 }
 
@@ -579,6 +585,226 @@ fn slab_with_its_halo_matches_the_whole_volume() {
     );
 }
 
+/// The hardware-filtered fetch's bounds against the twin, per opacity rule: (largest error of a
+/// voxel's eigenvalues, relative to the largest |eigenvalue| as in [`Stats`]; the fraction of
+/// voxels within 1e-3). Lavapipe filters rgba32float with f32 weights (worst over
+/// [`filtered_configs`]: 9.2e-7, 100% within 1e-3), so the bounds are set, with margin, from the
+/// exact path with its weights truncated to 8 bits (what many GPUs' texture units do).
+fn filtered_bounds(rule: OpacityRule) -> (f64, f64) {
+    match rule {
+        // Measured with 8-bit weights: worst 1.4e-3, at least 99.90% within 1e-3.
+        OpacityRule::Consistent => (5e-3, 0.99),
+        // Measured with 8-bit weights: worst 7.4e-2, at least 74.4% within 1e-3 (plate, 26 rays,
+        // dr 0.6 mm). The literal rule is discontinuous: opacity saturates within a step and a
+        // ray that stops one step later adds a whole alpha * g_k.
+        OpacityRule::Paper => (0.15, 0.6),
+    }
+}
+
+/// The configurations the filtered fetch is checked on: the sphere next to the cylinder with and
+/// without noise, and with a plate, both opacity rules (the paper's at its own step of one voxel
+/// and at 0.25 mm), every voxel of the volume (border voxels cast rays that leave it, so the
+/// sampler's clamp-to-edge meets the twin's clamping).
+fn filtered_configs() -> Vec<(String, Case, RstParams)> {
+    let plate = Shape::Slab {
+        point_mm: [0.0, 0.0, -5.4],
+        normal: [0.0, 0.0, 1.0],
+        half_thickness_mm: 1.5,
+    };
+    let plated = || case_of(phantom().with(plate, BACKGROUND_HU + CONTRAST_HU), 4.0);
+    vec![
+        (
+            "noise 0".into(),
+            case(0.0),
+            params(42, 6.0, OpacityRule::Consistent),
+        ),
+        (
+            "noise 6".into(),
+            case(6.0),
+            params(26, 6.0, OpacityRule::Consistent),
+        ),
+        (
+            "noise 6".into(),
+            case(6.0),
+            params_step(42, 6.0, OpacityRule::Paper, 0.6),
+        ),
+        (
+            "noise 0".into(),
+            case(0.0),
+            params(42, 6.0, OpacityRule::Paper),
+        ),
+        (
+            "plate, noise 4".into(),
+            plated(),
+            params(42, 3.0, OpacityRule::Consistent),
+        ),
+        (
+            "plate, noise 4".into(),
+            plated(),
+            params_step(26, 3.0, OpacityRule::Paper, 0.6),
+        ),
+    ]
+}
+
+/// Each voxel's eigenvalues in ascending order.
+fn by_value(v: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    v.iter()
+        .map(|l| {
+            let mut l = *l;
+            l.sort_by(f64::total_cmp);
+            l
+        })
+        .collect()
+}
+
+/// Runs `rst` on every [`filtered_configs`] case (eigenvalues, and Li features for the first) and
+/// checks it against the twin within the filtered bounds; also prints how far it is from the
+/// exact GPU path.
+fn check_filtered_against_the_twin(ctx: &GpuContext, rst: &Rst, label: &str) {
+    let exact = Rst::new(ctx).expect("shader");
+    let mut worst = [(0.0f64, 1.0f64); 2];
+    for (n, (name, c, p)) in filtered_configs().into_iter().enumerate() {
+        let what = format!(
+            "{label}: {name}, {} rays, {:?}, dr {} mm",
+            p.rays.len(),
+            p.rule,
+            p.step_mm
+        );
+        let nz = c.grid.dims[2];
+        let inputs = GpuInputs::upload(ctx, &c.gv, 0, nz);
+        let rays = RstRays::new(ctx, &p, c.grid.spacing_mm, SIGMA_G_MM).expect("rays");
+        let mut dispatch = RstDispatch::slices(slab_of(&c.grid), 0, nz as u32, RstOutput::Eigen);
+        let cpu_eigen: Vec<[f64; 3]> = cpu_tensors(&c.gv, &p, 0, nz)
+            .iter()
+            .map(cpu::eigenvalues_sorted)
+            .collect();
+        let gpu = rows3(&run_rst(ctx, rst, &inputs.inputs(&rays), &dispatch));
+        // Sorted by value, not by magnitude: at |l1| ~ |l2| with opposite signs the magnitude
+        // order flips with the slightest change of the tensor (the exact path is close enough
+        // to the twin not to meet such a tie here; 8-bit weights do), while eigenvalues sorted
+        // by value move at most by the tensor's error (Weyl).
+        let stats = Stats::of(&by_value(&cpu_eigen), &by_value(&gpu));
+        let exact_gpu = rows3(&run_rst(ctx, &exact, &inputs.inputs(&rays), &dispatch));
+        let from_exact = Stats::with_scale(&by_value(&exact_gpu), &by_value(&gpu), stats.scale);
+        eprintln!(
+            "{what}: against the exact GPU path: max {:.2e}, {:.3}% within 1e-3",
+            from_exact.max_rel,
+            100.0 * from_exact.within_1e3
+        );
+        let (max_rel, within) = filtered_bounds(p.rule);
+        stats.check_within(&format!("{what}: eigenvalues"), max_rel, within);
+        let w = &mut worst[usize::from(p.rule == OpacityRule::Paper)];
+        *w = (w.0.max(stats.max_rel), w.1.min(stats.within_1e3));
+        if n == 0 {
+            let map = FeatureMap::Li;
+            dispatch.output = RstOutput::Features(map);
+            let gpu = rows3(&run_rst(ctx, rst, &inputs.inputs(&rays), &dispatch));
+            let cpu: Vec<[f64; 3]> = cpu_eigen
+                .iter()
+                .map(|l| cpu::map_eigenvalues(*l, map))
+                .collect();
+            let features = Stats::with_scale(&cpu, &gpu, stats.scale);
+            // The Li map is continuous where |l1| = |l2| (its tube term vanishes there), so
+            // the eigenvalues' bounds hold. (The simple map is not: V jumps between 0 and |l1|
+            // when the magnitude order of l1 and l2 of opposite signs flips.)
+            features.check_within(&format!("{what}: {map:?} features"), max_rel, within);
+        }
+    }
+    for (rule, (max_rel, within)) in [OpacityRule::Consistent, OpacityRule::Paper]
+        .into_iter()
+        .zip(worst)
+    {
+        let bounds = filtered_bounds(rule);
+        eprintln!(
+            "{label}, {rule:?} rule: worst error {max_rel:.2e} (bound {:.2e}), fewest within 1e-3 {:.2}% (bound {:.0}%)",
+            bounds.0,
+            100.0 * within,
+            100.0 * bounds.1
+        );
+    }
+}
+
+/// The hardware-filtered fetch (one `textureSampleLevel` per step) against the twin within
+/// [`filtered_bounds`]. Where the device cannot filter rgba32float the kernel must fall back to
+/// the exact path.
+#[test]
+fn hardware_filtering_matches_the_twin_within_tolerance() {
+    let Some(ctx) = test_context() else { return };
+    let options = RstOptions {
+        hardware_filtering: true,
+        ..RstOptions::default()
+    };
+    let rst = Rst::with_options(&ctx, options).expect("shader");
+    assert!(!Rst::new(&ctx).expect("shader").hardware_filtering());
+    if !Rst::hardware_filtering_available(&ctx) {
+        assert!(!rst.hardware_filtering(), "falls back to the exact path");
+        eprintln!(
+            "SKIPPED: {} cannot filter rgba32float; the exact path runs",
+            ctx.adapter_label()
+        );
+        return;
+    }
+    assert!(rst.hardware_filtering());
+    check_filtered_against_the_twin(&ctx, &rst, "hardware filtering");
+}
+
+/// On a device without FLOAT32_FILTERABLE (the test adapter, asked for no features) hardware
+/// filtering is refused quietly: the exact kernel runs, its layout binds the rgba32float texture
+/// as unfilterable (no validation error), and it gives the exact kernel's bits on the test device.
+#[test]
+fn without_float32_filterable_the_exact_path_runs() {
+    let Some(ctx) = test_context() else { return };
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    let Some(adapter) = adapters.into_iter().find(|a| {
+        let info = a.get_info();
+        info.name == ctx.adapter_info.name && info.backend == ctx.adapter_info.backend
+    }) else {
+        eprintln!("SKIPPED: the test adapter is not enumerable a second time");
+        return;
+    };
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("no float32-filterable"),
+        required_features: wgpu::Features::empty(),
+        required_limits: adapter.limits(),
+        ..Default::default()
+    }))
+    .expect("device");
+    let plain = GpuContext::from_parts(device, queue, adapter.get_info());
+    assert!(!Rst::hardware_filtering_available(&plain));
+    let options = RstOptions {
+        hardware_filtering: true,
+        ..RstOptions::default()
+    };
+    let fallback = Rst::with_options(&plain, options).expect("shader");
+    assert!(!fallback.hardware_filtering());
+    let c = case(4.0);
+    let p = params(26, 3.0, OpacityRule::Consistent);
+    let dispatch = RstDispatch::slices(slab_of(&c.grid), 5, 4, RstOutput::Eigen);
+    let run_on = |ctx: &GpuContext, rst: &Rst| {
+        let inputs = GpuInputs::upload(ctx, &c.gv, 0, c.grid.dims[2]);
+        let rays = RstRays::new(ctx, &p, c.grid.spacing_mm, SIGMA_G_MM).expect("rays");
+        run_rst(ctx, rst, &inputs.inputs(&rays), &dispatch)
+    };
+    let exact = run_on(&ctx, &Rst::new(&ctx).expect("shader"));
+    assert_eq!(run_on(&plain, &fallback), exact);
+}
+
+/// The same bounds with the exact path's trilinear weights truncated to 8 fractional bits, as a
+/// texture unit that filters coarser than lavapipe's computes them: the bounds are meant to hold
+/// on such GPUs too.
+#[test]
+fn eight_bit_filter_weights_stay_within_the_filtered_tolerance() {
+    let Some(ctx) = test_context() else { return };
+    let options = RstOptions {
+        hardware_filtering: false,
+        emulated_weight_steps: 256,
+    };
+    let rst = Rst::with_options(&ctx, options).expect("shader");
+    check_filtered_against_the_twin(&ctx, &rst, "8-bit weights (emulated)");
+}
+
 /// Wrong sizes, ranges and configurations are errors, not wgpu validation panics.
 #[test]
 fn bad_dispatches_are_errors() {
@@ -872,6 +1098,107 @@ fn time_gpu_rst_against_the_cpu_twin() {
     eprintln!(
         "features: max error {:.2e} of the largest feature",
         stats.max_rel
+    );
+}
+
+/// A measurement, not a check (run by hand: `cargo test --test gpu_rst -- --ignored --nocapture
+/// time_exact_against_hardware_filtering`; `RST_BENCH_SIZE=64` for 64^3): the RST features (Li
+/// map) of a 48^3 sphere-next-to-cylinder phantom at the defaults (42 rays, R 15 mm, dr 0.25 mm)
+/// with the exact fetch (8 `textureLoad`s per step) and the hardware-filtered one (one
+/// `textureSampleLevel`), each run twice in alternation; wall and process CPU time of each run.
+#[test]
+#[ignore = "timing, run by hand"]
+fn time_exact_against_hardware_filtering() {
+    let Some(ctx) = test_context() else { return };
+    let size: usize = std::env::var("RST_BENCH_SIZE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(48);
+    let phantom = Phantom::by_name("sphere-cylinder", None).expect("phantom");
+    let extent: [f64; 3] = std::array::from_fn(|a| phantom.max_mm[a] - phantom.min_mm[a]);
+    let spacing = extent.map(|e| e / (size - 1) as f64);
+    let v = phantom.render(spacing);
+    let grid = Grid::of(&v);
+    let gv = GradientVolume::new(&grid, &v.to_f32(), SIGMA_G_MM);
+    let p = RstParams::paper_defaults();
+    let exact = Rst::new(&ctx).expect("shader");
+    let options = RstOptions {
+        hardware_filtering: true,
+        ..RstOptions::default()
+    };
+    let filtered = Rst::with_options(&ctx, options).expect("shader");
+    if !filtered.hardware_filtering() {
+        eprintln!("SKIPPED: {} cannot filter rgba32float", ctx.adapter_label());
+        return;
+    }
+    let rays = RstRays::new(&ctx, &p, grid.spacing_mm, SIGMA_G_MM).expect("rays");
+    let inputs = GpuInputs::upload(&ctx, &gv, 0, grid.dims[2]);
+    let slab = slab_of(&grid);
+    let nz = grid.dims[2] as u32;
+    let plane = u64::from(slab.dims[0] * slab.dims[1]);
+    let out = f32_buffer(&ctx.device, "out", plane * u64::from(nz) * 3);
+    let output = RstOutput::Features(FeatureMap::Li);
+    // Dispatches of 4 slices into one buffer, as a slab pipeline issues them; seconds of wall
+    // and process CPU time.
+    let run = |rst: &Rst, slices: std::ops::Range<u32>| {
+        let t = std::time::Instant::now();
+        let cpu0 = process_cpu_s();
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        for z0 in slices.step_by(4) {
+            let d = RstDispatch::slices(slab, z0, 4.min(nz - z0), output);
+            rst.record(&ctx, &mut encoder, &inputs.inputs(&rays), &d, &out)
+                .expect("record");
+        }
+        ctx.queue.submit([encoder.finish()]);
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .expect("poll");
+        (t.elapsed().as_secs_f64(), process_cpu_s() - cpu0)
+    };
+    // Warm-up (pipeline compilation in the driver).
+    run(&exact, 0..1);
+    run(&filtered, 0..1);
+    let count = RstDispatch::slices(slab, 0, nz, RstOutput::SampleCount);
+    let counts = run_rst(&ctx, &exact, &inputs.inputs(&rays), &count);
+    let samples: f64 = counts[0].iter().map(|&c| f64::from(c)).sum();
+    eprintln!(
+        "{}: {}x{}x{} voxels, 42 rays, R 15 mm, dr 0.25 mm, Li features, {:.0} ray samples per voxel",
+        ctx.adapter_label(),
+        grid.dims[0],
+        grid.dims[1],
+        grid.dims[2],
+        samples / grid.len() as f64
+    );
+    let mut best = [f64::INFINITY; 2];
+    for round in 0..2 {
+        for (i, (name, rst)) in [("exact", &exact), ("filtered", &filtered)]
+            .into_iter()
+            .enumerate()
+        {
+            let (wall, busy) = run(rst, 0..nz);
+            best[i] = best[i].min(busy);
+            eprintln!(
+                "round {round}, {name:8}: {wall:.2} s wall, {busy:.2} s process CPU time, {:.3e} ray samples per CPU second",
+                samples / busy
+            );
+        }
+    }
+    eprintln!(
+        "speed-up (best process CPU time, exact / filtered): {:.2}",
+        best[0] / best[1]
+    );
+    // How far apart the two paths are here (features, relative to the largest).
+    let full = RstDispatch::slices(slab, 0, nz, output);
+    let a = rows3(&run_rst(&ctx, &exact, &inputs.inputs(&rays), &full));
+    let b = rows3(&run_rst(&ctx, &filtered, &inputs.inputs(&rays), &full));
+    let stats = Stats::of(&a, &b);
+    eprintln!(
+        "filtered against exact: max {:.2e} of the largest feature ({:.4}), {:.3}% within 1e-3",
+        stats.max_rel,
+        stats.scale,
+        100.0 * stats.within_1e3
     );
 }
 
