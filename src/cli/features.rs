@@ -102,6 +102,10 @@ pub struct FeaturesArgs {
     /// Write the three eigenvalues sorted by magnitude instead of V, A, B.
     #[arg(long)]
     pub eigen: bool,
+    /// GPU RST: interpolate (I, g) in the shader, bit for bit the CPU twin's, instead of one
+    /// hardware-filtered fetch per step (the default; faster, within a tolerance).
+    #[arg(long)]
+    pub exact_rst: bool,
 }
 
 /// Reads a file, or every file of a folder, into loader inputs.
@@ -228,6 +232,7 @@ pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
         Some(ctx) => {
             let options = JobOptions {
                 export: true,
+                exact_rst: args.exact_rst,
                 ..JobOptions::default()
             };
             let mut job = FeatureJob::with_options(&ctx, &volume, &req, options)?;
