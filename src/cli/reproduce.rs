@@ -5,7 +5,7 @@ mod experiments;
 mod plot;
 mod stability;
 
-use stability::{section_skimage, section_stability, section_timing};
+use stability::{section_skimage, section_stability, section_thick_slices, section_timing};
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -87,6 +87,8 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     eprintln!("noise done ({:.0} s)", started.elapsed().as_secs_f64());
     section_stability(&mut md, &img_dir)?;
     eprintln!("stability done ({:.0} s)", started.elapsed().as_secs_f64());
+    section_thick_slices(&mut md);
+    eprintln!("thick slices done ({:.0} s)", started.elapsed().as_secs_f64());
     section_timing(&mut md);
     section_skimage(&mut md, &img_dir);
     let _ = writeln!(
