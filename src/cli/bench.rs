@@ -60,6 +60,54 @@ pub struct BenchArgs {
     /// With --pipeline: plan with WebGPU's default limits instead of the adapter's.
     #[arg(long)]
     pub webgpu_limits: bool,
+    /// With --pipeline and INPUT: repeat INPUT's slices along z to this many slices (a
+    /// whole-body length from a real chest series, e.g. 2000) before timing.
+    #[arg(long)]
+    pub tile_z: Option<usize>,
+}
+
+/// `volume` with its slices repeated back and forth along z to `nz` slices (no seam; compact
+/// voxels kept).
+fn tile_along_z(volume: &Volume, nz: usize) -> Volume {
+    use crate::volume::Voxels;
+    fn tile<T: Copy>(v: &[T], plane: usize, n: usize, nz: usize) -> Vec<T> {
+        let period = (2 * n).saturating_sub(1).max(1);
+        let mut out = Vec::with_capacity(plane * nz);
+        for k in 0..nz {
+            let p = k % period;
+            let src = if p < n { p } else { period - p };
+            out.extend_from_slice(&v[src * plane..(src + 1) * plane]);
+        }
+        out
+    }
+    let plane = volume.dims[0] * volume.dims[1];
+    let n = volume.dims[2].max(1);
+    let voxels = match &volume.voxels {
+        Voxels::U8(v) => Voxels::U8(tile(v, plane, n, nz)),
+        Voxels::I16(v) => Voxels::I16(tile(v, plane, n, nz)),
+        Voxels::U16(v) => Voxels::U16(tile(v, plane, n, nz)),
+        Voxels::F32(v) => Voxels::F32(tile(v, plane, n, nz)),
+    };
+    Volume {
+        dims: [volume.dims[0], volume.dims[1], nz],
+        spacing_mm: volume.spacing_mm,
+        origin_mm: volume.origin_mm,
+        direction: volume.direction,
+        voxels,
+        value_slope: volume.value_slope,
+        value_intercept: volume.value_intercept,
+        modality: volume.modality.clone(),
+        source: format!("{} tiled along z to {nz} slices", volume.source),
+        warnings: volume.warnings.clone(),
+    }
+}
+
+/// The process's peak resident memory (Linux), MB.
+fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
 }
 
 /// One whole feature job, timed: seconds, bricks, halo overhead.
@@ -111,6 +159,10 @@ fn pipeline_bench(args: &BenchArgs, preset: Preset) -> anyhow::Result<()> {
             path.display(),
             t.elapsed().as_secs_f64()
         );
+        let volume = match args.tile_z {
+            Some(nz) => tile_along_z(&volume, nz),
+            None => volume,
+        };
         inputs.push((path.display().to_string(), volume));
     }
     for (name, volume) in &inputs {
@@ -124,6 +176,9 @@ fn pipeline_bench(args: &BenchArgs, preset: Preset) -> anyhow::Result<()> {
             rate / 1e6
         );
         rates.push(rate);
+        if let Some(mb) = peak_rss_mb() {
+            println!("peak resident memory so far: {mb:.0} MB");
+        }
     }
     if let [reference, input] = rates[..] {
         println!(

@@ -103,6 +103,10 @@ pub struct RenderArgs {
     /// Do not skip empty space (same picture, slower; for comparisons).
     #[arg(long)]
     pub no_skip: bool,
+    /// Plan the feature bricks with WebGPU's default limits (128 MiB per binding, 256 MiB per
+    /// buffer), as many browsers grant, instead of this adapter's.
+    #[arg(long)]
+    pub webgpu_limits: bool,
     /// Voxel spacing of a `phantom:` input, mm: one value or X,Y,Z.
     #[arg(long, value_delimiter = ',', default_value = "0.5")]
     pub spacing_mm: Vec<f64>,
@@ -196,8 +200,18 @@ pub fn compute_features(
     ctx: &GpuContext,
     volume: &Volume,
     request: &Request,
+    webgpu_limits: bool,
 ) -> anyhow::Result<FeatureTexture> {
-    let mut job = FeatureJob::new(ctx, volume, request)?;
+    let options = crate::gpu::pipeline::JobOptions {
+        limits: webgpu_limits.then(wgpu::Limits::default),
+        ..Default::default()
+    };
+    let mut job = FeatureJob::with_options(ctx, volume, request, options)?;
+    eprintln!(
+        "{} brick(s), halo overhead {:.2}",
+        job.slab_count(),
+        job.overhead()
+    );
     let started = web_time::Instant::now();
     let mut shown = String::new();
     loop {
@@ -257,7 +271,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         Some(m) => {
             let mut request = Request::new(m);
             request.preset = preset;
-            Some(compute_features(&ctx, &volume, &request)?)
+            Some(compute_features(&ctx, &volume, &request, args.webgpu_limits)?)
         }
     };
 
