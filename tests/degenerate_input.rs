@@ -77,10 +77,14 @@ fn a_constant_volume_gives_zero_features_on_the_gpu() {
     let v = constant();
     let mut nonzero = Vec::new();
     for method in METHODS {
-        let m = max_abs(&gpu(&ctx, &v, &Request::new(method)));
-        eprintln!("GPU {method:?}: largest |feature| {m:e}");
-        if m != 0.0 {
-            nonzero.push((method, m));
+        for eigen in [false, true] {
+            let mut req = Request::new(method);
+            req.eigen = eigen;
+            let m = max_abs(&gpu(&ctx, &v, &req));
+            eprintln!("GPU {method:?} (eigen {eigen}): largest |feature| {m:e}");
+            if m != 0.0 {
+                nonzero.push((method, eigen, m));
+            }
         }
     }
     assert!(
