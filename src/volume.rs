@@ -151,8 +151,8 @@ impl Volume {
     /// computation sees them (the GPU upload, the CPU reference, the rendered volume): a voxel
     /// that is not finite (NaN or +-inf: missing data, or a rescale that overflows) is replaced
     /// by the nearest finite value along its row (the i axis, the lower index on a tie), and
-    /// in a row without any finite value by the volume's minimum finite value (0 when there is
-    /// none). One missing voxel then moves a feature as one wrong voxel would, instead of
+    /// in a row without any finite value by the minimum finite value of its slice (of the
+    /// volume for a slice without any; 0 when there is none). One missing voxel then moves a feature as one wrong voxel would, instead of
     /// spreading NaN over everything a kernel reaches (a whole blob's features). The result does
     /// not depend on how a caller splits the volume into chunks. [`Self::value`] still gives
     /// the stored value; [`Self::non_finite_count`] says how many voxels are replaced.
@@ -169,13 +169,16 @@ impl Volume {
 
     /// The replacement rule of [`Self::values_into`] for `out` = the values of voxels
     /// `start..start + out.len()`, row by row: O(row length) per row holding a non-finite
-    /// value, plus one pass over the volume per call when a row has no finite value at all.
+    /// value; a row without any finite value costs one pass over its slice (once per slice
+    /// and call), and over the volume only when the whole slice is missing.
     fn replace_non_finite(&self, start: usize, out: &mut [f32]) {
         let nx = self.dims[0].max(1);
+        let plane = nx * self.dims[1].max(1);
         let end = start + out.len();
         let mut row = vec![0.0f32; nx];
         let mut fill = vec![0.0f32; nx];
-        let mut row_fallback: Option<f32> = None;
+        let mut slice_min: Option<(usize, Option<f32>)> = None;
+        let mut volume_min: Option<f32> = None;
         let mut row_start = start - start % nx;
         while row_start < end {
             let lo = row_start.max(start);
@@ -187,8 +190,23 @@ impl Volume {
                     *r = self.value(row_start + i);
                 }
                 if nearest_finite_in_row(&row[..len], &mut fill[..len]).is_none() {
-                    let v = *row_fallback
-                        .get_or_insert_with(|| self.value_range().map_or(0.0, |(min, _)| min));
+                    // The minimum finite value of the row's slice (outside a scanner's field
+                    // of view: about its air), else of the volume, else 0.
+                    let k = row_start / plane;
+                    if slice_min.is_none_or(|(sk, _)| sk != k) {
+                        let first = k * plane;
+                        let last = (first + plane).min(self.voxel_count());
+                        let min = (first..last)
+                            .map(|i| self.value(i))
+                            .filter(|v| v.is_finite())
+                            .reduce(f32::min);
+                        slice_min = Some((k, min));
+                    }
+                    let v = match slice_min {
+                        Some((_, Some(min))) => min,
+                        _ => *volume_min
+                            .get_or_insert_with(|| self.value_range().map_or(0.0, |(min, _)| min)),
+                    };
                     fill[..len].iter_mut().for_each(|f| *f = v);
                 }
                 for idx in lo..hi {

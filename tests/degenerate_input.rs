@@ -184,7 +184,7 @@ fn loading_a_file_with_nan_voxels_warns_with_their_count() {
 fn non_finite_voxels_take_the_nearest_finite_value_of_their_row() {
     let nan = f32::NAN;
     // Row 0: a NaN between 1 and 5 (tie: the lower index wins), +inf at the end.
-    // Row 1: all missing: the minimum finite value of the volume (-3).
+    // Row 1: all missing: the minimum finite value of its slice (-3).
     // Row 2: -inf at the start.
     let values = vec![
         1.0,
@@ -231,4 +231,26 @@ fn non_finite_voxels_take_the_nearest_finite_value_of_their_row() {
             .non_finite_warning()
             .is_none()
     );
+}
+
+#[test]
+fn rows_without_a_finite_value_take_their_slice_minimum_and_missing_slices_the_volume_minimum() {
+    let (nan, inf) = (f32::NAN, f32::INFINITY);
+    // Slice 0: a missing row (its slice's minimum, 5). Slice 1: missing (the volume's, 2).
+    // Slice 2: a missing row (its slice's, 2).
+    let values = vec![5.0, 6.0, nan, nan, nan, nan, nan, inf, 9.0, 2.0, inf, nan];
+    let v = Volume::from_f32([2, 2, 3], [1.0; 3], values);
+    let want = [5.0, 6.0, 5.0, 5.0, 2.0, 2.0, 2.0, 2.0, 9.0, 2.0, 2.0, 2.0];
+    for chunk in 1..=12 {
+        let mut got = Vec::new();
+        let mut start = 0;
+        while start < 12 {
+            let len = chunk.min(12 - start);
+            let mut out = vec![0.0; len];
+            v.values_into(start, &mut out);
+            got.extend(out);
+            start += len;
+        }
+        assert_eq!(got, want, "chunks of {chunk}");
+    }
 }
