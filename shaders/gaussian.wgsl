@@ -17,8 +17,9 @@
 //
 // f32 care: the sum is taken about a reference value v_ref of the line (the centre voxel in
 // `convolve`, the block's first output voxel in the block kernels),
-// out = v_ref * sum(w) + sum w (v - v_ref), with sum(w) computed in f64 on the CPU: exact for
-// constants (smoothing gives the constant, derivatives 0), and a large offset (air at -1000 HU)
+// out = v_ref * sum(w) + sum w (v - v_ref), with sum(w) computed in f64 on the CPU (exactly 0
+// for derivative kernels: cpu::gaussian::tap_sum): exact for constants (smoothing gives the
+// constant, derivatives 0), and a large offset (air at -1000 HU)
 // does not cost the derivatives their precision.
 #import common.wgsl
 

@@ -147,15 +147,109 @@ impl Volume {
         self.value(self.linear_index(i, j, k))
     }
 
-    /// Writes the physical values of voxels `start..start + out.len()` into `out`.
+    /// Writes the physical values of voxels `start..start + out.len()` into `out`, as every
+    /// computation sees them (the GPU upload, the CPU reference, the rendered volume): a voxel
+    /// that is not finite (NaN or +-inf: missing data, or a rescale that overflows) is replaced
+    /// by the nearest finite value along its row (the i axis, the lower index on a tie), and
+    /// in a row without any finite value by the minimum finite value of its slice (of the
+    /// volume for a slice without any; 0 when there is none). One missing voxel then moves a feature as one wrong voxel would, instead of
+    /// spreading NaN over everything a kernel reaches (a whole blob's features). The result does
+    /// not depend on how a caller splits the volume into chunks. [`Self::value`] still gives
+    /// the stored value; [`Self::non_finite_count`] says how many voxels are replaced.
     pub fn values_into(&self, start: usize, out: &mut [f32]) {
+        let mut all_finite = true;
         for (n, o) in out.iter_mut().enumerate() {
             *o = self.value(start + n);
+            all_finite &= o.is_finite();
+        }
+        if !all_finite {
+            self.replace_non_finite(start, out);
         }
     }
 
-    /// All physical values as f32. Allocates 4 bytes per voxel: for small volumes and tests;
-    /// large volumes go through [`Self::values_into`] chunk by chunk.
+    /// The replacement rule of [`Self::values_into`] for `out` = the values of voxels
+    /// `start..start + out.len()`, row by row: O(row length) per row holding a non-finite
+    /// value; a row without any finite value costs one pass over its slice (once per slice
+    /// and call), and over the volume only when the whole slice is missing.
+    fn replace_non_finite(&self, start: usize, out: &mut [f32]) {
+        let nx = self.dims[0].max(1);
+        let plane = nx * self.dims[1].max(1);
+        let end = start + out.len();
+        let mut row = vec![0.0f32; nx];
+        let mut fill = vec![0.0f32; nx];
+        let mut slice_min: Option<(usize, Option<f32>)> = None;
+        let mut volume_min: Option<f32> = None;
+        let mut row_start = start - start % nx;
+        while row_start < end {
+            let lo = row_start.max(start);
+            let hi = (row_start + nx).min(end);
+            if out[lo - start..hi - start].iter().any(|v| !v.is_finite()) {
+                // The whole row, also the part outside this chunk.
+                let len = nx.min(self.voxel_count().saturating_sub(row_start));
+                for (i, r) in row[..len].iter_mut().enumerate() {
+                    *r = self.value(row_start + i);
+                }
+                if nearest_finite_in_row(&row[..len], &mut fill[..len]).is_none() {
+                    // The minimum finite value of the row's slice (outside a scanner's field
+                    // of view: about its air), else of the volume, else 0.
+                    let k = row_start / plane;
+                    if slice_min.is_none_or(|(sk, _)| sk != k) {
+                        let first = k * plane;
+                        let last = (first + plane).min(self.voxel_count());
+                        let min = (first..last)
+                            .map(|i| self.value(i))
+                            .filter(|v| v.is_finite())
+                            .reduce(f32::min);
+                        slice_min = Some((k, min));
+                    }
+                    let v = match slice_min {
+                        Some((_, Some(min))) => min,
+                        _ => *volume_min
+                            .get_or_insert_with(|| self.value_range().map_or(0.0, |(min, _)| min)),
+                    };
+                    fill[..len].iter_mut().for_each(|f| *f = v);
+                }
+                for idx in lo..hi {
+                    let o = &mut out[idx - start];
+                    if !o.is_finite() {
+                        *o = fill[idx - row_start];
+                    }
+                }
+            }
+            row_start += nx;
+        }
+    }
+
+    /// How many voxels have a physical value that is NaN or infinite (replaced in
+    /// [`Self::values_into`]).
+    pub fn non_finite_count(&self) -> usize {
+        // Integer voxels (|raw| <= 65535) under a finite rescale that cannot overflow f32 are
+        // all finite: no need to look at each.
+        let integer = !matches!(self.voxels, Voxels::F32(_));
+        let bound =
+            65535.0 * f64::from(self.value_slope).abs() + f64::from(self.value_intercept).abs();
+        if integer && bound < 1e37 {
+            return 0;
+        }
+        (0..self.voxel_count())
+            .filter(|&i| !self.value(i).is_finite())
+            .count()
+    }
+
+    /// The warning for the user when some voxels are not finite, naming how many.
+    pub fn non_finite_warning(&self) -> Option<String> {
+        let n = self.non_finite_count();
+        (n > 0).then(|| {
+            format!(
+                "{n} of {} voxels are NaN or infinite: the features use the nearest finite value along each one's row (i axis) instead",
+                self.voxel_count()
+            )
+        })
+    }
+
+    /// All physical values as f32, non-finite ones replaced as in [`Self::values_into`].
+    /// Allocates 4 bytes per voxel: for small volumes and tests; large volumes go through
+    /// [`Self::values_into`] chunk by chunk.
     pub fn to_f32(&self) -> Vec<f32> {
         let mut out = vec![0.0; self.voxel_count()];
         self.values_into(0, &mut out);
@@ -198,6 +292,38 @@ impl Volume {
     pub fn voxel_from_world(&self) -> DAffine3 {
         self.world_from_voxel().inverse()
     }
+}
+
+/// For each position of `row`, the nearest finite value of `row` (the lower index on a tie),
+/// written into `fill`; `None` when `row` has no finite value.
+fn nearest_finite_in_row(row: &[f32], fill: &mut [f32]) -> Option<()> {
+    // Forward: the last finite value at or before each position and its distance.
+    let mut left: Option<(usize, f32)> = None;
+    let mut left_at = vec![None; row.len()];
+    for (i, &v) in row.iter().enumerate() {
+        if v.is_finite() {
+            left = Some((i, v));
+        }
+        left_at[i] = left;
+    }
+    let mut right: Option<(usize, f32)> = None;
+    for i in (0..row.len()).rev() {
+        if row[i].is_finite() {
+            right = Some((i, row[i]));
+        }
+        fill[i] = match (left_at[i], right) {
+            (Some((l, lv)), Some((r, rv))) => {
+                if i - l <= r - i {
+                    lv
+                } else {
+                    rv
+                }
+            }
+            (Some((_, v)), None) | (None, Some((_, v))) => v,
+            (None, None) => return None,
+        };
+    }
+    Some(())
 }
 
 /// The patient-direction label (DICOM letters, LPS) a direction points towards, most significant

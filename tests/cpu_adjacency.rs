@@ -20,18 +20,29 @@ fn relative_blobness(gap_mm: f64) -> (f64, f64) {
     (rst(&near) / rst(&alone), hes(&near) / hes(&alone))
 }
 
+/// Two-sided: the RST keeps the nodule (0.9..1.02), the Hessian at sigma = r loses about half
+/// of it near the vessel and recovers with the gap, within 0.06 of what docs/reproduction.md
+/// reports (gap 1: 0.421, 2: 0.497, 4: 0.709), so that a Hessian which loses too little, or
+/// all of it (a wrong sign or scale), fails as well.
 #[test]
 fn rst_keeps_and_hessian_loses_a_nodule_beside_a_vessel() {
-    for gap_mm in [1.0, 2.0, 4.0] {
+    let mut last_hes = 0.0;
+    for (gap_mm, hes_expected) in [(1.0, 0.421), (2.0, 0.497), (4.0, 0.709)] {
         let (rst, hes) = relative_blobness(gap_mm);
         println!("gap {gap_mm} mm: RST {rst:.3}, Hessian(sigma = r) {hes:.3}");
-        assert!(rst >= 0.9, "RST relative blobness {rst} at gap {gap_mm}");
-        if gap_mm <= 2.0 {
-            assert!(
-                hes <= 0.55,
-                "Hessian relative blobness {hes} at gap {gap_mm}"
-            );
-        }
+        assert!(
+            (0.9..=1.02).contains(&rst),
+            "RST relative blobness {rst} at gap {gap_mm}"
+        );
+        assert!(
+            (hes - hes_expected).abs() <= 0.06,
+            "Hessian relative blobness {hes} at gap {gap_mm} (expected {hes_expected} +- 0.06)"
+        );
+        assert!(
+            hes > last_hes,
+            "Hessian {hes} at gap {gap_mm} not above {last_hes}"
+        );
+        last_hes = hes;
     }
 }
 
@@ -48,6 +59,16 @@ fn every_sphere_of_the_string_keeps_its_rst_blobness() {
         let hes = blobness(string.hessian_eigen(c, NODULE_RADIUS_MM))
             / blobness(alone.hessian_eigen([0.0; 3], NODULE_RADIUS_MM));
         println!("sphere at {c:?}: RST {rel:.3}, Hessian(sigma = r) {hes:.3}");
-        assert!(rel >= 0.9, "sphere at {c:?}: RST relative blobness {rel}");
+        assert!(
+            (0.9..=1.05).contains(&rel),
+            "sphere at {c:?}: RST relative blobness {rel}"
+        );
+        // The Hessian loses most of each sphere, the inner two (a neighbour on both sides)
+        // more than the outer two: 0.179 and 0.438 measured, +-0.06.
+        let expected = if c[0].abs() < 9.0 { 0.179 } else { 0.438 };
+        assert!(
+            (hes - expected).abs() <= 0.06,
+            "sphere at {c:?}: Hessian relative blobness {hes} (expected {expected} +- 0.06)"
+        );
     }
 }

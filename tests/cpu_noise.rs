@@ -84,7 +84,20 @@ fn blobness_falls_with_noise_and_more_rays_help_up_to_about_100() {
         means_386.windows(2).all(|w| w[1] < w[0]),
         "means {means_386:?}"
     );
-    assert!(means_386[2] < 0.95, "50 HU keeps {}", means_386[2]);
+    // Two-sided: about three standard errors of a 12-draw mean around the 1000-draw means of
+    // docs/reproduction.md (386 rays: 0.995, 0.976, 0.909 at 10, 30, 50 HU), so that noise
+    // that costs nothing, or everything, fails.
+    for ((noise_hu, m), (lo, hi)) in
+        [10.0, 30.0, 50.0]
+            .iter()
+            .zip(&means_386)
+            .zip([(0.98, 1.01), (0.93, 1.01), (0.82, 0.95)])
+    {
+        assert!(
+            (lo..=hi).contains(m),
+            "{noise_hu} HU keeps {m} (expected {lo}..{hi})"
+        );
+    }
 }
 
 /// Issue 4 also asks that the spread over draws shrinks with more rays. Measured with the
@@ -100,7 +113,10 @@ fn spread_is_common_mode_and_does_not_shrink_with_rays() {
     let rel = relative_blobness(50.0, &sets, &b0);
     let (s_few, s_many) = (mean_sd(&rel[0]).1, mean_sd(&rel[1]).1);
     println!("spread at 50 HU: 26 rays {s_few:.3}, 386 rays {s_many:.3}");
-    assert!(s_few > 0.0 && s_many > 0.0);
+    // 1000 draws give 0.107 for both; a 12-draw standard deviation is within about 25% of it.
+    for s in [s_few, s_many] {
+        assert!((0.06..=0.16).contains(&s), "spread {s} at 50 HU");
+    }
     assert!(
         s_many > 0.7 * s_few,
         "the spread now shrinks with rays (26 rays {s_few}, 386 rays {s_many}): update the report"

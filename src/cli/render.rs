@@ -271,7 +271,12 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         Some(m) => {
             let mut request = Request::new(m);
             request.preset = preset;
-            Some(compute_features(&ctx, &volume, &request, args.webgpu_limits)?)
+            Some(compute_features(
+                &ctx,
+                &volume,
+                &request,
+                args.webgpu_limits,
+            )?)
         }
     };
 

@@ -88,7 +88,10 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     section_stability(&mut md, &img_dir)?;
     eprintln!("stability done ({:.0} s)", started.elapsed().as_secs_f64());
     section_thick_slices(&mut md);
-    eprintln!("thick slices done ({:.0} s)", started.elapsed().as_secs_f64());
+    eprintln!(
+        "thick slices done ({:.0} s)",
+        started.elapsed().as_secs_f64()
+    );
     section_timing(&mut md);
     section_skimage(&mut md, &img_dir);
     let _ = writeln!(

@@ -34,6 +34,48 @@ pub fn eigenvalues_sorted(m: &Sym3) -> [f64; 3] {
     e
 }
 
+/// Eigenvalues by the cyclic Jacobi method in f64, sorted as [`eigenvalues_sorted`] sorts them:
+/// the slow, independent reference the closed forms (this file's and eigen.wgsl's) are tested
+/// against. Each rotation zeroes one off-diagonal entry; sweeps repeat until the off-diagonal
+/// part is below f64 resolution of the diagonal (quadratic convergence: ~5 sweeps), at most 50.
+pub fn eigenvalues_jacobi(m: &Sym3) -> [f64; 3] {
+    let [a00, a11, a22, a01, a02, a12] = *m;
+    let mut a = [[a00, a01, a02], [a01, a11, a12], [a02, a12, a22]];
+    for _ in 0..50 {
+        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+        let diag = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
+        if off == 0.0 || off <= 1e-18 * diag {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q] == 0.0 {
+                continue;
+            }
+            // Rotation angle from cot(2 theta) = (a_qq - a_pp) / (2 a_pq), the smaller root.
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = if theta.is_finite() {
+                theta.signum() / (theta.abs() + theta.hypot(1.0))
+            } else {
+                0.0
+            };
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let c = 1.0 / t.hypot(1.0);
+            let s = t * c;
+            for row in a.iter_mut() {
+                let (kp, kq) = (row[p], row[q]);
+                row[p] = c * kp - s * kq;
+                row[q] = s * kp + c * kq;
+            }
+            let (rp, rq) = (a[p], a[q]);
+            a[p] = std::array::from_fn(|k| c * rp[k] - s * rq[k]);
+            a[q] = std::array::from_fn(|k| s * rp[k] + c * rq[k]);
+        }
+    }
+    let mut e = [a[0][0], a[1][1], a[2][2]];
+    e.sort_by(|x, y| y.abs().total_cmp(&x.abs()).then(x.total_cmp(y)));
+    e
+}
+
 /// Frobenius norm of a symmetric matrix.
 pub fn frobenius(m: &Sym3) -> f64 {
     (m[0] * m[0] + m[1] * m[1] + m[2] * m[2] + 2.0 * (m[3] * m[3] + m[4] * m[4] + m[5] * m[5]))

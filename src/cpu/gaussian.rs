@@ -87,7 +87,24 @@ pub fn derivative_kernel(sigma_mm: f64, spacing_mm: f64, order: GaussianOrder) -
     w.iter().map(|v| v / scale).collect()
 }
 
+/// The sum of a kernel's taps as the convolutions use it ([`convolve_axis`], and the GPU's
+/// gaussian.wgsl through `crate::gpu::gaussian`). Derivative kernels (orders 1 and 2, central
+/// differences) sum to 0 by construction, but their f64 taps only to ~1e-17 of their size;
+/// that is taken as exactly 0, so that a constant gives exactly zero derivatives. Otherwise
+/// ~1e-17 of the value survives as "curvature", and a map that is free of scale turns it into
+/// features: Frangi's, with its default c (half the largest norm), gave 0.101 everywhere on
+/// a constant volume.
+pub fn tap_sum(kernel: &[f64]) -> f64 {
+    let sum: f64 = kernel.iter().sum();
+    let size: f64 = kernel.iter().map(|w| w.abs()).sum();
+    if sum.abs() <= 1e-9 * size { 0.0 } else { sum }
+}
+
 /// Correlates `src` with the 1-D `kernel` (odd length, centred) along `axis`, borders replicated.
+///
+/// The sum is taken about the centre voxel's value as gaussian.wgsl takes it about a nearby
+/// one: `out = v_c * tap_sum + sum w (v - v_c)`, so that a constant line gives exactly
+/// `v_c * tap_sum` (its value, or 0 for a derivative; see [`tap_sum`]).
 pub fn convolve_axis(grid: &Grid, src: &[f32], axis: usize, kernel: &[f64]) -> Vec<f32> {
     let [nx, ny, nz] = grid.dims;
     let mut out = vec![0.0f32; grid.len()];
@@ -95,6 +112,7 @@ pub fn convolve_axis(grid: &Grid, src: &[f32], axis: usize, kernel: &[f64]) -> V
         return out;
     }
     let r = (kernel.len() / 2) as i64;
+    let sum = tap_sum(kernel);
     let n_axis = grid.dims[axis] as i64;
     let stride = [1, nx, nx * ny][axis];
     let slice_len = nx * ny;
@@ -105,12 +123,13 @@ pub fn convolve_axis(grid: &Grid, src: &[f32], axis: usize, kernel: &[f64]) -> V
                 let centre = i + nx * (j + ny * k);
                 let pos = ijk[axis] as i64;
                 let base = centre - ijk[axis] * stride;
+                let v_c = f64::from(src[centre]);
                 let mut acc = 0.0f64;
                 for (t, w) in kernel.iter().enumerate() {
                     let q = (pos + t as i64 - r).clamp(0, n_axis - 1) as usize;
-                    acc += w * f64::from(src[base + q * stride]);
+                    acc += w * (f64::from(src[base + q * stride]) - v_c);
                 }
-                slice[i + nx * j] = acc as f32;
+                slice[i + nx * j] = (v_c * sum + acc) as f32;
             }
         }
     });

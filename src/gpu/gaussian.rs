@@ -15,7 +15,7 @@
 //! in one read of the input. Kernels longer than [`MAX_TAPS`] fall back to one output per
 //! invocation with the taps in a storage buffer.
 
-use crate::cpu::gaussian::{GaussianOrder, derivative_kernel, kernel_radius_vox};
+use crate::cpu::gaussian::{GaussianOrder, derivative_kernel, kernel_radius_vox, tap_sum};
 use crate::gpu::checks::{self, RecordError};
 use crate::gpu::kernel::{SlabGrid, WORKGROUP};
 use crate::gpu::{GpuContext, shaders};
@@ -93,7 +93,7 @@ impl AxisTaps {
     /// Any odd-length centred kernel (correlation weights for offsets `-r..=r`).
     pub fn from_weights(ctx: &GpuContext, weights: &[f64]) -> Self {
         let taps: Vec<f32> = weights.iter().map(|&w| w as f32).collect();
-        let sum = weights.iter().sum::<f64>() as f32;
+        let sum = tap_sum(weights) as f32;
         let radius = weights.len() / 2;
         Self {
             buffer: crate::gpu::kernel::f32_buffer_init(&ctx.device, "gaussian taps", &taps),
@@ -141,7 +141,7 @@ impl AxisTapSet {
         Self {
             packed: uniform_taps(ctx, &[&w[0], &w[1], &w[2]], radius),
             radius: radius as u32,
-            sums: std::array::from_fn(|o| w[o].iter().sum::<f64>() as f32),
+            sums: std::array::from_fn(|o| tap_sum(&w[o]) as f32),
             orders: std::array::from_fn(|o| AxisTaps::from_weights(ctx, &w[o])),
         }
     }

@@ -216,6 +216,9 @@ pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadErr
     };
     notes.append(&mut loaded.notes);
     loaded.notes = notes;
+    if let Some(w) = loaded.volume.non_finite_warning() {
+        loaded.volume.warnings.push(w);
+    }
     Ok(loaded)
 }
 

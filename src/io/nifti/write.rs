@@ -79,9 +79,10 @@ pub fn write(
     Ok(out)
 }
 
-/// Writes a volume's physical values (raw * slope + intercept) as a float32 NIfTI-1 file.
+/// Writes a volume's physical values (raw * slope + intercept) as a float32 NIfTI-1 file, NaN
+/// and infinities as stored (not replaced as the features see them).
 pub fn write_volume(name: &str, volume: &Volume) -> Result<Vec<u8>, LoadError> {
-    let values = volume.to_f32();
+    let values: Vec<f32> = (0..volume.voxel_count()).map(|i| volume.value(i)).collect();
     write(name, volume, &[&values], WriteIntent::None)
 }
 

@@ -1,0 +1,139 @@
+//! GPU pipeline against the CPU reference on crops of the real CTs of ../shared/data, every
+//! method (issue 13, item 4): below 1e-3 of the largest value except at rare decision ties
+//! (see `check`).
+
+mod common;
+
+use shapecast::cpu::Grid;
+use shapecast::cpu::pipeline::{Method, Request, compute};
+use shapecast::gpu::GpuContext;
+use shapecast::gpu::context::test_context;
+use shapecast::gpu::pipeline::{FeatureJob, JobOptions};
+use shapecast::volume::Volume;
+
+/// A crop of at most `size` voxels per axis around the centre of a CT of ../shared/data, in HU,
+/// with the file's spacing.
+fn crop(rel: &str, size: [usize; 3]) -> Option<Volume> {
+    let path = common::shared_data(rel)?;
+    let v = shapecast::io::load(&[common::input(&path)])
+        .expect("loads")
+        .volume;
+    let all = v.to_f32();
+    let n: [usize; 3] = std::array::from_fn(|a| size[a].min(v.dims[a]));
+    let lo: [usize; 3] = std::array::from_fn(|a| (v.dims[a] - n[a]) / 2);
+    let mut values = Vec::with_capacity(n[0] * n[1] * n[2]);
+    for k in 0..n[2] {
+        for j in 0..n[1] {
+            for i in 0..n[0] {
+                values.push(all[v.linear_index(lo[0] + i, lo[1] + j, lo[2] + k)]);
+            }
+        }
+    }
+    Some(Volume::from_f32(n, v.spacing_mm, values))
+}
+
+fn gpu(ctx: &GpuContext, volume: &Volume, req: &Request) -> [Vec<f32>; 3] {
+    let options = JobOptions {
+        export: true,
+        ..JobOptions::default()
+    };
+    let mut job = FeatureJob::with_options(ctx, volume, req, options).expect("job");
+    job.run_blocking(ctx).expect("run");
+    job.finish_result()
+        .expect("result")
+        .components
+        .expect("exported")
+}
+
+/// Per voxel, the largest |gpu - cpu| over the components relative to the largest |cpu| of the
+/// volume, sorted; and that largest |cpu|.
+fn errors(gpu: &[Vec<f32>; 3], cpu: &[Vec<f32>; 3]) -> (Vec<f64>, f64) {
+    let largest = cpu
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(f64::from(v.abs())))
+        .max(f64::MIN_POSITIVE);
+    let mut e: Vec<f64> = (0..cpu[0].len())
+        .map(|i| {
+            (0..3)
+                .map(|c| f64::from((gpu[c][i] - cpu[c][i]).abs()) / largest)
+                .fold(
+                    0.0,
+                    |m, x| if x.is_nan() { f64::INFINITY } else { m.max(x) },
+                )
+        })
+        .collect();
+    e.sort_by(f64::total_cmp);
+    (e, largest)
+}
+
+/// GPU against CPU for each method: at most one voxel in 5000 (and at most 2) may differ by
+/// more than 1e-3 of the largest value. That much is left for decision ties, which f32 and f64
+/// may decide either way (not checked voxel by voxel here; tests/gpu_eigen.rs and
+/// tests/gpu_hessian.rs do that on the kernels): the eq. 1 map jumps where |l1| = |l2| with opposite signs (V = |l1| or
+/// 0), and multi-scale eigenvalues where two scales' norms tie; the pipelines' interpolation
+/// back onto the input grid spreads such a jump over its neighbours (issue 13 item 1). The
+/// 99.9th percentile must stay below 1e-4. Measured on the crops below: no voxel above 1e-3
+/// (worst: the RST 1.1e-4, the rest below 4e-6); on a 32^3 crop of the 1.5 mm CT, 2 voxels of
+/// 32,768 of the eq. 1 map (3.6e-3). The crops are small to keep the test near a minute.
+fn check(rel: &str, size: [usize; 3], methods: &[(Method, bool)]) {
+    let Some(ctx) = test_context() else { return };
+    let Some(volume) = crop(rel, size) else {
+        return;
+    };
+    let grid = Grid::of(&volume);
+    let values = volume.to_f32();
+    let mut failures = Vec::new();
+    for &(method, eigen) in methods {
+        let mut req = Request::new(method);
+        req.eigen = eigen;
+        let cpu = compute(&grid, &values, &req).expect("cpu").components;
+        let g = gpu(&ctx, &volume, &req);
+        let (e, largest) = errors(&g, &cpu);
+        let n = e.len();
+        let over = e.iter().filter(|&&x| x > 1e-3).count();
+        let p999 = e[(n * 999) / 1000];
+        let worst = e[n - 1];
+        eprintln!(
+            "{rel} {:?} at {:?} mm, {method:?} (eigen {eigen}): worst {worst:.2e} of the largest ({largest:.2}), 99.9th percentile {p999:.2e}, {over} of {n} voxels above 1e-3",
+            volume.dims, volume.spacing_mm
+        );
+        if over > (n / 5000).max(2) || p999.is_nan() || p999 >= 1e-4 {
+            failures.push((method, eigen, worst, over, p999));
+        }
+    }
+    assert!(failures.is_empty(), "{rel}: {failures:?}");
+}
+
+const FEATURES: [(Method, bool); 5] = [
+    (Method::Hessian, false),
+    (Method::Li, false),
+    (Method::Frangi, false),
+    (Method::Gst, false),
+    (Method::Rst, false),
+];
+
+#[test]
+fn chest_ct_1_5_mm_features() {
+    check("ct/aorta_ct_cropped.nii.gz", [28; 3], &FEATURES);
+}
+
+#[test]
+fn abdomen_ct_3_mm_features() {
+    check("ct/example_ct_sm.nii.gz", [28; 3], &FEATURES);
+}
+
+#[test]
+fn chest_ct_5_mm_features() {
+    check("ct/lung2_image.nrrd", [40, 40, 10], &FEATURES);
+}
+
+/// The Hessian's and the RST's eigenvalues on a larger crop.
+#[test]
+fn chest_ct_1_5_mm_eigenvalues() {
+    check(
+        "ct/aorta_ct_cropped.nii.gz",
+        [40; 3],
+        &[(Method::Hessian, true), (Method::Rst, true)],
+    );
+}
