@@ -8,7 +8,9 @@ use std::collections::BTreeMap;
 use dicom_pixeldata::PixelDecoder;
 use glam::DVec3;
 
-use super::{FileHeader, FrameInfo, check_transfer_syntax, encapsulated, open, read_header};
+use super::{
+    FileHeader, FrameInfo, NATIVE_SYNTAXES, check_transfer_syntax, encapsulated, open, read_header,
+};
 use crate::io::geometry::{check_origin, from_axis_vectors};
 use crate::io::raw::{self, try_vec};
 use crate::io::{InputFile, Limits, LoadError, Loaded};
@@ -231,7 +233,7 @@ fn assemble(
                 if some { "some" } else { "all" }
             ));
         }
-        frames.sort_by_key(|a| tie(a));
+        frames.sort_by_cached_key(|a| tie(a));
     }
 
     // The slice step: from the first to the last position (keeping a gantry tilt's shear),
@@ -349,15 +351,6 @@ enum Target {
     F32,
 }
 
-/// Transfer syntaxes whose pixel data are stored as they are (possibly deflated as a whole).
-const NATIVE_SYNTAXES: &[&str] = &[
-    "1.2.840.10008.1.2",
-    "1.2.840.10008.1.2.1",
-    "1.2.840.10008.1.2.2",
-    "1.2.840.10008.1.2.1.99",
-    "1.2.840.10008.1.2.8.1",
-];
-
 /// Decodes each file's pixel data once and copies its frames into their slots.
 fn read_pixels(
     series: &str,
@@ -392,11 +385,14 @@ fn read_pixels(
     };
     raw::check_voxel_budget(files[0].0.name.as_str(), count, out_bytes, limits)?;
     let count = count as usize;
-    let mut voxels = match target {
-        Target::U8 => Voxels::U8(try_vec(&files[0].0.name, "voxels", count)?),
-        Target::I16 => Voxels::I16(try_vec(&files[0].0.name, "voxels", count)?),
-        Target::U16 => Voxels::U16(try_vec(&files[0].0.name, "voxels", count)?),
-        Target::F32 => Voxels::F32(try_vec(&files[0].0.name, "voxels", count)?),
+    let allocate = || -> Result<Voxels, LoadError> {
+        let name = &files[0].0.name;
+        Ok(match target {
+            Target::U8 => Voxels::U8(try_vec(name, "voxels", count)?),
+            Target::I16 => Voxels::I16(try_vec(name, "voxels", count)?),
+            Target::U16 => Voxels::U16(try_vec(name, "voxels", count)?),
+            Target::F32 => Voxels::F32(try_vec(name, "voxels", count)?),
+        })
     };
 
     // Slots of each file's frames, so that every file is opened and decoded once.
@@ -404,25 +400,24 @@ fn read_pixels(
     for (slot, f) in frames.iter().enumerate() {
         slots_of_file[f.file].push((f.frame, slot));
     }
+    // The checks that need no decoding, for every file, before the voxel buffer exists.
+    for (fi, slots) in slots_of_file.iter().enumerate() {
+        if !slots.is_empty() {
+            let (file, header) = files[fi];
+            check_before_decoding(file, header)?;
+        }
+    }
+    // Allocated once the first file has passed the checks that need its parsed pixel data
+    // (RLE segments, JPEG and JPEG 2000 codestream sizes), so that a small file declaring a
+    // huge image is refused before the buffer is made.
+    let mut voxels: Option<Voxels> = None;
     let mut samples = Vec::new();
     for (fi, slots) in slots_of_file.iter().enumerate() {
         if slots.is_empty() {
             continue;
         }
         let (file, header) = files[fi];
-        check_transfer_syntax(&file.name, &header.transfer_syntax)?;
-        if header.bits_allocated == 1
-            && !NATIVE_SYNTAXES.contains(&header.transfer_syntax.trim_end_matches(['\0', ' ']))
-        {
-            // dicom-rs's RLE and JPEG 2000 decoders handle 8 and 16 bits only.
-            return Err(LoadError::UnsupportedTransferSyntax {
-                file: file.name.clone(),
-                uid: header.transfer_syntax.clone(),
-                name: super::transfer_syntax_name(&header.transfer_syntax),
-                reason: "1-bit (binary segmentation) pixel data can be read only uncompressed or deflated".to_owned(),
-            });
-        }
-        let obj = open(file, false)?;
+        let obj = open(file, false, limits)?;
         let fragments = encapsulated::fragments(&obj);
         let rle_data;
         let decoded;
@@ -450,6 +445,12 @@ fn read_pixels(
             }
         };
         let n_frames = header.frames.len();
+        if voxels.is_none() {
+            voxels = Some(allocate()?);
+        }
+        let Some(voxels) = voxels.as_mut() else {
+            continue;
+        };
         for &(frame, slot) in slots {
             let slice_error = |message: String| LoadError::DicomSlice {
                 series: series.to_owned(),
@@ -462,7 +463,7 @@ fn read_pixels(
                 .map_err(slice_error)?;
             let info = frames[slot].info;
             let dst = slot * frame_len..(slot + 1) * frame_len;
-            match &mut voxels {
+            match voxels {
                 Voxels::U8(v) => v[dst]
                     .iter_mut()
                     .zip(&samples)
@@ -494,7 +495,34 @@ fn read_pixels(
     } else {
         (1.0, 0.0)
     };
+    let voxels = match voxels {
+        Some(v) => v,
+        None => allocate()?,
+    };
     Ok((voxels, slope, intercept))
+}
+
+/// What can be refused from a file's header and size alone: a transfer syntax without a
+/// decoder, 1-bit data in a compressed syntax, RLE data too small to hold the frames.
+fn check_before_decoding(file: &InputFile, header: &FileHeader) -> Result<(), LoadError> {
+    check_transfer_syntax(&file.name, &header.transfer_syntax)?;
+    let ts = header.transfer_syntax.trim_end_matches(['\0', ' ']);
+    if header.bits_allocated == 1 && !NATIVE_SYNTAXES.contains(&ts) {
+        // dicom-rs's RLE and JPEG 2000 decoders handle 8 and 16 bits only.
+        return Err(LoadError::UnsupportedTransferSyntax {
+            file: file.name.clone(),
+            uid: header.transfer_syntax.clone(),
+            name: super::transfer_syntax_name(&header.transfer_syntax),
+            reason:
+                "1-bit (binary segmentation) pixel data can be read only uncompressed or deflated"
+                    .to_owned(),
+        });
+    }
+    if ts == encapsulated::RLE_LOSSLESS {
+        // The whole file bounds the compressed size.
+        encapsulated::check_rle_size(&file.name, header, file.bytes.len())?;
+    }
+    Ok(())
 }
 
 /// The stored values of one frame as i64 (sign-extended or masked to BitsStored), checking that
