@@ -229,33 +229,18 @@ mod native {
     /// Bytes read per step: a frame or two of disk time.
     const BYTES_PER_STEP: u64 = 48 << 20;
 
-    /// Expands folders (recursively, skipping hidden entries) into files with their sizes.
+    /// Expands folders (recursively, skipping hidden entries) into regular files with their
+    /// sizes (`crate::files`: no FIFOs, devices or links into folders; sizes capped). What was
+    /// skipped is logged.
     pub fn list(paths: &[PathBuf]) -> Result<Vec<(PathBuf, u64)>, String> {
-        let mut out = Vec::new();
-        let mut stack: Vec<PathBuf> = paths.iter().rev().cloned().collect();
-        while let Some(p) = stack.pop() {
-            let meta =
-                std::fs::metadata(&p).map_err(|e| format!("{}: cannot open: {e}", p.display()))?;
-            if meta.is_dir() {
-                let mut children: Vec<PathBuf> = std::fs::read_dir(&p)
-                    .map_err(|e| format!("{}: cannot list the folder: {e}", p.display()))?
-                    .filter_map(|e| e.ok())
-                    .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
-                    .map(|e| e.path())
-                    .collect();
-                if children.is_empty() {
-                    return Err(format!("{}: the folder holds no files", p.display()));
-                }
-                children.sort();
-                stack.extend(children.into_iter().rev());
-            } else {
-                out.push((p, meta.len()));
-            }
+        let listing = crate::files::list(paths).map_err(|e| e.to_string())?;
+        for s in &listing.skipped {
+            log::warn!("{s}");
         }
-        if out.is_empty() {
+        if listing.files.is_empty() {
             return Err("no files were given".to_owned());
         }
-        Ok(out)
+        Ok(listing.files)
     }
 
     /// Reads files from the front of `queue` until about [`BYTES_PER_STEP`] are read.
@@ -266,8 +251,7 @@ mod native {
     ) -> Result<(), String> {
         let mut budget = BYTES_PER_STEP;
         while let Some((path, size)) = queue.pop_front() {
-            let bytes = std::fs::read(&path)
-                .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+            let bytes = crate::files::read(&path).map_err(|e| e.to_string())?;
             *done_bytes += size;
             files.push(InputFile::new(path.to_string_lossy(), bytes));
             budget = budget.saturating_sub(size.max(1));
