@@ -685,3 +685,181 @@ fn smaller_lies_are_said() {
         "{w}"
     );
 }
+
+// ---------------------------------------------------------------------------------------------
+// A small structure-aware fuzzer that runs with the tests: random DICOM trees (nested
+// sequences and items, defined and undefined lengths, lengths that lie, native or RLE pixel
+// data, explicit or deflated), randomly cut short. No input may panic, abort (a stack
+// overflow would end this test binary) or allocate more than a bounded amount.
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        // splitmix64
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n.max(1)
+    }
+    fn chance(&mut self, percent: u64) -> bool {
+        self.below(100) < percent
+    }
+}
+
+/// A length as written: usually the truth, sometimes undefined or a lie.
+fn told_len(rng: &mut Rng, truth: usize, may_be_undefined: bool) -> (u32, bool) {
+    match rng.below(20) {
+        0 if may_be_undefined => (u32::MAX, true),
+        1 => (rng.next() as u32, false),
+        2 => (truth as u32 + 1 + rng.below(64) as u32, false),
+        _ => (truth as u32, false),
+    }
+}
+
+/// The bytes of one random item body (elements, nested sequences) within `depth_left`.
+fn random_item(rng: &mut Rng, depth_left: usize) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut element_no = 0x0010u16;
+    for _ in 0..rng.below(4) {
+        element_no += 2;
+        if depth_left > 0 && rng.chance(60) {
+            out.extend_from_slice(&random_sequence(rng, (0x0008, element_no), depth_left - 1));
+        } else {
+            let value: Vec<u8> = (0..rng.below(12) * 2).map(|_| b'1').collect();
+            let lie = rng.chance(5).then(|| rng.next() as u32);
+            element(&mut out, (0x0008, element_no), b"LO", &value, lie);
+        }
+    }
+    out
+}
+
+fn random_sequence(rng: &mut Rng, tag: (u16, u16), depth_left: usize) -> Vec<u8> {
+    let mut items = Vec::new();
+    for _ in 0..1 + rng.below(2) {
+        let body = random_item(rng, depth_left);
+        let (len, undefined) = told_len(rng, body.len(), true);
+        items.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0]);
+        items.extend_from_slice(&len.to_le_bytes());
+        items.extend_from_slice(&body);
+        if undefined {
+            items.extend_from_slice(&[0xFE, 0xFF, 0x0D, 0xE0, 0, 0, 0, 0]);
+        }
+    }
+    let (len, undefined) = told_len(rng, items.len(), true);
+    let mut out = Vec::new();
+    element(&mut out, tag, b"SQ", &[], Some(len));
+    out.extend_from_slice(&items);
+    if undefined {
+        out.extend_from_slice(&[0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]);
+    }
+    out
+}
+
+/// A chain of `levels` undefined-length sequences, the deepest holding a random item.
+fn deep_chain(rng: &mut Rng, levels: usize) -> Vec<u8> {
+    let mut out = Vec::new();
+    for _ in 0..levels {
+        element(&mut out, (0x0008, 0x1140), b"SQ", &[], Some(u32::MAX));
+        out.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 0xFF, 0xFF, 0xFF, 0xFF]);
+    }
+    out.extend_from_slice(&random_item(rng, 2));
+    for _ in 0..levels {
+        out.extend_from_slice(&[0xFE, 0xFF, 0x0D, 0xE0, 0, 0, 0, 0]);
+        out.extend_from_slice(&[0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]);
+    }
+    out
+}
+
+#[test]
+fn random_dicom_structures_never_crash() {
+    let limits = Limits {
+        max_voxel_bytes: 16 * MIB as u64,
+        max_decompressed_bytes: 64 * MIB as u64,
+    };
+    let t = std::time::Instant::now();
+    let (mut ok, mut refused, mut deepest_loaded) = (0, 0, 0);
+    // SHAPECAST_FUZZ_SEEDS=1000000 for a longer run (20,000 take about a second).
+    let seeds: u64 = std::env::var("SHAPECAST_FUZZ_SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(20_000);
+    for seed in 0..seeds {
+        let mut rng = Rng(seed);
+        let rows = 1 + rng.below(8) as u16;
+        let cols = 1 + rng.below(8) as u16;
+        let mut d = Vec::new();
+        element(&mut d, (0x0008, 0x0060), b"CS", b"CT", None);
+        // Nested structure at (0008,1140): a random tree, or a deep chain around the limit.
+        let levels = if rng.chance(30) {
+            40 + rng.below(60) as usize
+        } else {
+            0
+        };
+        if levels > 0 {
+            d.extend_from_slice(&deep_chain(&mut rng, levels));
+        } else {
+            d.extend_from_slice(&random_sequence(&mut rng, (0x0008, 0x1140), 6));
+        }
+        let mut attrs = image_attributes(rows, cols, None, 16, 0);
+        attrs.drain(..10); // the (0008,0060) already written
+        d.extend_from_slice(&attrs);
+        let rle = rng.chance(20);
+        if rle {
+            let frag: Vec<u8> = (0..64 + rng.below(64)).map(|_| rng.next() as u8).collect();
+            d.extend_from_slice(&encapsulated(&[&frag]));
+        } else {
+            let truth = usize::from(rows) * usize::from(cols) * 2;
+            let (len, _) = told_len(&mut rng, truth, false);
+            let pixels: Vec<u8> = (0..truth).map(|_| rng.next() as u8).collect();
+            element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels, Some(len));
+        }
+        if rng.chance(15) {
+            d.truncate(rng.below(d.len() as u64) as usize);
+        }
+        let ts = if rle {
+            RLE
+        } else if rng.chance(30) {
+            DEFLATED_LE
+        } else {
+            EXPLICIT_LE
+        };
+        let mut f = meta(ts);
+        if ts == DEFLATED_LE {
+            f.extend_from_slice(&raw_deflate(&d));
+        } else {
+            f.extend_from_slice(&d);
+        }
+        let (r, peak) = peak_during(|| {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                load_one("random.dcm", f, &limits)
+            }))
+        });
+        let Ok(result) = r else {
+            panic!("seed {seed} panicked");
+        };
+        assert!(peak < 64 * MIB, "seed {seed}: peak {peak} bytes");
+        match result {
+            Ok(_) => {
+                ok += 1;
+                deepest_loaded = deepest_loaded.max(levels);
+            }
+            Err(e) => {
+                assert!(e.to_string().contains("random.dcm"), "seed {seed}: {e}");
+                refused += 1;
+            }
+        }
+    }
+    eprintln!(
+        "random DICOM trees: {ok} loaded, {refused} refused (deepest chain loaded: {deepest_loaded}) in {:.1?}",
+        t.elapsed()
+    );
+    assert!(
+        deepest_loaded <= 64,
+        "a chain of {deepest_loaded} sequences was accepted"
+    );
+    assert!(ok > 100 && refused > 100, "{ok} loaded, {refused} refused");
+}

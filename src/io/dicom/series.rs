@@ -39,9 +39,24 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
         }
     }
     if headers.is_empty() {
-        return Err(first_error.unwrap_or_else(|| LoadError::DicomSeries {
-            series: "-".to_owned(),
-            message: "none of the DICOM files holds an image".to_owned(),
+        return Err(first_error.unwrap_or_else(|| match files {
+            [one] => LoadError::Dicom {
+                file: one.name.clone(),
+                message: "holds no image (no Rows and Columns)".to_owned(),
+            },
+            many => LoadError::DicomSeries {
+                series: "-".to_owned(),
+                message: format!(
+                    "none of the {} DICOM files holds an image ({}{})",
+                    many.len(),
+                    many.iter()
+                        .take(3)
+                        .map(|f| f.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    if many.len() > 3 { ", ..." } else { "" }
+                ),
+            },
         }));
     }
 
