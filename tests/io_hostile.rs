@@ -863,3 +863,49 @@ fn random_dicom_structures_never_crash() {
     );
     assert!(ok > 100 && refused > 100, "{ok} loaded, {refused} refused");
 }
+
+/// A 2 x 2 slice with an orientation and a position (z in mm along the normal of axial).
+fn oriented_slice(iop: &str, ipp: &str, value: u16) -> Vec<u8> {
+    let attrs = image_attributes(2, 2, None, 16, 0);
+    let split = attrs
+        .windows(4)
+        .position(|w| w == [0x28, 0x00, 0x02, 0x00])
+        .expect("SamplesPerPixel");
+    let mut d = attrs[..split].to_vec();
+    element(&mut d, (0x0020, 0x0032), b"DS", ipp.as_bytes(), None);
+    element(&mut d, (0x0020, 0x0037), b"DS", iop.as_bytes(), None);
+    d.extend_from_slice(&attrs[split..]);
+    let pixels: Vec<u8> = (0..4).flat_map(|_| value.to_le_bytes()).collect();
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels, None);
+    dicom_file(EXPLICIT_LE, &d)
+}
+
+#[test]
+fn a_slice_of_another_orientation_is_not_stacked() {
+    let axial = "1\\0\\0\\0\\1\\0";
+    for (odd_name, odd_iop) in [
+        ("sagittal.dcm", "0\\1\\0\\0\\0\\-1"),
+        ("rotated.dcm", "-1\\0\\0\\0\\-1\\0"),
+    ] {
+        let mut files: Vec<InputFile> = (0..3)
+            .map(|z| {
+                InputFile::new(
+                    format!("ax{z}.dcm"),
+                    oriented_slice(axial, &format!("0\\0\\{z}"), 100 + z),
+                )
+            })
+            .collect();
+        files.insert(
+            1,
+            InputFile::new(odd_name, oriented_slice(odd_iop, "0\\0\\1.5", 999)),
+        );
+        let loaded = io::load(&files).expect("the axial stack loads");
+        assert_eq!(loaded.volume.dims, [2, 2, 3], "{odd_name}");
+        assert_eq!(loaded.volume.value_at(0, 0, 2), 102.0);
+        let notes = loaded.notes.join("\n");
+        assert!(
+            notes.contains("not stacked") && notes.contains(odd_name),
+            "{odd_name}: {notes}"
+        );
+    }
+}

@@ -60,12 +60,39 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
         }));
     }
 
-    // Group by series (and image size, which must be shared within a volume); BTreeMap keeps
-    // the grouping independent of the order the files came in.
-    let mut groups: BTreeMap<(String, u32, u32), Vec<usize>> = BTreeMap::new();
-    for (h_index, (_, h)) in headers.iter().enumerate() {
+    // Group by series and image size, which must be shared within a volume, and split a
+    // series into stacks by ImageOrientationPatient (as dcm2niix does): a localizer, a sagittal
+    // slice among axial ones or a slice rotated in plane is not stacked with the others. Files
+    // are visited in a fixed order and BTreeMap sorts the groups, so the grouping does not
+    // depend on the order the files came in.
+    let mut order: Vec<usize> = (0..headers.len()).collect();
+    order.sort_by(|&a, &b| {
+        let (ha, hb) = (&headers[a].1, &headers[b].1);
+        (&ha.sop_instance_uid, &files[headers[a].0].name)
+            .cmp(&(&hb.sop_instance_uid, &files[headers[b].0].name))
+    });
+    let mut stacks: BTreeMap<(String, u32, u32), Vec<[f64; 6]>> = BTreeMap::new();
+    let mut groups: BTreeMap<(String, u32, u32, usize), Vec<usize>> = BTreeMap::new();
+    for h_index in order {
+        let h = &headers[h_index].1;
+        let series_key = (h.series_uid.clone(), h.rows, h.cols);
+        let known = stacks.entry(series_key).or_default();
+        // Files without an orientation join the first stack.
+        let stack = match h.frames.iter().find_map(|f| f.orientation) {
+            None => 0,
+            Some(o) => match known
+                .iter()
+                .position(|k| k.iter().zip(&o).all(|(a, b)| (a - b).abs() < 1e-3))
+            {
+                Some(i) => i,
+                None => {
+                    known.push(o);
+                    known.len() - 1
+                }
+            },
+        };
         groups
-            .entry((h.series_uid.clone(), h.rows, h.cols))
+            .entry((h.series_uid.clone(), h.rows, h.cols, stack))
             .or_default()
             .push(h_index);
     }
@@ -87,9 +114,27 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
             series: "-".to_owned(),
             message: "no series".to_owned(),
         })?;
+    let orientation_of = |key: &(String, u32, u32, usize)| {
+        stacks
+            .get(&(key.0.clone(), key.1, key.2))
+            .and_then(|k| k.get(key.3))
+            .copied()
+    };
     for (key, members) in &groups {
-        if *key != chosen_key {
-            let h = &headers[members[0]].1;
+        if *key == chosen_key {
+            continue;
+        }
+        let h = &headers[members[0]].1;
+        if (&key.0, key.1, key.2) == (&chosen_key.0, chosen_key.1, chosen_key.2) {
+            notes.push(format!(
+                "{} image(s) of series {} were not stacked with the others: their ImageOrientationPatient {:?} differs from the loaded images' {:?} (a localizer, another plane or a rotated slice?); first: {}",
+                frame_count(members),
+                key.0,
+                orientation_of(key).unwrap_or_default(),
+                orientation_of(&chosen_key).unwrap_or_default(),
+                files[headers[members[0]].0].name
+            ));
+        } else {
             notes.push(format!(
                 "another series was not loaded: {} \"{}\" ({} images of {}x{}, {})",
                 key.0,
