@@ -909,3 +909,28 @@ fn a_slice_of_another_orientation_is_not_stacked() {
         );
     }
 }
+
+#[test]
+fn native_dicom_memory_is_bounded() {
+    // 32 frames of 512 x 512 at 16 bits: 16 MiB of pixels in, 16 MiB of voxels out.
+    let frames = 32u32;
+    let mut d = image_attributes(512, 512, Some(frames), 16, 0);
+    let n = 512 * 512 * frames as usize;
+    let pixels: Vec<u8> = (0..n)
+        .flat_map(|i| ((i % 4000) as u16).to_le_bytes())
+        .collect();
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels, None);
+    drop(pixels);
+    let files = [InputFile::new("frames.dcm", dicom_file(EXPLICIT_LE, &d))];
+    drop(d);
+    let (r, peak) = peak_during(|| io::load(&files));
+    let v = r.expect("loads").volume;
+    assert_eq!(v.dims, [512, 512, frames as usize]);
+    assert_eq!(v.value_at(7, 0, 0), 7.0);
+    let voxel_bytes = n * 2;
+    eprintln!(
+        "native DICOM of {voxel_bytes} voxel bytes: peak {peak} bytes ({:.2}x)",
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak < voxel_bytes * 5 / 2, "peak {peak} bytes");
+}

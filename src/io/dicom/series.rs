@@ -481,6 +481,7 @@ fn read_pixels(
         let fragments = encapsulated::fragments(&obj);
         let rle_data;
         let decoded;
+        let native;
         let data: &[u8] = match &fragments {
             Some(frags)
                 if header.transfer_syntax.trim_end_matches(['\0', ' '])
@@ -488,6 +489,14 @@ fn read_pixels(
             {
                 rle_data = encapsulated::decode_rle(&file.name, header, frags)?;
                 &rle_data
+            }
+            // Native samples are read where the object holds them: dicom-pixeldata would copy
+            // them twice (to bytes, then to a vector), a third and fourth copy of the pixels.
+            None if header.bits_allocated != 1
+                && let Some(bytes) = native_pixel_bytes(&obj) =>
+            {
+                native = bytes;
+                &native
             }
             _ => {
                 if let Some(frags) = &fragments {
@@ -560,6 +569,26 @@ fn read_pixels(
         None => allocate()?,
     };
     Ok((voxels, slope, intercept))
+}
+
+/// The native PixelData's bytes as the object holds them (little endian), without a copy
+/// where the value is bytes (OB) or, on a little-endian machine, 16-bit words (OW).
+fn native_pixel_bytes(
+    obj: &dicom_object::DefaultDicomObject,
+) -> Option<std::borrow::Cow<'_, [u8]>> {
+    use dicom_core::value::PrimitiveValue;
+    let dicom_core::DicomValue::Primitive(p) =
+        obj.get(dicom_dictionary_std::tags::PIXEL_DATA)?.value()
+    else {
+        return None;
+    };
+    Some(match p {
+        PrimitiveValue::U8(v) => std::borrow::Cow::Borrowed(v.as_slice()),
+        PrimitiveValue::U16(v) if cfg!(target_endian = "little") => {
+            std::borrow::Cow::Borrowed(bytemuck::cast_slice(v.as_slice()))
+        }
+        other => other.to_bytes(),
+    })
 }
 
 /// What can be refused from a file's header and size alone: a transfer syntax without a
