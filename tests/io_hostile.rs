@@ -934,3 +934,40 @@ fn native_dicom_memory_is_bounded() {
     );
     assert!(peak < voxel_bytes * 5 / 2, "peak {peak} bytes");
 }
+
+#[test]
+fn gzipped_wide_integers_are_converted_without_a_buffer_of_stored_bytes() {
+    // int32 labels (a common segmentation type): 128^3 values in i16 range, then one beyond.
+    let dims = [128u16, 128, 128];
+    let n = 128 * 128 * 128;
+    for (big, expect) in [(false, "i16"), (true, "f32")] {
+        let mut b = nifti_u8_header(dims);
+        b[70..72].copy_from_slice(&8i16.to_le_bytes());
+        b[72..74].copy_from_slice(&32i16.to_le_bytes());
+        for i in 0..n {
+            let v: i32 = if big && i == n - 1 {
+                100_000
+            } else {
+                (i % 50) as i32 - 3
+            };
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        let gz = gzip(&b);
+        drop(b);
+        let (r, peak) = peak_during(|| load_one("labels.nii.gz", gz, &Limits::default()));
+        let v = r.expect("loads").volume;
+        assert_eq!(v.voxels.type_name(), expect);
+        assert_eq!(v.value_at(4, 0, 0), 1.0);
+        assert_eq!(
+            v.value_at(127, 127, 127),
+            if big {
+                100_000.0
+            } else {
+                ((n - 1) % 50) as f32 - 3.0
+            }
+        );
+        let out_bytes = n * if big { 4 } else { 2 };
+        eprintln!("int32 .nii.gz -> {expect}: peak {peak} bytes for {out_bytes} voxel bytes");
+        assert!(peak < out_bytes + 2 * MIB, "peak {peak} bytes");
+    }
+}

@@ -242,7 +242,7 @@ fn skip_bytes(reader: &mut impl Read, n: u64) -> std::io::Result<bool> {
 /// header declares, other volumes included) plus a little slack, so that every gzip member's
 /// CRC-32 and ISIZE (the zlib Adler-32) is checked: a corrupt file is refused, never loaded
 /// with garbage. Wide integer types, whose compact type depends on their range, are inflated
-/// into a byte buffer first and decoded from it. Returns the voxels and how many bytes the
+/// twice: once for the range, once into the voxels. Returns the voxels and how many bytes the
 /// whole stream held.
 pub(crate) fn inflate_voxels(
     file: &str,
@@ -282,37 +282,34 @@ pub(crate) fn inflate_voxels(
     if !skip_bytes(&mut reader, skip).map_err(err)? {
         return Err(truncated(skip));
     }
-    let voxels = match layout.ty {
-        SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64 => {
-            let span = usize::try_from(span).map_err(|_| truncated(0))?;
-            let mut bytes = Vec::new();
-            bytes
-                .try_reserve_exact(span)
-                .map_err(|_| LoadError::OutOfMemory {
-                    file: file.to_owned(),
-                    what: "decompressed voxel data".to_owned(),
-                    bytes: span as u64,
-                })?;
-            // `take` + `read_to_end` fills the reserved capacity without zero-filling it first,
-            // so a stream that ends early costs only what it held.
-            (&mut reader)
-                .take(span as u64)
-                .read_to_end(&mut bytes)
-                .map_err(err)?;
-            if bytes.len() < span {
-                return Err(truncated(skip + bytes.len() as u64));
-            }
-            decode_samples(
-                file,
-                &bytes,
-                SampleLayout {
-                    offset: 0,
-                    ..layout
-                },
-                limits,
-            )?
+    let wide = matches!(
+        layout.ty,
+        SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64
+    );
+    // Wide integers become i16, u16 or f32 by their range: a first pass finds the range (and
+    // reads the stream to its end for its checksums), a second inflates again and converts,
+    // so that no buffer of the stored bytes is ever held.
+    let (voxels, range) = if wide {
+        let mut samples = SampleReader::new(file, &mut reader, layout, skip, needed, kind);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for i in 0..layout.count {
+            let x = sample_value(layout.ty, samples.next(i)?);
+            lo = lo.min(x);
+            hi = hi.max(x);
         }
-        _ => stream_samples(file, &mut reader, layout, skip, needed, kind)?,
+        (None, Some((lo, hi)))
+    } else {
+        (
+            Some(stream_samples(
+                file,
+                &mut reader,
+                layout,
+                skip,
+                needed,
+                kind,
+            )?),
+            None,
+        )
     };
     // The rest of the stream, so that the checksums at its end are read and checked.
     let allowed = declared_bytes
@@ -332,7 +329,122 @@ pub(crate) fn inflate_voxels(
             });
         }
     }
+    let voxels = match (voxels, range) {
+        (Some(v), _) => v,
+        (None, range) => {
+            let (lo, hi) = range.unwrap_or((0.0, 0.0));
+            let mut again =
+                std::io::BufReader::with_capacity(64 << 10, Members::new(kind, compressed));
+            if !skip_bytes(&mut again, skip).map_err(err)? {
+                return Err(truncated(skip));
+            }
+            let mut samples = SampleReader::new(file, &mut again, layout, skip, needed, kind);
+            let n = layout.count;
+            if n == 0 || (lo >= f64::from(i16::MIN) && hi <= f64::from(i16::MAX)) {
+                let mut v = reserve::<i16>(file, n)?;
+                for i in 0..n {
+                    v.push(sample_value(layout.ty, samples.next(i)?) as i16);
+                }
+                Voxels::I16(v)
+            } else if lo >= 0.0 && hi <= f64::from(u16::MAX) {
+                let mut v = reserve::<u16>(file, n)?;
+                for i in 0..n {
+                    v.push(sample_value(layout.ty, samples.next(i)?) as u16);
+                }
+                Voxels::U16(v)
+            } else {
+                let mut v = reserve::<f32>(file, n)?;
+                for i in 0..n {
+                    v.push(sample_value(layout.ty, samples.next(i)?) as f32);
+                }
+                Voxels::F32(v)
+            }
+        }
+    };
     Ok((voxels, needed + rest))
+}
+
+/// A buffer reserved for `n` values, not filled (so not yet touched).
+fn reserve<T>(file: &str, n: usize) -> Result<Vec<T>, LoadError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|_| LoadError::OutOfMemory {
+        file: file.to_owned(),
+        what: "voxels".to_owned(),
+        bytes: (n as u64).saturating_mul(std::mem::size_of::<T>() as u64),
+    })?;
+    Ok(v)
+}
+
+/// A sample as 8 little-endian bytes (zero-extended) to its value.
+fn sample_value(ty: SampleType, a: [u8; 8]) -> f64 {
+    sample_f64(&a, ty, Endian::Little, 0).unwrap_or(0.0)
+}
+
+/// Reads the samples of a layout (offset 0) one by one from a decompressing stream.
+struct SampleReader<'r, 'a> {
+    file: &'r str,
+    reader: &'r mut std::io::BufReader<Members<'a>>,
+    layout: SampleLayout,
+    skip: u64,
+    needed: u64,
+    kind: Compression,
+    done: u64,
+}
+
+impl<'r, 'a> SampleReader<'r, 'a> {
+    fn new(
+        file: &'r str,
+        reader: &'r mut std::io::BufReader<Members<'a>>,
+        layout: SampleLayout,
+        skip: u64,
+        needed: u64,
+        kind: Compression,
+    ) -> Self {
+        Self {
+            file,
+            reader,
+            layout,
+            skip,
+            needed,
+            kind,
+            done: 0,
+        }
+    }
+
+    fn truncated(&self) -> LoadError {
+        LoadError::truncated(
+            self.file,
+            format!("decompressed {} data", self.kind.name()),
+            self.needed,
+            self.skip + self.done,
+        )
+    }
+
+    /// Sample `i` (called in order) as 8 little-endian bytes, zero-extended.
+    fn next(&mut self, i: usize) -> Result<[u8; 8], LoadError> {
+        let size = self.layout.ty.size();
+        if i > 0 && self.layout.stride_samples > 1 {
+            let gap = ((self.layout.stride_samples - 1) * size) as u64;
+            match skip_bytes(self.reader, gap) {
+                Ok(true) => self.done += gap,
+                Ok(false) => return Err(self.truncated()),
+                Err(e) => return Err(decompress_error(self.file, self.kind, &e)),
+            }
+        }
+        let mut a = [0u8; 8];
+        if let Err(e) = self.reader.read_exact(&mut a[..size]) {
+            return Err(if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                self.truncated()
+            } else {
+                decompress_error(self.file, self.kind, &e)
+            });
+        }
+        self.done += size as u64;
+        if self.layout.endian == Endian::Big {
+            a[..size].reverse();
+        }
+        Ok(a)
+    }
 }
 
 /// Decodes `layout` (offset 0) from a stream into a buffer of the final type that grows as the
@@ -345,59 +457,7 @@ fn stream_samples(
     needed: u64,
     kind: Compression,
 ) -> Result<Voxels, LoadError> {
-    fn reserve<T>(file: &str, n: usize) -> Result<Vec<T>, LoadError> {
-        let mut v = Vec::new();
-        v.try_reserve_exact(n).map_err(|_| LoadError::OutOfMemory {
-            file: file.to_owned(),
-            what: "voxels".to_owned(),
-            bytes: (n as u64).saturating_mul(std::mem::size_of::<T>() as u64),
-        })?;
-        Ok(v)
-    }
     let n = layout.count;
-    let size = layout.ty.size();
-    let big = layout.endian == Endian::Big;
-    let mut sample = [0u8; 8];
-    let mut done: u64 = 0;
-    // Sample i as 8 little-endian bytes (zero-extended).
-    let mut next =
-        |reader: &mut std::io::BufReader<Members<'_>>, i: usize| -> Result<[u8; 8], LoadError> {
-            if i > 0 && layout.stride_samples > 1 {
-                let gap = ((layout.stride_samples - 1) * size) as u64;
-                match skip_bytes(reader, gap) {
-                    Ok(true) => done += gap,
-                    Ok(false) => {
-                        return Err(LoadError::truncated(
-                            file,
-                            format!("decompressed {} data", kind.name()),
-                            needed,
-                            skip + done,
-                        ));
-                    }
-                    Err(e) => return Err(decompress_error(file, kind, &e)),
-                }
-            }
-            let buf = &mut sample[..size];
-            if let Err(e) = reader.read_exact(buf) {
-                return Err(if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                    LoadError::truncated(
-                        file,
-                        format!("decompressed {} data", kind.name()),
-                        needed,
-                        skip + done,
-                    )
-                } else {
-                    decompress_error(file, kind, &e)
-                });
-            }
-            done += size as u64;
-            let mut a = [0u8; 8];
-            a[..size].copy_from_slice(buf);
-            if big {
-                a[..size].reverse();
-            }
-            Ok(a)
-        };
     Ok(match layout.ty {
         SampleType::U8 => {
             let mut v = reserve::<u8>(file, n)?;
@@ -416,47 +476,53 @@ fn stream_samples(
                     ));
                 }
             } else {
+                let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
                 for i in 0..n {
-                    v.push(next(reader, i)?[0]);
+                    v.push(samples.next(i)?[0]);
                 }
             }
             Voxels::U8(v)
         }
         SampleType::I8 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
             let mut v = reserve::<i16>(file, n)?;
             for i in 0..n {
-                v.push(i16::from(next(reader, i)?[0] as i8));
+                v.push(i16::from(samples.next(i)?[0] as i8));
             }
             Voxels::I16(v)
         }
         SampleType::U16 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
             let mut v = reserve::<u16>(file, n)?;
             for i in 0..n {
-                let a = next(reader, i)?;
+                let a = samples.next(i)?;
                 v.push(u16::from_le_bytes([a[0], a[1]]));
             }
             Voxels::U16(v)
         }
         SampleType::I16 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
             let mut v = reserve::<i16>(file, n)?;
             for i in 0..n {
-                let a = next(reader, i)?;
+                let a = samples.next(i)?;
                 v.push(i16::from_le_bytes([a[0], a[1]]));
             }
             Voxels::I16(v)
         }
         SampleType::F32 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
             let mut v = reserve::<f32>(file, n)?;
             for i in 0..n {
-                let a = next(reader, i)?;
+                let a = samples.next(i)?;
                 v.push(f32::from_le_bytes([a[0], a[1], a[2], a[3]]));
             }
             Voxels::F32(v)
         }
         SampleType::F64 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
             let mut v = reserve::<f32>(file, n)?;
             for i in 0..n {
-                v.push(f64::from_le_bytes(next(reader, i)?) as f32);
+                v.push(f64::from_le_bytes(samples.next(i)?) as f32);
             }
             Voxels::F32(v)
         }
@@ -464,7 +530,7 @@ fn stream_samples(
             return Err(LoadError::unsupported(
                 file,
                 "streamed sample type",
-                format!("{:?} (internal: decoded from a buffer)", layout.ty),
+                format!("{:?} (internal: converted in two passes)", layout.ty),
             ));
         }
     })
