@@ -68,3 +68,68 @@ fn info_fails_with_one_line() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("README.md"), "{err}");
 }
+
+#[test]
+fn info_finds_the_data_file_beside_a_header() {
+    // Only the header is named: its same-stem data file is read too, as `features` does.
+    let out = shapecast()
+        .arg("info")
+        .arg(common::test_data("analyze/ras.hdr"))
+        .output()
+        .expect("run shapecast");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("62 x 41 x 34"));
+}
+
+/// A series folder with a FIFO (which blocked `info` forever), a link to /dev/zero (read until
+/// memory ran out) and a link back to the folder (a loop that failed the whole folder).
+#[cfg(unix)]
+#[test]
+fn info_of_a_folder_skips_fifos_device_links_and_loops() {
+    let dir = std::env::temp_dir().join(format!("shapecast-info-hostile-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp folder");
+    let series = common::test_data("dicom/ct-head-64px");
+    for e in std::fs::read_dir(&series).expect("series") {
+        let p = e.expect("entry").path();
+        std::fs::copy(&p, dir.join(p.file_name().expect("name"))).expect("copy");
+    }
+    let have_fifo = Command::new("mkfifo")
+        .arg(dir.join("pipe"))
+        .status()
+        .is_ok_and(|s| s.success());
+    std::os::unix::fs::symlink("/dev/zero", dir.join("zero")).expect("symlink");
+    std::os::unix::fs::symlink(&dir, dir.join("loop")).expect("symlink");
+    let mut child = shapecast()
+        .arg("info")
+        .arg(&dir)
+        .arg("--json")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run shapecast");
+    let started = std::time::Instant::now();
+    while child.try_wait().expect("wait").is_none() {
+        if started.elapsed().as_secs() > 30 {
+            let _ = child.kill();
+            panic!("shapecast info hung on the folder");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let out = child.wait_with_output().expect("output");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(json["dims"], serde_json::json!([64, 64, 6]));
+    assert!(err.contains("zero") && err.contains("loop"), "{err}");
+    if have_fifo {
+        assert!(err.contains("FIFO"), "{err}");
+    } else {
+        eprintln!("SKIPPED: the FIFO case (mkfifo not available)");
+    }
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}

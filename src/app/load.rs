@@ -62,10 +62,13 @@ enum Stage {
         files: Vec<InputFile>,
         done_bytes: u64,
         total_bytes: u64,
+        skipped: Vec<String>,
     },
     Decode {
         files: Vec<InputFile>,
         announced: bool,
+        /// What the folder walk skipped, put first among the loaded volume's notes.
+        skipped: Vec<String>,
     },
     Phantom {
         name: String,
@@ -87,6 +90,7 @@ impl LoadJob {
             LoadSource::Files { files, .. } => Stage::Decode {
                 files,
                 announced: false,
+                skipped: Vec::new(),
             },
             #[cfg(not(target_arch = "wasm32"))]
             LoadSource::Paths(paths) => Stage::Listing(paths),
@@ -107,7 +111,7 @@ impl LoadJob {
         match std::mem::replace(&mut self.stage, Stage::Finished) {
             #[cfg(not(target_arch = "wasm32"))]
             Stage::Listing(paths) => match native::list(&paths) {
-                Ok(queue) => {
+                Ok((queue, skipped)) => {
                     let total_bytes = queue.iter().map(|(_, n)| n).sum();
                     let what = format!("reading {} files", queue.len());
                     self.stage = Stage::Reading {
@@ -115,6 +119,7 @@ impl LoadJob {
                         files: Vec::new(),
                         done_bytes: 0,
                         total_bytes,
+                        skipped,
                     };
                     LoadStep::Working {
                         fraction: 0.0,
@@ -129,6 +134,7 @@ impl LoadJob {
                 mut files,
                 mut done_bytes,
                 total_bytes,
+                skipped,
             } => {
                 if let Err(e) = native::read_some(&mut queue, &mut files, &mut done_bytes) {
                     return LoadStep::Failed(e);
@@ -137,6 +143,7 @@ impl LoadJob {
                     self.stage = Stage::Decode {
                         files,
                         announced: false,
+                        skipped,
                     };
                     return self.step();
                 }
@@ -153,13 +160,18 @@ impl LoadJob {
                     files,
                     done_bytes,
                     total_bytes,
+                    skipped,
                 };
                 LoadStep::Working {
                     fraction: 0.5 * fraction,
                     what,
                 }
             }
-            Stage::Decode { files, announced } => {
+            Stage::Decode {
+                files,
+                announced,
+                skipped,
+            } => {
                 if !announced {
                     let what = match files.as_slice() {
                         [one] => format!("decoding {}", crate::io::base_name(&one.name)),
@@ -168,6 +180,7 @@ impl LoadJob {
                     self.stage = Stage::Decode {
                         files,
                         announced: true,
+                        skipped,
                     };
                     return LoadStep::Working {
                         fraction: 0.5,
@@ -175,7 +188,12 @@ impl LoadJob {
                     };
                 }
                 match crate::io::load(&files) {
-                    Ok(loaded) => LoadStep::Done(Box::new(loaded)),
+                    Ok(mut loaded) => {
+                        let mut notes = skipped;
+                        notes.append(&mut loaded.notes);
+                        loaded.notes = notes;
+                        LoadStep::Done(Box::new(loaded))
+                    }
                     Err(e) => LoadStep::Failed(e.to_string()),
                 }
             }
@@ -229,33 +247,16 @@ mod native {
     /// Bytes read per step: a frame or two of disk time.
     const BYTES_PER_STEP: u64 = 48 << 20;
 
-    /// Expands folders (recursively, skipping hidden entries) into files with their sizes.
-    pub fn list(paths: &[PathBuf]) -> Result<Vec<(PathBuf, u64)>, String> {
-        let mut out = Vec::new();
-        let mut stack: Vec<PathBuf> = paths.iter().rev().cloned().collect();
-        while let Some(p) = stack.pop() {
-            let meta =
-                std::fs::metadata(&p).map_err(|e| format!("{}: cannot open: {e}", p.display()))?;
-            if meta.is_dir() {
-                let mut children: Vec<PathBuf> = std::fs::read_dir(&p)
-                    .map_err(|e| format!("{}: cannot list the folder: {e}", p.display()))?
-                    .filter_map(|e| e.ok())
-                    .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
-                    .map(|e| e.path())
-                    .collect();
-                if children.is_empty() {
-                    return Err(format!("{}: the folder holds no files", p.display()));
-                }
-                children.sort();
-                stack.extend(children.into_iter().rev());
-            } else {
-                out.push((p, meta.len()));
-            }
-        }
-        if out.is_empty() {
+    /// Expands folders (recursively, skipping hidden entries) into regular files with their
+    /// sizes (`crate::files`: no FIFOs, devices or links into folders; sizes capped), and
+    /// what was skipped.
+    #[allow(clippy::type_complexity)]
+    pub fn list(paths: &[PathBuf]) -> Result<(Vec<(PathBuf, u64)>, Vec<String>), String> {
+        let listing = crate::files::list(paths).map_err(|e| e.to_string())?;
+        if listing.files.is_empty() {
             return Err("no files were given".to_owned());
         }
-        Ok(out)
+        Ok((listing.files, listing.skipped))
     }
 
     /// Reads files from the front of `queue` until about [`BYTES_PER_STEP`] are read.
@@ -266,8 +267,7 @@ mod native {
     ) -> Result<(), String> {
         let mut budget = BYTES_PER_STEP;
         while let Some((path, size)) = queue.pop_front() {
-            let bytes = std::fs::read(&path)
-                .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+            let bytes = crate::files::read(&path).map_err(|e| e.to_string())?;
             *done_bytes += size;
             files.push(InputFile::new(path.to_string_lossy(), bytes));
             budget = budget.saturating_sub(size.max(1));
@@ -336,12 +336,24 @@ mod tests {
         let bytes = crate::io::nifti::write_volume("a.nii", &volume).unwrap();
         std::fs::write(sub.join("a.nii"), bytes).unwrap();
         std::fs::write(dir.join(".hidden"), b"x").unwrap();
+        #[cfg(unix)]
+        std::os::unix::fs::symlink("/dev/zero", dir.join("zero")).unwrap();
         let (said, r) = run(LoadJob::new(LoadSource::Paths(vec![dir.clone()])));
         assert!(
             said.iter().any(|s| s.starts_with("reading 1 files")),
             "{said:?}"
         );
-        assert_eq!(r.unwrap().volume.dims, volume.dims);
+        let loaded = r.unwrap();
+        assert_eq!(loaded.volume.dims, volume.dims);
+        #[cfg(unix)]
+        assert!(
+            loaded
+                .notes
+                .iter()
+                .any(|n| n.contains("zero") && n.contains("skipped")),
+            "{:?}",
+            loaded.notes
+        );
         let missing = dir.join("missing.nii");
         let (_, r) = run(LoadJob::new(LoadSource::Paths(vec![missing])));
         assert!(r.unwrap_err().contains("missing.nii"));

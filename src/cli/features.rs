@@ -108,48 +108,10 @@ pub struct FeaturesArgs {
     pub exact_rst: bool,
 }
 
-/// Reads a file, or every file of a folder, into loader inputs.
+/// Reads a file (with the data file beside a header), or every file of a folder, into loader
+/// inputs: the same reader as every subcommand (`crate::cli::info::read_inputs`).
 pub fn read_input(path: &Path) -> anyhow::Result<Vec<InputFile>> {
-    let mut files = Vec::new();
-    if path.is_dir() {
-        let mut entries: Vec<PathBuf> = std::fs::read_dir(path)
-            .with_context(|| format!("reading folder {}", path.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_file())
-            .collect();
-        entries.sort();
-        for p in entries {
-            let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
-            files.push(InputFile::new(p.to_string_lossy(), bytes));
-        }
-    } else {
-        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-        files.push(InputFile::new(path.to_string_lossy(), bytes));
-        // A header's data file sits beside it with the same stem (ras.hdr + ras.img,
-        // x.nhdr + x.raw.gz, x.mhd + x.raw): give the loader those siblings.
-        let name = path.to_string_lossy().to_lowercase();
-        let is_header = [".hdr", ".nhdr", ".mhd"].iter().any(|e| name.ends_with(e));
-        let dir = path.parent().map(|d| {
-            if d.as_os_str().is_empty() {
-                Path::new(".")
-            } else {
-                d
-            }
-        });
-        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
-        if let (true, Some(dir), Some(stem)) = (is_header, dir, stem) {
-            for e in std::fs::read_dir(dir)?.flatten() {
-                let p = e.path();
-                let same_stem = p
-                    .file_name()
-                    .is_some_and(|n| n.to_string_lossy().starts_with(&format!("{stem}.")));
-                if same_stem && p.file_name() != path.file_name() && p.is_file() {
-                    files.push(InputFile::new(p.to_string_lossy(), std::fs::read(&p)?));
-                }
-            }
-        }
-    }
-    Ok(files)
+    crate::cli::info::read_inputs(&[path.to_path_buf()])
 }
 
 pub fn request(args: &FeaturesArgs) -> anyhow::Result<Request> {

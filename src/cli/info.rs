@@ -1,9 +1,7 @@
 //! `shapecast info PATH... [--json]`: what a volume file, a header + data pair or a DICOM folder
 //! holds (dimensions, spacing, orientation, intensity range, modality, warnings).
 
-use std::path::{Path, PathBuf};
-
-use anyhow::Context as _;
+use std::path::PathBuf;
 
 use crate::io::{self, InputFile, Loaded};
 use crate::volume::orientation_label;
@@ -21,13 +19,14 @@ pub struct InfoArgs {
 }
 
 /// Reads files and (recursively) folders into `InputFile`s named by their path, sorted by name
-/// within each folder so that the output does not depend on directory order.
+/// within each folder so that the output does not depend on directory order (see
+/// `crate::files`: regular files only, what is skipped is said on stderr).
 pub fn read_inputs(paths: &[PathBuf]) -> anyhow::Result<Vec<InputFile>> {
-    let mut out = Vec::new();
-    for p in paths {
-        collect(p, &mut out)?;
+    let (files, skipped) = crate::files::read_all(paths)?;
+    for s in &skipped {
+        eprintln!("warning: {s}");
     }
-    if out.is_empty() {
+    if files.is_empty() {
         anyhow::bail!(
             "no files found in {}",
             paths
@@ -37,31 +36,7 @@ pub fn read_inputs(paths: &[PathBuf]) -> anyhow::Result<Vec<InputFile>> {
                 .join(", ")
         );
     }
-    Ok(out)
-}
-
-fn collect(path: &Path, out: &mut Vec<InputFile>) -> anyhow::Result<()> {
-    if path.is_dir() {
-        let mut entries: Vec<PathBuf> = std::fs::read_dir(path)
-            .with_context(|| format!("cannot list {}", path.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .collect();
-        entries.sort();
-        for e in entries {
-            // Hidden files (.DS_Store, ._x) are never part of a series.
-            if e.file_name()
-                .is_some_and(|n| n.to_string_lossy().starts_with('.'))
-            {
-                continue;
-            }
-            collect(&e, out)?;
-        }
-    } else {
-        let bytes =
-            std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-        out.push(InputFile::new(path.display().to_string(), bytes));
-    }
-    Ok(())
+    Ok(files)
 }
 
 /// Runs `shapecast info`.

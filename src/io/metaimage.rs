@@ -222,7 +222,24 @@ pub(crate) fn read(
                 dir[c] = m[a * ndims + c];
             }
         }
-        let s = spacing.get(a).copied().unwrap_or(1.0);
+        let s = match spacing.get(a).copied() {
+            Some(s) => {
+                if s < 0.0 {
+                    // ITK keeps a negative spacing (with a warning): the axis points the other
+                    // way. Said here too, as it flips the image.
+                    warnings.push(format!(
+                        "header field ElementSpacing: axis {a} is {s} (negative): the axis is taken to point the other way, as ITK reads it"
+                    ));
+                }
+                s
+            }
+            None => {
+                warnings.push(format!(
+                    "header field ElementSpacing: no value for axis {a}; 1 mm is assumed"
+                ));
+                1.0
+            }
+        };
         *step = dir * s;
     }
     if matches!(&matrix, Some(m) if m.len() != ndims * ndims) {
@@ -267,22 +284,34 @@ pub(crate) fn read(
                 file: name.to_owned(),
                 data_file: data_file.to_owned(),
             })?;
+        if let Some(note) = super::path_note("ElementDataFile", data_file, &f.name) {
+            warnings.push(note);
+        }
         (f.name.clone(), f.bytes.as_slice())
     };
     let header_size: i64 = get(&fields, "HeaderSize")
         .and_then(|s| s.parse().ok())
         .unwrap_or(0);
     let compressed = is_true(get(&fields, "CompressedData"));
-    let decoded: std::borrow::Cow<'_, [u8]> = if compressed {
-        if total_bytes > limits.max_decompressed_bytes {
-            return Err(LoadError::TooLarge {
-                file: data_name,
-                what: "decompressed MetaImage data".to_owned(),
-                bytes: total_bytes,
-                limit: limits.max_decompressed_bytes,
-            });
-        }
-        std::borrow::Cow::Owned(raw::inflate_zlib_prefix(&data_name, data, total_bytes)?.0)
+    let layout = SampleLayout {
+        ty,
+        endian,
+        offset: 0,
+        count: count as usize,
+        stride_samples: usize::try_from(channels).unwrap_or(usize::MAX),
+    };
+    let voxels = if compressed {
+        // Straight from the stream into the voxels (the Adler-32 is checked at its end).
+        raw::inflate_voxels(
+            &data_name,
+            raw::Compression::Zlib,
+            data,
+            0,
+            layout,
+            total_bytes,
+            limits,
+        )?
+        .0
     } else {
         let skip = if header_size == -1 {
             // -1: the data are the last bytes of the file.
@@ -291,23 +320,15 @@ pub(crate) fn read(
             u64::try_from(header_size).unwrap_or(0)
         };
         let skip = usize::try_from(skip).unwrap_or(usize::MAX).min(data.len());
-        std::borrow::Cow::Borrowed(&data[skip..])
+        raw::decode_present(
+            &data_name,
+            "MetaImage data",
+            &data[skip..],
+            total_bytes,
+            layout,
+            limits,
+        )?
     };
-    let layout = SampleLayout {
-        ty,
-        endian,
-        offset: 0,
-        count: count as usize,
-        stride_samples: usize::try_from(channels).unwrap_or(usize::MAX),
-    };
-    let voxels = raw::decode_present(
-        &data_name,
-        "MetaImage data",
-        &decoded,
-        total_bytes,
-        layout,
-        limits,
-    )?;
     let (spacing_mm, direction) =
         from_axis_vectors(name, "ElementSpacing/TransformMatrix", steps, &mut warnings)?;
     let origin_mm = check_origin(name, "Offset", origin)?;

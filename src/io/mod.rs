@@ -118,6 +118,17 @@ pub(crate) fn base_name(name: &str) -> &str {
     name.rsplit(['/', '\\']).next().unwrap_or(name)
 }
 
+/// A warning when a header names its data file by a path (`../x/passwd`): only the last
+/// component is matched against the files given, and the user is told which one was used.
+pub(crate) fn path_note(field: &str, wanted: &str, used: &str) -> Option<String> {
+    let wanted = wanted.trim();
+    (base_name(wanted) != wanted).then(|| {
+        format!(
+            "header field {field} names the path \"{wanted}\"; only its file name is matched, and the given file {used} was used"
+        )
+    })
+}
+
 /// Finds the companion data file a header names, among the files the user gave.
 #[derive(Clone, Copy)]
 pub(crate) struct Companions<'a> {

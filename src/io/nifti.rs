@@ -273,12 +273,9 @@ fn ras_geometry(h: &Header, warnings: &mut Vec<String>) -> ([DVec3; 3], DVec3) {
         warnings.push("the sform is degenerate; the qform or pixdim is used instead".to_owned());
     }
     if h.qform_code > 0 {
-        return qform_geometry(h);
+        return qform_geometry(h, warnings);
     }
-    let pix = [1, 2, 3].map(|a| {
-        let p = h.pixdim[a].abs();
-        if p.is_finite() && p > 0.0 { p } else { 1.0 }
-    });
+    let pix = [1, 2, 3].map(|a| pixdim_mm(h, a, false, warnings));
     warnings.push(match h.kind {
         Kind::Analyze => "Analyze 7.5 header: no orientation is stored; axes are assumed to be RAS with the origin at voxel 0".to_owned(),
         _ => "no qform or sform: no orientation is stored; axes are assumed to be RAS with the origin at voxel 0 (NIfTI method 1)".to_owned(),
@@ -289,8 +286,30 @@ fn ras_geometry(h: &Header, warnings: &mut Vec<String>) -> ([DVec3; 3], DVec3) {
     )
 }
 
+/// pixdim[a] as a voxel size in mm, with a warning that names the field when it is not one:
+/// 0, NaN or infinity becomes 1 mm; a negative value becomes its magnitude for method 1 and
+/// 1 mm for the qform (as nifti1_io's quaternion conversion does).
+fn pixdim_mm(h: &Header, a: usize, qform: bool, warnings: &mut Vec<String>) -> f64 {
+    let p = h.pixdim[a];
+    if p.is_finite() && p > 0.0 {
+        return p;
+    }
+    if a as i64 > h.dim[0] {
+        return 1.0; // an axis the image does not have (a 2D image's pixdim[3])
+    }
+    let used = if p.is_finite() && p < 0.0 && !qform {
+        -p
+    } else {
+        1.0
+    };
+    warnings.push(format!(
+        "header field pixdim[{a}] is {p}, not a voxel size; {used} mm is used"
+    ));
+    used
+}
+
 /// nifti1.h's quaternion to rotation, with qfac = pixdim[0] flipping the k axis.
-fn qform_geometry(h: &Header) -> ([DVec3; 3], DVec3) {
+fn qform_geometry(h: &Header, warnings: &mut Vec<String>) -> ([DVec3; 3], DVec3) {
     let [mut b, mut c, mut d] = h.quatern;
     let mut a2 = 1.0 - (b * b + c * c + d * d);
     if !(a2.is_finite()) || a2 < 1e-7 {
@@ -322,11 +341,10 @@ fn qform_geometry(h: &Header) -> ([DVec3; 3], DVec3) {
         ),
     );
     let qfac = if h.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
-    let step = |p: f64| if p.is_finite() && p > 0.0 { p } else { 1.0 };
     let axes = [
-        r.x_axis * step(h.pixdim[1]),
-        r.y_axis * step(h.pixdim[2]),
-        r.z_axis * step(h.pixdim[3]) * qfac,
+        r.x_axis * pixdim_mm(h, 1, true, warnings),
+        r.y_axis * pixdim_mm(h, 2, true, warnings),
+        r.z_axis * pixdim_mm(h, 3, true, warnings) * qfac,
     ];
     (axes, DVec3::from(h.qoffset))
 }
@@ -350,7 +368,7 @@ pub(crate) fn read(
     let h = parse_header(name, head)?;
     let mut warnings = Vec::new();
     let ty = sample_type(name, h.datatype)?;
-    let (dims, _volumes) = grid(name, &h, &mut warnings)?;
+    let (dims, volumes) = grid(name, &h, &mut warnings)?;
     let count = raw::checked_product(&dims.map(|d| d as u64)).unwrap_or(u64::MAX);
     raw::check_voxel_budget(name, count, ty.output_size() as u64, limits)?;
     let data_bytes = count.saturating_mul(ty.size() as u64);
@@ -368,71 +386,70 @@ pub(crate) fn read(
         ));
     }
     let mut vox_offset = h.vox_offset as u64;
-
-    // Where the voxels are: in this file after the header, or in the .img beside the .hdr.
-    let (data_name, data): (String, std::borrow::Cow<'_, [u8]>) = match h.kind {
-        Kind::Single => {
-            // Some writers leave vox_offset at 0 in a single file; the data then follow the
-            // header and its 4-byte extension flag.
-            if vox_offset < header_size as u64 {
-                vox_offset = header_size as u64 + 4;
-                warnings.push(format!(
-                    "vox_offset was {}; {} assumed",
-                    h.vox_offset, vox_offset
-                ));
-            }
-            let needed = vox_offset.saturating_add(data_bytes);
-            let bytes = if gz {
-                if needed > limits.max_decompressed_bytes {
-                    return Err(LoadError::TooLarge {
-                        file: name.to_owned(),
-                        what: "decompressed NIfTI".to_owned(),
-                        bytes: needed,
-                        limit: limits.max_decompressed_bytes,
-                    });
-                }
-                std::borrow::Cow::Owned(raw::gunzip_prefix(name, &file.bytes, needed)?.0)
-            } else {
-                std::borrow::Cow::Borrowed(file.bytes.as_slice())
-            };
-            (name.to_owned(), bytes)
-        }
-        Kind::Pair | Kind::Analyze => {
-            let img = pair_data_file(name, companions)?;
-            let bytes = if raw::is_gzip(&img.bytes) {
-                let needed = vox_offset.saturating_add(data_bytes);
-                if needed > limits.max_decompressed_bytes {
-                    return Err(LoadError::TooLarge {
-                        file: img.name.clone(),
-                        what: "decompressed image data".to_owned(),
-                        bytes: needed,
-                        limit: limits.max_decompressed_bytes,
-                    });
-                }
-                std::borrow::Cow::Owned(raw::gunzip_prefix(&img.name, &img.bytes, needed)?.0)
-            } else {
-                std::borrow::Cow::Borrowed(img.bytes.as_slice())
-            };
-            (img.name.clone(), bytes)
-        }
-    };
-    let needed = vox_offset.saturating_add(data_bytes);
-    if needed > data.len() as u64 {
-        return Err(LoadError::truncated(
-            &data_name,
-            "NIfTI voxel data",
-            needed,
-            data.len() as u64,
+    if h.kind == Kind::Single && vox_offset < header_size as u64 {
+        // Some writers leave vox_offset at 0 in a single file; the data then follow the
+        // header and its 4-byte extension flag.
+        vox_offset = header_size as u64 + 4;
+        warnings.push(format!(
+            "vox_offset was {}; {} assumed",
+            h.vox_offset, vox_offset
         ));
     }
+
+    // Where the voxels are: in this file after the header, or in the .img beside the .hdr.
+    let data_file: &InputFile = match h.kind {
+        Kind::Single => file,
+        Kind::Pair | Kind::Analyze => pair_data_file(name, companions)?,
+    };
+    let data_name = data_file.name.clone();
     let layout = SampleLayout {
         ty,
         endian: h.endian,
-        offset: vox_offset as usize,
+        offset: 0,
         count: count as usize,
         stride_samples: 1,
     };
-    let voxels = raw::decode_samples(&data_name, &data, layout, limits)?;
+    let (voxels, present_bytes) = if raw::is_gzip(&data_file.bytes) {
+        // Straight from the stream into the voxels; the whole stream (every volume of a 4D
+        // file) is read so that its CRC-32 is checked.
+        let declared = vox_offset.saturating_add(data_bytes.saturating_mul(volumes));
+        raw::inflate_voxels(
+            &data_name,
+            raw::Compression::Gzip,
+            &data_file.bytes,
+            vox_offset,
+            layout,
+            declared,
+            limits,
+        )?
+    } else {
+        let needed = vox_offset.saturating_add(data_bytes);
+        if needed > data_file.bytes.len() as u64 {
+            return Err(LoadError::truncated(
+                &data_name,
+                "NIfTI voxel data",
+                needed,
+                data_file.bytes.len() as u64,
+            ));
+        }
+        let layout = SampleLayout {
+            offset: vox_offset as usize,
+            ..layout
+        };
+        (
+            raw::decode_samples(&data_name, &data_file.bytes, layout, limits)?,
+            data_file.bytes.len() as u64,
+        )
+    };
+    if volumes > 1 && data_bytes > 0 {
+        // Only the first volume is shown, but a file that lacks the others is worth a word.
+        let complete = present_bytes.saturating_sub(vox_offset) / data_bytes;
+        if complete < volumes {
+            warnings.push(format!(
+                "dim[4..7] declare {volumes} volumes but {data_name} holds only {complete} complete one(s)"
+            ));
+        }
+    }
 
     let (axes_ras, origin_ras) = ras_geometry(&h, &mut warnings);
     let (spacing_mm, direction) =

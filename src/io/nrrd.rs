@@ -265,21 +265,42 @@ pub(crate) fn read(
             .map(|s| s.split_whitespace().map(str::to_ascii_lowercase).collect())
             .unwrap_or_default();
         let mut spatial = 0;
+        let mut bad_spacings = Vec::new();
         for (a, step) in axis_steps.iter_mut().enumerate() {
             let kind_ok = kinds
                 .get(a)
                 .is_none_or(|k| matches!(k.as_str(), "domain" | "space" | "???" | "none"));
             if kind_ok && spatial < 3 {
-                let s = spacings
-                    .get(a)
-                    .copied()
-                    .filter(|s| s.is_finite() && *s != 0.0)
-                    .map_or(1.0, f64::abs);
+                let s = match spacings.get(a).copied() {
+                    Some(s) if s.is_finite() && s > 0.0 => s,
+                    Some(s) if s.is_finite() && s < 0.0 => {
+                        bad_spacings
+                            .push(format!("axis {a} is {s}; its magnitude {} mm is used", -s));
+                        -s
+                    }
+                    Some(s) => {
+                        bad_spacings.push(format!("axis {a} is {s}; 1 mm is assumed"));
+                        1.0
+                    }
+                    None if !spacings.is_empty() => {
+                        bad_spacings.push(format!("axis {a} has no value; 1 mm is assumed"));
+                        1.0
+                    }
+                    None => 1.0,
+                };
                 let mut v = DVec3::ZERO;
                 v[spatial] = s;
                 *step = Some(v);
                 spatial += 1;
             }
+        }
+        if !bad_spacings.is_empty() {
+            warnings.push(format!(
+                "header field spacings: {}",
+                bad_spacings.join("; ")
+            ));
+        } else if spacings.is_empty() {
+            warnings.push("no spacings and no space directions: 1 mm is assumed".to_owned());
         }
         warnings.push(
             "no space directions: the orientation is unknown; axes are assumed to be LPS"
@@ -380,6 +401,9 @@ pub(crate) fn read(
                     file: name.to_owned(),
                     data_file: df.to_owned(),
                 })?;
+            if let Some(note) = super::path_note("data file", df, &f.name) {
+                warnings.push(note);
+            }
             (f.name.clone(), &f.bytes)
         }
         None => {
@@ -460,19 +484,24 @@ pub(crate) fn read(
             let skip = u64::try_from(byte_skip).map_err(|_| {
                 LoadError::header(name, "byte skip", "-1 is only allowed with raw encoding")
             })?;
-            let needed = skip.saturating_add(data_bytes_total);
-            if needed > limits.max_decompressed_bytes {
-                return Err(LoadError::TooLarge {
-                    file: data_name,
-                    what: "decompressed NRRD data".to_owned(),
-                    bytes: needed,
-                    limit: limits.max_decompressed_bytes,
-                });
-            }
-            let (mut out, _) = raw::gunzip_prefix(&data_name, data, needed)?;
-            let skip = (skip as usize).min(out.len());
-            out.drain(..skip);
-            std::borrow::Cow::Owned(out)
+            // Straight from the stream into the voxels (the CRC-32 is checked at its end).
+            let layout = SampleLayout {
+                ty,
+                endian,
+                offset: 0,
+                count: count as usize,
+                stride_samples: usize::try_from(stride).unwrap_or(usize::MAX),
+            };
+            let (voxels, _) = raw::inflate_voxels(
+                &data_name,
+                raw::Compression::Gzip,
+                data,
+                skip,
+                layout,
+                skip.saturating_add(data_bytes_total),
+                limits,
+            )?;
+            return finish(name, &data_name, dims, steps, origin, voxels, warnings);
         }
         "ascii" | "text" | "txt" => {
             std::borrow::Cow::Owned(ascii_to_f64_bytes(&data_name, data, total, limits)?)
@@ -500,10 +529,23 @@ pub(crate) fn read(
         stride_samples: usize::try_from(stride).unwrap_or(usize::MAX),
     };
     let voxels = raw::decode_present(&data_name, "NRRD data", &decoded, needed, layout, limits)?;
+    finish(name, &data_name, dims, steps, origin, voxels, warnings)
+}
+
+/// The volume from its voxels and the header's geometry.
+fn finish(
+    name: &str,
+    data_name: &str,
+    dims: [usize; 3],
+    steps: [DVec3; 3],
+    origin: DVec3,
+    voxels: crate::volume::Voxels,
+    mut warnings: Vec<String>,
+) -> Result<Volume, LoadError> {
     let (spacing_mm, direction) =
         from_axis_vectors(name, "space directions", steps, &mut warnings)?;
     let origin_mm = check_origin(name, "space origin", origin)?;
-    let source = raw::source_name(name, &data_name);
+    let source = raw::source_name(name, data_name);
     Ok(Volume {
         dims,
         spacing_mm,

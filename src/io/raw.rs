@@ -96,25 +96,444 @@ pub(crate) fn is_gzip(bytes: &[u8]) -> bool {
     bytes.len() >= 2 && bytes[0] == 0x1f && bytes[1] == 0x8b
 }
 
-/// Decompresses gzip (possibly several members), stopping at `max_out` bytes of output.
-/// Returns the bytes and whether the stream had more than `max_out` bytes.
+/// The first `max_out` bytes of a gzip stream (possibly several members), for sniffing and
+/// headers, and whether the stream has more. Checksums are not reached here: whatever reads the
+/// voxels reads the stream to its end ([`inflate_voxels`]). A stream that breaks after some
+/// bytes gives those bytes; the full read reports the break.
 pub(crate) fn gunzip_prefix(
     file: &str,
     bytes: &[u8],
     max_out: u64,
 ) -> Result<(Vec<u8>, bool), LoadError> {
-    let decoder = flate2::read::MultiGzDecoder::new(bytes);
-    read_capped(file, decoder, max_out, "gzip")
+    read_capped(
+        file,
+        Members::new(Compression::Gzip, bytes),
+        max_out,
+        "gzip",
+    )
 }
 
-/// Decompresses a zlib stream (MetaImage CompressedData), stopping at `max_out` bytes.
-pub(crate) fn inflate_zlib_prefix(
+/// How a compressed data stream is wrapped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Compression {
+    /// gzip (.nii.gz, NRRD "gzip" encoding): one or more members, each with a CRC-32 and ISIZE.
+    Gzip,
+    /// zlib (MetaImage CompressedData): one stream with an Adler-32.
+    Zlib,
+}
+
+impl Compression {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Gzip => "gzip",
+            Self::Zlib => "zlib",
+        }
+    }
+}
+
+/// Slack past what a header declares that a compressed stream may still hold (some writers pad)
+/// before it is refused as longer than its header says.
+const STREAM_SLACK_BYTES: u64 = 1 << 20;
+
+/// The decompressed bytes of a whole gzip file (members one after the other, each checked
+/// against its CRC-32 and ISIZE by flate2 when its end is read), or of a zlib stream. After the
+/// last member, zero bytes are padding (gzip accepts them too); anything else is refused.
+struct Members<'a> {
+    kind: Compression,
+    gzip: Option<flate2::bufread::GzDecoder<&'a [u8]>>,
+    zlib: Option<flate2::bufread::ZlibDecoder<&'a [u8]>>,
+}
+
+impl<'a> Members<'a> {
+    fn new(kind: Compression, bytes: &'a [u8]) -> Self {
+        match kind {
+            Compression::Gzip => Self {
+                kind,
+                gzip: Some(flate2::bufread::GzDecoder::new(bytes)),
+                zlib: None,
+            },
+            Compression::Zlib => Self {
+                kind,
+                gzip: None,
+                zlib: Some(flate2::bufread::ZlibDecoder::new(bytes)),
+            },
+        }
+    }
+}
+
+impl<'a> Read for Members<'a> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if buf.is_empty() {
+            return Ok(0);
+        }
+        loop {
+            let rest: &'a [u8] = if let Some(z) = &mut self.zlib {
+                let n = z.read(buf)?;
+                if n > 0 {
+                    return Ok(n);
+                }
+                let rest = *z.get_ref();
+                self.zlib = None;
+                rest
+            } else if let Some(g) = &mut self.gzip {
+                let n = g.read(buf)?;
+                if n > 0 {
+                    return Ok(n);
+                }
+                let rest = *g.get_ref();
+                self.gzip = None;
+                rest
+            } else {
+                return Ok(0);
+            };
+            if rest.iter().all(|&b| b == 0) {
+                return Ok(0);
+            }
+            if self.kind == Compression::Gzip && is_gzip(rest) {
+                self.gzip = Some(flate2::bufread::GzDecoder::new(rest));
+                continue;
+            }
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "{} bytes after the end of the {} stream are neither zero padding nor another member",
+                    rest.len(),
+                    self.kind.name()
+                ),
+            ));
+        }
+    }
+}
+
+fn decompress_error(file: &str, kind: Compression, e: &std::io::Error) -> LoadError {
+    let what = match kind {
+        Compression::Gzip => "CRC-32 or length",
+        Compression::Zlib => "Adler-32",
+    };
+    let message = if e.kind() == std::io::ErrorKind::UnexpectedEof {
+        format!(
+            "{}: the stream ends early (the file is truncated)",
+            kind.name()
+        )
+    } else if e.to_string().contains("checksum") || e.to_string().contains("corrupt") {
+        format!(
+            "{}: {e}; the {what} check failed, so the file is corrupt",
+            kind.name()
+        )
+    } else {
+        format!("{}: {e} (the file is corrupt)", kind.name())
+    };
+    LoadError::Decompress {
+        file: file.to_owned(),
+        message,
+    }
+}
+
+/// Reads and drops `n` bytes; false when the stream ends first.
+fn skip_bytes(reader: &mut impl Read, n: u64) -> std::io::Result<bool> {
+    let copied = std::io::copy(&mut reader.take(n), &mut std::io::sink())?;
+    Ok(copied == n)
+}
+
+/// Decompresses the voxels of one volume straight into their final buffer, with a small
+/// constant of scratch besides (peak memory ~ the voxel bytes): `skip` bytes of the stream are
+/// dropped (a NIfTI header, an NRRD byte skip), then `layout` is decoded (offset 0 = the first
+/// byte after `skip`). The stream is then read to its end, at most to `declared_bytes` (all the
+/// header declares, other volumes included) plus a little slack, so that every gzip member's
+/// CRC-32 and ISIZE (the zlib Adler-32) is checked: a corrupt file is refused, never loaded
+/// with garbage. Wide integer types, whose compact type depends on their range, are inflated
+/// twice: once for the range, once into the voxels. Returns the voxels and how many bytes the
+/// whole stream held.
+pub(crate) fn inflate_voxels(
     file: &str,
-    bytes: &[u8],
-    max_out: u64,
-) -> Result<(Vec<u8>, bool), LoadError> {
-    let decoder = flate2::read::ZlibDecoder::new(bytes);
-    read_capped(file, decoder, max_out, "zlib")
+    kind: Compression,
+    compressed: &[u8],
+    skip: u64,
+    layout: SampleLayout,
+    declared_bytes: u64,
+    limits: &Limits,
+) -> Result<(Voxels, u64), LoadError> {
+    let span = layout.span_bytes().unwrap_or(u64::MAX);
+    let needed = skip.saturating_add(span);
+    if needed > limits.max_decompressed_bytes {
+        return Err(LoadError::TooLarge {
+            file: file.to_owned(),
+            what: format!("decompressed {} data", kind.name()),
+            bytes: needed,
+            limit: limits.max_decompressed_bytes,
+        });
+    }
+    check_voxel_budget(
+        file,
+        layout.count as u64,
+        layout.ty.output_size() as u64,
+        limits,
+    )?;
+    let err = |e: std::io::Error| decompress_error(file, kind, &e);
+    let truncated = |got: u64| {
+        LoadError::truncated(
+            file,
+            format!("decompressed {} data", kind.name()),
+            needed,
+            got,
+        )
+    };
+    let mut reader = std::io::BufReader::with_capacity(64 << 10, Members::new(kind, compressed));
+    if !skip_bytes(&mut reader, skip).map_err(err)? {
+        return Err(truncated(skip));
+    }
+    let wide = matches!(
+        layout.ty,
+        SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64
+    );
+    // Wide integers become i16, u16 or f32 by their range: a first pass finds the range (and
+    // reads the stream to its end for its checksums), a second inflates again and converts,
+    // so that no buffer of the stored bytes is ever held.
+    let (voxels, range) = if wide {
+        let mut samples = SampleReader::new(file, &mut reader, layout, skip, needed, kind);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for i in 0..layout.count {
+            let x = sample_value(layout.ty, samples.next(i)?);
+            lo = lo.min(x);
+            hi = hi.max(x);
+        }
+        (None, Some((lo, hi)))
+    } else {
+        (
+            Some(stream_samples(
+                file,
+                &mut reader,
+                layout,
+                skip,
+                needed,
+                kind,
+            )?),
+            None,
+        )
+    };
+    // The rest of the stream, so that the checksums at its end are read and checked.
+    let allowed = declared_bytes
+        .saturating_sub(needed)
+        .saturating_add(STREAM_SLACK_BYTES);
+    let rest =
+        std::io::copy(&mut (&mut reader).take(allowed), &mut std::io::sink()).map_err(err)?;
+    if rest == allowed {
+        let mut probe = [0u8; 1];
+        if reader.read(&mut probe).map_err(err)? > 0 {
+            return Err(LoadError::Decompress {
+                file: file.to_owned(),
+                message: format!(
+                    "{}: the stream holds more than the {declared_bytes} bytes its header declares (with {STREAM_SLACK_BYTES} bytes of slack)",
+                    kind.name()
+                ),
+            });
+        }
+    }
+    let voxels = match (voxels, range) {
+        (Some(v), _) => v,
+        (None, range) => {
+            let (lo, hi) = range.unwrap_or((0.0, 0.0));
+            let mut again =
+                std::io::BufReader::with_capacity(64 << 10, Members::new(kind, compressed));
+            if !skip_bytes(&mut again, skip).map_err(err)? {
+                return Err(truncated(skip));
+            }
+            let mut samples = SampleReader::new(file, &mut again, layout, skip, needed, kind);
+            let n = layout.count;
+            if n == 0 || (lo >= f64::from(i16::MIN) && hi <= f64::from(i16::MAX)) {
+                let mut v = reserve::<i16>(file, n)?;
+                for i in 0..n {
+                    v.push(sample_value(layout.ty, samples.next(i)?) as i16);
+                }
+                Voxels::I16(v)
+            } else if lo >= 0.0 && hi <= f64::from(u16::MAX) {
+                let mut v = reserve::<u16>(file, n)?;
+                for i in 0..n {
+                    v.push(sample_value(layout.ty, samples.next(i)?) as u16);
+                }
+                Voxels::U16(v)
+            } else {
+                let mut v = reserve::<f32>(file, n)?;
+                for i in 0..n {
+                    v.push(sample_value(layout.ty, samples.next(i)?) as f32);
+                }
+                Voxels::F32(v)
+            }
+        }
+    };
+    Ok((voxels, needed + rest))
+}
+
+/// A buffer reserved for `n` values, not filled (so not yet touched).
+fn reserve<T>(file: &str, n: usize) -> Result<Vec<T>, LoadError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|_| LoadError::OutOfMemory {
+        file: file.to_owned(),
+        what: "voxels".to_owned(),
+        bytes: (n as u64).saturating_mul(std::mem::size_of::<T>() as u64),
+    })?;
+    Ok(v)
+}
+
+/// A sample as 8 little-endian bytes (zero-extended) to its value.
+fn sample_value(ty: SampleType, a: [u8; 8]) -> f64 {
+    sample_f64(&a, ty, Endian::Little, 0).unwrap_or(0.0)
+}
+
+/// Reads the samples of a layout (offset 0) one by one from a decompressing stream.
+struct SampleReader<'r, 'a> {
+    file: &'r str,
+    reader: &'r mut std::io::BufReader<Members<'a>>,
+    layout: SampleLayout,
+    skip: u64,
+    needed: u64,
+    kind: Compression,
+    done: u64,
+}
+
+impl<'r, 'a> SampleReader<'r, 'a> {
+    fn new(
+        file: &'r str,
+        reader: &'r mut std::io::BufReader<Members<'a>>,
+        layout: SampleLayout,
+        skip: u64,
+        needed: u64,
+        kind: Compression,
+    ) -> Self {
+        Self {
+            file,
+            reader,
+            layout,
+            skip,
+            needed,
+            kind,
+            done: 0,
+        }
+    }
+
+    fn truncated(&self) -> LoadError {
+        LoadError::truncated(
+            self.file,
+            format!("decompressed {} data", self.kind.name()),
+            self.needed,
+            self.skip + self.done,
+        )
+    }
+
+    /// Sample `i` (called in order) as 8 little-endian bytes, zero-extended.
+    fn next(&mut self, i: usize) -> Result<[u8; 8], LoadError> {
+        let size = self.layout.ty.size();
+        if i > 0 && self.layout.stride_samples > 1 {
+            let gap = ((self.layout.stride_samples - 1) * size) as u64;
+            match skip_bytes(self.reader, gap) {
+                Ok(true) => self.done += gap,
+                Ok(false) => return Err(self.truncated()),
+                Err(e) => return Err(decompress_error(self.file, self.kind, &e)),
+            }
+        }
+        let mut a = [0u8; 8];
+        if let Err(e) = self.reader.read_exact(&mut a[..size]) {
+            return Err(if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                self.truncated()
+            } else {
+                decompress_error(self.file, self.kind, &e)
+            });
+        }
+        self.done += size as u64;
+        if self.layout.endian == Endian::Big {
+            a[..size].reverse();
+        }
+        Ok(a)
+    }
+}
+
+/// Decodes `layout` (offset 0) from a stream into a buffer of the final type that grows as the
+/// samples arrive (reserved once, never zero-filled ahead of the data).
+fn stream_samples(
+    file: &str,
+    reader: &mut std::io::BufReader<Members<'_>>,
+    layout: SampleLayout,
+    skip: u64,
+    needed: u64,
+    kind: Compression,
+) -> Result<Voxels, LoadError> {
+    let n = layout.count;
+    Ok(match layout.ty {
+        SampleType::U8 => {
+            let mut v = reserve::<u8>(file, n)?;
+            if layout.stride_samples == 1 {
+                // The common case in bulk: read straight into the buffer's spare capacity.
+                (&mut *reader)
+                    .take(n as u64)
+                    .read_to_end(&mut v)
+                    .map_err(|e| decompress_error(file, kind, &e))?;
+                if v.len() < n {
+                    return Err(LoadError::truncated(
+                        file,
+                        format!("decompressed {} data", kind.name()),
+                        needed,
+                        skip + v.len() as u64,
+                    ));
+                }
+            } else {
+                let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
+                for i in 0..n {
+                    v.push(samples.next(i)?[0]);
+                }
+            }
+            Voxels::U8(v)
+        }
+        SampleType::I8 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
+            let mut v = reserve::<i16>(file, n)?;
+            for i in 0..n {
+                v.push(i16::from(samples.next(i)?[0] as i8));
+            }
+            Voxels::I16(v)
+        }
+        SampleType::U16 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
+            let mut v = reserve::<u16>(file, n)?;
+            for i in 0..n {
+                let a = samples.next(i)?;
+                v.push(u16::from_le_bytes([a[0], a[1]]));
+            }
+            Voxels::U16(v)
+        }
+        SampleType::I16 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
+            let mut v = reserve::<i16>(file, n)?;
+            for i in 0..n {
+                let a = samples.next(i)?;
+                v.push(i16::from_le_bytes([a[0], a[1]]));
+            }
+            Voxels::I16(v)
+        }
+        SampleType::F32 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
+            let mut v = reserve::<f32>(file, n)?;
+            for i in 0..n {
+                let a = samples.next(i)?;
+                v.push(f32::from_le_bytes([a[0], a[1], a[2], a[3]]));
+            }
+            Voxels::F32(v)
+        }
+        SampleType::F64 => {
+            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
+            let mut v = reserve::<f32>(file, n)?;
+            for i in 0..n {
+                v.push(f64::from_le_bytes(samples.next(i)?) as f32);
+            }
+            Voxels::F32(v)
+        }
+        SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64 => {
+            return Err(LoadError::unsupported(
+                file,
+                "streamed sample type",
+                format!("{:?} (internal: converted in two passes)", layout.ty),
+            ));
+        }
+    })
 }
 
 fn read_capped(
@@ -126,14 +545,23 @@ fn read_capped(
     // One byte more than the cap tells whether the stream goes on past it.
     let mut limited = reader.take(max_out.saturating_add(1));
     let mut out = Vec::new();
-    // Reserve modestly; read_to_end grows geometrically and the cap bounds the growth.
+    // Reserve modestly; the buffer grows as data arrive and the cap bounds the growth.
     let _ = out.try_reserve(max_out.min(1 << 26) as usize);
-    limited
-        .read_to_end(&mut out)
-        .map_err(|e| LoadError::Decompress {
-            file: file.to_owned(),
-            message: format!("{kind}: {e}"),
-        })?;
+    let mut chunk = [0u8; 8192];
+    loop {
+        match limited.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => out.extend_from_slice(&chunk[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(_) if !out.is_empty() => break,
+            Err(e) => {
+                return Err(LoadError::Decompress {
+                    file: file.to_owned(),
+                    message: format!("{kind}: {e}"),
+                });
+            }
+        }
+    }
     let more = out.len() as u64 > max_out;
     if more {
         out.truncate(max_out as usize);

@@ -14,7 +14,7 @@ pub(super) const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
 
 /// The fragments of encapsulated pixel data, or `None` for native pixel data.
 pub(super) fn fragments(obj: &DefaultDicomObject) -> Option<Vec<&[u8]>> {
-    let element = obj.element_opt(tags::PIXEL_DATA).ok()??;
+    let element = obj.get(tags::PIXEL_DATA)?;
     match element.value() {
         DicomValue::PixelSequence(seq) => Some(seq.fragments().iter().map(Vec::as_slice).collect()),
         _ => None,
@@ -46,16 +46,8 @@ pub(super) fn decode_rle(
     }
     let pixels = h.rows as usize * h.cols as usize;
     let frame_bytes = pixels * bytes_per_sample;
-    let total = frame_bytes
-        .checked_mul(n_frames)
-        .ok_or_else(|| err("frame size overflows".to_owned()))?;
-    // Even the best RLE needs 2 bytes per 128 output bytes: a smaller input cannot hold the frames.
     let compressed: usize = frags.iter().map(|f| f.len()).sum();
-    if total / 64 > compressed.saturating_add(1 << 16) {
-        return Err(err(format!(
-            "{compressed} compressed bytes cannot hold {total} bytes of pixels"
-        )));
-    }
+    let total = check_rle_size(file, h, compressed)?;
     let mut out = crate::io::raw::try_vec::<u8>(file, "RLE pixel data", total)?;
     let mut segment = Vec::with_capacity(pixels);
     for (f, frag) in frags.iter().take(n_frames).enumerate() {
@@ -109,6 +101,33 @@ pub(super) fn decode_rle(
         }
     }
     Ok(out)
+}
+
+/// The decoded size of a file's RLE frames, refused when `compressed` bytes cannot hold them:
+/// even the best RLE needs 2 bytes per 128 output bytes.
+pub(super) fn check_rle_size(
+    file: &str,
+    h: &FileHeader,
+    compressed: usize,
+) -> Result<usize, LoadError> {
+    let bytes_per_sample = usize::from(h.bits_allocated.div_ceil(8).max(1));
+    let total = (h.rows as usize)
+        .checked_mul(h.cols as usize)
+        .and_then(|p| p.checked_mul(bytes_per_sample))
+        .and_then(|b| b.checked_mul(h.frames.len()))
+        .ok_or_else(|| LoadError::Dicom {
+            file: file.to_owned(),
+            message: "RLE Lossless: frame size overflows".to_owned(),
+        })?;
+    if total / 64 > compressed.saturating_add(1 << 16) {
+        return Err(LoadError::Dicom {
+            file: file.to_owned(),
+            message: format!(
+                "RLE Lossless: {compressed} compressed bytes cannot hold {total} bytes of pixels"
+            ),
+        });
+    }
+    Ok(total)
 }
 
 /// PackBits, stopping once `limit` bytes are out.

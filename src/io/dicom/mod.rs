@@ -38,14 +38,18 @@ fn chain(e: &dyn std::error::Error) -> String {
 }
 
 /// Parses a DICOM file from bytes; with `headers_only` it stops before the pixel data.
-pub(super) fn open(file: &InputFile, headers_only: bool) -> Result<DefaultDicomObject, LoadError> {
+pub(super) fn open(
+    file: &InputFile,
+    headers_only: bool,
+    limits: &Limits,
+) -> Result<DefaultDicomObject, LoadError> {
     let bytes = file.bytes.as_slice();
     let body = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
         &bytes[128..]
     } else {
         bytes
     };
-    validate::check_lengths(&file.name, body)?;
+    validate::check_lengths(&file.name, body, limits, headers_only)?;
     let mut options = OpenFileOptions::new().read_preamble(dicom_object::file::ReadPreamble::Never);
     if headers_only {
         options = options.read_until(tags::PIXEL_DATA);
@@ -123,20 +127,23 @@ pub(super) fn transfer_syntax_name(uid: &str) -> String {
         .map_or_else(|| "unknown".to_owned(), |ts| ts.name().to_owned())
 }
 
+// Lookups use `get`, never `element_opt`: a missing tag through `element_opt` builds an error
+// with a captured backtrace (~95 us), which made a header of a million frames take minutes.
+
 fn elem_str(obj: &InMemDicomObject, tag: dicom_core::Tag) -> Option<String> {
-    let e = obj.element_opt(tag).ok()??;
+    let e = obj.get(tag)?;
     let s = e.to_str().ok()?;
     let s = s.trim_matches(['\0', ' ']).to_owned();
     (!s.is_empty()).then_some(s)
 }
 
 fn elem_floats(obj: &InMemDicomObject, tag: dicom_core::Tag) -> Option<Vec<f64>> {
-    let v = obj.element_opt(tag).ok()??.to_multi_float64().ok()?;
+    let v = obj.get(tag)?.to_multi_float64().ok()?;
     v.iter().all(|x| x.is_finite()).then_some(v)
 }
 
 fn elem_int(obj: &InMemDicomObject, tag: dicom_core::Tag) -> Option<i64> {
-    let e = obj.element_opt(tag).ok()??;
+    let e = obj.get(tag)?;
     e.to_int::<i64>().ok().or_else(|| {
         e.to_float64()
             .ok()
@@ -147,7 +154,7 @@ fn elem_int(obj: &InMemDicomObject, tag: dicom_core::Tag) -> Option<i64> {
 
 /// The first item of a sequence.
 fn first_item(obj: &InMemDicomObject, tag: dicom_core::Tag) -> Option<&InMemDicomObject> {
-    obj.element_opt(tag).ok()??.items()?.first()
+    obj.get(tag)?.items()?.first()
 }
 
 /// What one frame (a classic slice, or one frame of a multi-frame object) says about itself.
@@ -249,6 +256,15 @@ fn frame_info(levels: &[Option<&InMemDicomObject>]) -> FrameInfo {
     }
 }
 
+/// Transfer syntaxes whose pixel data are stored as they are (possibly deflated as a whole).
+pub(super) const NATIVE_SYNTAXES: &[&str] = &[
+    "1.2.840.10008.1.2",
+    "1.2.840.10008.1.2.1",
+    "1.2.840.10008.1.2.2",
+    "1.2.840.10008.1.2.1.99",
+    "1.2.840.10008.1.2.8.1",
+];
+
 /// Largest frame count accepted from a header before the pixel data are seen.
 const MAX_FRAMES: i64 = 1 << 20;
 
@@ -258,7 +274,7 @@ pub(super) fn read_header(
     file: &InputFile,
     limits: &Limits,
 ) -> Result<Option<FileHeader>, LoadError> {
-    let obj = open(file, true)?;
+    let obj = open(file, true, limits)?;
     let (Some(rows), Some(cols)) = (elem_int(&obj, tags::ROWS), elem_int(&obj, tags::COLUMNS))
     else {
         return Ok(None);
@@ -315,6 +331,16 @@ pub(super) fn read_header(
             file_len,
         ));
     }
+    // Encapsulated frames take at least one fragment each, and every fragment an 8-byte item
+    // header: a bound on the frame count before a per-frame table is made.
+    if !NATIVE_SYNTAXES.contains(&ts.as_str()) && (n_frames as u64).saturating_mul(8) > file_len {
+        return Err(LoadError::truncated(
+            name,
+            format!("{n_frames} compressed frames (an 8-byte item header each at least)"),
+            (n_frames as u64).saturating_mul(8),
+            file_len,
+        ));
+    }
     let out_bytes = rows as u64 * cols as u64 * n_frames as u64 * if bits > 16 { 4 } else { 2 };
     if out_bytes > limits.max_voxel_bytes {
         return Err(LoadError::TooLarge {
@@ -326,9 +352,7 @@ pub(super) fn read_header(
     }
     let shared = first_item(&obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
     let per_frame = obj
-        .element_opt(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
-        .ok()
-        .flatten()
+        .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
         .and_then(|e| e.items());
     if let Some(items) = per_frame
         && items.len() as i64 != n_frames
@@ -339,9 +363,23 @@ pub(super) fn read_header(
         ));
     }
     let top: &InMemDicomObject = &obj;
-    let frames: Vec<FrameInfo> = (0..n_frames as usize)
-        .map(|f| frame_info(&[per_frame.and_then(|items| items.get(f)), shared, Some(top)]))
-        .collect();
+    // What the shared group and the top level say is read once; a frame without its own
+    // functional group (every frame of a classic or single-frame file) is a copy of it.
+    let common = frame_info(&[shared, Some(top)]);
+    let mut frames: Vec<FrameInfo> = Vec::new();
+    frames
+        .try_reserve_exact(n_frames as usize)
+        .map_err(|_| LoadError::OutOfMemory {
+            file: name.to_owned(),
+            what: format!("the table of {n_frames} frames"),
+            bytes: n_frames as u64 * std::mem::size_of::<FrameInfo>() as u64,
+        })?;
+    for f in 0..n_frames as usize {
+        frames.push(match per_frame.and_then(|items| items.get(f)) {
+            Some(own) => frame_info(&[Some(own), shared, Some(top)]),
+            None => common.clone(),
+        });
+    }
     let modality_name = elem_str(&obj, tags::MODALITY).unwrap_or_default();
     let modality = match modality_name.as_str() {
         "CT" => Modality::Ct,
@@ -350,6 +388,13 @@ pub(super) fn read_header(
     };
     let bits_allocated = elem_int(&obj, tags::BITS_ALLOCATED).unwrap_or(16);
     let bits_stored = elem_int(&obj, tags::BITS_STORED).unwrap_or(bits_allocated);
+    if !(1..=bits_allocated).contains(&bits_stored) {
+        // The samples are masked to 1..=BitsAllocated bits when decoded; say so.
+        warnings.push(format!(
+            "{name}: BitsStored is {bits_stored} with BitsAllocated {bits_allocated}; {} bits are used",
+            bits_stored.clamp(1, bits_allocated.max(1))
+        ));
+    }
     Ok(Some(FileHeader {
         series_uid: elem_str(&obj, tags::SERIES_INSTANCE_UID)
             .unwrap_or_else(|| "(no SeriesInstanceUID)".to_owned()),

@@ -8,7 +8,9 @@ use std::collections::BTreeMap;
 use dicom_pixeldata::PixelDecoder;
 use glam::DVec3;
 
-use super::{FileHeader, FrameInfo, check_transfer_syntax, encapsulated, open, read_header};
+use super::{
+    FileHeader, FrameInfo, NATIVE_SYNTAXES, check_transfer_syntax, encapsulated, open, read_header,
+};
 use crate::io::geometry::{check_origin, from_axis_vectors};
 use crate::io::raw::{self, try_vec};
 use crate::io::{InputFile, Limits, LoadError, Loaded};
@@ -37,18 +39,60 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
         }
     }
     if headers.is_empty() {
-        return Err(first_error.unwrap_or_else(|| LoadError::DicomSeries {
-            series: "-".to_owned(),
-            message: "none of the DICOM files holds an image".to_owned(),
+        return Err(first_error.unwrap_or_else(|| match files {
+            [one] => LoadError::Dicom {
+                file: one.name.clone(),
+                message: "holds no image (no Rows and Columns)".to_owned(),
+            },
+            many => LoadError::DicomSeries {
+                series: "-".to_owned(),
+                message: format!(
+                    "none of the {} DICOM files holds an image ({}{})",
+                    many.len(),
+                    many.iter()
+                        .take(3)
+                        .map(|f| f.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    if many.len() > 3 { ", ..." } else { "" }
+                ),
+            },
         }));
     }
 
-    // Group by series (and image size, which must be shared within a volume); BTreeMap keeps
-    // the grouping independent of the order the files came in.
-    let mut groups: BTreeMap<(String, u32, u32), Vec<usize>> = BTreeMap::new();
-    for (h_index, (_, h)) in headers.iter().enumerate() {
+    // Group by series and image size, which must be shared within a volume, and split a
+    // series into stacks by ImageOrientationPatient (as dcm2niix does): a localizer, a sagittal
+    // slice among axial ones or a slice rotated in plane is not stacked with the others. Files
+    // are visited in a fixed order and BTreeMap sorts the groups, so the grouping does not
+    // depend on the order the files came in.
+    let mut order: Vec<usize> = (0..headers.len()).collect();
+    order.sort_by(|&a, &b| {
+        let (ha, hb) = (&headers[a].1, &headers[b].1);
+        (&ha.sop_instance_uid, &files[headers[a].0].name)
+            .cmp(&(&hb.sop_instance_uid, &files[headers[b].0].name))
+    });
+    let mut stacks: BTreeMap<(String, u32, u32), Vec<[f64; 6]>> = BTreeMap::new();
+    let mut groups: BTreeMap<(String, u32, u32, usize), Vec<usize>> = BTreeMap::new();
+    for h_index in order {
+        let h = &headers[h_index].1;
+        let series_key = (h.series_uid.clone(), h.rows, h.cols);
+        let known = stacks.entry(series_key).or_default();
+        // Files without an orientation join the first stack.
+        let stack = match h.frames.iter().find_map(|f| f.orientation) {
+            None => 0,
+            Some(o) => match known
+                .iter()
+                .position(|k| k.iter().zip(&o).all(|(a, b)| (a - b).abs() < 1e-3))
+            {
+                Some(i) => i,
+                None => {
+                    known.push(o);
+                    known.len() - 1
+                }
+            },
+        };
         groups
-            .entry((h.series_uid.clone(), h.rows, h.cols))
+            .entry((h.series_uid.clone(), h.rows, h.cols, stack))
             .or_default()
             .push(h_index);
     }
@@ -70,9 +114,27 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
             series: "-".to_owned(),
             message: "no series".to_owned(),
         })?;
+    let orientation_of = |key: &(String, u32, u32, usize)| {
+        stacks
+            .get(&(key.0.clone(), key.1, key.2))
+            .and_then(|k| k.get(key.3))
+            .copied()
+    };
     for (key, members) in &groups {
-        if *key != chosen_key {
-            let h = &headers[members[0]].1;
+        if *key == chosen_key {
+            continue;
+        }
+        let h = &headers[members[0]].1;
+        if (&key.0, key.1, key.2) == (&chosen_key.0, chosen_key.1, chosen_key.2) {
+            notes.push(format!(
+                "{} image(s) of series {} were not stacked with the others: their ImageOrientationPatient {:?} differs from the loaded images' {:?} (a localizer, another plane or a rotated slice?); first: {}",
+                frame_count(members),
+                key.0,
+                orientation_of(key).unwrap_or_default(),
+                orientation_of(&chosen_key).unwrap_or_default(),
+                files[headers[members[0]].0].name
+            ));
+        } else {
             notes.push(format!(
                 "another series was not loaded: {} \"{}\" ({} images of {}x{}, {})",
                 key.0,
@@ -231,7 +293,7 @@ fn assemble(
                 if some { "some" } else { "all" }
             ));
         }
-        frames.sort_by_key(|a| tie(a));
+        frames.sort_by_cached_key(|a| tie(a));
     }
 
     // The slice step: from the first to the last position (keeping a gantry tilt's shear),
@@ -349,15 +411,6 @@ enum Target {
     F32,
 }
 
-/// Transfer syntaxes whose pixel data are stored as they are (possibly deflated as a whole).
-const NATIVE_SYNTAXES: &[&str] = &[
-    "1.2.840.10008.1.2",
-    "1.2.840.10008.1.2.1",
-    "1.2.840.10008.1.2.2",
-    "1.2.840.10008.1.2.1.99",
-    "1.2.840.10008.1.2.8.1",
-];
-
 /// Decodes each file's pixel data once and copies its frames into their slots.
 fn read_pixels(
     series: &str,
@@ -392,11 +445,14 @@ fn read_pixels(
     };
     raw::check_voxel_budget(files[0].0.name.as_str(), count, out_bytes, limits)?;
     let count = count as usize;
-    let mut voxels = match target {
-        Target::U8 => Voxels::U8(try_vec(&files[0].0.name, "voxels", count)?),
-        Target::I16 => Voxels::I16(try_vec(&files[0].0.name, "voxels", count)?),
-        Target::U16 => Voxels::U16(try_vec(&files[0].0.name, "voxels", count)?),
-        Target::F32 => Voxels::F32(try_vec(&files[0].0.name, "voxels", count)?),
+    let allocate = || -> Result<Voxels, LoadError> {
+        let name = &files[0].0.name;
+        Ok(match target {
+            Target::U8 => Voxels::U8(try_vec(name, "voxels", count)?),
+            Target::I16 => Voxels::I16(try_vec(name, "voxels", count)?),
+            Target::U16 => Voxels::U16(try_vec(name, "voxels", count)?),
+            Target::F32 => Voxels::F32(try_vec(name, "voxels", count)?),
+        })
     };
 
     // Slots of each file's frames, so that every file is opened and decoded once.
@@ -404,28 +460,28 @@ fn read_pixels(
     for (slot, f) in frames.iter().enumerate() {
         slots_of_file[f.file].push((f.frame, slot));
     }
+    // The checks that need no decoding, for every file, before the voxel buffer exists.
+    for (fi, slots) in slots_of_file.iter().enumerate() {
+        if !slots.is_empty() {
+            let (file, header) = files[fi];
+            check_before_decoding(file, header)?;
+        }
+    }
+    // Allocated once the first file has passed the checks that need its parsed pixel data
+    // (RLE segments, JPEG and JPEG 2000 codestream sizes), so that a small file declaring a
+    // huge image is refused before the buffer is made.
+    let mut voxels: Option<Voxels> = None;
     let mut samples = Vec::new();
     for (fi, slots) in slots_of_file.iter().enumerate() {
         if slots.is_empty() {
             continue;
         }
         let (file, header) = files[fi];
-        check_transfer_syntax(&file.name, &header.transfer_syntax)?;
-        if header.bits_allocated == 1
-            && !NATIVE_SYNTAXES.contains(&header.transfer_syntax.trim_end_matches(['\0', ' ']))
-        {
-            // dicom-rs's RLE and JPEG 2000 decoders handle 8 and 16 bits only.
-            return Err(LoadError::UnsupportedTransferSyntax {
-                file: file.name.clone(),
-                uid: header.transfer_syntax.clone(),
-                name: super::transfer_syntax_name(&header.transfer_syntax),
-                reason: "1-bit (binary segmentation) pixel data can be read only uncompressed or deflated".to_owned(),
-            });
-        }
-        let obj = open(file, false)?;
+        let obj = open(file, false, limits)?;
         let fragments = encapsulated::fragments(&obj);
         let rle_data;
         let decoded;
+        let native;
         let data: &[u8] = match &fragments {
             Some(frags)
                 if header.transfer_syntax.trim_end_matches(['\0', ' '])
@@ -433,6 +489,14 @@ fn read_pixels(
             {
                 rle_data = encapsulated::decode_rle(&file.name, header, frags)?;
                 &rle_data
+            }
+            // Native samples are read where the object holds them: dicom-pixeldata would copy
+            // them twice (to bytes, then to a vector), a third and fourth copy of the pixels.
+            None if header.bits_allocated != 1
+                && let Some(bytes) = native_pixel_bytes(&obj) =>
+            {
+                native = bytes;
+                &native
             }
             _ => {
                 if let Some(frags) = &fragments {
@@ -450,6 +514,12 @@ fn read_pixels(
             }
         };
         let n_frames = header.frames.len();
+        if voxels.is_none() {
+            voxels = Some(allocate()?);
+        }
+        let Some(voxels) = voxels.as_mut() else {
+            continue;
+        };
         for &(frame, slot) in slots {
             let slice_error = |message: String| LoadError::DicomSlice {
                 series: series.to_owned(),
@@ -462,7 +532,7 @@ fn read_pixels(
                 .map_err(slice_error)?;
             let info = frames[slot].info;
             let dst = slot * frame_len..(slot + 1) * frame_len;
-            match &mut voxels {
+            match voxels {
                 Voxels::U8(v) => v[dst]
                     .iter_mut()
                     .zip(&samples)
@@ -494,7 +564,54 @@ fn read_pixels(
     } else {
         (1.0, 0.0)
     };
+    let voxels = match voxels {
+        Some(v) => v,
+        None => allocate()?,
+    };
     Ok((voxels, slope, intercept))
+}
+
+/// The native PixelData's bytes as the object holds them (little endian), without a copy
+/// where the value is bytes (OB) or, on a little-endian machine, 16-bit words (OW).
+fn native_pixel_bytes(
+    obj: &dicom_object::DefaultDicomObject,
+) -> Option<std::borrow::Cow<'_, [u8]>> {
+    use dicom_core::value::PrimitiveValue;
+    let dicom_core::DicomValue::Primitive(p) =
+        obj.get(dicom_dictionary_std::tags::PIXEL_DATA)?.value()
+    else {
+        return None;
+    };
+    Some(match p {
+        PrimitiveValue::U8(v) => std::borrow::Cow::Borrowed(v.as_slice()),
+        PrimitiveValue::U16(v) if cfg!(target_endian = "little") => {
+            std::borrow::Cow::Borrowed(bytemuck::cast_slice(v.as_slice()))
+        }
+        other => other.to_bytes(),
+    })
+}
+
+/// What can be refused from a file's header and size alone: a transfer syntax without a
+/// decoder, 1-bit data in a compressed syntax, RLE data too small to hold the frames.
+fn check_before_decoding(file: &InputFile, header: &FileHeader) -> Result<(), LoadError> {
+    check_transfer_syntax(&file.name, &header.transfer_syntax)?;
+    let ts = header.transfer_syntax.trim_end_matches(['\0', ' ']);
+    if header.bits_allocated == 1 && !NATIVE_SYNTAXES.contains(&ts) {
+        // dicom-rs's RLE and JPEG 2000 decoders handle 8 and 16 bits only.
+        return Err(LoadError::UnsupportedTransferSyntax {
+            file: file.name.clone(),
+            uid: header.transfer_syntax.clone(),
+            name: super::transfer_syntax_name(&header.transfer_syntax),
+            reason:
+                "1-bit (binary segmentation) pixel data can be read only uncompressed or deflated"
+                    .to_owned(),
+        });
+    }
+    if ts == encapsulated::RLE_LOSSLESS {
+        // The whole file bounds the compressed size.
+        encapsulated::check_rle_size(&file.name, header, file.bytes.len())?;
+    }
+    Ok(())
 }
 
 /// The stored values of one frame as i64 (sign-extended or masked to BitsStored), checking that

@@ -1,0 +1,973 @@
+//! Hostile and broken files (issue 14), each built here in the test: deeply nested DICOM
+//! sequences, deflate bombs, headers that lie about sizes, gzip streams with flipped bits or
+//! trailing bytes. Each must give a typed error naming the file, or the correct volume, within
+//! bounded memory: a counting allocator measures the bytes this thread has allocated at its
+//! peak during each load.
+
+mod common;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::io::Write;
+
+use shapecast::io::{self, InputFile, Limits, LoadError, Loaded};
+
+// ---------------------------------------------------------------------------------------------
+// A counting allocator: bytes live and their peak, per thread (the loaders are single-threaded
+// and tests run on several threads at once).
+
+struct Counting;
+
+thread_local! {
+    static LIVE: Cell<usize> = const { Cell::new(0) };
+    static PEAK: Cell<usize> = const { Cell::new(0) };
+}
+
+fn note_alloc(size: usize) {
+    let _ = LIVE.try_with(|live| {
+        let now = live.get().saturating_add(size);
+        live.set(now);
+        let _ = PEAK.try_with(|p| p.set(p.get().max(now)));
+    });
+}
+
+fn note_free(size: usize) {
+    let _ = LIVE.try_with(|live| live.set(live.get().saturating_sub(size)));
+}
+
+// Counting needs `unsafe impl GlobalAlloc`; it forwards to the system allocator unchanged.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note_alloc(layout.size());
+        // SAFETY: forwarded with the caller's layout.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note_alloc(layout.size());
+        // SAFETY: forwarded with the caller's layout.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        note_free(layout.size());
+        // SAFETY: forwarded with the caller's pointer and layout.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note_free(layout.size());
+        note_alloc(new_size);
+        // SAFETY: forwarded with the caller's pointer, layout and size.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+/// Runs `f` and returns its result with the peak of bytes allocated by this thread above what
+/// was live when it started.
+fn peak_during<R>(f: impl FnOnce() -> R) -> (R, usize) {
+    let base = LIVE.with(Cell::get);
+    PEAK.with(|p| p.set(base));
+    let r = f();
+    let peak = PEAK.with(Cell::get);
+    (r, peak.saturating_sub(base))
+}
+
+const MIB: usize = 1 << 20;
+
+fn load_one(name: &str, bytes: Vec<u8>, limits: &Limits) -> Result<Loaded, LoadError> {
+    io::load_with(&[InputFile::new(name, bytes)], limits)
+}
+
+fn expect_err(r: Result<Loaded, LoadError>, file: &str, words: &[&str]) -> LoadError {
+    let e = match r {
+        Ok(l) => panic!("{file}: loaded {:?}", l.volume.dims),
+        Err(e) => e,
+    };
+    let m = e.to_string();
+    assert!(m.contains(file), "the error does not name {file}: {m}");
+    for w in words {
+        assert!(m.contains(w), "the error does not say {w:?}: {m}");
+    }
+    e
+}
+
+// ---------------------------------------------------------------------------------------------
+// DICOM files written by hand (explicit VR little endian), so that any lie can be told.
+
+const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
+const DEFLATED_LE: &str = "1.2.840.10008.1.2.1.99";
+const RLE: &str = "1.2.840.10008.1.2.5";
+const J2K_LOSSLESS: &str = "1.2.840.10008.1.2.4.90";
+
+fn long_vr(vr: &[u8; 2]) -> bool {
+    matches!(
+        vr,
+        b"OB" | b"OW" | b"SQ" | b"UN" | b"UT" | b"OF" | b"OD" | b"OL"
+    )
+}
+
+/// One element; `len` overrides the length written (a lie), else the value's (padded) length.
+fn element(out: &mut Vec<u8>, tag: (u16, u16), vr: &[u8; 2], value: &[u8], len: Option<u32>) {
+    let mut v = value.to_vec();
+    if v.len() % 2 == 1 {
+        v.push(if matches!(vr, b"UI" | b"OB") { 0 } else { b' ' });
+    }
+    out.extend_from_slice(&tag.0.to_le_bytes());
+    out.extend_from_slice(&tag.1.to_le_bytes());
+    out.extend_from_slice(vr);
+    let len = len.unwrap_or(v.len() as u32);
+    if long_vr(vr) {
+        out.extend_from_slice(&[0, 0]);
+        out.extend_from_slice(&len.to_le_bytes());
+    } else {
+        out.extend_from_slice(&(len as u16).to_le_bytes());
+    }
+    out.extend_from_slice(&v);
+}
+
+fn us(v: u16) -> Vec<u8> {
+    v.to_le_bytes().to_vec()
+}
+
+/// Preamble, "DICM" and the file meta group for a transfer syntax.
+fn meta(ts: &str) -> Vec<u8> {
+    let mut group = Vec::new();
+    element(&mut group, (0x0002, 0x0001), b"OB", &[0, 1], None);
+    element(
+        &mut group,
+        (0x0002, 0x0002),
+        b"UI",
+        b"1.2.840.10008.5.1.4.1.1.2",
+        None,
+    );
+    element(&mut group, (0x0002, 0x0003), b"UI", b"1.2.3.4.5", None);
+    element(&mut group, (0x0002, 0x0010), b"UI", ts.as_bytes(), None);
+    let mut out = vec![0u8; 128];
+    out.extend_from_slice(b"DICM");
+    element(
+        &mut out,
+        (0x0002, 0x0000),
+        b"UL",
+        &(group.len() as u32).to_le_bytes(),
+        None,
+    );
+    out.extend_from_slice(&group);
+    out
+}
+
+/// The image attributes of a monochrome 16-bit CT slice, up to (not including) PixelData.
+/// `nested` undefined-length sequences, one inside the other's item, are put in between.
+fn image_attributes(
+    rows: u16,
+    cols: u16,
+    frames: Option<u32>,
+    bits: u16,
+    nested: usize,
+) -> Vec<u8> {
+    let mut d = Vec::new();
+    element(&mut d, (0x0008, 0x0060), b"CS", b"CT", None);
+    if nested > 0 {
+        // (0008,1140) SQ, undefined length, each item holding the next sequence.
+        for _ in 0..nested {
+            element(&mut d, (0x0008, 0x1140), b"SQ", &[], Some(u32::MAX));
+            d.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 0xFF, 0xFF, 0xFF, 0xFF]);
+        }
+        element(&mut d, (0x0008, 0x1150), b"UI", b"1.2.3", None);
+        for _ in 0..nested {
+            d.extend_from_slice(&[0xFE, 0xFF, 0x0D, 0xE0, 0, 0, 0, 0]); // item end
+            d.extend_from_slice(&[0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]); // sequence end
+        }
+    }
+    element(&mut d, (0x0020, 0x000E), b"UI", b"1.2.3.99", None);
+    element(&mut d, (0x0028, 0x0002), b"US", &us(1), None);
+    element(&mut d, (0x0028, 0x0004), b"CS", b"MONOCHROME2", None);
+    if let Some(f) = frames {
+        element(
+            &mut d,
+            (0x0028, 0x0008),
+            b"IS",
+            f.to_string().as_bytes(),
+            None,
+        );
+    }
+    element(&mut d, (0x0028, 0x0010), b"US", &us(rows), None);
+    element(&mut d, (0x0028, 0x0011), b"US", &us(cols), None);
+    element(&mut d, (0x0028, 0x0100), b"US", &us(bits), None);
+    element(&mut d, (0x0028, 0x0101), b"US", &us(bits), None);
+    element(
+        &mut d,
+        (0x0028, 0x0102),
+        b"US",
+        &us(bits.saturating_sub(1)),
+        None,
+    );
+    element(&mut d, (0x0028, 0x0103), b"US", &us(0), None);
+    d
+}
+
+/// A native 16-bit slice of `rows` x `cols` with pixel values 0, 1, 2, ...
+fn native_slice(rows: u16, cols: u16, nested: usize) -> Vec<u8> {
+    let mut d = image_attributes(rows, cols, None, 16, nested);
+    let pixels: Vec<u8> = (0..u32::from(rows) * u32::from(cols))
+        .flat_map(|i| (i as u16).to_le_bytes())
+        .collect();
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels, None);
+    d
+}
+
+fn dicom_file(ts: &str, dataset: &[u8]) -> Vec<u8> {
+    let mut f = meta(ts);
+    f.extend_from_slice(dataset);
+    f
+}
+
+fn raw_deflate(bytes: &[u8]) -> Vec<u8> {
+    let mut enc = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::fast());
+    enc.write_all(bytes).expect("deflate to memory");
+    enc.finish().expect("deflate to memory")
+}
+
+/// Encapsulated pixel data: an empty offset table and the given fragments.
+fn encapsulated(fragments: &[&[u8]]) -> Vec<u8> {
+    let mut d = Vec::new();
+    element(&mut d, (0x7FE0, 0x0010), b"OB", &[], Some(u32::MAX));
+    d.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 0, 0, 0, 0]);
+    for f in fragments {
+        d.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0]);
+        d.extend_from_slice(&(f.len() as u32).to_le_bytes());
+        d.extend_from_slice(f);
+    }
+    d.extend_from_slice(&[0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]);
+    d
+}
+
+#[test]
+fn a_small_hand_written_dicom_loads() {
+    // The builder itself is right: without lies the file loads, as explicit and as deflated.
+    let plain = dicom_file(EXPLICIT_LE, &native_slice(4, 3, 0));
+    let v = load_one("plain.dcm", plain, &Limits::default())
+        .expect("plain")
+        .volume;
+    assert_eq!(v.dims, [3, 4, 1]);
+    assert_eq!(v.value_at(2, 3, 0), 11.0);
+    let mut deflated = meta(DEFLATED_LE);
+    deflated.extend_from_slice(&raw_deflate(&native_slice(4, 3, 0)));
+    let v = load_one("deflated.dcm", deflated, &Limits::default())
+        .expect("deflated")
+        .volume;
+    assert_eq!(v.dims, [3, 4, 1]);
+    assert_eq!(v.value_at(2, 3, 0), 11.0);
+}
+
+#[test]
+fn nesting_within_the_limit_loads_and_beyond_it_is_refused() {
+    let ok = dicom_file(EXPLICIT_LE, &native_slice(2, 2, 20));
+    let v = load_one("nested20.dcm", ok, &Limits::default()).expect("20 levels");
+    assert_eq!(v.volume.dims, [2, 2, 1]);
+
+    // 10,000 levels (~160 KB) overflowed the stack in dicom-rs's recursive object builder.
+    let deep = dicom_file(EXPLICIT_LE, &native_slice(2, 2, 10_000));
+    assert!(deep.len() < 400_000);
+    let t = std::time::Instant::now();
+    let (r, peak) = peak_during(|| load_one("deep.dcm", deep, &Limits::default()));
+    expect_err(r, "deep.dcm", &["nested more than 64"]);
+    assert!(peak < 8 * MIB, "peak {peak} bytes");
+    assert!(t.elapsed().as_secs() < 5);
+
+    // 65 levels: just past the limit.
+    let r = load_one(
+        "d65.dcm",
+        dicom_file(EXPLICIT_LE, &native_slice(2, 2, 65)),
+        &Limits::default(),
+    );
+    expect_err(r, "d65.dcm", &["nested"]);
+    let r = load_one(
+        "d64.dcm",
+        dicom_file(EXPLICIT_LE, &native_slice(2, 2, 64)),
+        &Limits::default(),
+    );
+    assert!(r.is_ok(), "{r:?}");
+}
+
+#[test]
+fn deflated_nesting_is_refused_too() {
+    let mut f = meta(DEFLATED_LE);
+    f.extend_from_slice(&raw_deflate(&native_slice(2, 2, 10_000)));
+    let r = load_one("deep-deflated.dcm", f, &Limits::default());
+    expect_err(r, "deep-deflated.dcm", &["nested more than 64"]);
+}
+
+#[test]
+fn deflated_length_lies_are_refused_before_allocating() {
+    // An OB declaring 0xFFFFFFFE bytes in an 800-byte deflated file: dicom-rs zero-filled 4 GB.
+    let mut d = image_attributes(2, 2, None, 16, 0);
+    element(
+        &mut d,
+        (0x0009, 0x0010),
+        b"OB",
+        &[1, 2, 3, 4],
+        Some(0xFFFF_FFFE),
+    );
+    let mut f = meta(DEFLATED_LE);
+    f.extend_from_slice(&raw_deflate(&d));
+    let (r, peak) = peak_during(|| load_one("lie.dcm", f, &Limits::default()));
+    expect_err(r, "lie.dcm", &["truncated"]);
+    assert!(peak < 8 * MIB, "peak {peak} bytes");
+}
+
+#[test]
+fn deflate_bombs_are_refused_in_bounded_memory() {
+    // A 512 x 512 header over 64 MB of deflated zeros (the issue's bomb had 2.5 GB).
+    let zeros = 64 * MIB;
+    let mut d = image_attributes(512, 512, None, 16, 0);
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &[], Some(zeros as u32));
+    d.resize(d.len() + zeros, 0);
+    let mut f = meta(DEFLATED_LE);
+    f.extend_from_slice(&raw_deflate(&d));
+    drop(d);
+    assert!(f.len() < MIB, "{} bytes", f.len());
+    let (r, peak) = peak_during(|| load_one("bomb.dcm", f.clone(), &Limits::default()));
+    expect_err(r, "bomb.dcm", &["PixelData", "far more"]);
+    assert!(peak < 8 * MIB, "peak {peak} bytes");
+
+    // The same zeros under a header that agrees (128 frames), beyond a 16 MiB voxel cap: refused
+    // at the PixelData header, before the zeros are inflated.
+    let mut d = image_attributes(512, 512, Some(128), 16, 0);
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &[], Some(zeros as u32));
+    d.resize(d.len() + zeros, 0);
+    let mut f = meta(DEFLATED_LE);
+    f.extend_from_slice(&raw_deflate(&d));
+    drop(d);
+    let limits = Limits {
+        max_voxel_bytes: 16 * MIB as u64,
+        max_decompressed_bytes: 1 << 30,
+    };
+    let (r, peak) = peak_during(|| load_one("consistent-bomb.dcm", f, &limits));
+    expect_err(r, "consistent-bomb.dcm", &["limit"]);
+    assert!(peak < 8 * MIB, "peak {peak} bytes");
+}
+
+#[test]
+fn native_pixel_data_far_longer_than_the_image_is_refused() {
+    let mut d = image_attributes(4, 4, None, 16, 0);
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &vec![0u8; 4 * MIB], None);
+    let r = load_one("long.dcm", dicom_file(EXPLICIT_LE, &d), &Limits::default());
+    expect_err(r, "long.dcm", &["PixelData", "far more"]);
+}
+
+#[test]
+fn compressed_slices_declaring_a_huge_image_are_refused_before_the_voxel_buffer() {
+    // RLE: a 1 KB fragment cannot hold 13000 x 13000 x 2 bytes.
+    let mut rle = vec![0u8; 64];
+    rle[0] = 2;
+    rle[4] = 64;
+    rle[8] = 64 + 4;
+    rle.extend_from_slice(&[0x81, 0, 0x81, 0]);
+    let mut d = image_attributes(13_000, 13_000, None, 16, 0);
+    d.extend_from_slice(&encapsulated(&[&rle]));
+    let f = dicom_file(RLE, &d);
+    let (r, peak) = peak_during(|| load_one("rle.dcm", f, &Limits::default()));
+    expect_err(r, "rle.dcm", &["cannot hold"]);
+    assert!(
+        peak < 16 * MIB,
+        "peak {peak} bytes (the voxels alone are 338 MB)"
+    );
+
+    // JPEG 2000: the codestream says 64 x 64.
+    let mut j2k = vec![0xFF, 0x4F, 0xFF, 0x51, 0, 41, 0, 0];
+    for v in [64u32, 64, 0, 0, 64, 64, 0, 0] {
+        j2k.extend_from_slice(&v.to_be_bytes());
+    }
+    j2k.extend_from_slice(&[0, 1, 15, 1, 1]);
+    j2k.extend_from_slice(&[0xFF, 0xD9]);
+    let mut d = image_attributes(13_000, 13_000, None, 16, 0);
+    d.extend_from_slice(&encapsulated(&[&j2k]));
+    let f = dicom_file(J2K_LOSSLESS, &d);
+    let (r, peak) = peak_during(|| load_one("j2k.dcm", f, &Limits::default()));
+    expect_err(r, "j2k.dcm", &["64x64"]);
+    assert!(
+        peak < 16 * MIB,
+        "peak {peak} bytes (the voxels alone are 338 MB)"
+    );
+
+    // 1-bit data in RLE: refused by name, before anything is decoded.
+    let mut d = image_attributes(13_000, 13_000, None, 1, 0);
+    d.extend_from_slice(&encapsulated(&[&rle]));
+    let (r, peak) = peak_during(|| load_one("bits1.dcm", dicom_file(RLE, &d), &Limits::default()));
+    expect_err(r, "bits1.dcm", &["1-bit"]);
+    assert!(peak < 16 * MIB, "peak {peak} bytes");
+}
+
+#[test]
+fn a_million_frames_are_bounded_before_frame_tables() {
+    // Compressed: a million frames cannot fit in a few KB of fragments.
+    let mut d = image_attributes(64, 64, Some(1 << 20), 16, 0);
+    d.extend_from_slice(&encapsulated(&[&[0u8; 128]]));
+    let t = std::time::Instant::now();
+    let r = load_one("frames.dcm", dicom_file(RLE, &d), &Limits::default());
+    expect_err(r, "frames.dcm", &["frames"]);
+    assert!(t.elapsed().as_secs() < 5, "{:?}", t.elapsed());
+
+    // Native 1 x 1 frames: a million frames are a consistent 2 MB file, read in seconds, not
+    // minutes (a missing tag no longer costs a backtrace per frame).
+    let mut d = image_attributes(1, 1, Some(1 << 20), 16, 0);
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &vec![0u8; 2 << 20], None);
+    let t = std::time::Instant::now();
+    let r = load_one(
+        "million.dcm",
+        dicom_file(EXPLICIT_LE, &d),
+        &Limits::default(),
+    );
+    let elapsed = t.elapsed();
+    if let Ok(l) = &r {
+        assert_eq!(l.volume.dims, [1, 1, 1 << 20]);
+    }
+    assert!(elapsed.as_secs() < 20, "{elapsed:?}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// gzip and zlib: CRC-32 / Adler-32 checked, padding accepted, memory ~ the voxels.
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    enc.write_all(bytes).expect("gzip to memory");
+    enc.finish().expect("gzip to memory")
+}
+
+fn zlib(bytes: &[u8]) -> Vec<u8> {
+    let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    enc.write_all(bytes).expect("zlib to memory");
+    enc.finish().expect("zlib to memory")
+}
+
+/// A NIfTI-1 single file of `dims` int16 voxels (values from a seeded sequence).
+fn nifti_i16(dims: [u16; 3], seed: u32) -> Vec<u8> {
+    let mut b = vec![0u8; 352];
+    b[0..4].copy_from_slice(&348i32.to_le_bytes());
+    b[40..42].copy_from_slice(&3i16.to_le_bytes());
+    for (i, d) in dims.iter().enumerate() {
+        b[42 + 2 * i..44 + 2 * i].copy_from_slice(&d.to_le_bytes());
+    }
+    b[70..72].copy_from_slice(&4i16.to_le_bytes());
+    b[72..74].copy_from_slice(&16i16.to_le_bytes());
+    for i in 0..4 {
+        b[76 + 4 * i..80 + 4 * i].copy_from_slice(&1f32.to_le_bytes());
+    }
+    b[108..112].copy_from_slice(&352f32.to_le_bytes());
+    b[344..348].copy_from_slice(b"n+1\0");
+    let n = dims.iter().map(|&d| usize::from(d)).product::<usize>();
+    let mut x = seed | 1;
+    for i in 0..n {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        // Smooth-ish values with some noise, so that the stream has matches and literals.
+        let v = (i % 97) as i16 * 10 - 400 + (x % 7) as i16;
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b
+}
+
+fn nifti_u8_header(dims: [u16; 3]) -> Vec<u8> {
+    let mut b = nifti_i16([1, 1, 1], 1);
+    b.truncate(352);
+    for (i, d) in dims.iter().enumerate() {
+        b[42 + 2 * i..44 + 2 * i].copy_from_slice(&d.to_le_bytes());
+    }
+    b[70..72].copy_from_slice(&2i16.to_le_bytes());
+    b[72..74].copy_from_slice(&8i16.to_le_bytes());
+    b
+}
+
+/// Every single-bit flip of `bytes` from `from` on: each load is refused or equals `good`.
+fn flips_refused_or_identical(
+    name: &str,
+    others: &[InputFile],
+    target: Vec<u8>,
+    from: usize,
+) -> (usize, usize) {
+    let mut files = vec![InputFile::new(name, target.clone())];
+    files.extend_from_slice(others);
+    let good = io::load(&files).expect("the unflipped file loads").volume;
+    let (mut refused, mut identical) = (0, 0);
+    for byte in from..target.len() {
+        for bit in 0..8 {
+            let mut b = target.clone();
+            b[byte] ^= 1 << bit;
+            files[0].bytes = b;
+            match io::load(&files) {
+                Err(e) => {
+                    let m = e.to_string();
+                    assert!(m.contains(name), "byte {byte} bit {bit}: {m}");
+                    refused += 1;
+                }
+                Ok(l) => {
+                    let v = l.volume;
+                    assert!(
+                        v.dims == good.dims && v.voxels == good.voxels,
+                        "byte {byte} bit {bit} flipped: loaded different voxels without an error"
+                    );
+                    identical += 1;
+                }
+            }
+        }
+    }
+    (refused, identical)
+}
+
+#[test]
+fn gzip_bit_flips_are_refused_or_harmless() {
+    let gz = gzip(&nifti_i16([12, 10, 6], 7));
+    assert!(gz.len() < 4096, "{} bytes", gz.len());
+    let (refused, identical) = flips_refused_or_identical("flip.nii.gz", &[], gz, 0);
+    eprintln!("nii.gz: {refused} flips refused, {identical} harmless");
+    assert!(refused > identical);
+}
+
+#[test]
+fn nrrd_gzip_and_metaimage_zlib_bit_flips_are_refused_or_harmless() {
+    let plain = nifti_i16([12, 10, 6], 3)[352..].to_vec();
+    let header = b"NRRD0004\ntype: short\ndimension: 3\nsizes: 12 10 6\nspacings: 1 1 1\nendian: little\nencoding: gzip\ndata file: d.raw.gz\n".to_vec();
+    let hdr = InputFile::new("d.nhdr", header);
+    let gz = gzip(&plain);
+    let (refused, _) = flips_refused_or_identical("d.raw.gz", &[hdr], gz, 0);
+    assert!(refused > 0);
+
+    let mut mha = b"ObjectType = Image\nNDims = 3\nDimSize = 12 10 6\nElementType = MET_SHORT\nElementSpacing = 1 1 1\nCompressedData = True\nElementDataFile = LOCAL\n".to_vec();
+    let start = mha.len();
+    mha.extend_from_slice(&zlib(&plain));
+    let (refused, _) = flips_refused_or_identical("z.mha", &[], mha, start);
+    assert!(refused > 0);
+}
+
+#[test]
+fn gzip_padding_is_accepted_and_trailing_garbage_refused() {
+    let gz = gzip(&nifti_i16([8, 8, 4], 5));
+    let good = load_one("p.nii.gz", gz.clone(), &Limits::default())
+        .expect("plain")
+        .volume;
+    let mut padded = gz.clone();
+    padded.extend_from_slice(&[0u8; 512]);
+    let v = load_one("padded.nii.gz", padded, &Limits::default())
+        .expect("zero padding after the member, as gzip accepts")
+        .volume;
+    assert_eq!(v.voxels, good.voxels);
+    // Two members are one stream.
+    let plain = nifti_i16([8, 8, 4], 5);
+    let mut two = gzip(&plain[..500]);
+    two.extend_from_slice(&gzip(&plain[500..]));
+    let v = load_one("two.nii.gz", two, &Limits::default())
+        .expect("two members")
+        .volume;
+    assert_eq!(v.voxels, good.voxels);
+    let mut junk = gz;
+    junk.extend_from_slice(b"junk");
+    let r = load_one("junk.nii.gz", junk, &Limits::default());
+    expect_err(r, "junk.nii.gz", &["neither zero padding"]);
+}
+
+#[test]
+fn gzip_memory_is_the_voxels_plus_a_constant() {
+    // 256^3 u8 = 16 MiB of voxels from a ~16 KB file: it used to cost the inflated buffer and
+    // the voxel copy together.
+    let dims = [256u16, 256, 256];
+    let voxel_bytes = 256 * 256 * 256;
+    let mut plain = nifti_u8_header(dims);
+    plain.resize(352 + voxel_bytes, 0);
+    let gz = gzip(&plain);
+    drop(plain);
+    let (r, peak) = peak_during(|| load_one("bomb.nii.gz", gz.clone(), &Limits::default()));
+    assert_eq!(r.expect("loads").volume.dims, [256, 256, 256]);
+    eprintln!("nii.gz of {voxel_bytes} voxel bytes: peak {peak} bytes");
+    assert!(peak < voxel_bytes + 2 * MIB, "peak {peak} bytes");
+
+    // A stream that ends early: refused by name.
+    let mut short = nifti_u8_header(dims);
+    short.resize(352 + voxel_bytes / 2, 0);
+    let r = load_one("short.nii.gz", gzip(&short), &Limits::default());
+    expect_err(r, "short.nii.gz", &["truncated"]);
+
+    // A stream longer than the header declares (beyond the slack): refused.
+    let mut long = nifti_u8_header([16, 16, 16]);
+    long.resize(352 + 4096 + 2 * MIB, 0);
+    let r = load_one("long.nii.gz", gzip(&long), &Limits::default());
+    expect_err(r, "long.nii.gz", &["more than"]);
+}
+
+#[test]
+fn shared_ct_with_the_issues_flipped_bit_is_refused() {
+    let Some(path) = common::shared_data("ct/example_ct_sm.nii.gz") else {
+        return;
+    };
+    let mut f = common::input(&path);
+    assert!(io::load(std::slice::from_ref(&f)).is_ok());
+    // Bit 6 of byte 52925 loaded with garbage voxels (-32768..32767) before the CRC was read.
+    f.bytes[52925] ^= 1 << 6;
+    let r = io::load(std::slice::from_ref(&f));
+    expect_err(r, "example_ct_sm.nii.gz", &["gzip"]);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Geometry that cannot be right is named in a warning or an error, never taken silently.
+
+fn warnings_of(files: &[InputFile]) -> Vec<String> {
+    io::load(files).expect("loads").volume.warnings
+}
+
+#[test]
+fn bad_spacings_are_named() {
+    for (bad, says) in [
+        ("0", "axis 0 is 0"),
+        ("nan", "axis 0 is NaN"),
+        ("inf", "axis 0 is inf"),
+    ] {
+        let mut b = format!(
+            "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 1\nspacings: {bad} 1 1\nencoding: raw\n\n"
+        )
+        .into_bytes();
+        b.extend_from_slice(&[1, 2, 3, 4]);
+        let w = warnings_of(&[InputFile::new("s.nrrd", b)]).join("\n");
+        assert!(w.contains("spacings") && w.contains(says), "{bad}: {w}");
+    }
+    for bad in [0.0f32, f32::NAN] {
+        let mut b = nifti_u8_header([2, 2, 1]);
+        b[80..84].copy_from_slice(&bad.to_le_bytes()); // pixdim[1]
+        b.extend_from_slice(&[1, 2, 3, 4]);
+        let w = warnings_of(&[InputFile::new("p.nii", b)]).join("\n");
+        assert!(w.contains("pixdim[1]"), "{bad}: {w}");
+        assert!(!w.contains("pixdim[3]"), "{w}");
+    }
+    let mut mha = b"ObjectType = Image\nNDims = 3\nDimSize = 2 2 1\nElementType = MET_UCHAR\nElementSpacing = -1 1 1\nElementDataFile = LOCAL\n".to_vec();
+    mha.extend_from_slice(&[1, 2, 3, 4]);
+    let w = warnings_of(&[InputFile::new("n.mha", mha)]).join("\n");
+    assert!(
+        w.contains("ElementSpacing") && w.contains("negative"),
+        "{w}"
+    );
+}
+
+#[test]
+fn smaller_lies_are_said() {
+    // BitsStored 0: masked to 1 bit, with a warning that says so.
+    let mut d = native_slice(2, 2, 0);
+    let at = d
+        .windows(6)
+        .position(|w| w == [0x28, 0x00, 0x01, 0x01, b'U', b'S'])
+        .expect("BitsStored");
+    d[at + 8..at + 10].copy_from_slice(&[0, 0]);
+    let w = warnings_of(&[InputFile::new("b0.dcm", dicom_file(EXPLICIT_LE, &d))]).join("\n");
+    assert!(w.contains("BitsStored is 0"), "{w}");
+
+    // A 4D NIfTI declaring 3 volumes that holds one, plain and gzipped.
+    let mut b = nifti_u8_header([2, 2, 1]);
+    b[40..42].copy_from_slice(&4i16.to_le_bytes());
+    b[48..50].copy_from_slice(&3i16.to_le_bytes());
+    b.extend_from_slice(&[1, 2, 3, 4]);
+    for (name, bytes) in [("v.nii", b.clone()), ("v.nii.gz", gzip(&b))] {
+        let w = warnings_of(&[InputFile::new(name, bytes)]).join("\n");
+        assert!(
+            w.contains("3 volumes") && w.contains("only 1 complete"),
+            "{name}: {w}"
+        );
+    }
+
+    // A detached data file named by a path: the same-named file given is used, and said.
+    let hdr = InputFile::new(
+        "p.nhdr",
+        b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 1\nencoding: raw\ndata file: ../x/d.raw\n"
+            .to_vec(),
+    );
+    let w = warnings_of(&[hdr, InputFile::new("d.raw", vec![1, 2, 3, 4])]).join("\n");
+    assert!(
+        w.contains("../x/d.raw") && w.contains("d.raw was used"),
+        "{w}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// A small structure-aware fuzzer that runs with the tests: random DICOM trees (nested
+// sequences and items, defined and undefined lengths, lengths that lie, native or RLE pixel
+// data, explicit or deflated), randomly cut short. No input may panic, abort (a stack
+// overflow would end this test binary) or allocate more than a bounded amount.
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        // splitmix64
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n.max(1)
+    }
+    fn chance(&mut self, percent: u64) -> bool {
+        self.below(100) < percent
+    }
+}
+
+/// A length as written: usually the truth, sometimes undefined or a lie.
+fn told_len(rng: &mut Rng, truth: usize, may_be_undefined: bool) -> (u32, bool) {
+    match rng.below(20) {
+        0 if may_be_undefined => (u32::MAX, true),
+        1 => (rng.next() as u32, false),
+        2 => (truth as u32 + 1 + rng.below(64) as u32, false),
+        _ => (truth as u32, false),
+    }
+}
+
+/// The bytes of one random item body (elements, nested sequences) within `depth_left`.
+fn random_item(rng: &mut Rng, depth_left: usize) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut element_no = 0x0010u16;
+    for _ in 0..rng.below(4) {
+        element_no += 2;
+        if depth_left > 0 && rng.chance(60) {
+            out.extend_from_slice(&random_sequence(rng, (0x0008, element_no), depth_left - 1));
+        } else {
+            let value: Vec<u8> = (0..rng.below(12) * 2).map(|_| b'1').collect();
+            let lie = rng.chance(5).then(|| rng.next() as u32);
+            element(&mut out, (0x0008, element_no), b"LO", &value, lie);
+        }
+    }
+    out
+}
+
+fn random_sequence(rng: &mut Rng, tag: (u16, u16), depth_left: usize) -> Vec<u8> {
+    let mut items = Vec::new();
+    for _ in 0..1 + rng.below(2) {
+        let body = random_item(rng, depth_left);
+        let (len, undefined) = told_len(rng, body.len(), true);
+        items.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0]);
+        items.extend_from_slice(&len.to_le_bytes());
+        items.extend_from_slice(&body);
+        if undefined {
+            items.extend_from_slice(&[0xFE, 0xFF, 0x0D, 0xE0, 0, 0, 0, 0]);
+        }
+    }
+    let (len, undefined) = told_len(rng, items.len(), true);
+    let mut out = Vec::new();
+    element(&mut out, tag, b"SQ", &[], Some(len));
+    out.extend_from_slice(&items);
+    if undefined {
+        out.extend_from_slice(&[0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]);
+    }
+    out
+}
+
+/// A chain of `levels` undefined-length sequences, the deepest holding a random item.
+fn deep_chain(rng: &mut Rng, levels: usize) -> Vec<u8> {
+    let mut out = Vec::new();
+    for _ in 0..levels {
+        element(&mut out, (0x0008, 0x1140), b"SQ", &[], Some(u32::MAX));
+        out.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 0xFF, 0xFF, 0xFF, 0xFF]);
+    }
+    out.extend_from_slice(&random_item(rng, 2));
+    for _ in 0..levels {
+        out.extend_from_slice(&[0xFE, 0xFF, 0x0D, 0xE0, 0, 0, 0, 0]);
+        out.extend_from_slice(&[0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]);
+    }
+    out
+}
+
+#[test]
+fn random_dicom_structures_never_crash() {
+    let limits = Limits {
+        max_voxel_bytes: 16 * MIB as u64,
+        max_decompressed_bytes: 64 * MIB as u64,
+    };
+    let t = std::time::Instant::now();
+    let (mut ok, mut refused, mut deepest_loaded) = (0, 0, 0);
+    // SHAPECAST_FUZZ_SEEDS=1000000 for a longer run (20,000 take about a second).
+    let seeds: u64 = std::env::var("SHAPECAST_FUZZ_SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(20_000);
+    for seed in 0..seeds {
+        let mut rng = Rng(seed);
+        let rows = 1 + rng.below(8) as u16;
+        let cols = 1 + rng.below(8) as u16;
+        let mut d = Vec::new();
+        element(&mut d, (0x0008, 0x0060), b"CS", b"CT", None);
+        // Nested structure at (0008,1140): a random tree, or a deep chain around the limit.
+        let levels = if rng.chance(30) {
+            40 + rng.below(60) as usize
+        } else {
+            0
+        };
+        if levels > 0 {
+            d.extend_from_slice(&deep_chain(&mut rng, levels));
+        } else {
+            d.extend_from_slice(&random_sequence(&mut rng, (0x0008, 0x1140), 6));
+        }
+        let mut attrs = image_attributes(rows, cols, None, 16, 0);
+        attrs.drain(..10); // the (0008,0060) already written
+        d.extend_from_slice(&attrs);
+        let rle = rng.chance(20);
+        if rle {
+            let frag: Vec<u8> = (0..64 + rng.below(64)).map(|_| rng.next() as u8).collect();
+            d.extend_from_slice(&encapsulated(&[&frag]));
+        } else {
+            let truth = usize::from(rows) * usize::from(cols) * 2;
+            let (len, _) = told_len(&mut rng, truth, false);
+            let pixels: Vec<u8> = (0..truth).map(|_| rng.next() as u8).collect();
+            element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels, Some(len));
+        }
+        if rng.chance(15) {
+            d.truncate(rng.below(d.len() as u64) as usize);
+        }
+        let ts = if rle {
+            RLE
+        } else if rng.chance(30) {
+            DEFLATED_LE
+        } else {
+            EXPLICIT_LE
+        };
+        let mut f = meta(ts);
+        if ts == DEFLATED_LE {
+            f.extend_from_slice(&raw_deflate(&d));
+        } else {
+            f.extend_from_slice(&d);
+        }
+        let (r, peak) = peak_during(|| {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                load_one("random.dcm", f, &limits)
+            }))
+        });
+        let Ok(result) = r else {
+            panic!("seed {seed} panicked");
+        };
+        assert!(peak < 64 * MIB, "seed {seed}: peak {peak} bytes");
+        match result {
+            Ok(_) => {
+                ok += 1;
+                deepest_loaded = deepest_loaded.max(levels);
+            }
+            Err(e) => {
+                assert!(e.to_string().contains("random.dcm"), "seed {seed}: {e}");
+                refused += 1;
+            }
+        }
+    }
+    eprintln!(
+        "random DICOM trees: {ok} loaded, {refused} refused (deepest chain loaded: {deepest_loaded}) in {:.1?}",
+        t.elapsed()
+    );
+    assert!(
+        deepest_loaded <= 64,
+        "a chain of {deepest_loaded} sequences was accepted"
+    );
+    assert!(ok > 100 && refused > 100, "{ok} loaded, {refused} refused");
+}
+
+/// A 2 x 2 slice with an orientation and a position (z in mm along the normal of axial).
+fn oriented_slice(iop: &str, ipp: &str, value: u16) -> Vec<u8> {
+    let attrs = image_attributes(2, 2, None, 16, 0);
+    let split = attrs
+        .windows(4)
+        .position(|w| w == [0x28, 0x00, 0x02, 0x00])
+        .expect("SamplesPerPixel");
+    let mut d = attrs[..split].to_vec();
+    element(&mut d, (0x0020, 0x0032), b"DS", ipp.as_bytes(), None);
+    element(&mut d, (0x0020, 0x0037), b"DS", iop.as_bytes(), None);
+    d.extend_from_slice(&attrs[split..]);
+    let pixels: Vec<u8> = (0..4).flat_map(|_| value.to_le_bytes()).collect();
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels, None);
+    dicom_file(EXPLICIT_LE, &d)
+}
+
+#[test]
+fn a_slice_of_another_orientation_is_not_stacked() {
+    let axial = "1\\0\\0\\0\\1\\0";
+    for (odd_name, odd_iop) in [
+        ("sagittal.dcm", "0\\1\\0\\0\\0\\-1"),
+        ("rotated.dcm", "-1\\0\\0\\0\\-1\\0"),
+    ] {
+        let mut files: Vec<InputFile> = (0..3)
+            .map(|z| {
+                InputFile::new(
+                    format!("ax{z}.dcm"),
+                    oriented_slice(axial, &format!("0\\0\\{z}"), 100 + z),
+                )
+            })
+            .collect();
+        files.insert(
+            1,
+            InputFile::new(odd_name, oriented_slice(odd_iop, "0\\0\\1.5", 999)),
+        );
+        let loaded = io::load(&files).expect("the axial stack loads");
+        assert_eq!(loaded.volume.dims, [2, 2, 3], "{odd_name}");
+        assert_eq!(loaded.volume.value_at(0, 0, 2), 102.0);
+        let notes = loaded.notes.join("\n");
+        assert!(
+            notes.contains("not stacked") && notes.contains(odd_name),
+            "{odd_name}: {notes}"
+        );
+    }
+}
+
+#[test]
+fn native_dicom_memory_is_bounded() {
+    // 32 frames of 512 x 512 at 16 bits: 16 MiB of pixels in, 16 MiB of voxels out.
+    let frames = 32u32;
+    let mut d = image_attributes(512, 512, Some(frames), 16, 0);
+    let n = 512 * 512 * frames as usize;
+    let pixels: Vec<u8> = (0..n)
+        .flat_map(|i| ((i % 4000) as u16).to_le_bytes())
+        .collect();
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels, None);
+    drop(pixels);
+    let files = [InputFile::new("frames.dcm", dicom_file(EXPLICIT_LE, &d))];
+    drop(d);
+    let (r, peak) = peak_during(|| io::load(&files));
+    let v = r.expect("loads").volume;
+    assert_eq!(v.dims, [512, 512, frames as usize]);
+    assert_eq!(v.value_at(7, 0, 0), 7.0);
+    let voxel_bytes = n * 2;
+    eprintln!(
+        "native DICOM of {voxel_bytes} voxel bytes: peak {peak} bytes ({:.2}x)",
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak < voxel_bytes * 5 / 2, "peak {peak} bytes");
+}
+
+#[test]
+fn gzipped_wide_integers_are_converted_without_a_buffer_of_stored_bytes() {
+    // int32 labels (a common segmentation type): 128^3 values in i16 range, then one beyond.
+    let dims = [128u16, 128, 128];
+    let n = 128 * 128 * 128;
+    for (big, expect) in [(false, "i16"), (true, "f32")] {
+        let mut b = nifti_u8_header(dims);
+        b[70..72].copy_from_slice(&8i16.to_le_bytes());
+        b[72..74].copy_from_slice(&32i16.to_le_bytes());
+        for i in 0..n {
+            let v: i32 = if big && i == n - 1 {
+                100_000
+            } else {
+                (i % 50) as i32 - 3
+            };
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        let gz = gzip(&b);
+        drop(b);
+        let (r, peak) = peak_during(|| load_one("labels.nii.gz", gz, &Limits::default()));
+        let v = r.expect("loads").volume;
+        assert_eq!(v.voxels.type_name(), expect);
+        assert_eq!(v.value_at(4, 0, 0), 1.0);
+        assert_eq!(
+            v.value_at(127, 127, 127),
+            if big {
+                100_000.0
+            } else {
+                ((n - 1) % 50) as f32 - 3.0
+            }
+        );
+        let out_bytes = n * if big { 4 } else { 2 };
+        eprintln!("int32 .nii.gz -> {expect}: peak {peak} bytes for {out_bytes} voxel bytes");
+        assert!(peak < out_bytes + 2 * MIB, "peak {peak} bytes");
+    }
+}
