@@ -96,7 +96,7 @@ fn tile_along_z(volume: &Volume, nz: usize) -> Volume {
         voxels,
         value_slope: volume.value_slope,
         value_intercept: volume.value_intercept,
-        modality: volume.modality.clone(),
+        modality: volume.modality,
         source: format!("{} tiled along z to {nz} slices", volume.source),
         warnings: volume.warnings.clone(),
     }

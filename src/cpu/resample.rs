@@ -21,7 +21,9 @@ pub const MAX_REFINEMENT: usize = 8;
 pub fn refinement_factors(grid: &Grid, sigma_min_mm: f64) -> [usize; 3] {
     std::array::from_fn(|a| {
         let s = grid.spacing_mm[a];
-        if grid.dims[a] < 2 || !(sigma_min_mm > 0.0) || !(s > sigma_min_mm) {
+        // NaN scales or spacings refine nothing.
+        let refine = sigma_min_mm > 0.0 && s > sigma_min_mm;
+        if grid.dims[a] < 2 || !refine {
             return 1;
         }
         ((s / sigma_min_mm - 1e-9).ceil() as usize).clamp(1, MAX_REFINEMENT)
@@ -32,8 +34,8 @@ pub fn refinement_factors(grid: &Grid, sigma_min_mm: f64) -> [usize; 3] {
 /// and last voxel centre.
 pub fn refined_grid(grid: &Grid, factors: [usize; 3]) -> Grid {
     let mut out = *grid;
-    for a in 0..3 {
-        let f = factors[a].max(1);
+    for (a, &f) in factors.iter().enumerate() {
+        let f = f.max(1);
         if f > 1 && grid.dims[a] > 1 {
             out.dims[a] = (grid.dims[a] - 1) * f + 1;
             out.spacing_mm[a] = grid.spacing_mm[a] / f as f64;

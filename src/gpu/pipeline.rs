@@ -331,7 +331,9 @@ impl FeatureJob {
         let halo = halo_of(&req, &resolved);
         let resampled = compute != input;
         let limits = options.limits.as_ref().unwrap_or(&ctx.limits);
-        let binding = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
         let budget_voxels = options.memory_budget_bytes / bytes_per_voxel(req.method, resampled);
         // A brick's buffers hold one f32 per voxel; the feature output 3 (4 for eigenvalues
         // with their scale's norm) per voxel of whole rows of the core slices.
