@@ -1,7 +1,7 @@
 // Per-voxel eigenvalues and feature maps of a symmetric tensor field given as six component
 // buffers [xx, yy, zz, xy, xz, yz] on a slab (the Hessian, the general structure tensor), for the
 // output slices out_z0 .. out_z0 + out_nz only (keep Params in sync with
-// src/gpu/eigen_features.rs). Twins: src/cpu/features.rs, src/cpu/structure_tensor.rs.
+// src/compute/eigen_features.rs). Twins: src/cpu/features.rs, src/cpu/structure_tensor.rs.
 //
 // Output, component-major over the output slices (n_out = nx * ny * out_nz, index uses
 // k - out_z0):

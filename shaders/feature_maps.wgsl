@@ -2,7 +2,7 @@
 // eigenvalues l = (l0, l1, l2) sorted by magnitude (eigen.wgsl); output (V, A, B) =
 // (vesselness, airwayness, blobness). Pure functions; import with `#import feature_maps.wgsl`.
 
-// Which map `map_features` applies (the same numbers in src/gpu/eigen_features.rs).
+// Which map `map_features` applies (the same numbers in src/compute/eigen_features.rs).
 const MAP_SIMPLE: u32 = 0u;  // paper eq. 1
 const MAP_LI: u32 = 1u;      // paper eq. 2 (Li et al. 2003)
 const MAP_FRANGI: u32 = 2u;  // Frangi 1998: V bright tubes, A dark tubes, B = 0

@@ -1,6 +1,6 @@
 // 1-D correlation along one axis of a slab with replicated borders (twin: convolve_axis in
 // src/cpu/gaussian.rs): out[i] = sum_t w[t] in[clamp(i + t - r)], taps w uploaded from the CPU's
-// own `derivative_kernel` (keep Params in sync with src/gpu/gaussian.rs).
+// own `derivative_kernel` (keep Params in sync with src/compute/gaussian.rs).
 //
 // Three entry points:
 // - `convolve_block`: each invocation computes BLOCK consecutive outputs along the pass axis
@@ -38,7 +38,7 @@ struct Params {
 }
 
 // Outputs per invocation of convolve_block (4 vec4 windows) and convolve_block3 (3 vec4
-// windows, 3 kernels: 9 vec4 accumulators); keep in sync with src/gpu/gaussian.rs.
+// windows, 3 kernels: 9 vec4 accumulators); keep in sync with src/compute/gaussian.rs.
 const BLOCK: u32 = 16u;
 const BLOCK3: u32 = 12u;
 // Taps the uniform array holds (radius <= 127).

@@ -1,5 +1,5 @@
 // Central differences in mm of an (already smoothed) slab, borders replicated: the gradient of
-// `GradientVolume::new` after its smoothing (src/cpu/rst.rs; keep in sync with src/gpu/gradient.rs).
+// `GradientVolume::new` after its smoothing (src/cpu/rst.rs; keep in sync with src/compute/gradient.rs).
 // g_a = (I[idx + e_a] - I[idx - e_a]) / (2 s_a), the neighbour index clamped into the slab, so at
 // the first and last voxel of an axis the difference spans one voxel but is still divided by 2 s_a.
 //

@@ -1,5 +1,5 @@
 // Trilinear resampling between two grids (twin: resample_linear in src/cpu/resample.rs; keep
-// Params and Tap in sync with src/gpu/resample.rs). Destination voxel (i, j, k) reads the
+// Params and Tap in sync with src/compute/resample.rs). Destination voxel (i, j, k) reads the
 // source at per-axis positions whose two neighbours and weight are precomputed on the CPU in
 // f64 (one Tap per destination index and axis: x taps, then y, then z), positions clamped into
 // the source as the CPU does. `components` volumes are stored component-major in both buffers.

@@ -1,4 +1,4 @@
-// One slice of the volume for the slice panes (keep in sync with src/gpu/slice.rs and its CPU
+// One slice of the volume for the slice panes (keep in sync with src/render/slice.rs and its CPU
 // twin `cpu_twin`): the intensity windowed to grey, optionally overlaid with one method's
 // features as the MIP composites them: over the grey, in this order, red = vesselness, blue =
 // airwayness, yellow = blobness, each with opacity clamp(value * scale, 0, 1) * overlay opacity. Output pixel (x, y) is the voxel with
@@ -26,7 +26,7 @@ struct Params {
 @group(0) @binding(2) var features: texture_3d<f32>;
 @group(0) @binding(3) var image: texture_storage_2d<rgba8unorm, write>;
 
-// The MIP's colours (gpu::raycast::CHANNEL_COLOURS).
+// The MIP's colours (render::raycast::CHANNEL_COLOURS).
 const VESSEL_RGB: vec3<f32> = vec3<f32>(1.0, 0.0, 0.0);
 const AIRWAY_RGB: vec3<f32> = vec3<f32>(0.0, 0.4, 1.0);
 const BLOB_RGB: vec3<f32> = vec3<f32>(1.0, 1.0, 0.0);

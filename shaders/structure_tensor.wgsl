@@ -1,5 +1,5 @@
 // One component g_a * g_b of the outer product g g^T of a gradient field given as three
-// component buffers (keep Params in sync with src/gpu/structure_tensor.rs). The six products
+// component buffers (keep Params in sync with src/compute/structure_tensor.rs). The six products
 // are then smoothed with a Gaussian of the neighbourhood scale rho (gaussian.wgsl) and mapped by
 // eigen_features.wgsl. Twin: src/cpu/structure_tensor.rs.
 #import common.wgsl

@@ -4,11 +4,12 @@
 //! ARCHITECTURE.md at the repository root is the map of this crate.
 
 pub mod app;
-pub mod camera;
+pub mod compute;
 pub mod cpu;
 pub mod gpu;
 pub mod io;
 pub mod phantom;
+pub mod render;
 pub mod status;
 pub mod volume;
 

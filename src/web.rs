@@ -37,7 +37,7 @@ async fn run() -> Result<(), String> {
         return Ok(());
     }
     match browser_adapter(&gpu).await {
-        Some(name) => BROWSER_ADAPTER.with(|a| *a.borrow_mut() = Some(name)),
+        Some(name) => crate::gpu::context::set_browser_adapter_name(name),
         None => {
             show_message(&format!(
                 "{NO_WEBGPU}<p>Details: this browser has WebGPU but gave no graphics adapter \
@@ -75,17 +75,6 @@ async fn run() -> Result<(), String> {
         }
     }
     Ok(())
-}
-
-thread_local! {
-    static BROWSER_ADAPTER: std::cell::RefCell<Option<String>> =
-        const { std::cell::RefCell::new(None) };
-}
-
-/// The adapter as the browser describes it (vendor, architecture, description); wgpu's
-/// `AdapterInfo` on the web carries only the often empty description.
-pub fn browser_adapter_name() -> Option<String> {
-    BROWSER_ADAPTER.with(|a| a.borrow().clone())
 }
 
 /// Asks `navigator.gpu` for an adapter and describes it, or `None` when it gives none.

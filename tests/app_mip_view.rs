@@ -11,12 +11,12 @@ use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable as _;
 use glam::DVec3;
 use shapecast::app::mip_view::{MipScene, MipView};
+use shapecast::compute::pipeline::{FeatureJob, JobState};
 use shapecast::cpu::pipeline::{Method, Request};
 use shapecast::gpu::GpuContext;
-use shapecast::gpu::pipeline::{FeatureJob, JobState};
-use shapecast::gpu::raycast::Pick;
-use shapecast::gpu::render_volume::{FeatureTexture, RenderVolume};
+use shapecast::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use shapecast::phantom::{NODULE_RADIUS_MM, Phantom, bifurcation_nodule_centres};
+use shapecast::render::raycast::Pick;
 
 /// The smallest app hosting the widget: the GPU textures, the widget, and the crosshair the
 /// picks move.
@@ -194,7 +194,7 @@ fn mip_view_renders_turns_zooms_pans_and_picks_a_nodule() {
             .view
             .camera
             .rotation
-            .angle_between(shapecast::camera::ViewPreset::Anterior.rotation())
+            .angle_between(shapecast::render::camera::ViewPreset::Anterior.rotation())
             < 1e-6,
         "the A button did not set the anterior view"
     );

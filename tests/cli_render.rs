@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use glam::DVec3;
-use shapecast::camera::{Camera, ViewPreset};
 use shapecast::phantom::{NODULE_RADIUS_MM, Phantom, bifurcation_nodule_centres};
+use shapecast::render::camera::{Camera, ViewPreset};
 
 const PHANTOM: &str = "bifurcation-nodules-far";
 const SIZE: [u32; 2] = [160, 160];

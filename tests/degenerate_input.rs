@@ -3,11 +3,11 @@
 //! for every method, and a NaN or infinite voxel inside a blob is replaced by its row's nearest
 //! finite value instead of blanking the blob's features.
 
+use shapecast::compute::pipeline::{FeatureJob, JobOptions};
 use shapecast::cpu::Grid;
 use shapecast::cpu::pipeline::{Method, Request, compute};
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::pipeline::{FeatureJob, JobOptions};
 use shapecast::phantom::{Phantom, Shape};
 use shapecast::volume::Volume;
 

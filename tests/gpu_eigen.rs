@@ -9,6 +9,8 @@ mod gpu_common;
 
 use eigen_common::{Rng, hard_matrix, relative_error, sorted_by_magnitude};
 use gpu_common::*;
+use shapecast::compute::eigen_features::{EigenFeatures, TensorOutput};
+use shapecast::compute::hessian::{Hessian, HessianKernels};
 use shapecast::cpu::Grid;
 use shapecast::cpu::Preset;
 use shapecast::cpu::eigen::{eigenvalues_jacobi, eigenvalues_sorted, frobenius};
@@ -16,8 +18,6 @@ use shapecast::cpu::features::{hessian_eigen_multiscale, sym_at};
 use shapecast::cpu::hessian_volume;
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::eigen_features::{EigenFeatures, TensorOutput};
-use shapecast::gpu::hessian::{Hessian, HessianKernels};
 use shapecast::gpu::kernel::SlabGrid;
 
 /// Eigenvalues (sorted by magnitude, as eigen.wgsl returns them) of the f32 matrices

@@ -6,9 +6,9 @@
 mod gpu_common;
 
 use gpu_common::*;
+use shapecast::compute::gaussian::{Gaussian, SeparableKernel};
 use shapecast::cpu::gaussian::{GaussianOrder, derivative_kernel, separable};
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::gaussian::{Gaussian, SeparableKernel};
 
 const O: [GaussianOrder; 3] = [
     GaussianOrder::Smooth,
@@ -71,8 +71,8 @@ fn gaussian_passes_match_cpu() {
 /// uniform array (radius > 127), which fall back to one output per invocation.
 #[test]
 fn gaussian_multi_order_and_fallback_match_cpu() {
+    use shapecast::compute::gaussian::{AxisTapSet, MAX_TAPS};
     use shapecast::cpu::gaussian::convolve_axis;
-    use shapecast::gpu::gaussian::{AxisTapSet, MAX_TAPS};
     let Some(ctx) = test_context() else { return };
     let gauss = Gaussian::new(&ctx).expect("shader");
     // Relative to the output's range (as gaussian_passes_match_cpu), or for nearly constant
@@ -150,6 +150,10 @@ fn gaussian_multi_order_and_fallback_match_cpu() {
     );
 }
 
+use shapecast::compute::eigen_features::{
+    EigenFeatures, Mapping, TensorOutput, frangi_c_from_norm_bits, norm_buffer,
+};
+use shapecast::compute::hessian::{Hessian, HessianKernels};
 use shapecast::cpu::eigen::{eigenvalues_sorted, frobenius};
 use shapecast::cpu::features::{
     FeatureMap, HessianMethod, frangi_default_c, hessian_eigen_multiscale,
@@ -157,10 +161,6 @@ use shapecast::cpu::features::{
 };
 use shapecast::cpu::hessian_volume;
 use shapecast::gpu::GpuContext;
-use shapecast::gpu::eigen_features::{
-    EigenFeatures, Mapping, TensorOutput, frangi_c_from_norm_bits, norm_buffer,
-};
-use shapecast::gpu::hessian::{Hessian, HessianKernels};
 use shapecast::gpu::kernel::SlabGrid;
 
 /// The six normalised Hessian component buffers of `values` on the GPU.
@@ -672,7 +672,7 @@ fn slab_with_halo_matches_whole_volume() {
     let ef = EigenFeatures::new(&ctx).expect("shader");
     let (z0, nz) = (10usize, 3usize);
     for sigma in [0.7, 1.0] {
-        let halo = shapecast::gpu::hessian::halo_slices(sigma, grid.spacing_mm[2]) as usize;
+        let halo = shapecast::compute::hessian::halo_slices(sigma, grid.spacing_mm[2]) as usize;
         let kernels = HessianKernels::new(&ctx, sigma, grid.spacing_mm, true);
         assert_eq!(kernels.halo_slices() as usize, halo);
         let (s0, s1) = (z0 - halo, z0 + nz + halo);
@@ -765,10 +765,10 @@ fn slab_with_halo_matches_whole_volume() {
 /// -l), against `structure_tensor_eigen` / `structure_tensor_features`.
 #[test]
 fn structure_tensor_matches_cpu() {
+    use shapecast::compute::gaussian::SeparableKernel;
+    use shapecast::compute::structure_tensor::StructureTensor;
     use shapecast::cpu::GradientVolume;
     use shapecast::cpu::structure_tensor::{structure_tensor_eigen, structure_tensor_features};
-    use shapecast::gpu::gaussian::SeparableKernel;
-    use shapecast::gpu::structure_tensor::StructureTensor;
     let Some(ctx) = test_context() else { return };
     let (grid, values) = phantom();
     let sg = slab_grid(&grid);

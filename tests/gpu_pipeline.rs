@@ -3,11 +3,11 @@
 //! that are not multiples of the workgroup, brick processing (several bricks, tiled in y and z)
 //! equal to one piece, and a 512-wide volume within WebGPU's default limits.
 
+use shapecast::compute::pipeline::{FeatureJob, FeatureResult, JobOptions};
 use shapecast::cpu::pipeline::{Method, Request, compute};
 use shapecast::cpu::{Grid, TransferFunction};
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::pipeline::{FeatureJob, FeatureResult, JobOptions};
 use shapecast::phantom::{Phantom, Shape};
 use shapecast::volume::Volume;
 
@@ -235,7 +235,7 @@ fn bricks_give_the_same_result_as_one_piece_and_fill_the_texture() {
     assert!(worst < 1e-5, "slabs differ from one piece by {worst:.2e}");
     // The texture holds what was exported (half floats) and the maxima are the components'.
     let comps = many.components.as_ref().expect("exported");
-    let texels = shapecast::gpu::render_volume::read_texture_blocking(&ctx, &many.texture)
+    let texels = shapecast::gpu::volume_texture::read_texture_blocking(&ctx, &many.texture)
         .expect("texture readback");
     for c in 0..3 {
         let max = comps[c].iter().copied().fold(0.0f32, f32::max);

@@ -3,14 +3,14 @@
 //! oblique volumes land where the camera projects them, slabs and MinIP do what they say.
 
 use glam::{DMat3, DQuat, DVec3};
-use shapecast::camera::{Camera, ViewPreset};
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::raycast::{
+use shapecast::gpu::volume_texture::{FeatureTexture, RenderVolume};
+use shapecast::render::camera::{Camera, ViewPreset};
+use shapecast::render::raycast::{
     Channel, ChannelDisplay, Projection, RaycastTarget, Raycaster, RenderSettings, Scene, Slab,
     TwinScene, VolumeGeometry, cpu_twin, params,
 };
-use shapecast::gpu::render_volume::{FeatureTexture, RenderVolume};
 use shapecast::volume::Volume;
 
 /// A small LCG: test data without a dependency.

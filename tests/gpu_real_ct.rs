@@ -4,11 +4,11 @@
 
 mod common;
 
+use shapecast::compute::pipeline::{FeatureJob, JobOptions};
 use shapecast::cpu::Grid;
 use shapecast::cpu::pipeline::{Method, Request, compute};
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::pipeline::{FeatureJob, JobOptions};
 use shapecast::volume::Volume;
 
 /// A crop of at most `size` voxels per axis around the centre of a CT of ../shared/data, in HU,

@@ -6,10 +6,10 @@
 mod gpu_common;
 
 use gpu_common::*;
+use shapecast::compute::resample::{Resample, ResampleGeometry};
 use shapecast::cpu::Grid;
 use shapecast::cpu::resample::{refine_linear, refined_grid, subsample};
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::resample::{Resample, ResampleGeometry};
 
 const FACTORS: [usize; 3] = [1, 2, 3];
 

@@ -2,7 +2,7 @@
 //! volume too large for the device is refused with a message naming its size.
 
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::render_volume::check_dims;
+use shapecast::gpu::volume_texture::check_dims;
 
 #[test]
 fn context_uses_adapter_limits() {

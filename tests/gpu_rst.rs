@@ -9,16 +9,16 @@
 //! looser bounds ([`filtered_bounds`]). Volumes are small (the CPU twin takes ~50-200 us per
 //! voxel): 21 x 19 x 15 voxels of 0.6 x 0.6 x 0.9 mm, R = 6 mm (3 mm for the halo test).
 
+use shapecast::compute::gradient::{DispatchError, Gradient, GradientBuffers, packed_texture};
+use shapecast::compute::rst::{Rst, RstDispatch, RstInputs, RstOptions, RstOutput, RstRays};
 use shapecast::cpu::rst::opacity_length_mm;
 use shapecast::cpu::{
     self, FeatureMap, GradientVolume, Grid, OpacityRule, RstParams, Sym3, TransferFunction,
 };
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::gradient::{DispatchError, Gradient, GradientBuffers, packed_texture};
 use shapecast::gpu::kernel::{SlabGrid, f32_buffer, f32_buffer_init};
 use shapecast::gpu::readback::{read_bytes_blocking, read_f32_blocking};
-use shapecast::gpu::rst::{Rst, RstDispatch, RstInputs, RstOptions, RstOutput, RstRays};
 use shapecast::phantom::{BACKGROUND_HU, CONTRAST_HU, Phantom, Shape};
 
 const SPACING: [f64; 3] = [0.6, 0.6, 0.9];

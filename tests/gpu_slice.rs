@@ -2,9 +2,9 @@
 //! texel probe against the values uploaded.
 
 use shapecast::cpu::Components3;
-use shapecast::gpu::probe::TexelProbe;
-use shapecast::gpu::render_volume::{FeatureTexture, RenderVolume};
-use shapecast::gpu::slice::{
+use shapecast::gpu::volume_texture::{FeatureTexture, RenderVolume};
+use shapecast::render::probe::TexelProbe;
+use shapecast::render::slice::{
     Overlay, SliceError, SlicePlane, SliceRenderer, SliceRequest, cpu_twin, read_image_blocking,
 };
 use shapecast::volume::Volume;

@@ -3,14 +3,14 @@
 //! computed [`FeatureTexture`]s keyed by method and parameters (switching modes never recomputes
 //! what exists), and the one running [`FeatureJob`], stepped once per frame and cancellable.
 
+use crate::compute::pipeline::{FeatureJob, JobOptions, JobState};
 use crate::cpu::features::FeatureMap;
 use crate::cpu::pipeline::{Method, Request};
 use crate::cpu::rays::RAY_COUNTS;
 use crate::cpu::rst::DEFAULT_STEP_MM;
 use crate::cpu::tf::{Preset, TransferFunction};
 use crate::gpu::GpuContext;
-use crate::gpu::pipeline::{FeatureJob, JobOptions, JobState};
-use crate::gpu::render_volume::FeatureTexture;
+use crate::gpu::volume_texture::FeatureTexture;
 use crate::volume::Volume;
 use std::sync::Arc;
 

@@ -1,5 +1,5 @@
 //! The shape-encoding MIP viewport: an egui widget that owns the camera and the render settings,
-//! draws the GPU ray caster's image ([`crate::gpu::raycast`]) and turns mouse input into camera
+//! draws the GPU ray caster's image ([`crate::render::raycast`]) and turns mouse input into camera
 //! moves and picks. It re-renders only when something that changes the picture changed (camera,
 //! settings, size, the textures), so an idle viewer costs nothing.
 //!
@@ -25,13 +25,13 @@
 
 use glam::{DVec2, DVec3};
 
-use crate::camera::{Camera, ViewPreset};
 use crate::gpu::GpuContext;
-use crate::gpu::raycast::{
+use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
+use crate::render::camera::{Camera, ViewPreset};
+use crate::render::raycast::{
     Bricks, CHANNEL_COLOURS, PendingPick, Pick, Projection, RaycastTarget, Raycaster,
     RenderSettings, Scene, Slab,
 };
-use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
 use crate::volume::orientation_label;
 
 /// What the viewport shows: the intensity and the feature sets computed so far, by name
@@ -184,7 +184,7 @@ impl MipView {
         }
         let u = f64::from((pos.x - rect.left()) / rect.width());
         let v = f64::from((pos.y - rect.top()) / rect.height());
-        crate::gpu::raycast::pixel_of_uv(DVec2::new(u, v), target.size)
+        crate::render::raycast::pixel_of_uv(DVec2::new(u, v), target.size)
     }
 
     /// The feature texture of the current mode, if the scene has it.

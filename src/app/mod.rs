@@ -19,13 +19,13 @@ pub mod window_level;
 
 use std::sync::Arc;
 
-use crate::gpu::render_volume::FeatureTexture;
+use crate::gpu::volume_texture::FeatureTexture;
 
 use crate::cpu::pipeline::Request;
 use crate::cpu::tf::Preset;
 use crate::gpu::GpuContext;
-use crate::gpu::render_volume::RenderVolume;
-use crate::gpu::slice::{Overlay, SliceRenderer};
+use crate::gpu::volume_texture::RenderVolume;
+use crate::render::slice::{Overlay, SliceRenderer};
 use crate::status::{
     AdapterStatus, AppStatus, CrosshairStatus, FeatureStatus, Phase, VolumeStatus,
 };
@@ -257,7 +257,7 @@ impl ShapecastApp {
         match &gpu {
             Some(g) => {
                 #[cfg(target_arch = "wasm32")]
-                let name = crate::web::browser_adapter_name()
+                let name = crate::gpu::context::browser_adapter_name()
                     .unwrap_or_else(|| g.adapter_info.name.clone());
                 #[cfg(not(target_arch = "wasm32"))]
                 let name = g.adapter_info.name.clone();

@@ -223,7 +223,7 @@ impl ShapecastApp {
         egui::CollapsingHeader::new("Display")
             .default_open(true)
             .show(ui, |ui| {
-                let rgb = crate::gpu::slice::FEATURE_RGB;
+                let rgb = crate::render::slice::FEATURE_RGB;
                 for c in 0..3 {
                     ui.horizontal(|ui| {
                         let col = egui::Color32::from_rgb(

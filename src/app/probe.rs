@@ -1,10 +1,10 @@
 //! Feature values for the status bar: the texels under the mouse and at the crosshair, read
 //! back from the displayed method's feature texture with a small asynchronous readback
-//! (`gpu::probe`), one in flight at a time, never waited for.
+//! (`render::probe`), one in flight at a time, never waited for.
 
 use crate::gpu::GpuContext;
-use crate::gpu::probe::TexelProbe;
-use crate::gpu::render_volume::FeatureTexture;
+use crate::gpu::volume_texture::FeatureTexture;
+use crate::render::probe::TexelProbe;
 
 #[derive(Clone, Debug, PartialEq)]
 struct Key {

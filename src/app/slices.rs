@@ -1,4 +1,4 @@
-//! Linked slice panes (axial, coronal, sagittal), rendered on the GPU (`gpu::slice`) from the
+//! Linked slice panes (axial, coronal, sagittal), rendered on the GPU (`render::slice`) from the
 //! intensity texture and, optionally, the displayed method's features. Patient orientation: the
 //! voxel axis closest to each patient axis is chosen per pane, and flipped so that the patient's
 //! left is on the right of the axial and coronal panes, anterior up in the axial pane, superior
@@ -13,8 +13,8 @@
 use eframe::egui_wgpu::RenderState;
 
 use crate::gpu::GpuContext;
-use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
-use crate::gpu::slice::{Overlay, SliceImage, SlicePlane, SliceRenderer, SliceRequest};
+use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
+use crate::render::slice::{Overlay, SliceImage, SlicePlane, SliceRenderer, SliceRequest};
 use crate::volume::{Volume, orientation_label};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

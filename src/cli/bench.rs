@@ -7,17 +7,17 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 
+use crate::compute::eigen_features::{EigenFeatures, Mapping, TensorOutput};
+use crate::compute::gaussian::{Gaussian, SeparableKernel};
+use crate::compute::gradient::{Gradient, GradientBuffers};
+use crate::compute::hessian::{Hessian, HessianKernels};
+use crate::compute::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
 use crate::cpu::features::{FeatureMap, HessianMethod, hessian_features_multiscale};
 use crate::cpu::rst::{GradientVolume, RstParams, rst_tensor_at};
 use crate::cpu::{Grid, Preset, gaussian_smooth, rays};
 use crate::gpu::GpuContext;
-use crate::gpu::eigen_features::{EigenFeatures, Mapping, TensorOutput};
-use crate::gpu::gaussian::{Gaussian, SeparableKernel};
-use crate::gpu::gradient::{Gradient, GradientBuffers};
-use crate::gpu::hessian::{Hessian, HessianKernels};
 use crate::gpu::kernel::{SlabGrid, f32_buffer};
 use crate::gpu::readback::read_f32_blocking;
-use crate::gpu::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
 use crate::phantom::{Phantom, Shape};
 use crate::volume::Volume;
 
@@ -117,7 +117,7 @@ fn time_job(
     req: &crate::cpu::pipeline::Request,
     webgpu_limits: bool,
 ) -> anyhow::Result<(f64, usize, f64)> {
-    use crate::gpu::pipeline::{FeatureJob, JobOptions};
+    use crate::compute::pipeline::{FeatureJob, JobOptions};
     let options = JobOptions {
         limits: webgpu_limits.then(wgpu::Limits::default),
         ..JobOptions::default()
@@ -420,7 +420,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             gz: &gbufs[2],
         };
         // The RST reads (I, g) packed in one texture; the structure tensor reads g as buffers.
-        let packed = crate::gpu::gradient::packed_texture(&ctx, &slab, "bench (I, g)")?;
+        let packed = crate::compute::gradient::packed_texture(&ctx, &slab, "bench (I, g)")?;
         let g = timed(&ctx, |e| {
             gaussian.record_separable(&ctx, e, &slab, &kernel, &input, &tmp, &smooth_out)?;
             gradient.record(&ctx, e, &slab, &smooth_out, &gb)?;

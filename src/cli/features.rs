@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 
+use crate::compute::pipeline::{FeatureJob, JobOptions};
 use crate::cpu::pipeline::{self, Method, Request};
 use crate::cpu::{FeatureMap, Grid, OpacityRule, Preset, TransferFunction};
 use crate::gpu::GpuContext;
-use crate::gpu::pipeline::{FeatureJob, JobOptions};
 use crate::io::{self, InputFile};
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

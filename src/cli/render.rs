@@ -8,17 +8,17 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use glam::DVec3;
 
-use crate::camera::{Camera, ViewPreset};
+use crate::compute::pipeline::{FeatureJob, JobState};
 use crate::cpu::Preset;
 use crate::cpu::pipeline::{Method, Request};
 use crate::gpu::GpuContext;
-use crate::gpu::pipeline::{FeatureJob, JobState};
-use crate::gpu::raycast::{
-    self, Pick, Projection, RaycastTarget, Raycaster, RenderSettings, Scene, Slab,
-};
-use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
+use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::io;
 use crate::phantom::{self, Phantom};
+use crate::render::camera::{Camera, ViewPreset};
+use crate::render::raycast::{
+    self, Pick, Projection, RaycastTarget, Raycaster, RenderSettings, Scene, Slab,
+};
 use crate::volume::{Modality, Volume};
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -56,7 +56,7 @@ pub struct RenderArgs {
     pub input: String,
     #[arg(long, value_enum, default_value = "rst")]
     pub method: RenderMethod,
-    /// Preset view (radiological convention; see src/camera.rs).
+    /// Preset view (radiological convention; see src/render/camera.rs).
     #[arg(long, value_enum, default_value = "anterior")]
     pub view: ViewArg,
     /// Turn the view: positive yaw moves the viewer to the screen's right, degrees.
@@ -202,7 +202,7 @@ pub fn compute_features(
     request: &Request,
     webgpu_limits: bool,
 ) -> anyhow::Result<FeatureTexture> {
-    let options = crate::gpu::pipeline::JobOptions {
+    let options = crate::compute::pipeline::JobOptions {
         limits: webgpu_limits.then(wgpu::Limits::default),
         ..Default::default()
     };

@@ -88,7 +88,7 @@ pub fn derivative_kernel(sigma_mm: f64, spacing_mm: f64, order: GaussianOrder) -
 }
 
 /// The sum of a kernel's taps as the convolutions use it ([`convolve_axis`], and the GPU's
-/// gaussian.wgsl through `crate::gpu::gaussian`). Derivative kernels (orders 1 and 2, central
+/// gaussian.wgsl through `crate::compute::gaussian`). Derivative kernels (orders 1 and 2, central
 /// differences) sum to 0 by construction, but their f64 taps only to ~1e-17 of their size;
 /// that is taken as exactly 0, so that a constant gives exactly zero derivatives. Otherwise
 /// ~1e-17 of the value survives as "curvature", and a map that is free of scale turns it into

@@ -98,7 +98,7 @@ pub enum RequestError {
 }
 
 /// A request checked once and resolved against a grid: what both the CPU pipeline and the GPU
-/// job ([`crate::gpu::pipeline::FeatureJob`]) compute with.
+/// job ([`crate::compute::pipeline::FeatureJob`]) compute with.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Resolved {
     /// Scales (Hessian, structure tensor), mm.

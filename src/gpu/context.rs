@@ -250,3 +250,23 @@ pub fn test_context() -> Option<GpuContext> {
         }
     }
 }
+
+#[cfg(target_arch = "wasm32")]
+thread_local! {
+    static BROWSER_ADAPTER: std::cell::RefCell<Option<String>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// Web only: the adapter as the browser describes it (vendor, architecture, description), which
+/// the page's entry (`crate::web`) asks `navigator.gpu` for before the app starts; wgpu's
+/// `AdapterInfo` on the web carries only the often empty description.
+#[cfg(target_arch = "wasm32")]
+pub fn set_browser_adapter_name(name: String) {
+    BROWSER_ADAPTER.with(|a| *a.borrow_mut() = Some(name));
+}
+
+/// Web only: what [`set_browser_adapter_name`] stored.
+#[cfg(target_arch = "wasm32")]
+pub fn browser_adapter_name() -> Option<String> {
+    BROWSER_ADAPTER.with(|a| a.borrow().clone())
+}

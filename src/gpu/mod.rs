@@ -1,25 +1,14 @@
-//! Everything that touches wgpu: the shared context, the shader sources, and one module per
-//! kernel that owns its pipeline and the bytemuck structs mirroring its WGSL structs.
+//! The device: the shared GPU context and its limits, the shader sources, the helpers every
+//! kernel module uses (storage buffers, uniform structs, size checks, bind groups, dispatch),
+//! the one readback, and the 3D volume textures that feature compute writes and rendering
+//! reads (the hand-off between `crate::compute` and `crate::render`). Kernels live in
+//! `crate::compute` (features) and `crate::render` (projections and slices).
 
 pub mod checks;
 pub mod context;
-pub mod eigen_features;
-pub mod gaussian;
-pub mod gradient;
-pub mod hessian;
 pub mod kernel;
-pub mod noise;
-pub mod pack;
-pub mod pipeline;
-pub mod probe;
-pub mod raycast;
 pub mod readback;
-pub mod render_volume;
-pub mod resample;
-pub mod rst;
 pub mod shaders;
-pub mod slab;
-pub mod slice;
-pub mod structure_tensor;
+pub mod volume_texture;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};

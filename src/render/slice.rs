@@ -10,12 +10,12 @@
 //! slice `index` of the `fixed` axis (no flips; the pane flips for patient orientation).
 
 use crate::cpu::Components3;
-use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
+use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::gpu::{GpuContext, shaders};
 
-/// Colours of vesselness, airwayness and blobness: the MIP's (`gpu::raycast::CHANNEL_COLOURS`;
+/// Colours of vesselness, airwayness and blobness: the MIP's (`render::raycast::CHANNEL_COLOURS`;
 /// shaders/slice.wgsl and raycast.wgsl repeat them as WGSL constants).
-pub const FEATURE_RGB: [[f32; 3]; 3] = crate::gpu::raycast::CHANNEL_COLOURS;
+pub const FEATURE_RGB: [[f32; 3]; 3] = crate::render::raycast::CHANNEL_COLOURS;
 
 /// Mirrors `Params` in slice.wgsl (keep in sync).
 #[repr(C)]
@@ -124,7 +124,7 @@ impl SliceRenderer {
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D3,
-            format: crate::gpu::render_volume::FEATURE_FORMAT,
+            format: crate::gpu::volume_texture::FEATURE_FORMAT,
             usage: wgpu::TextureUsages::TEXTURE_BINDING,
             view_formats: &[],
         });

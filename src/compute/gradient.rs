@@ -182,7 +182,7 @@ const _: () = assert!(std::mem::size_of::<Params>() == 32);
 /// The format of the packed (I, gx, gy, gz) texture.
 pub const PACKED_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
-/// A texture for [`Gradient::record_packed`] and [`crate::gpu::rst::Rst::record`]: 3D,
+/// A texture for [`Gradient::record_packed`] and [`crate::compute::rst::Rst::record`]: 3D,
 /// rgba32float, the slab's dims, usable as a storage texture (written) and a sampled texture
 /// (read with `textureLoad`, or with a linear sampler by the RST's hardware-filtered path where
 /// the device has FLOAT32_FILTERABLE), and as a copy source (readback in tests).

@@ -1,9 +1,9 @@
 //! Packing feature blocks into a method's feature texture (shaders/pack_features.wgsl): the last
 //! step of the slab pipeline, keeping the features on the GPU for rendering. The CPU twin is the
-//! half-float conversion of [`crate::gpu::render_volume::FeatureTexture::from_components`].
+//! half-float conversion of [`crate::gpu::volume_texture::FeatureTexture::from_components`].
 
 use crate::gpu::kernel::{SlabGrid, WORKGROUP, uniform_buffer};
-use crate::gpu::render_volume::FeatureTexture;
+use crate::gpu::volume_texture::FeatureTexture;
 use crate::gpu::{GpuContext, shaders};
 
 /// Mirrors `Params` in pack_features.wgsl.

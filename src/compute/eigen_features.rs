@@ -1,6 +1,6 @@
 //! Eigenvalues and feature maps of a symmetric tensor field on a slab (shaders/eigen_features.wgsl):
-//! six component buffers `[xx, yy, zz, xy, xz, yz]` in (the Hessian of [`crate::gpu::hessian`],
-//! the structure tensor of [`crate::gpu::structure_tensor`]), one component-major buffer out for
+//! six component buffers `[xx, yy, zz, xy, xz, yz]` in (the Hessian of [`crate::compute::hessian`],
+//! the structure tensor of [`crate::compute::structure_tensor`]), one component-major buffer out for
 //! the output slices `(out_z0, out_nz)`. Twins: `crate::cpu::features`,
 //! `crate::cpu::structure_tensor`.
 //!

@@ -33,10 +33,10 @@
 
 use glam::{DAffine3, DVec2, DVec3};
 
-use crate::camera::Camera;
 use crate::gpu::readback::{self, ReadbackError};
-use crate::gpu::render_volume::{FeatureTexture, RenderVolume};
+use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::gpu::{GpuContext, shaders};
+use crate::render::camera::Camera;
 
 /// Mirrors `Params` in raycast.wgsl (keep in sync).
 #[repr(C)]
@@ -761,7 +761,7 @@ impl Raycaster {
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D3,
-                format: crate::gpu::render_volume::FEATURE_FORMAT,
+                format: crate::gpu::volume_texture::FEATURE_FORMAT,
                 usage: wgpu::TextureUsages::TEXTURE_BINDING,
                 view_formats: &[],
             })

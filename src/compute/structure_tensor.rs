@@ -2,11 +2,11 @@
 //! components of g g^T from three gradient component buffers (the gradient kernel belongs to
 //! the RST module), each smoothed with a Gaussian of the neighbourhood scale rho (mm), into six
 //! buffers `[xx, yy, zz, xy, xz, yz]`. Its eigenvalues and features then come from
-//! [`crate::gpu::eigen_features`] with `TensorOutput::structure_tensor(map)` (the map of `-l`)
+//! [`crate::compute::eigen_features`] with `TensorOutput::structure_tensor(map)` (the map of `-l`)
 //! or `TensorOutput::Eigen`.
 
+use crate::compute::gaussian::{Gaussian, SeparableKernel};
 use crate::gpu::checks::{self, RecordError};
-use crate::gpu::gaussian::{Gaussian, SeparableKernel};
 use crate::gpu::kernel::{SlabGrid, WORKGROUP};
 use crate::gpu::{GpuContext, shaders};
 
@@ -28,7 +28,7 @@ const PAIRS: [(u32, u32); 6] = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
 /// `spacing_z_mm`), on top of the halo of the gradient it reads (sigma_g's kernel + 1 slice for
 /// the central difference, the gradient kernel's business).
 pub fn halo_slices(rho_mm: f64, spacing_z_mm: f64) -> u32 {
-    crate::gpu::gaussian::halo_slices(rho_mm, spacing_z_mm)
+    crate::compute::gaussian::halo_slices(rho_mm, spacing_z_mm)
 }
 
 /// Bytes per slab voxel of the structure tensor's buffers besides the gradient (3 x f32): six

@@ -9,7 +9,7 @@
 
 use crate::gpu::GpuContext;
 use crate::gpu::readback::ReadbackError;
-use crate::gpu::render_volume::FeatureTexture;
+use crate::gpu::volume_texture::FeatureTexture;
 
 /// Bytes of one `Rgba16Float` texel.
 const TEXEL_BYTES: u64 = 8;

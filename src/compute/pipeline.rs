@@ -11,7 +11,7 @@
 //! [`Request::resolve`]: thick axes refined by integer factors for the Hessian, the automatic
 //! transfer function from the noise of the whole volume, Frangi's c over the whole volume per
 //! scale, the multi-scale maximum, and results taken at the input voxels. Bricks (whole rows,
-//! tiled in y and z) come from [`crate::gpu::slab::plan`], sized from the device's binding
+//! tiled in y and z) come from [`crate::compute::slab::plan`], sized from the device's binding
 //! limit and a memory budget, with halos wide enough for the kernels and the rays; the RST
 //! casts rays from core voxels only.
 
@@ -19,24 +19,25 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use crate::compute::eigen_features::{EigenFeatures, Mapping, TensorOutput};
+use crate::compute::gaussian::{Gaussian, SeparableKernel};
+use crate::compute::gradient::{Gradient, GradientBuffers};
+use crate::compute::hessian::{Hessian, HessianKernels};
+use crate::compute::pack::PackBox;
+use crate::compute::resample::{Resample, ResampleGeometry};
+use crate::compute::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
+use crate::compute::slab::{Brick, BrickLimits, PlanError, plan};
+use crate::compute::structure_tensor::StructureTensor;
+use crate::compute::{noise, pack};
 use crate::cpu::features::FeatureMap;
 use crate::cpu::gaussian::kernel_radius_vox;
 use crate::cpu::pipeline::{Method, Request, RequestError, Resolved};
 use crate::cpu::tf::{NOISE_BAND_HU, TransferFunction, auto_transfer_function, median};
 use crate::cpu::{Components3, Grid};
-use crate::gpu::eigen_features::{EigenFeatures, Mapping, TensorOutput};
-use crate::gpu::gaussian::{Gaussian, SeparableKernel};
-use crate::gpu::gradient::{Gradient, GradientBuffers};
-use crate::gpu::hessian::{Hessian, HessianKernels};
 use crate::gpu::kernel::{SlabGrid, f32_buffer};
-use crate::gpu::pack::PackBox;
 use crate::gpu::readback::{PendingRead, ReadbackError};
-use crate::gpu::render_volume::{FeatureTexture, RenderVolumeError};
-use crate::gpu::resample::{Resample, ResampleGeometry};
-use crate::gpu::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
-use crate::gpu::slab::{Brick, BrickLimits, PlanError, plan};
-use crate::gpu::structure_tensor::StructureTensor;
-use crate::gpu::{GpuContext, noise, pack, shaders};
+use crate::gpu::volume_texture::{FeatureTexture, RenderVolumeError};
+use crate::gpu::{GpuContext, shaders};
 use crate::volume::Volume;
 
 /// Why a feature computation failed.
@@ -733,7 +734,7 @@ impl FeatureJob {
             .map_err(dispatch_err)?;
         if self.request.method == Method::Rst {
             if self.packed.as_ref().is_none_or(|(d, _)| *d != grid.dims) {
-                let tex = crate::gpu::gradient::packed_texture(ctx, grid, "slab (I, g)")
+                let tex = crate::compute::gradient::packed_texture(ctx, grid, "slab (I, g)")
                     .map_err(dispatch_err)?;
                 self.packed = Some((grid.dims, tex));
             }
@@ -1207,7 +1208,7 @@ impl Kernels {
             rst: if req.method == Method::Rst {
                 Some(Rst::with_options(
                     ctx,
-                    crate::gpu::rst::RstOptions {
+                    crate::compute::rst::RstOptions {
                         hardware_filtering: !exact_rst,
                         ..Default::default()
                     },
@@ -1300,7 +1301,7 @@ impl Buffers {
                 .then(|| f32_buffer(d, "RST block", 3 * plane_n * rst_slices as u64)),
             out_in: resampled.then(|| f32_buffer(d, "features on the input grid", 3 * out_n)),
             small: f32_buffer(d, "noise windows", noise_n),
-            norm: crate::gpu::eigen_features::norm_buffer(ctx),
+            norm: crate::compute::eigen_features::norm_buffer(ctx),
         }
     }
 }

@@ -5,7 +5,7 @@
 //! and steps computed here on the CPU with the twin's own functions, uploaded once); then
 //! [`Rst::record`] per dispatch into the caller's command encoder, over the output slices
 //! `out_z0 .. out_z0 + out_nz` of a slab whose smoothed intensity and gradient are packed as
-//! (I, gx, gy, gz) in one rgba32float 3D texture ([`crate::gpu::gradient::packed_texture`],
+//! (I, gx, gy, gz) in one rgba32float 3D texture ([`crate::compute::gradient::packed_texture`],
 //! written by [`Gradient::record_packed`] from the smoothed intensity).
 //!
 //! Why a texture and not four storage buffers: the kernel reads 8 corners x 4 values per ray
@@ -38,12 +38,12 @@
 //! first two). Memory: [`Rst::INPUT_BYTES_PER_VOXEL`] per slab voxel (the packed texture),
 //! [`RstOutput::bytes_per_voxel`] per output voxel.
 
-use crate::cpu::rst::{ALPHA_STOP, opacity_length_mm};
-use crate::cpu::{FeatureMap, OpacityRule, RstParams};
-use crate::gpu::gradient::{
+use crate::compute::gradient::{
     DispatchError, Gradient, check_packed, entry, record_pass, storage_binding, voxel_count,
     workgroups,
 };
+use crate::cpu::rst::{ALPHA_STOP, opacity_length_mm};
+use crate::cpu::{FeatureMap, OpacityRule, RstParams};
 use crate::gpu::kernel::{SlabGrid, uniform_buffer};
 use crate::gpu::{GpuContext, shaders};
 
@@ -293,7 +293,7 @@ impl RstRays {
 pub struct RstInputs<'a> {
     /// Smoothed intensity I and gradient g (HU/mm) of the slab as (I, gx, gy, gz): a 3D
     /// rgba32float texture of the slab's dims with TEXTURE_BINDING usage
-    /// ([`crate::gpu::gradient::packed_texture`], filled by [`Gradient::record_packed`]).
+    /// ([`crate::compute::gradient::packed_texture`], filled by [`Gradient::record_packed`]).
     pub volume: &'a wgpu::Texture,
     pub rays: &'a RstRays,
 }

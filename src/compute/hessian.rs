@@ -8,8 +8,8 @@
 //! input). The sigma^2 normalisation is folded into the x taps. Intermediate results are parked
 //! in output buffers not yet written, so the working set is one temporary plus the six outputs.
 
+use crate::compute::gaussian::{AxisTapSet, Gaussian};
 use crate::gpu::checks::RecordError;
-use crate::gpu::gaussian::{AxisTapSet, Gaussian};
 use crate::gpu::kernel::SlabGrid;
 use crate::gpu::{GpuContext, shaders};
 
@@ -49,7 +49,7 @@ impl HessianKernels {
 /// Slices of halo the Hessian at `sigma_mm` needs on each side of a slab with z spacing
 /// `spacing_z_mm` (the z kernel radius, 3 sigma + 1 voxel).
 pub fn halo_slices(sigma_mm: f64, spacing_z_mm: f64) -> u32 {
-    crate::gpu::gaussian::halo_slices(sigma_mm, spacing_z_mm)
+    crate::compute::gaussian::halo_slices(sigma_mm, spacing_z_mm)
 }
 
 /// The largest halo over several scales (multi-scale features run every sigma on one slab).
