@@ -1,0 +1,198 @@
+//! Empty-space skipping: brick extrema tables, the host side of raycast_bricks.wgsl (one
+//! compute pass per texture) and its CPU twin [`cpu_bricks`].
+
+use crate::gpu::GpuContext;
+use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
+
+#[cfg(not(target_arch = "wasm32"))]
+use super::RaycastError;
+use super::settings::BIG;
+#[cfg(not(target_arch = "wasm32"))]
+use super::target::{decode_texel, read_buffer_blocking};
+use super::{Raycaster, entry};
+
+/// Edge of the bricks of the empty-space skipping, voxels (raycast_bricks.wgsl).
+pub const BRICK: u32 = 8;
+
+/// Brick counts per axis for a volume of `dims` (brick b covers positions `[8b, 8b + 8]`).
+pub fn brick_dims(dims: [u32; 3]) -> [u32; 3] {
+    dims.map(|n| n.saturating_sub(1).div_ceil(BRICK).max(1))
+}
+
+/// Brick extrema of one texture (the volume's intensity, or one method's features), for
+/// empty-space skipping: made once per texture with [`Raycaster::intensity_bricks`] or
+/// [`Raycaster::feature_bricks`], used every frame. Holds a handle of its source, so it is only
+/// ever used with that texture.
+pub struct Bricks {
+    pub dims: [u32; 3],
+    pub texture: wgpu::Texture,
+    pub view: wgpu::TextureView,
+    source: wgpu::Texture,
+}
+
+impl Bricks {
+    /// Native only: the brick values (tests), brick x fastest.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn read_blocking(&self, ctx: &GpuContext) -> Result<Vec<[f32; 4]>, RaycastError> {
+        let [w, h, d] = self.dims;
+        let row = w * 8;
+        let padded =
+            row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("bricks copy"),
+            size: u64::from(padded) * u64::from(h) * u64::from(d),
+            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("bricks copy"),
+            });
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(padded),
+                    rows_per_image: Some(h),
+                },
+            },
+            wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: d,
+            },
+        );
+        ctx.queue.submit([encoder.finish()]);
+        let bytes = read_buffer_blocking(ctx, &buffer, buffer.size())?;
+        Ok(bytes
+            .chunks(padded as usize)
+            .flat_map(|r| r[..row as usize].chunks_exact(8).map(decode_texel))
+            .collect())
+    }
+
+    /// Whether these are the bricks of `texture`.
+    pub fn of(&self, texture: &wgpu::Texture) -> bool {
+        self.source == *texture
+    }
+}
+
+impl Raycaster {
+    /// The brick extrema of the volume's intensity (one small compute pass).
+    pub fn intensity_bricks(&self, ctx: &GpuContext, volume: &RenderVolume) -> Bricks {
+        self.bricks(
+            ctx,
+            &self.bricks_intensity,
+            &volume.intensity,
+            &volume.intensity_view,
+            volume.dims,
+        )
+    }
+
+    /// The brick extrema of one method's features.
+    pub fn feature_bricks(&self, ctx: &GpuContext, features: &FeatureTexture) -> Bricks {
+        self.bricks(
+            ctx,
+            &self.bricks_features,
+            &features.texture,
+            &features.view,
+            features.dims,
+        )
+    }
+
+    fn bricks(
+        &self,
+        ctx: &GpuContext,
+        pipeline: &wgpu::ComputePipeline,
+        source: &wgpu::Texture,
+        source_view: &wgpu::TextureView,
+        dims: [u32; 3],
+    ) -> Bricks {
+        let nb = brick_dims(dims);
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("raycast bricks"),
+            size: wgpu::Extent3d {
+                width: nb[0],
+                height: nb[1],
+                depth_or_array_layers: nb[2],
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::Rgba16Float,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("raycast bricks"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                entry(0, wgpu::BindingResource::TextureView(source_view)),
+                entry(1, wgpu::BindingResource::TextureView(&view)),
+            ],
+        });
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("raycast bricks"),
+            });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("raycast bricks"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(nb[0].div_ceil(4), nb[1].div_ceil(4), nb[2].div_ceil(4));
+        }
+        ctx.queue.submit([encoder.finish()]);
+        Bricks {
+            dims: nb,
+            texture,
+            view,
+            source: source.clone(),
+        }
+    }
+}
+
+/// The CPU twin of raycast_bricks.wgsl. For each brick: `[max c0, min c0, max c1, max c2]` of
+/// the three values `get` gives per voxel (intensity: all three the same).
+pub fn cpu_bricks<T>(dims: [u32; 3], values: &[T], get: impl Fn(&T) -> [f32; 3]) -> Vec<[f32; 4]> {
+    let nb = brick_dims(dims);
+    let d = dims.map(|x| x as usize);
+    let mut out = Vec::with_capacity(nb.iter().map(|&x| x as usize).product());
+    for bz in 0..nb[2] {
+        for by in 0..nb[1] {
+            for bx in 0..nb[0] {
+                let b = [bx, by, bz];
+                let lo: [usize; 3] = std::array::from_fn(|a| (b[a] * BRICK) as usize);
+                let hi: [usize; 3] =
+                    std::array::from_fn(|a| (lo[a] + BRICK as usize).min(d[a].saturating_sub(1)));
+                let mut e = [-BIG, BIG, -BIG, -BIG];
+                for k in lo[2]..=hi[2] {
+                    for j in lo[1]..=hi[1] {
+                        for i in lo[0]..=hi[0] {
+                            let v = get(&values[i + d[0] * (j + d[1] * k)]);
+                            e[0] = e[0].max(v[0]);
+                            e[1] = e[1].min(v[0]);
+                            e[2] = e[2].max(v[1]);
+                            e[3] = e[3].max(v[2]);
+                        }
+                    }
+                }
+                out.push(e);
+            }
+        }
+    }
+    out
+}

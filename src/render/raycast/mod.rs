@@ -1,0 +1,259 @@
+//! The shape-encoding MIP ray caster (shaders/raycast.wgsl): the picture of the MIP viewport and
+//! of `shapecast render`, and the depth per pixel that click-to-navigate reads back.
+//!
+//! - Input: the intensity texture of a [`RenderVolume`] and, optionally, one method's
+//!   [`FeatureTexture`] `(V, A, B, 0)`. Nothing is recomputed: a frame only projects.
+//! - Geometry: an orthographic [`Camera`] in world LPS mm. The world rays are turned into voxel
+//!   space through the volume's `world_from_voxel`, so anisotropic and oblique volumes render at
+//!   their true shape. Samples lie at `t = k * step` (k integer, `t` the depth in mm from the
+//!   plane through the camera's centre), `step = step_fraction * smallest spacing` (half a voxel
+//!   by default), inside the box of the voxels (`[-0.5, n - 0.5]` in voxel coordinates) and the
+//!   slab, if any. Aligning the samples to a grid in `t` keeps the picture still when the slab
+//!   moves.
+//! - Sampling: trilinear, computed in the shader from `textureLoad` of the 8 neighbours
+//!   (positions clamped to `[0, n - 1]`, i.e. borders replicated), not by the sampler: the CPU
+//!   twin ([`cpu_twin`]) does the same arithmetic in f32 on the same half-float values, so images
+//!   agree to a level of 8 bits and picks to the sample.
+//! - Colour (paper section 5.2: every feature projected on its own, then composited): grey =
+//!   windowed intensity MIP (or MinIP); over it, in this order, red = vesselness, blue =
+//!   airwayness, yellow = blobness, each with opacity `clamp(F_max * gain / feature maximum, 0,
+//!   1)`. Blobness comes last, so a blob (which by eq. 1 has vesselness too) is yellow to orange,
+//!   a vessel red.
+//! - Pick rule: each pixel stores the depth of the extreme of its *dominant channel*, the channel
+//!   with the largest share of the final colour: yellow `a_B`, blue `a_A (1 - a_B)`, red
+//!   `a_V (1 - a_A)(1 - a_B)`, grey `vis (1 - a_V)(1 - a_A)(1 - a_B)` with `vis` the grey level
+//!   (MIP) or its complement (MinIP); ties to the earlier channel (intensity first). On ties
+//!   along the ray the sample nearest the viewer wins. [`RaycastTarget::pick`] turns that depth
+//!   back into a world point and a voxel.
+//! - Empty-space skipping: with [`Bricks`] (extrema of 8^3-voxel bricks, one compute pass per
+//!   texture) in the [`Scene`], a ray jumps over a brick when neither its intensity nor any shown
+//!   feature can exceed the running extremes, and skips the loads of one kind when only that kind
+//!   cannot. Updates need a strictly larger value, so the picture and the picks are unchanged
+//!   (tested against the unskipped GPU frame and the twin, which skips the same way).
+
+//!
+//! One file per concern: `settings` (the frame's settings and the uniforms mirroring
+//! raycast.wgsl), `bricks` (the brick tables of the skipping), `target` (the render target, its
+//! readbacks and the picks), `twin` (the CPU twin of the pass); here, the pass itself.
+
+mod bricks;
+mod settings;
+mod target;
+mod twin;
+
+pub use bricks::{BRICK, Bricks, brick_dims, cpu_bricks};
+pub use settings::{
+    CHANNEL_COLOURS, ChannelDisplay, Params, Projection, RenderSettings, Slab, VolumeGeometry,
+    params,
+};
+#[cfg(not(target_arch = "wasm32"))]
+pub use target::read_feature_texel_blocking;
+pub use target::{
+    Channel, PendingPick, Pick, RaycastTarget, RenderedView, pixel_of_uv, read_feature_texel,
+};
+pub use twin::{TwinImage, TwinScene, cpu_twin};
+
+use crate::gpu::readback::ReadbackError;
+use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
+use crate::gpu::{GpuContext, shaders};
+use crate::render::camera::Camera;
+
+/// Why a frame or a pick failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RaycastError {
+    #[error(transparent)]
+    Shader(#[from] shaders::ShaderSourceError),
+    #[error(transparent)]
+    Readback(#[from] ReadbackError),
+    #[error("image size {0}x{1} is empty or larger than this GPU's 2D textures ({2} per side)")]
+    Size(u32, u32, u32),
+    #[error("the feature texture is {got:?} voxels, the volume {want:?}")]
+    FeatureDims { got: [u32; 3], want: [u32; 3] },
+}
+
+/// The ray caster's pipeline and the stand-in for "no features".
+pub struct Raycaster {
+    pipeline: wgpu::ComputePipeline,
+    no_features: wgpu::TextureView,
+    linear_clamp: wgpu::Sampler,
+    bricks_intensity: wgpu::ComputePipeline,
+    bricks_features: wgpu::ComputePipeline,
+}
+
+/// What a frame projects: the volume, optionally one method's features, and optionally their
+/// bricks (skipping is on when the bricks of every texture used are given).
+#[derive(Clone, Copy)]
+pub struct Scene<'a> {
+    pub volume: &'a RenderVolume,
+    pub features: Option<&'a FeatureTexture>,
+    pub bricks: Option<&'a Bricks>,
+    pub feature_bricks: Option<&'a Bricks>,
+}
+
+impl<'a> Scene<'a> {
+    /// A scene without bricks (no skipping).
+    pub fn new(volume: &'a RenderVolume, features: Option<&'a FeatureTexture>) -> Self {
+        Self {
+            volume,
+            features,
+            bricks: None,
+            feature_bricks: None,
+        }
+    }
+
+    /// Whether the bricks given belong to the textures used, so that skipping is exact.
+    pub fn skipping(&self) -> bool {
+        let volume_ok = self.bricks.is_some_and(|b| b.of(&self.volume.intensity));
+        let features_ok = match self.features {
+            None => true,
+            Some(f) => self.feature_bricks.is_some_and(|b| b.of(&f.texture)),
+        };
+        volume_ok && features_ok
+    }
+}
+
+impl Raycaster {
+    pub fn new(ctx: &GpuContext) -> Result<Self, RaycastError> {
+        let module = shaders::create_module(&ctx.device, "raycast.wgsl")?;
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("raycast"),
+                layout: None,
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        let no_features = ctx
+            .device
+            .create_texture(&wgpu::TextureDescriptor {
+                label: Some("raycast no features"),
+                size: wgpu::Extent3d {
+                    width: 1,
+                    height: 1,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format: crate::gpu::volume_texture::FEATURE_FORMAT,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        let linear_clamp = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("raycast linear clamp"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Nearest,
+            ..Default::default()
+        });
+        let bricks_module = shaders::create_module(&ctx.device, "raycast_bricks.wgsl")?;
+        let make = |entry: &str| {
+            ctx.device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: None,
+                    module: &bricks_module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+        };
+        Ok(Self {
+            pipeline,
+            no_features,
+            linear_clamp,
+            bricks_intensity: make("bricks_intensity"),
+            bricks_features: make("bricks_features"),
+        })
+    }
+
+    /// Renders one frame into `target` (submitted; not waited for). Bricks in the scene turn
+    /// on empty-space skipping, which does not change the picture or the picks.
+    pub fn render(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene<'_>,
+        camera: &Camera,
+        settings: &RenderSettings,
+        target: &mut RaycastTarget,
+    ) -> Result<(), RaycastError> {
+        let (volume, features) = (scene.volume, scene.features);
+        if let Some(f) = features
+            && f.dims != volume.dims
+        {
+            return Err(RaycastError::FeatureDims {
+                got: f.dims,
+                want: volume.dims,
+            });
+        }
+        let geometry = VolumeGeometry::of(volume);
+        let p = params(
+            &geometry,
+            camera,
+            settings,
+            target.size,
+            features.map(|f| f.max),
+        );
+        let skipping = scene.skipping();
+        let p = if skipping { p.with_skipping() } else { p };
+        ctx.queue
+            .write_buffer(&target.params, 0, bytemuck::bytes_of(&p));
+        let feature_view = features.map_or(&self.no_features, |f| &f.view);
+        let (brick_view, feature_brick_view) = match (skipping, scene.bricks) {
+            (true, Some(b)) => (
+                &b.view,
+                scene.feature_bricks.map_or(&self.no_features, |f| &f.view),
+            ),
+            _ => (&self.no_features, &self.no_features),
+        };
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("raycast"),
+            layout: &self.pipeline.get_bind_group_layout(0),
+            entries: &[
+                entry(0, target.params.as_entire_binding()),
+                entry(
+                    1,
+                    wgpu::BindingResource::TextureView(&volume.intensity_view),
+                ),
+                entry(2, wgpu::BindingResource::TextureView(feature_view)),
+                entry(3, wgpu::BindingResource::TextureView(&target.view)),
+                entry(4, target.pick.as_entire_binding()),
+                entry(5, wgpu::BindingResource::Sampler(&self.linear_clamp)),
+                entry(6, wgpu::BindingResource::TextureView(brick_view)),
+                entry(7, wgpu::BindingResource::TextureView(feature_brick_view)),
+            ],
+        });
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("raycast"),
+            });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("raycast"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(target.size[0].div_ceil(8), target.size[1].div_ceil(8), 1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        target.rendered = Some(RenderedView {
+            camera: *camera,
+            size: target.size,
+            geometry,
+        });
+        Ok(())
+    }
+}
+
+fn entry(binding: u32, resource: wgpu::BindingResource<'_>) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry { binding, resource }
+}
