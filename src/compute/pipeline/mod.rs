@@ -15,30 +15,39 @@
 //! limit and a memory budget, with halos wide enough for the kernels and the rays; the RST
 //! casts rays from core voxels only.
 
+//!
+//! Why this file is over 600 lines: it has one job, the task queue of the feature job (plan the
+//! bricks, then upload, record and read back one bounded task per step), and the recording of
+//! each task needs the job's whole state; cutting it apart would spread one state machine over
+//! several files. Its buffers (`buffers`) and kernels (`kernels`) live beside it.
+
+mod buffers;
+mod kernels;
+
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::compute::eigen_features::{EigenFeatures, Mapping, TensorOutput};
-use crate::compute::gaussian::{Gaussian, SeparableKernel};
-use crate::compute::gradient::{Gradient, GradientBuffers};
-use crate::compute::hessian::{Hessian, HessianKernels};
+use crate::compute::eigen_features::{Mapping, TensorOutput};
+use crate::compute::gradient::GradientBuffers;
 use crate::compute::pack::PackBox;
-use crate::compute::resample::{Resample, ResampleGeometry};
-use crate::compute::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
+use crate::compute::resample::ResampleGeometry;
+use crate::compute::rst::{RstDispatch, RstInputs, RstOutput, RstRays};
 use crate::compute::slab::{Brick, BrickLimits, PlanError, plan};
-use crate::compute::structure_tensor::StructureTensor;
 use crate::compute::{noise, pack};
 use crate::cpu::features::FeatureMap;
 use crate::cpu::gaussian::kernel_radius_vox;
 use crate::cpu::pipeline::{Method, Request, RequestError, Resolved};
 use crate::cpu::tf::{NOISE_BAND_HU, TransferFunction, auto_transfer_function, median};
 use crate::cpu::{Components3, Grid};
-use crate::gpu::kernel::{SlabGrid, f32_buffer};
+use crate::gpu::kernel::SlabGrid;
 use crate::gpu::readback::{PendingRead, ReadbackError};
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolumeError};
 use crate::gpu::{GpuContext, shaders};
 use crate::volume::Volume;
+
+use buffers::{Buffers, box_grid, bytes_per_voxel, core_in_slab, halo_of, starts, to_u32};
+use kernels::Kernels;
 
 /// Why a feature computation failed.
 #[derive(Debug, thiserror::Error)]
@@ -147,48 +156,6 @@ enum ReadFor {
     Maxima,
 }
 
-/// The kernels a method needs, built once per job.
-struct Kernels {
-    gaussian: Gaussian,
-    hessian: Hessian,
-    eigen: EigenFeatures,
-    resample: Resample,
-    gradient: Gradient,
-    rst: Option<Rst>,
-    /// The ray set, built once the transfer function is known.
-    rays: Option<RstRays>,
-    gst: Option<StructureTensor>,
-    noise: noise::NoiseWindows,
-    pack: pack::Pack,
-    /// Per-scale kernels, uploaded once.
-    hessian_kernels: Vec<HessianKernels>,
-    smooth_g: SeparableKernel,
-    rho: Vec<SeparableKernel>,
-}
-
-/// Per-slab GPU buffers, allocated once at the largest slab's size and reused.
-struct Buffers {
-    /// Input-grid slices of a slab.
-    input: wgpu::Buffer,
-    /// The slab on the compute grid (only when it differs from the input grid).
-    vol: Option<wgpu::Buffer>,
-    /// Scratch for separable passes and smoothing.
-    tmp: [wgpu::Buffer; 2],
-    /// Six tensor components (Hessian); I, gx, gy, gz (RST); I, gx, gy, gz and six tensor
-    /// components (structure tensor).
-    work: Vec<wgpu::Buffer>,
-    /// Features of the core on the compute grid, component-major (3, or 4 for eigenvalues).
-    out_core: wgpu::Buffer,
-    /// One RST dispatch's output block.
-    chunk_out: Option<wgpu::Buffer>,
-    /// Features on the input grid (only when the grids differ).
-    out_in: Option<wgpu::Buffer>,
-    /// Noise windows, small.
-    small: wgpu::Buffer,
-    /// Largest tensor norm (Frangi's c).
-    norm: wgpu::Buffer,
-}
-
 /// One method's features for one volume, computed step by step.
 pub struct FeatureJob {
     request: Request,
@@ -229,70 +196,6 @@ pub struct FeatureJob {
     notes: Vec<String>,
     stage: String,
     done: bool,
-}
-
-/// Bytes per compute voxel of a method's working buffers (for the memory budget).
-fn bytes_per_voxel(method: Method, resampled: bool) -> u64 {
-    let base = match method {
-        // input + 6 components + 2 scratch
-        Method::Hessian | Method::Li | Method::Frangi => 9 * 4,
-        // input + gradient (3) + 6 components + 2 scratch
-        Method::Gst => 12 * 4,
-        // input + I + 2 scratch + the (I, g) texture
-        Method::Rst => 4 * 4 + 16,
-    };
-    // + the features of the core (3 components), + the compute-grid copy when resampling
-    base + 12 + if resampled { 4 } else { 0 }
-}
-
-/// Halo in compute voxels per axis (x unused: rows are whole) that `method` needs.
-fn halo_of(req: &Request, r: &Resolved) -> [usize; 3] {
-    let s = r.compute.spacing_mm;
-    std::array::from_fn(|a| match req.method {
-        Method::Hessian | Method::Li | Method::Frangi => r
-            .sigmas_mm
-            .iter()
-            .map(|&sigma| kernel_radius_vox(sigma / s[a]))
-            .max()
-            .unwrap_or(0),
-        Method::Gst => {
-            let rho = r.sigmas_mm.iter().copied().fold(0.0, f64::max);
-            kernel_radius_vox(req.sigma_g_mm / s[a]) + 1 + kernel_radius_vox(rho / s[a])
-        }
-        Method::Rst => {
-            let k = (r.radius_mm / r.step_mm + 1e-6).floor();
-            let reach = k * r.step_mm / s[a];
-            kernel_radius_vox(req.sigma_g_mm / s[a]) + 1 + reach.ceil() as usize + 1
-        }
-    })
-}
-
-fn to_u32(v: usize) -> u32 {
-    u32::try_from(v).unwrap_or(u32::MAX)
-}
-
-/// The kernels' grid of a box of `grid` with these ranges' lengths.
-fn box_grid(grid: &Grid, ranges: &[std::ops::Range<usize>; 3]) -> SlabGrid {
-    SlabGrid::new(
-        std::array::from_fn(|a| to_u32(ranges[a].len())),
-        grid.spacing_mm.map(|s| s as f32),
-    )
-}
-
-/// The core's slices and rows within its brick: `((z0, nz), (y0, ny))`.
-fn core_in_slab(b: &Brick) -> ((u32, u32), (u32, u32)) {
-    let local = |a: usize| {
-        (
-            to_u32(b.core_c[a].start - b.slab_c[a].start),
-            to_u32(b.core_c[a].len()),
-        )
-    };
-    (local(2), local(1))
-}
-
-/// The first voxel of each range.
-fn starts(ranges: &[std::ops::Range<usize>; 3]) -> [u32; 3] {
-    std::array::from_fn(|a| to_u32(ranges[a].start))
 }
 
 impl FeatureJob {
@@ -1185,123 +1088,5 @@ impl FeatureJob {
             .options
             .export
             .then(|| (features.clone(), bytes, ReadFor::Export(s))))
-    }
-}
-
-impl Kernels {
-    fn new(
-        ctx: &GpuContext,
-        req: &Request,
-        compute: &Grid,
-        sigmas_mm: &[f64],
-        exact_rst: bool,
-    ) -> Result<Self, PipelineError> {
-        let spacing = compute.spacing_mm;
-        let hessian_scales = matches!(req.method, Method::Hessian | Method::Li | Method::Frangi);
-        let gst = req.method == Method::Gst;
-        Ok(Self {
-            gaussian: Gaussian::new(ctx)?,
-            hessian: Hessian::new(ctx)?,
-            eigen: EigenFeatures::new(ctx)?,
-            resample: Resample::new(ctx)?,
-            gradient: Gradient::new(ctx)?,
-            rst: if req.method == Method::Rst {
-                Some(Rst::with_options(
-                    ctx,
-                    crate::compute::rst::RstOptions {
-                        hardware_filtering: !exact_rst,
-                        ..Default::default()
-                    },
-                )?)
-            } else {
-                None
-            },
-            rays: None,
-            gst: if gst {
-                Some(StructureTensor::new(ctx)?)
-            } else {
-                None
-            },
-            noise: noise::NoiseWindows::new(ctx)?,
-            pack: pack::Pack::new(ctx)?,
-            hessian_kernels: if hessian_scales {
-                sigmas_mm
-                    .iter()
-                    .map(|&s| HessianKernels::new(ctx, s, spacing, true))
-                    .collect()
-            } else {
-                Vec::new()
-            },
-            smooth_g: SeparableKernel::smooth(ctx, req.sigma_g_mm, spacing),
-            rho: if gst {
-                sigmas_mm
-                    .iter()
-                    .map(|&s| SeparableKernel::smooth(ctx, s, spacing))
-                    .collect()
-            } else {
-                Vec::new()
-            },
-        })
-    }
-}
-
-impl Buffers {
-    fn new(
-        ctx: &GpuContext,
-        bricks: &[Brick],
-        noise_bricks: &[Brick],
-        resampled: bool,
-        req: &Request,
-        rst_slices: usize,
-    ) -> Self {
-        let d = &ctx.device;
-        let all = || bricks.iter().chain(noise_bricks);
-        let in_n = all().map(Brick::input_len).max().unwrap_or(1);
-        let slab_n = all().map(Brick::slab_len).max().unwrap_or(1);
-        let rows = |b: &Brick| (b.slab_c[0].len() * b.slab_c[1].len()) as u64;
-        // Features of a brick's core slices, whole brick planes.
-        let core_n = bricks
-            .iter()
-            .map(|b| rows(b) * b.core_c[2].len() as u64)
-            .max()
-            .unwrap_or(1);
-        let out_n = bricks.iter().map(Brick::out_len).max().unwrap_or(1);
-        let plane_n = bricks.iter().map(rows).max().unwrap_or(1);
-        let work_count = match req.method {
-            Method::Rst => 1,
-            Method::Gst => 10,
-            _ => 6,
-        };
-        let out_components = if req.eigen && req.method != Method::Rst {
-            4
-        } else {
-            3
-        };
-        let noise_n = all()
-            .map(|b| {
-                let [nwx, nwy] =
-                    crate::cpu::tf::noise_window_counts([b.slab_c[0].len(), b.slab_c[1].len(), 1]);
-                (nwx * nwy * b.core_c[2].len()) as u64
-            })
-            .max()
-            .unwrap_or(1)
-            .max(1);
-        Self {
-            input: f32_buffer(d, "brick input", in_n),
-            vol: resampled.then(|| f32_buffer(d, "brick on the compute grid", slab_n)),
-            tmp: [
-                f32_buffer(d, "brick scratch 0", slab_n),
-                f32_buffer(d, "brick scratch 1", slab_n),
-            ],
-            work: (0..work_count)
-                .map(|_| f32_buffer(d, "brick work", slab_n))
-                .collect(),
-            out_core: f32_buffer(d, "brick features", out_components * core_n),
-            chunk_out: (req.method == Method::Rst)
-                .then(|| f32_buffer(d, "RST block", 3 * plane_n * rst_slices as u64)),
-            out_in: resampled.then(|| f32_buffer(d, "features on the input grid", 3 * out_n)),
-            small: f32_buffer(d, "noise windows", noise_n),
-            norm: crate::compute::eigen_features::norm_buffer(ctx),
-        }
     }
 }
