@@ -126,6 +126,66 @@ impl Volume {
         }
     }
 
+    /// The volume averaged over blocks of `factors` voxels per axis (a reduced copy for a
+    /// device whose 3D textures cannot hold it): same extent and orientation, spacing times the
+    /// factors, each voxel the mean of its block (the last block along an axis may be
+    /// partial), in the same compact type (rounded for integers).
+    pub fn reduced(&self, factors: [usize; 3]) -> Self {
+        let f = factors.map(|f| f.max(1));
+        let dims: [usize; 3] = std::array::from_fn(|a| self.dims[a].div_ceil(f[a]).max(1));
+        fn reduce<T: Copy>(
+            v: &[T],
+            src: [usize; 3],
+            f: [usize; 3],
+            dims: [usize; 3],
+            to_f64: impl Fn(T) -> f64,
+            from_f64: impl Fn(f64) -> T,
+        ) -> Vec<T> {
+            let mut out = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
+            for k in 0..dims[2] {
+                for j in 0..dims[1] {
+                    for i in 0..dims[0] {
+                        let (mut sum, mut n) = (0.0f64, 0usize);
+                        for kk in k * f[2]..((k + 1) * f[2]).min(src[2]) {
+                            for jj in j * f[1]..((j + 1) * f[1]).min(src[1]) {
+                                for ii in i * f[0]..((i + 1) * f[0]).min(src[0]) {
+                                    sum += to_f64(v[ii + src[0] * (jj + src[1] * kk)]);
+                                    n += 1;
+                                }
+                            }
+                        }
+                        out.push(from_f64(sum / n.max(1) as f64));
+                    }
+                }
+            }
+            out
+        }
+        let d = self.dims;
+        let voxels = match &self.voxels {
+            Voxels::U8(v) => Voxels::U8(reduce(v, d, f, dims, f64::from, |x| x.round() as u8)),
+            Voxels::I16(v) => Voxels::I16(reduce(v, d, f, dims, f64::from, |x| x.round() as i16)),
+            Voxels::U16(v) => Voxels::U16(reduce(v, d, f, dims, f64::from, |x| x.round() as u16)),
+            Voxels::F32(v) => Voxels::F32(reduce(v, d, f, dims, f64::from, |x| x as f32)),
+        };
+        // The first reduced voxel sits at the centre of the first block.
+        let shift = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+            (f[a] as f64 - 1.0) * 0.5 * self.spacing_mm[a]
+        }));
+        let origin = DVec3::from(self.origin_mm) + self.direction * shift;
+        Self {
+            dims,
+            spacing_mm: std::array::from_fn(|a| self.spacing_mm[a] * f[a] as f64),
+            origin_mm: origin.into(),
+            direction: self.direction,
+            voxels,
+            value_slope: self.value_slope,
+            value_intercept: self.value_intercept,
+            modality: self.modality,
+            source: self.source.clone(),
+            warnings: self.warnings.clone(),
+        }
+    }
+
     pub fn voxel_count(&self) -> usize {
         self.dims[0] * self.dims[1] * self.dims[2]
     }
@@ -374,5 +434,26 @@ mod tests {
         assert_eq!(orientation_label(-DVec3::Y), "A");
         assert_eq!(orientation_label(DVec3::new(0.0, 0.3, -1.0)), "IP");
         assert_eq!(orientation_label(DVec3::new(0.0, 0.01, -1.0)), "I");
+    }
+}
+
+#[cfg(test)]
+mod reduced_tests {
+    use super::*;
+
+    #[test]
+    fn a_reduced_copy_keeps_extent_orientation_and_block_means() {
+        let dims = [4, 3, 5];
+        let values: Vec<f32> = (0..60).map(|n| n as f32).collect();
+        let mut v = Volume::from_f32(dims, [0.5, 0.7, 2.0], values);
+        v.origin_mm = [10.0, 20.0, 30.0];
+        let r = v.reduced([1, 1, 2]);
+        assert_eq!(r.dims, [4, 3, 3]);
+        assert_eq!(r.spacing_mm, [0.5, 0.7, 4.0]);
+        // Mean of slices 0 and 1 at (0, 0): (0 + 12) / 2; the last block is slice 4 alone.
+        assert_eq!(r.value(0), 6.0);
+        assert_eq!(r.value(r.linear_index(0, 0, 2)), 48.0);
+        // The first voxel is the centre of the first block: 1 mm further along z.
+        assert_eq!(r.origin_mm, [10.0, 20.0, 31.0]);
     }
 }

@@ -608,7 +608,20 @@ impl ShapecastApp {
     /// Makes a loaded volume the displayed one (or says why it cannot be shown).
     fn install(&mut self, loaded: crate::io::Loaded) {
         let Some(gpu) = &self.gpu else { return };
-        let volume = loaded.volume;
+        let mut volume = loaded.volume;
+        let mut notes = loaded.notes;
+        // Larger than one 3D texture of this device: a reduced copy, said so (the file is
+        // unchanged; features are computed on what is shown).
+        let max = gpu.limits.max_texture_dimension_3d as usize;
+        if max > 0 && volume.dims.iter().any(|&d| d > max) {
+            let factors = volume.dims.map(|d| d.div_ceil(max));
+            let before = volume.dims;
+            volume = volume.reduced(factors);
+            notes.push(format!(
+                "{before:?} voxels exceed this GPU's largest 3D texture ({max} per side): shown and computed as {:?} voxels, averaged {factors:?}",
+                volume.dims
+            ));
+        }
         let render = match RenderVolume::upload(gpu, &volume) {
             Ok(r) => r,
             Err(e) => return self.error(format!("{}: {e}", volume.source)),
@@ -619,7 +632,7 @@ impl ShapecastApp {
         self.hover = None;
         self.features.clear();
         self.probe = probe::ProbeState::default();
-        self.notes = loaded.notes;
+        self.notes = notes;
         self.notes.extend(volume.warnings.iter().cloned());
         let range = volume.value_range();
         self.scene = Some(Scene {
