@@ -1,4 +1,4 @@
-// The noise estimator of SCIENCE.md ("What real scans taught us", item 2), GPU part: on the
+// The noise estimator of docs/science.md (RST item 8), GPU part: on the
 // smoothed intensity, the standard deviation of every w x w in-plane window (tiled from (0, 0)
 // without overlap) that lies wholly inside the band; -1 for windows that do not. The median over
 // all windows of the volume is taken on the CPU (src/cpu/tf.rs has the twin).

@@ -1,4 +1,4 @@
-// The radial structure tensor ray kernel (twin: `rst_tensor_at` in src/cpu/rst.rs, SCIENCE.md RST
+// The radial structure tensor ray kernel (twin: `rst_tensor_at` in src/cpu/rst.rs, docs/science.md RST
 // items 3-7; keep the structs in sync with src/compute/rst.rs). One invocation per output voxel casts
 // every ray from the voxel centre, samples the smoothed intensity I and the gradient g by
 // trilinear interpolation (by default done here from 8 `textureLoad`s of the packed

@@ -62,11 +62,11 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     let _ = writeln!(
         md,
         "Written by `shapecast reproduce --out {}{}` ({mode} run, {draws} noise draws per point). \
-         Every number comes from the CPU reference (`src/cpu`), which follows SCIENCE.md. \
+         Every number comes from the CPU reference (`src/cpu`), which follows docs/science.md. \
          Phantoms are anti-aliased, in HU, objects 100 HU above a 40 HU soft-tissue background, 0.5 mm voxels \
          unless stated; nodules r = 4 mm, vessels r = 3 mm. RST: 42 rays, R = 15 mm, dr = 0.25 mm, \
          sigma_g = 0.7 mm, transfer function 10/30 HU, the consistent opacity rule unless stated; \
-         `paper rule` is SCIENCE.md RST item 7 with one-voxel steps. Blobness is |l2| of eq. 1 \
+         `paper rule` is docs/science.md RST item 7 with one-voxel steps. Blobness is |l2| of eq. 1 \
          (`Li` rows use eq. 2); relative values divide by the same measure on an isolated nodule.\n",
         args.out.display(),
         if args.quick { " --quick" } else { "" }
@@ -465,7 +465,7 @@ fn section_noise(md: &mut String, dir: &Path, quick: bool, draws: usize) -> anyh
     table(md, &["noise (HU)", "relative blobness"], &rows);
     let _ = writeln!(
         md,
-        "With d_min = 0 and d_max tied to the noise, noise alone is opaque at every level: the rays stop inside the sphere well before its edge, and the blobness stays near half to two thirds of its noise-free value whatever the noise (it is even lowest at 5 HU, where the function is steepest). SCIENCE.md keeps the 10/30 function for the noise study.\n"
+        "With d_min = 0 and d_max tied to the noise, noise alone is opaque at every level: the rays stop inside the sphere well before its edge, and the blobness stays near half to two thirds of its noise-free value whatever the noise (it is even lowest at 5 HU, where the function is steepest). docs/science.md keeps the 10/30 function for the noise study.\n"
     );
     Ok(())
 }

@@ -4,7 +4,7 @@
 //! the output slices `(out_z0, out_nz)`. Twins: `crate::cpu::features`,
 //! `crate::cpu::structure_tensor`.
 //!
-//! Multi-scale (SCIENCE.md): record scale 1 with `accumulate = false`, every further scale with
+//! Multi-scale (docs/science.md): record scale 1 with `accumulate = false`, every further scale with
 //! `accumulate = true`, into the same output buffer.
 //! - Features (3 components `[V, A, B]`): per voxel and feature the maximum over scales.
 //! - Eigenvalues (4 components `[l0, l1, l2, norm]`): the eigenvalues of the scale whose

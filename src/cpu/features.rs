@@ -1,5 +1,5 @@
 //! Eigenvalue feature maps (paper eq. 1 and eq. 2, Frangi 1998) and the multi-scale Hessian
-//! features with gamma = 1 normalisation (SCIENCE.md, Hessian features, items 2 and 4).
+//! features with gamma = 1 normalisation (docs/science.md, Hessian features, items 2 and 4).
 
 use super::eigen::{Sym3, eigenvalues_sorted, frobenius};
 use super::hessian::hessian_volume;
@@ -125,7 +125,7 @@ pub fn hessian_features_multiscale(
 }
 
 /// Eigenvalues `[l0, l1, l2]` per voxel of the sigma^2-normalised Hessian at the scale whose
-/// normalised Hessian has the largest Frobenius norm (SCIENCE.md, conventions).
+/// normalised Hessian has the largest Frobenius norm (docs/science.md, Hessian features, item 5).
 pub fn hessian_eigen_multiscale(grid: &Grid, values: &[f32], sigmas_mm: &[f64]) -> Components3 {
     let n = grid.len();
     let mut out: Components3 = std::array::from_fn(|_| vec![0.0f32; n]);

@@ -1,5 +1,5 @@
 //! Separable Gaussian and Gaussian-derivative kernels in mm, and convolution along one axis with
-//! replicated borders (SCIENCE.md, Hessian features, item 1).
+//! replicated borders (docs/science.md, Hessian features, item 1).
 //!
 //! Kernels are sampled at integer voxel offsets `x = -r..=r`, with `r = ceil(3 sigma_vox) + 1`
 //! (3 sigma plus one voxel) and `sigma_vox = sigma_mm / spacing_mm` per axis:

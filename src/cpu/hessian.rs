@@ -1,4 +1,4 @@
-//! Hessian by separable Gaussian derivative kernels (SCIENCE.md, Hessian features, item 1),
+//! Hessian by separable Gaussian derivative kernels (docs/science.md, Hessian features, item 1),
 //! for a whole volume and at one voxel. Components per mm^2, optionally gamma-normalised
 //! (multiplied by sigma_mm^2, Lindeberg's gamma = 1).
 

@@ -1,4 +1,4 @@
-//! The CPU reference of every feature (SCIENCE.md): plain Rust that follows the equations, the
+//! The CPU reference of every feature (docs/science.md): plain Rust that follows the equations, the
 //! twin every GPU kernel is tested against.
 //!
 //! Conventions of this module (the GPU kernels must match them):

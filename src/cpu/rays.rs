@@ -1,4 +1,4 @@
-//! The ray direction sets of the RST (paper section 4.1, SCIENCE.md RST item 2): 42 vertices of
+//! The ray direction sets of the RST (paper section 4.1, docs/science.md RST item 2): 42 vertices of
 //! a once-subdivided icosahedron, and 26, 98, 218, 386 directions to the surface cells of a
 //! k x k x k cube (k = 3, 5, 7, 9).
 

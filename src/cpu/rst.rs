@@ -1,4 +1,4 @@
-//! The radial structure tensor (paper sections 3.1, 3.2; SCIENCE.md RST items 1-7): gradient
+//! The radial structure tensor (paper sections 3.1, 3.2; docs/science.md RST items 1-7): gradient
 //! volume, trilinear sampling of (I, g), ray casting with the consistent opacity rule (default)
 //! or the paper's literal rule, and the symmetrised tensor per point.
 
@@ -96,10 +96,10 @@ impl GradientVolume {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum OpacityRule {
     /// Extinction in mm with the per-ray opacity length L_i = 0.6 rho(r_i), steps weighted by
-    /// the opacity they add (SCIENCE.md RST items 4, 5).
+    /// the opacity they add (docs/science.md RST items 4, 5).
     #[default]
     Consistent,
-    /// The paper's eq. 4 and 7 taken literally (SCIENCE.md RST item 7).
+    /// The paper's eq. 4 and 7 taken literally (docs/science.md RST item 7).
     Paper,
 }
 

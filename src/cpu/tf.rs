@@ -1,5 +1,5 @@
 //! The opacity transfer function (paper eq. 3), the noise estimator, the automatic transfer
-//! function and the presets (SCIENCE.md, RST item 8 and "What real scans taught us").
+//! function and the presets (docs/science.md, RST item 8 and "Presets").
 
 use super::Grid;
 
@@ -106,7 +106,7 @@ pub fn auto_transfer_function(preset: TransferFunction, sigma_s: Option<f64>) ->
     }
 }
 
-/// Named defaults for a clinical task (SCIENCE.md, "What real scans taught us", item 1).
+/// Named defaults for a clinical task (docs/science.md, "Presets").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Preset {
     /// Lymph nodes / soft tissue: TF 10/30 HU, Hessian sigma 1.5-5 mm, R 15 mm.
