@@ -64,7 +64,14 @@ pub enum PipelineError {
     #[error("reading results back from the GPU failed: {0}")]
     Readback(#[from] ReadbackError),
     #[error("a GPU kernel refused its inputs: {0}")]
-    Dispatch(String),
+    Record(#[from] crate::gpu::checks::RecordError),
+    #[error("a GPU kernel refused its inputs: {0}")]
+    Dispatch(#[from] crate::compute::gradient::DispatchError),
+    #[error("the RST's rays: {0}")]
+    Rays(#[from] crate::compute::rst::RstConfigError),
+    /// A step ran before the one that prepares what it needs (a bug, not an input).
+    #[error("the feature job's {0} is missing (steps out of order)")]
+    Missing(&'static str),
 }
 
 /// Where a job is.
@@ -538,10 +545,6 @@ impl FeatureJob {
     }
 }
 
-fn dispatch_err(e: impl std::fmt::Display) -> PipelineError {
-    PipelineError::Dispatch(e.to_string())
-}
-
 impl FeatureJob {
     /// Uploads the input box `ranges` (whole rows) into `buffers.input` (f32, physical values).
     fn upload(&self, ctx: &GpuContext, ranges: &[std::ops::Range<usize>; 3]) {
@@ -593,19 +596,16 @@ impl FeatureJob {
             let geometry =
                 ResampleGeometry::refine(self.factors.map(to_u32), self.input.dims.map(to_u32))
                     .blocks(starts(&brick.input), starts(&brick.slab_c));
-            self.kernels
-                .resample
-                .record(
-                    ctx,
-                    encoder,
-                    &self.buffers.input,
-                    src.dims,
-                    vol,
-                    dst.dims,
-                    1,
-                    &geometry,
-                )
-                .map_err(dispatch_err)?;
+            self.kernels.resample.record(
+                ctx,
+                encoder,
+                &self.buffers.input,
+                src.dims,
+                vol,
+                dst.dims,
+                1,
+                &geometry,
+            )?;
         }
         Ok(())
     }
@@ -623,32 +623,28 @@ impl FeatureJob {
         grid: &SlabGrid,
     ) -> Result<(), PipelineError> {
         let b = &self.buffers;
-        self.kernels
-            .gaussian
-            .record_separable(
-                ctx,
-                encoder,
-                grid,
-                &self.kernels.smooth_g,
-                self.vol(),
-                &b.tmp[0],
-                &b.work[0],
-            )
-            .map_err(dispatch_err)?;
+        self.kernels.gaussian.record_separable(
+            ctx,
+            encoder,
+            grid,
+            &self.kernels.smooth_g,
+            self.vol(),
+            &b.tmp[0],
+            &b.work[0],
+        )?;
         if self.request.method == Method::Rst {
             if self.packed.as_ref().is_none_or(|(d, _)| *d != grid.dims) {
-                let tex = crate::compute::gradient::packed_texture(ctx, grid, "slab (I, g)")
-                    .map_err(dispatch_err)?;
+                let tex = crate::compute::gradient::packed_texture(ctx, grid, "slab (I, g)")?;
                 self.packed = Some((grid.dims, tex));
             }
             let Some((_, tex)) = &self.packed else {
-                return Err(dispatch_err("no (I, g) texture"));
+                return Err(PipelineError::Missing("(I, g) texture"));
             };
             return self
                 .kernels
                 .gradient
                 .record_packed(ctx, encoder, grid, &self.buffers.work[0], tex)
-                .map_err(dispatch_err);
+                .map_err(PipelineError::from);
         }
         let b = &self.buffers;
         self.kernels
@@ -664,7 +660,7 @@ impl FeatureJob {
                     gz: &b.work[3],
                 },
             )
-            .map_err(dispatch_err)
+            .map_err(PipelineError::from)
     }
 
     /// The six Hessian components at scale `scale` in `work[0..6]`.
@@ -688,7 +684,7 @@ impl FeatureJob {
                 &b.tmp[0],
                 out,
             )
-            .map_err(dispatch_err)
+            .map_err(PipelineError::from)
     }
 
     /// Records one task; returns a buffer to read back when the task ends with a readback.
@@ -707,18 +703,15 @@ impl FeatureJob {
                 let grid = box_grid(&self.compute, &slab.slab_c);
                 self.record_slab_values(ctx, encoder, &slab)?;
                 let b = &self.buffers;
-                self.kernels
-                    .gaussian
-                    .record_separable(
-                        ctx,
-                        encoder,
-                        &grid,
-                        &self.kernels.smooth_g,
-                        self.vol(),
-                        &b.tmp[0],
-                        &b.work[0],
-                    )
-                    .map_err(dispatch_err)?;
+                self.kernels.gaussian.record_separable(
+                    ctx,
+                    encoder,
+                    &grid,
+                    &self.kernels.smooth_g,
+                    self.vol(),
+                    &b.tmp[0],
+                    &b.work[0],
+                )?;
                 // Cores tile the volume: each slice is measured once.
                 let z0 = to_u32(slab.core_c[2].start - slab.slab_c[2].start);
                 let nz = to_u32(slab.core_c[2].len());
@@ -770,10 +763,15 @@ impl FeatureJob {
                 let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
                 self.kernels.eigen.record_clear_norm(encoder, &b.norm);
                 let (z, y) = core_in_slab(&slab);
-                self.kernels
-                    .eigen
-                    .record_max_norm(ctx, encoder, &grid, tensor, z, Some([y.0, y.1]), &b.norm)
-                    .map_err(dispatch_err)?;
+                self.kernels.eigen.record_max_norm(
+                    ctx,
+                    encoder,
+                    &grid,
+                    tensor,
+                    z,
+                    Some([y.0, y.1]),
+                    &b.norm,
+                )?;
                 Ok(Some((b.norm.clone(), 4, ReadFor::FrangiC(scale))))
             }
             Task::Prepare(s) => {
@@ -844,7 +842,7 @@ impl FeatureJob {
                 part > 0,
                 &b.out_core,
             )
-            .map_err(dispatch_err)
+            .map_err(PipelineError::from)
     }
 
     fn record_compute(
@@ -879,7 +877,7 @@ impl FeatureJob {
                     .kernels
                     .gst
                     .as_ref()
-                    .ok_or_else(|| dispatch_err("no structure tensor kernel"))?;
+                    .ok_or(PipelineError::Missing("structure tensor kernel"))?;
                 let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[4 + c]);
                 gst.record(
                     ctx,
@@ -889,8 +887,7 @@ impl FeatureJob {
                     [&b.work[1], &b.work[2], &b.work[3]],
                     [&b.tmp[0], &b.tmp[1]],
                     tensor,
-                )
-                .map_err(dispatch_err)?;
+                )?;
                 self.record_features_of_tensor(ctx, encoder, &grid, 4, core, part)?;
             }
             Method::Rst => self.record_rst(ctx, encoder, s, part, grid)?,
@@ -927,8 +924,7 @@ impl FeatureJob {
                 &params,
                 self.compute.spacing_mm,
                 self.request.sigma_g_mm,
-            )
-            .map_err(dispatch_err)?;
+            )?;
             self.kernels.rays = Some(rays);
             self.tf = Some(tf);
         }
@@ -961,7 +957,7 @@ impl FeatureJob {
             self.compute.dims[2]
         );
         let (Some(rst), Some(rays)) = (&self.kernels.rst, &self.kernels.rays) else {
-            return Err(dispatch_err("no RST kernel"));
+            return Err(PipelineError::Missing("RST kernel"));
         };
         let b = &self.buffers;
         let output = if self.request.eigen {
@@ -977,15 +973,14 @@ impl FeatureJob {
             output,
         };
         let Some((_, volume)) = &self.packed else {
-            return Err(dispatch_err("no (I, g) texture"));
+            return Err(PipelineError::Missing("(I, g) texture"));
         };
         let inputs = RstInputs { volume, rays };
         let chunk = b
             .chunk_out
             .as_ref()
-            .ok_or_else(|| dispatch_err("no RST output buffer"))?;
-        rst.record(ctx, encoder, &inputs, &dispatch, chunk)
-            .map_err(dispatch_err)?;
+            .ok_or(PipelineError::Missing("RST output buffer"))?;
+        rst.record(ctx, encoder, &inputs, &dispatch, chunk)?;
         // Into the core's component-major block (whole brick planes; rows outside the core are
         // never read).
         let plane = u64::from(grid.dims[0]) * u64::from(grid.dims[1]);
@@ -1063,19 +1058,16 @@ impl FeatureJob {
                     ],
                     starts(&slab.out),
                 );
-                self.kernels
-                    .resample
-                    .record(
-                        ctx,
-                        encoder,
-                        &b.out_core,
-                        core_dims,
-                        out_in,
-                        at.src_dims,
-                        3,
-                        &geometry,
-                    )
-                    .map_err(dispatch_err)?;
+                self.kernels.resample.record(
+                    ctx,
+                    encoder,
+                    &b.out_core,
+                    core_dims,
+                    out_in,
+                    at.src_dims,
+                    3,
+                    &geometry,
+                )?;
                 out_in
             }
             None => &b.out_core,
