@@ -462,3 +462,29 @@ fn corrupt_file_shows_an_error_and_keeps_the_volume_then_a_folder_drop_loads() {
     assert_eq!(harness.state().status().error, None);
     assert_eq!(harness.state().crosshair(), [32, 32, 3]);
 }
+
+/// A loaded volume opens on the preset that fits it, and the note says which and why.
+#[test]
+fn the_preset_fits_what_was_loaded() {
+    use shapecast::app::preset_for;
+    use shapecast::cpu::Preset;
+    use shapecast::volume::{Modality, Volume};
+    let ct = |lung_fraction: f64| {
+        let n = 40 * 40 * 10;
+        let values = (0..n)
+            .map(|i| if (i as f64) < lung_fraction * n as f64 { -820.0 } else { 40.0 })
+            .collect();
+        let mut v = Volume::from_f32([40, 40, 10], [0.7, 0.7, 2.0], values);
+        v.modality = Modality::Ct;
+        v
+    };
+    let (p, why) = preset_for(&ct(0.4), true);
+    assert_eq!(p, Preset::LungNodules, "{why}");
+    assert!(why.contains("40% of the voxels are lung"), "{why}");
+    let (p, why) = preset_for(&ct(0.0), true);
+    assert_eq!(p, Preset::LymphNodes, "{why}");
+    let mut mr = ct(0.0);
+    mr.modality = Modality::Mr;
+    let (_, why) = preset_for(&mr, false);
+    assert!(why.contains("Hounsfield"), "{why}");
+}

@@ -635,8 +635,22 @@ impl ShapecastApp {
         self.notes = notes;
         self.notes.extend(volume.warnings.iter().cloned());
         let range = volume.value_range();
+        let is_ct = window_level::looks_like_ct(&volume, range);
+        // Without a preset asked for (URL, command line), open on the one that fits what was
+        // loaded, and say which (the demo CTA keeps the vessels preset it starts with).
+        if self.options.preset.is_none()
+            && volume.modality != crate::volume::Modality::Phantom
+            && !volume.source.contains(demo::DEMO_FILE)
+        {
+            let (preset, why) = preset_for(&volume, is_ct);
+            if preset != self.applied.preset {
+                self.params = FeatureParams::from_preset(preset);
+                self.applied = self.params.clone();
+            }
+            self.notes.push(why);
+        }
         self.scene = Some(Scene {
-            is_ct: window_level::looks_like_ct(&volume, range),
+            is_ct,
             volume: Arc::new(volume),
             render,
             generation: self.generation,
@@ -951,4 +965,42 @@ impl eframe::App for ShapecastApp {
             ctx.request_repaint();
         }
     }
+}
+
+/// The preset that fits a loaded volume, and a sentence saying why: lung nodules when a CT holds
+/// lung (more than 5% of its voxels between -950 and -600 HU), lymph nodes / soft tissue for
+/// other CT; for a volume without Hounsfield units, the default with a warning that the presets'
+/// transfer functions are in HU.
+pub fn preset_for(volume: &crate::volume::Volume, is_ct: bool) -> (Preset, String) {
+    if !is_ct {
+        return (
+            Preset::default(),
+            format!(
+                "preset: {} (the presets' transfer functions and thresholds are CT Hounsfield units; this volume has none, so set the transfer function to its contrast)",
+                features::preset_label(Preset::default())
+            ),
+        );
+    }
+    let n = volume.voxel_count();
+    let stride = (n / 200_000).max(1);
+    let (mut lung, mut seen) = (0usize, 0usize);
+    for i in (0..n).step_by(stride) {
+        let v = volume.value(i);
+        seen += 1;
+        lung += usize::from((-950.0..=-600.0).contains(&v));
+    }
+    let fraction = lung as f64 / seen.max(1) as f64;
+    let preset = if fraction > 0.05 {
+        Preset::LungNodules
+    } else {
+        Preset::LymphNodes
+    };
+    (
+        preset,
+        format!(
+            "preset: {} ({:.0}% of the voxels are lung, -950..-600 HU); change it under Features",
+            features::preset_label(preset),
+            100.0 * fraction
+        ),
+    )
 }
