@@ -18,7 +18,18 @@ struct Params {
 @group(0) @binding(0) var<uniform> p: Params;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
 @group(0) @binding(2) var dst: texture_storage_3d<rgba16float, write>;
-@group(0) @binding(3) var<storage, read_write> maxima: array<atomic<u32>, 3>;
+// maxima[0..3]: the largest value of each component (float bits); maxima[4 + c * BINS + b]:
+// the histogram of component c's positive values (bins of src/gpu/volume_texture.rs, the twin).
+@group(0) @binding(3) var<storage, read_write> maxima: array<atomic<u32>>;
+
+const BINS: u32 = 960u;
+const BINS_PER_OCTAVE: f32 = 32.0;
+const LOWEST_OCTAVE: f32 = -10.0;
+
+fn bin_of(v: f32) -> u32 {
+    let b = floor((log2(v) - LOWEST_OCTAVE) * BINS_PER_OCTAVE);
+    return u32(clamp(b, 0.0, f32(BINS - 1u)));
+}
 
 var<workgroup> wg_max: array<atomic<u32>, 3>;
 
@@ -50,6 +61,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         textureStore(dst, vec3<u32>(id.x, id.y + p.y0, id.z + p.z0), vec4<f32>(v, 0.0));
         for (var c = 0u; c < 3u; c++) {
             atomicMax(&wg_max[c], bitcast<u32>(max(v[c], 0.0)));
+            if v[c] > 0.0 {
+                atomicAdd(&maxima[4u + c * BINS + bin_of(v[c])], 1u);
+            }
         }
     }
     workgroupBarrier();

@@ -1,4 +1,4 @@
-// Shape-encoding MIP ray caster (keep in sync with src/render/raycast.rs, whose `cpu_twin` follows
+// Shape-encoding MIP ray caster (keep in sync with src/render/raycast/, whose `cpu_twin` follows
 // this file line by line).
 //
 // One invocation per output pixel. The ray is marched in continuous voxel coordinates (the Rust

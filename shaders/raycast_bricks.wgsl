@@ -1,5 +1,5 @@
 // Brick extrema for the MIP ray caster's empty-space skipping (keep in sync with
-// src/render/raycast.rs, `cpu_bricks`).
+// src/render/raycast/, `cpu_bricks`).
 //
 // Brick b (per axis) covers the continuous voxel positions [b * B, (b + 1) * B] (the last brick
 // ends at n - 1), so every trilinear sample whose clamped position lies in it reads only voxels

@@ -472,7 +472,13 @@ fn the_preset_fits_what_was_loaded() {
     let ct = |lung_fraction: f64| {
         let n = 40 * 40 * 10;
         let values = (0..n)
-            .map(|i| if (i as f64) < lung_fraction * n as f64 { -820.0 } else { 40.0 })
+            .map(|i| {
+                if (i as f64) < lung_fraction * n as f64 {
+                    -820.0
+                } else {
+                    40.0
+                }
+            })
             .collect();
         let mut v = Volume::from_f32([40, 40, 10], [0.7, 0.7, 2.0], values);
         v.modality = Modality::Ct;

@@ -237,6 +237,22 @@ fn bricks_give_the_same_result_as_one_piece_and_fill_the_texture() {
     let comps = many.components.as_ref().expect("exported");
     let texels = shapecast::gpu::volume_texture::read_texture_blocking(&ctx, &many.texture)
         .expect("texture readback");
+    // The gain reference (99.9th percentile of positive values) is the CPU twin's, within one
+    // histogram bin (2.2%), and below the maximum.
+    let (_, p999) = shapecast::gpu::volume_texture::feature_statistics(comps);
+    for c in 0..3 {
+        let (gpu, cpu) = (many.texture.p999[c], p999[c]);
+        eprintln!(
+            "component {c}: p99.9 {gpu} (CPU {cpu}), max {}",
+            many.texture.max[c]
+        );
+        assert!(
+            (gpu - cpu).abs() <= 0.023 * cpu.max(1e-6),
+            "p99.9 {c}: {gpu} vs {cpu}"
+        );
+        assert!(gpu <= many.texture.max[c] + 1e-6);
+    }
+    assert!(many.texture.p999[2] > 0.0, "blobness has a reference");
     for c in 0..3 {
         let max = comps[c].iter().copied().fold(0.0f32, f32::max);
         assert!(

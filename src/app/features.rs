@@ -180,7 +180,8 @@ impl Default for FeatureDisplay {
 
 impl FeatureDisplay {
     /// Per feature: opacity = clamp(value * scale, 0, 1) with scale = gain / the feature's
-    /// maximum, as the MIP composites it (gain 1: the maximum is full colour; 2: half of it).
+    /// reference (`FeatureTexture::reference`: its 99.9th percentile of positive values), as
+    /// the MIP composites it (gain 1: the reference is full colour; 2: half of it).
     /// While the maximum is unknown (0), 100 units stand in for it.
     pub fn scales(&self, max: [f32; 3]) -> [f32; 3] {
         std::array::from_fn(|c| {

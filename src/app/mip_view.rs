@@ -440,7 +440,7 @@ impl MipView {
             settings,
             size,
             volume: scene.volume.intensity.clone(),
-            features: features.map(|f| (f.texture.clone(), f.max)),
+            features: features.map(|f| (f.texture.clone(), f.reference())),
         };
         let mut rendered = false;
         if self.last.as_ref() != Some(&key) {

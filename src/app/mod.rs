@@ -663,7 +663,7 @@ impl ShapecastApp {
     fn overlay(&self) -> Option<Overlay> {
         let entry = self.displayed_entry()?;
         self.display.overlay_on_slices.then(|| Overlay {
-            scale: self.display.scales(entry.texture.max),
+            scale: self.display.scales(entry.texture.reference()),
             opacity: self.display.opacity,
         })
     }

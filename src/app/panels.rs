@@ -242,6 +242,16 @@ impl ShapecastApp {
                         );
                     });
                 }
+                // Gain 1 shows the 99.9th percentile of a feature's positive values as full
+                // colour (not its maximum: one metal voxel would dim every other structure).
+                if let Some(entry) = self.displayed_entry() {
+                    let r = entry.texture.reference();
+                    ui.label(format!(
+                        "gain 1 = full colour at p99.9: V {:.3}, A {:.3}, B {:.3} (max {:.3}, {:.3}, {:.3})",
+                        r[0], r[1], r[2], entry.texture.max[0], entry.texture.max[1], entry.texture.max[2]
+                    ))
+                    .on_hover_text("the 99.9th percentile of each feature's positive values over the volume");
+                }
                 ui.checkbox(&mut self.display.overlay_on_slices, "overlay on the slices");
                 ui.add_enabled(
                     self.display.overlay_on_slices,

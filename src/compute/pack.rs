@@ -3,7 +3,7 @@
 //! half-float conversion of [`crate::gpu::volume_texture::FeatureTexture::from_components`].
 
 use crate::gpu::kernel::{SlabGrid, WORKGROUP, uniform_buffer};
-use crate::gpu::volume_texture::FeatureTexture;
+use crate::gpu::volume_texture::{FeatureTexture, HISTOGRAM_BINS, histogram_quantile};
 use crate::gpu::{GpuContext, shaders};
 
 /// Mirrors `Params` in pack_features.wgsl.
@@ -67,8 +67,8 @@ impl Pack {
                 cache: None,
             });
         let maxima = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("feature maxima"),
-            size: 16,
+            label: Some("feature maxima and histograms"),
+            size: Self::MAXIMA_BYTES,
             usage: wgpu::BufferUsages::STORAGE
                 | wgpu::BufferUsages::COPY_SRC
                 | wgpu::BufferUsages::COPY_DST,
@@ -129,6 +129,24 @@ impl Pack {
         pass.set_bind_group(0, &bind, &[]);
         let [x, y, z] = block.workgroups(WORKGROUP);
         pass.dispatch_workgroups(x, y, z);
+    }
+
+    /// Bytes of [`Pack::maxima`]: three maxima, a pad, three histograms.
+    pub const MAXIMA_BYTES: u64 = 4 * (4 + 3 * HISTOGRAM_BINS as u64);
+
+    /// The 99.9th percentile of each component's positive values from a readback of
+    /// [`Pack::maxima`], clamped to its maximum.
+    pub fn decode_p999(bytes: &[u8], max: [f32; 3]) -> [f32; 3] {
+        let words: Vec<u32> = bytes
+            .chunks_exact(4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        std::array::from_fn(|c| {
+            let start = 4 + c * HISTOGRAM_BINS;
+            words
+                .get(start..start + HISTOGRAM_BINS)
+                .map_or(0.0, |h| histogram_quantile(h, 0.999, max[c]))
+        })
     }
 
     /// The maxima from the bytes of a readback of [`Pack::maxima`].

@@ -540,7 +540,10 @@ impl FeatureJob {
                     }
                 }
             }
-            ReadFor::Maxima => self.texture.max = pack::Pack::decode_maxima(bytes),
+            ReadFor::Maxima => {
+                self.texture.max = pack::Pack::decode_maxima(bytes);
+                self.texture.p999 = pack::Pack::decode_p999(bytes, self.texture.max);
+            }
         }
     }
 }
@@ -796,7 +799,7 @@ impl FeatureJob {
                 self.stage = "finishing".to_owned();
                 Ok(Some((
                     self.kernels.pack.maxima.clone(),
-                    12,
+                    pack::Pack::MAXIMA_BYTES,
                     ReadFor::Maxima,
                 )))
             }

@@ -199,7 +199,7 @@ impl Raycaster {
             camera,
             settings,
             target.size,
-            features.map(|f| f.max),
+            features.map(|f| f.reference()),
         );
         let skipping = scene.skipping();
         let p = if skipping { p.with_skipping() } else { p };

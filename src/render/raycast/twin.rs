@@ -38,8 +38,11 @@ impl TwinScene {
                 })
                 .collect()
         });
-        let feature_max =
-            components.map(|c| std::array::from_fn(|k| c[k].iter().copied().fold(0.0, f32::max)));
+        // What a gain of 1 shows as full colour, as the GPU path's texture says.
+        let feature_max = components.map(|c| {
+            let (max, p999) = crate::gpu::volume_texture::feature_statistics(c);
+            crate::gpu::volume_texture::reference_of(max, p999)
+        });
         let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
         let bricks = cpu_bricks(dims, &intensity, |v: &f32| [*v, *v, *v]);
         let feature_bricks = features
