@@ -240,8 +240,8 @@ fn bricks_give_the_same_result_as_one_piece_and_fill_the_texture() {
     // The gain reference (99.9th percentile of positive values) is the CPU twin's, within one
     // histogram bin (2.2%), and below the maximum.
     let (_, p999) = shapecast::gpu::volume_texture::feature_statistics(comps);
-    for c in 0..3 {
-        let (gpu, cpu) = (many.texture.p999[c], p999[c]);
+    for (c, &cpu) in p999.iter().enumerate() {
+        let gpu = many.texture.p999[c];
         eprintln!(
             "component {c}: p99.9 {gpu} (CPU {cpu}), max {}",
             many.texture.max[c]
