@@ -379,6 +379,13 @@ impl FeatureManager {
         }
     }
 
+    /// GPU memory the kept methods' textures hold, and the budget beyond which the least
+    /// recently used is dropped, bytes.
+    pub fn memory(&self) -> (u64, u64) {
+        let used = self.entries.iter().map(|e| texture_bytes(&e.texture)).sum();
+        (used, self.budget_bytes)
+    }
+
     fn insert(&mut self, request: Request, texture: FeatureTexture, notes: Vec<String>) {
         self.entries.retain(|e| e.request != request);
         self.clock += 1;

@@ -200,10 +200,13 @@ impl ShapecastApp {
                         }
                     });
                 }
+                let (used, budget) = self.features.memory();
                 ui.label(
                     egui::RichText::new(format!(
-                        "{} method(s) computed and kept; switching to them is instant",
-                        self.features.len()
+                        "{} method(s) computed and kept ({} MB of GPU memory, budget {} MB: the least recently used goes first); switching to them is instant",
+                        self.features.len(),
+                        used >> 20,
+                        budget >> 20
                     ))
                     .small(),
                 );
