@@ -87,7 +87,8 @@ pub struct RenderArgs {
     /// presets, the value range otherwise).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub window: Option<Vec<f32>>,
-    /// Feature gains: one for all, or V,A,B (1 = each feature's maximum is full colour).
+    /// Feature gains: one for all, or V,A,B (1 = the 99.9th percentile of each feature's
+    /// positive values is full colour).
     #[arg(long, value_delimiter = ',')]
     pub gain: Option<Vec<f32>>,
     /// Minimum intensity projection for the grey (airways).
