@@ -9,13 +9,14 @@
 //! looser bounds ([`filtered_bounds`]). Volumes are small (the CPU twin takes ~50-200 us per
 //! voxel): 21 x 19 x 15 voxels of 0.6 x 0.6 x 0.9 mm, R = 6 mm (3 mm for the halo test).
 
-use shapecast::compute::gradient::{DispatchError, Gradient, GradientBuffers, packed_texture};
+use shapecast::compute::gradient::{Gradient, GradientBuffers, packed_texture};
 use shapecast::compute::rst::{Rst, RstDispatch, RstInputs, RstOptions, RstOutput, RstRays};
 use shapecast::cpu::rst::opacity_length_mm;
 use shapecast::cpu::{
     self, FeatureMap, GradientVolume, Grid, OpacityRule, RstParams, Sym3, TransferFunction,
 };
 use shapecast::gpu::GpuContext;
+use shapecast::gpu::checks::RecordError;
 use shapecast::gpu::context::test_context;
 use shapecast::gpu::kernel::{SlabGrid, f32_buffer, f32_buffer_init};
 use shapecast::gpu::readback::{read_bytes_blocking, read_f32_blocking};
@@ -832,7 +833,7 @@ fn bad_dispatches_are_errors() {
     let past_end = RstDispatch { out_nz: 6, ..ok };
     assert!(matches!(
         record(&past_end, &out),
-        Err(DispatchError::OutputRange { .. })
+        Err(RecordError::OutputRange { .. })
     ));
     let empty = RstDispatch { out_nz: 0, ..ok };
     assert!(matches!(
@@ -843,7 +844,7 @@ fn bad_dispatches_are_errors() {
             },
             &out
         ),
-        Err(DispatchError::RowRange { .. })
+        Err(RecordError::RowRange { .. })
     ));
     assert!(matches!(
         record(
@@ -853,7 +854,7 @@ fn bad_dispatches_are_errors() {
             },
             &out
         ),
-        Err(DispatchError::RowRange { .. })
+        Err(RecordError::RowRange { .. })
     ));
     assert_eq!(
         record(
@@ -867,12 +868,12 @@ fn bad_dispatches_are_errors() {
     );
     assert!(matches!(
         record(&empty, &out),
-        Err(DispatchError::OutputRange { .. })
+        Err(RecordError::OutputRange { .. })
     ));
     let small = f32_buffer(&ctx.device, "small", ok.out_voxels() * 6 - 1);
     assert!(matches!(
         record(&ok, &small),
-        Err(DispatchError::BufferTooSmall { .. })
+        Err(RecordError::BufferTooSmall { .. })
     ));
     let other_spacing = RstDispatch {
         grid: SlabGrid::new(ok.grid.dims, [0.6, 0.6, 1.0]),
@@ -880,7 +881,7 @@ fn bad_dispatches_are_errors() {
     };
     assert!(matches!(
         record(&other_spacing, &out),
-        Err(DispatchError::SpacingMismatch { .. })
+        Err(RecordError::SpacingMismatch { .. })
     ));
     let larger_slab = RstDispatch {
         grid: SlabGrid::new([21, 19, 16], ok.grid.spacing_mm),
@@ -888,7 +889,7 @@ fn bad_dispatches_are_errors() {
     };
     assert!(matches!(
         record(&larger_slab, &out),
-        Err(DispatchError::WrongTexture { .. })
+        Err(RecordError::WrongTexture { .. })
     ));
     let not_storage = ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: None,
@@ -898,7 +899,7 @@ fn bad_dispatches_are_errors() {
     });
     assert!(matches!(
         record(&ok, &not_storage),
-        Err(DispatchError::NotStorage { .. })
+        Err(RecordError::NotStorage { .. })
     ));
     let no_voxels = RstDispatch {
         grid: SlabGrid::new([0, 19, 15], ok.grid.spacing_mm),
@@ -906,7 +907,7 @@ fn bad_dispatches_are_errors() {
     };
     assert!(matches!(
         record(&no_voxels, &out),
-        Err(DispatchError::EmptySlab { .. })
+        Err(RecordError::EmptySlab { .. })
     ));
     drop(encoder);
 

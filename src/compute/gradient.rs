@@ -4,62 +4,13 @@
 //! Two outputs: three f32 buffers gx, gy, gz ([`Gradient::record`]), or (I, gx, gy, gz) packed
 //! in one rgba32float 3D texture ([`Gradient::record_packed`]), the input of the RST kernel.
 //!
-//! Also holds what the RST and gradient kernels share: [`DispatchError`] and the checks that make
+//! Also holds what the RST and gradient kernels share: [`RecordError`] and the checks that make
 //! a bad size an error instead of a wgpu validation panic.
 
 use crate::gpu::kernel::{SlabGrid, WORKGROUP, uniform_buffer};
 use crate::gpu::{GpuContext, shaders};
 
-/// Why a kernel could not be recorded. Everything is checked before anything is recorded, so a
-/// bad size never reaches wgpu's validation (which panics natively).
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[non_exhaustive]
-pub enum DispatchError {
-    #[error("the slab is empty ({nx}x{ny}x{nz} voxels)")]
-    EmptySlab { nx: u32, ny: u32, nz: u32 },
-    #[error("the {name} buffer holds {have} bytes; the kernel needs {need}")]
-    BufferTooSmall {
-        name: &'static str,
-        need: u64,
-        have: u64,
-    },
-    #[error("the {name} buffer was not created with STORAGE usage")]
-    NotStorage { name: &'static str },
-    #[error("the {name} binding needs {bytes} bytes; this GPU binds at most {limit}")]
-    BindingTooLarge {
-        name: &'static str,
-        bytes: u64,
-        limit: u64,
-    },
-    #[error("the dispatch needs {groups:?} workgroups; this GPU allows {limit} per dimension")]
-    TooManyWorkgroups { groups: [u32; 3], limit: u32 },
-    #[error("output slices {z0}..{end} are not a non-empty range inside the slab's {nz} slices")]
-    OutputRange { z0: u32, end: u64, nz: u32 },
-    #[error("the slab's spacing {slab:?} mm is not the one the rays were built for ({rays:?} mm)")]
-    SpacingMismatch { slab: [f32; 3], rays: [f32; 3] },
-    #[error(
-        "the slab ({nx}x{ny}x{nz} voxels) exceeds this GPU's 3D texture size ({limit} per axis)"
-    )]
-    TextureTooLarge {
-        nx: u32,
-        ny: u32,
-        nz: u32,
-        limit: u32,
-    },
-    #[error(
-        "the packed (I, g) texture must be a 3D rgba32float texture of the slab's size {want:?} with {usage:?} usage; got {got:?} {format:?}"
-    )]
-    WrongTexture {
-        want: [u32; 3],
-        got: [u32; 3],
-        format: wgpu::TextureFormat,
-        usage: wgpu::TextureUsages,
-    },
-    #[error("output rows {j0}..{end} are not a non-empty range inside the slab's {ny} rows")]
-    RowRange { j0: u32, end: u64, ny: u32 },
-    #[error("the {0} buffer is bound both as an input and as an output")]
-    Aliased(&'static str),
-}
+use crate::gpu::checks::RecordError;
 
 /// Checks that `buffer` can be bound as a storage buffer of `bytes` bytes and returns that
 /// binding (only the bytes the kernel uses are bound, so a larger buffer is fine).
@@ -68,20 +19,24 @@ pub(crate) fn storage_binding<'a>(
     name: &'static str,
     buffer: &'a wgpu::Buffer,
     bytes: u64,
-) -> Result<wgpu::BindingResource<'a>, DispatchError> {
+) -> Result<wgpu::BindingResource<'a>, RecordError> {
     if !buffer.usage().contains(wgpu::BufferUsages::STORAGE) {
-        return Err(DispatchError::NotStorage { name });
+        return Err(RecordError::NotStorage { what: name });
     }
     if buffer.size() < bytes {
-        return Err(DispatchError::BufferTooSmall {
-            name,
-            need: bytes,
+        return Err(RecordError::BufferTooSmall {
+            what: name,
+            needed: bytes,
             have: buffer.size(),
         });
     }
     let limit = ctx.limits.max_storage_buffer_binding_size;
     if bytes > limit {
-        return Err(DispatchError::BindingTooLarge { name, bytes, limit });
+        return Err(RecordError::BindingTooLarge {
+            what: name,
+            bytes,
+            limit,
+        });
     }
     Ok(wgpu::BindingResource::Buffer(wgpu::BufferBinding {
         buffer,
@@ -95,7 +50,7 @@ pub(crate) fn check_packed(
     texture: &wgpu::Texture,
     grid: &SlabGrid,
     usage: wgpu::TextureUsages,
-) -> Result<(), DispatchError> {
+) -> Result<(), RecordError> {
     let size = texture.size();
     let got = [size.width, size.height, size.depth_or_array_layers];
     if texture.dimension() != wgpu::TextureDimension::D3
@@ -104,7 +59,7 @@ pub(crate) fn check_packed(
         || !texture.usage().contains(usage)
         || texture.mip_level_count() != 1
     {
-        return Err(DispatchError::WrongTexture {
+        return Err(RecordError::WrongTexture {
             want: grid.dims,
             got,
             format: texture.format(),
@@ -115,20 +70,24 @@ pub(crate) fn check_packed(
 }
 
 /// Workgroup counts of an `(8, 8, 1)` dispatch over `dims`, checked against the device's limit.
-pub(crate) fn workgroups(ctx: &GpuContext, dims: [u32; 3]) -> Result<[u32; 3], DispatchError> {
+pub(crate) fn workgroups(ctx: &GpuContext, dims: [u32; 3]) -> Result<[u32; 3], RecordError> {
     let groups = SlabGrid::new(dims, [1.0; 3]).workgroups(WORKGROUP);
     let limit = ctx.limits.max_compute_workgroups_per_dimension;
     if groups.iter().any(|&g| g > limit) {
-        return Err(DispatchError::TooManyWorkgroups { groups, limit });
+        return Err(RecordError::TooManyWorkgroups {
+            what: "dispatch",
+            groups: groups.iter().copied().max().unwrap_or(0),
+            limit,
+        });
     }
     Ok(groups)
 }
 
 /// The slab's voxel count, or an error for an empty slab.
-pub(crate) fn voxel_count(grid: &SlabGrid) -> Result<u64, DispatchError> {
+pub(crate) fn voxel_count(grid: &SlabGrid) -> Result<u64, RecordError> {
     if grid.is_empty() {
         let [nx, ny, nz] = grid.dims;
-        return Err(DispatchError::EmptySlab { nx, ny, nz });
+        return Err(RecordError::EmptySlab { nx, ny, nz });
     }
     Ok(grid.len())
 }
@@ -190,12 +149,12 @@ pub fn packed_texture(
     ctx: &GpuContext,
     grid: &SlabGrid,
     label: &str,
-) -> Result<wgpu::Texture, DispatchError> {
+) -> Result<wgpu::Texture, RecordError> {
     voxel_count(grid)?;
     let limit = ctx.limits.max_texture_dimension_3d;
     let [nx, ny, nz] = grid.dims;
     if grid.dims.iter().any(|&d| d > limit) {
-        return Err(DispatchError::TextureTooLarge { nx, ny, nz, limit });
+        return Err(RecordError::TextureTooLarge { nx, ny, nz, limit });
     }
     Ok(ctx.device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
@@ -267,7 +226,7 @@ impl Gradient {
         grid: &SlabGrid,
         intensity: &wgpu::Buffer,
         out: &wgpu::Texture,
-    ) -> Result<(), DispatchError> {
+    ) -> Result<(), RecordError> {
         let bytes = voxel_count(grid)? * 4;
         check_packed(out, grid, wgpu::TextureUsages::STORAGE_BINDING)?;
         let groups = workgroups(ctx, grid.dims)?;
@@ -303,15 +262,15 @@ impl Gradient {
         grid: &SlabGrid,
         intensity: &wgpu::Buffer,
         out: &GradientBuffers<'_>,
-    ) -> Result<(), DispatchError> {
+    ) -> Result<(), RecordError> {
         let bytes = voxel_count(grid)? * 4;
         for (name, b) in [("gx", out.gx), ("gy", out.gy), ("gz", out.gz)] {
             if b == intensity {
-                return Err(DispatchError::Aliased(name));
+                return Err(RecordError::Aliased(name));
             }
         }
         if out.gx == out.gy || out.gx == out.gz || out.gy == out.gz {
-            return Err(DispatchError::Aliased("gradient output"));
+            return Err(RecordError::Aliased("gradient output"));
         }
         let groups = workgroups(ctx, grid.dims)?;
         let params_buf = Self::params_buffer(ctx, grid);

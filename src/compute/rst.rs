@@ -39,11 +39,11 @@
 //! [`RstOutput::bytes_per_voxel`] per output voxel.
 
 use crate::compute::gradient::{
-    DispatchError, Gradient, check_packed, entry, record_pass, storage_binding, voxel_count,
-    workgroups,
+    Gradient, check_packed, entry, record_pass, storage_binding, voxel_count, workgroups,
 };
 use crate::cpu::rst::{ALPHA_STOP, opacity_length_mm};
 use crate::cpu::{FeatureMap, OpacityRule, RstParams};
+use crate::gpu::checks::RecordError;
 use crate::gpu::kernel::{SlabGrid, uniform_buffer};
 use crate::gpu::{GpuContext, shaders};
 
@@ -504,23 +504,23 @@ impl Rst {
         inputs: &RstInputs<'_>,
         params: &RstDispatch,
         out: &wgpu::Buffer,
-    ) -> Result<(), DispatchError> {
+    ) -> Result<(), RecordError> {
         let grid = &params.grid;
         voxel_count(grid)?;
         check_packed(inputs.volume, grid, wgpu::TextureUsages::TEXTURE_BINDING)?;
         let nz = grid.dims[2];
         let end = u64::from(params.out_z0) + u64::from(params.out_nz);
         if params.out_nz == 0 || end > u64::from(nz) {
-            return Err(DispatchError::OutputRange {
+            return Err(RecordError::OutputRange {
                 z0: params.out_z0,
-                end,
-                nz,
+                nz: params.out_nz,
+                depth: nz,
             });
         }
         let [row0, n_rows] = params.row_range();
         let rows_end = u64::from(row0) + u64::from(n_rows);
         if n_rows == 0 || rows_end > u64::from(grid.dims[1]) {
-            return Err(DispatchError::RowRange {
+            return Err(RecordError::RowRange {
                 j0: row0,
                 end: rows_end,
                 ny: grid.dims[1],
@@ -529,7 +529,7 @@ impl Rst {
         let rays = inputs.rays;
         let rays_spacing = rays.spacing_mm.map(|s| s as f32);
         if rays_spacing != grid.spacing_mm {
-            return Err(DispatchError::SpacingMismatch {
+            return Err(RecordError::SpacingMismatch {
                 slab: grid.spacing_mm,
                 rays: rays_spacing,
             });

@@ -3,8 +3,9 @@
 
 use crate::gpu::GpuContext;
 
-/// Why a kernel could not be recorded.
-#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+/// Why a kernel could not be recorded or dispatched: the one error of every kernel module, so
+/// that a bad size never reaches wgpu's validation (which panics natively).
+#[derive(Clone, Debug, thiserror::Error, PartialEq)]
 #[non_exhaustive]
 pub enum RecordError {
     #[error("{what}: the buffer holds {have} bytes, the kernel needs {needed}")]
@@ -19,14 +20,44 @@ pub enum RecordError {
         bytes: u64,
         limit: u64,
     },
+    #[error("{what}: the buffer was not created with STORAGE usage")]
+    NotStorage { what: &'static str },
     #[error("{what}: {groups} workgroups along one axis exceed this GPU's limit ({limit})")]
     TooManyWorkgroups {
         what: &'static str,
         groups: u32,
         limit: u32,
     },
-    #[error("output slices {z0}..{z0}+{nz} are not inside the slab's {depth} slices")]
+    #[error(
+        "output slices {z0}..{z0}+{nz} are not a non-empty range inside the slab's {depth} slices"
+    )]
     OutputRange { z0: u32, nz: u32, depth: u32 },
+    #[error("output rows {j0}..{end} are not a non-empty range inside the slab's {ny} rows")]
+    RowRange { j0: u32, end: u64, ny: u32 },
+    #[error("the slab is empty ({nx}x{ny}x{nz} voxels)")]
+    EmptySlab { nx: u32, ny: u32, nz: u32 },
+    #[error("the slab's spacing {slab:?} mm is not the one the rays were built for ({rays:?} mm)")]
+    SpacingMismatch { slab: [f32; 3], rays: [f32; 3] },
+    #[error(
+        "the slab ({nx}x{ny}x{nz} voxels) exceeds this GPU's 3D texture size ({limit} per axis)"
+    )]
+    TextureTooLarge {
+        nx: u32,
+        ny: u32,
+        nz: u32,
+        limit: u32,
+    },
+    #[error(
+        "the packed (I, g) texture must be a 3D rgba32float texture of the slab's size {want:?} with {usage:?} usage; got {got:?} {format:?}"
+    )]
+    WrongTexture {
+        want: [u32; 3],
+        got: [u32; 3],
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    },
+    #[error("the {0} buffer is bound both as an input and as an output")]
+    Aliased(&'static str),
     #[error("{0}")]
     Invalid(&'static str),
 }

@@ -65,8 +65,6 @@ pub enum PipelineError {
     Readback(#[from] ReadbackError),
     #[error("a GPU kernel refused its inputs: {0}")]
     Record(#[from] crate::gpu::checks::RecordError),
-    #[error("a GPU kernel refused its inputs: {0}")]
-    Dispatch(#[from] crate::compute::gradient::DispatchError),
     #[error("the RST's rays: {0}")]
     Rays(#[from] crate::compute::rst::RstConfigError),
     /// A step ran before the one that prepares what it needs (a bug, not an input).
