@@ -39,18 +39,32 @@ fn start_read(
     wgpu::Buffer,
     futures_channel::oneshot::Receiver<Result<(), wgpu::BufferAsyncError>>,
 ) {
+    start_copies(ctx, size, "readback", |encoder, staging| {
+        encoder.copy_buffer_to_buffer(src, 0, staging, 0, size);
+    })
+}
+
+/// A staging buffer of `size` bytes that `record` fills (copies from buffers or textures),
+/// submitted, and mapped once the GPU is done: the one way anything is read back.
+fn start_copies(
+    ctx: &GpuContext,
+    size: u64,
+    label: &str,
+    record: impl FnOnce(&mut wgpu::CommandEncoder, &wgpu::Buffer),
+) -> (
+    wgpu::Buffer,
+    futures_channel::oneshot::Receiver<Result<(), wgpu::BufferAsyncError>>,
+) {
     let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("readback staging"),
+        label: Some(label),
         size,
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
     let mut encoder = ctx
         .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("readback"),
-        });
-    encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+    record(&mut encoder, &staging);
     ctx.queue.submit([encoder.finish()]);
     let (sender, receiver) = futures_channel::oneshot::channel();
     staging.map_async(wgpu::MapMode::Read, .., move |result| {
@@ -118,6 +132,22 @@ impl PendingRead {
     /// Copies `size` bytes of `src` (which needs `COPY_SRC`) and starts mapping them.
     pub fn start(ctx: &GpuContext, src: &wgpu::Buffer, size: u64) -> Self {
         let (staging, receiver) = start_read(ctx, src, size);
+        Self {
+            staging,
+            size,
+            receiver,
+        }
+    }
+
+    /// `size` bytes that `record` copies into the staging buffer it is given (e.g. texels of a
+    /// texture), then mapped.
+    pub fn start_with(
+        ctx: &GpuContext,
+        size: u64,
+        label: &str,
+        record: impl FnOnce(&mut wgpu::CommandEncoder, &wgpu::Buffer),
+    ) -> Self {
+        let (staging, receiver) = start_copies(ctx, size, label, record);
         Self {
             staging,
             size,

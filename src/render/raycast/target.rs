@@ -299,26 +299,14 @@ impl RaycastTarget {
     }
 }
 
-/// Native only: reads a buffer back, polling the device until the mapping has completed. Unlike
-/// a single wait, this is safe when other threads poll the same device at the same time (one of
-/// them may still be running this mapping's callback when the wait returns).
+/// Native only: reads a buffer back, blocking (the one readback, `gpu::readback`).
 #[cfg(not(target_arch = "wasm32"))]
 pub(super) fn read_buffer_blocking(
     ctx: &GpuContext,
     src: &wgpu::Buffer,
     size: u64,
 ) -> Result<Vec<u8>, RaycastError> {
-    let mut future = Box::pin(readback::read_bytes(ctx, src, size));
-    let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
-    loop {
-        if let std::task::Poll::Ready(result) = future.as_mut().poll(&mut cx) {
-            return result.map_err(RaycastError::from);
-        }
-        ctx.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(ReadbackError::from)?;
-        std::thread::yield_now();
-    }
+    Ok(readback::read_bytes_blocking(ctx, src, size)?)
 }
 
 type PickFuture =
