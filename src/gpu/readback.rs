@@ -108,6 +108,49 @@ pub fn read_bytes_blocking(
     finish_read(&staging, size)
 }
 
+/// Native only: the texels of `texture` (a box of `size` from its origin, `bytes_per_texel`
+/// each) as tightly packed rows, x fastest, blocking. Rows are copied at wgpu's 256-byte row
+/// alignment and unpadded here.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn read_texture_blocking(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    size: [u32; 3],
+    bytes_per_texel: u32,
+) -> Result<Vec<u8>, ReadbackError> {
+    let [w, h, d] = size;
+    let row = w * bytes_per_texel;
+    let padded =
+        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let bytes = u64::from(padded) * u64::from(h) * u64::from(d);
+    let read =
+        PendingRead::start_with(ctx, bytes.max(4), "texture readback", |encoder, staging| {
+            encoder.copy_texture_to_buffer(
+                texture.as_image_copy(),
+                wgpu::TexelCopyBufferInfo {
+                    buffer: staging,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(padded),
+                        rows_per_image: Some(h),
+                    },
+                },
+                wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: d,
+                },
+            );
+        });
+    let padded_bytes = read.wait(ctx)?;
+    Ok(padded_bytes
+        .chunks(padded as usize)
+        .take(h as usize * d as usize)
+        .flat_map(|r| &r[..(row as usize).min(r.len())])
+        .copied()
+        .collect())
+}
+
 /// Native only: reads an f32 buffer back, blocking.
 #[cfg(not(target_arch = "wasm32"))]
 pub fn read_f32_blocking(

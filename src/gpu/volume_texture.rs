@@ -323,47 +323,9 @@ pub fn read_texture_blocking(
     ctx: &GpuContext,
     tex: &FeatureTexture,
 ) -> Result<Vec<f32>, crate::gpu::readback::ReadbackError> {
-    let [nx, ny, nz] = tex.dims;
-    let row = nx * 8;
-    let padded =
-        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let size = u64::from(padded) * u64::from(ny) * u64::from(nz);
-    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("texture readback"),
-        size,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    encoder.copy_texture_to_buffer(
-        tex.texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(padded),
-                rows_per_image: Some(ny),
-            },
-        },
-        wgpu::Extent3d {
-            width: nx,
-            height: ny,
-            depth_or_array_layers: nz,
-        },
-    );
-    ctx.queue.submit([encoder.finish()]);
-    let bytes = crate::gpu::readback::read_bytes_blocking(ctx, &buffer, size)?;
-    let mut out = Vec::with_capacity(nx as usize * ny as usize * nz as usize * 4);
-    for r in 0..(ny * nz) as usize {
-        let start = r * padded as usize;
-        let halves: &[u8] = &bytes[start..start + row as usize];
-        out.extend(
-            halves
-                .chunks_exact(2)
-                .map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()),
-        );
-    }
-    Ok(out)
+    let bytes = crate::gpu::readback::read_texture_blocking(ctx, &tex.texture, tex.dims, 8)?;
+    Ok(bytes
+        .chunks_exact(2)
+        .map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32())
+        .collect())
 }

@@ -8,7 +8,7 @@ use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use super::RaycastError;
 use super::settings::BIG;
 #[cfg(not(target_arch = "wasm32"))]
-use super::target::{decode_texel, read_buffer_blocking};
+use super::target::decode_texel;
 use super::{Raycaster, entry};
 
 /// Edge of the bricks of the empty-space skipping, voxels (raycast_bricks.wgsl).
@@ -34,48 +34,8 @@ impl Bricks {
     /// Native only: the brick values (tests), brick x fastest.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_blocking(&self, ctx: &GpuContext) -> Result<Vec<[f32; 4]>, RaycastError> {
-        let [w, h, d] = self.dims;
-        let row = w * 8;
-        let padded =
-            row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("bricks copy"),
-            size: u64::from(padded) * u64::from(h) * u64::from(d),
-            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("bricks copy"),
-            });
-        encoder.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &self.texture,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(padded),
-                    rows_per_image: Some(h),
-                },
-            },
-            wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: d,
-            },
-        );
-        ctx.queue.submit([encoder.finish()]);
-        let bytes = read_buffer_blocking(ctx, &buffer, buffer.size())?;
-        Ok(bytes
-            .chunks(padded as usize)
-            .flat_map(|r| r[..row as usize].chunks_exact(8).map(decode_texel))
-            .collect())
+        let bytes = crate::gpu::readback::read_texture_blocking(ctx, &self.texture, self.dims, 8)?;
+        Ok(bytes.chunks_exact(8).map(decode_texel).collect())
     }
 
     /// Whether these are the bricks of `texture`.

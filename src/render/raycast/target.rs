@@ -227,16 +227,13 @@ impl RaycastTarget {
     /// Native only: the whole image as tightly packed RGBA8 rows, top row first.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_image_blocking(&self, ctx: &GpuContext) -> Result<Vec<u8>, RaycastError> {
-        let (buffer, padded) = self.copy_image(ctx);
-        let bytes = read_buffer_blocking(ctx, &buffer, buffer.size())?;
-        Ok(self.unpad(&bytes, padded))
-    }
-
-    /// The image as tightly packed RGBA8 rows, awaited (works on wasm).
-    pub async fn read_image(&self, ctx: &GpuContext) -> Result<Vec<u8>, RaycastError> {
-        let (buffer, padded) = self.copy_image(ctx);
-        let bytes = readback::read_bytes(ctx, &buffer, buffer.size()).await?;
-        Ok(self.unpad(&bytes, padded))
+        let [w, h] = self.size;
+        Ok(readback::read_texture_blocking(
+            ctx,
+            &self.texture,
+            [w, h, 1],
+            4,
+        )?)
     }
 
     /// Native only: every pixel's `(depth, channel code)` (tests).
@@ -246,56 +243,6 @@ impl RaycastTarget {
         let bytes = read_buffer_blocking(ctx, &self.pick, n as u64 * 8)?;
         let values: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes);
         Ok(values.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
-    }
-
-    fn copy_image(&self, ctx: &GpuContext) -> (wgpu::Buffer, u32) {
-        let row = self.size[0] * 4;
-        let padded =
-            row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("raycast image copy"),
-            size: u64::from(padded) * u64::from(self.size[1]),
-            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("raycast image copy"),
-            });
-        encoder.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &self.texture,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(padded),
-                    rows_per_image: Some(self.size[1]),
-                },
-            },
-            wgpu::Extent3d {
-                width: self.size[0],
-                height: self.size[1],
-                depth_or_array_layers: 1,
-            },
-        );
-        ctx.queue.submit([encoder.finish()]);
-        (buffer, padded)
-    }
-
-    fn unpad(&self, bytes: &[u8], padded: u32) -> Vec<u8> {
-        let row = self.size[0] as usize * 4;
-        bytes
-            .chunks(padded as usize)
-            .take(self.size[1] as usize)
-            .flat_map(|r| &r[..row.min(r.len())])
-            .copied()
-            .collect()
     }
 }
 
