@@ -254,3 +254,39 @@ fn rows_without_a_finite_value_take_their_slice_minimum_and_missing_slices_the_v
         assert_eq!(got, want, "chunks of {chunk}");
     }
 }
+
+/// Scales far wider than the grid holds (spacings of 1e-6 mm) are capped with a warning instead
+/// of building kernels of millions of taps (issue 13 item 3): the request runs, and says so.
+#[test]
+fn scales_wider_than_the_volume_are_capped_with_a_warning() {
+    use shapecast::cpu::Grid;
+    use shapecast::cpu::pipeline::{Method, Request, compute};
+    let grid = Grid::new([24, 24, 24], [1e-6; 3]);
+    let values: Vec<f32> = (0..grid.len())
+        .map(|n| {
+            let [i, j, k] = grid.ijk(n);
+            let d2 = [i, j, k]
+                .iter()
+                .map(|&c| (c as f64 - 11.5).powi(2))
+                .sum::<f64>();
+            if d2 < 25.0 { 140.0 } else { 40.0 }
+        })
+        .collect();
+    let req = Request::new(Method::Li);
+    let resolved = req.resolve(&grid).expect("request");
+    let cap = 24e-6 / 6.0;
+    assert!(
+        resolved.sigmas_mm.iter().all(|&s| s <= cap * (1.0 + 1e-12)),
+        "{resolved:?}"
+    );
+    let out = compute(&grid, &values, &req).expect("features");
+    let warning = out.notes.iter().find(|n| n.contains("capped"));
+    assert!(warning.is_some(), "{:?}", out.notes);
+    // The blob still stands out at its centre.
+    let centre = grid.index(12, 12, 12);
+    assert!(
+        out.components[2][centre] > 0.0,
+        "blobness {}",
+        out.components[2][centre]
+    );
+}

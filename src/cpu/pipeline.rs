@@ -138,6 +138,25 @@ impl Request {
         if !(self.sigma_g_mm.is_finite() && self.sigma_g_mm > 0.0) {
             return Err(RequestError::NotPositive("--sigma-g-mm"));
         }
+        // A scale wider than the grid holds only costs time (kernels of millions of taps on a
+        // grid of microscopic spacing): cap it at a sixth of the volume's largest extent, so
+        // that a kernel reaches about half of it, and say so.
+        let extent_mm = (0..3)
+            .map(|a| grid.dims[a] as f64 * grid.spacing_mm[a])
+            .fold(0.0, f64::max);
+        let cap_mm = extent_mm / 6.0;
+        let mut capped = Vec::new();
+        let sigmas_mm: Vec<f64> = sigmas_mm
+            .into_iter()
+            .map(|s| {
+                if cap_mm > 0.0 && s > cap_mm {
+                    capped.push(s);
+                    cap_mm
+                } else {
+                    s
+                }
+            })
+            .collect();
         let sigma_min = sigmas_mm.iter().copied().fold(f64::INFINITY, f64::min);
         let factors = match self.method {
             Method::Hessian | Method::Li | Method::Frangi => refinement_factors(grid, sigma_min),
@@ -145,6 +164,16 @@ impl Request {
         };
         let compute = refined_grid(grid, factors);
         let mut notes = Vec::new();
+        if !capped.is_empty()
+            && matches!(
+                self.method,
+                Method::Hessian | Method::Li | Method::Frangi | Method::Gst
+            )
+        {
+            notes.push(format!(
+                "warning: scales {capped:?} mm are wider than the volume holds ({extent_mm:.3} mm at most): capped at {cap_mm:.4} mm"
+            ));
+        }
         if compute != *grid {
             notes.push(format!(
                 "thick axes refined for the Hessian by {factors:?} ({:?} mm -> {:.3?} mm); features taken at the input voxels",
