@@ -92,23 +92,6 @@ pub(crate) fn voxel_count(grid: &SlabGrid) -> Result<u64, RecordError> {
     Ok(grid.len())
 }
 
-/// Records one compute pass with a single pipeline and bind group.
-pub(crate) fn record_pass(
-    encoder: &mut wgpu::CommandEncoder,
-    label: &str,
-    pipeline: &wgpu::ComputePipeline,
-    bind_group: &wgpu::BindGroup,
-    groups: [u32; 3],
-) {
-    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-        label: Some(label),
-        timestamp_writes: None,
-    });
-    pass.set_pipeline(pipeline);
-    pass.set_bind_group(0, bind_group, &[]);
-    pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-}
-
 pub(crate) fn compute_pipeline(
     ctx: &GpuContext,
     shader: &str,
@@ -242,7 +225,7 @@ impl Gradient {
             layout: &self.packed.get_bind_group_layout(0),
             entries: &entries,
         });
-        record_pass(
+        crate::gpu::checks::dispatch(
             encoder,
             "gradient packed",
             &self.packed,
@@ -286,7 +269,7 @@ impl Gradient {
             layout: &self.pipeline.get_bind_group_layout(0),
             entries: &entries,
         });
-        record_pass(encoder, "gradient", &self.pipeline, &bind_group, groups);
+        crate::gpu::checks::dispatch(encoder, "gradient", &self.pipeline, &bind_group, groups);
         Ok(())
     }
 }

@@ -39,7 +39,7 @@
 //! [`RstOutput::bytes_per_voxel`] per output voxel.
 
 use crate::compute::gradient::{
-    Gradient, check_packed, entry, record_pass, storage_binding, voxel_count, workgroups,
+    Gradient, check_packed, entry, storage_binding, voxel_count, workgroups,
 };
 use crate::cpu::rst::{ALPHA_STOP, opacity_length_mm};
 use crate::cpu::{FeatureMap, OpacityRule, RstParams};
@@ -575,7 +575,7 @@ impl Rst {
             layout: &self.layout,
             entries: &entries,
         });
-        record_pass(encoder, "rst", &self.pipeline, &bind_group, groups);
+        crate::gpu::checks::dispatch(encoder, "rst", &self.pipeline, &bind_group, groups);
         Ok(())
     }
 }
