@@ -40,6 +40,13 @@ struct Params {
     out_size: vec2<u32>,
     window_hi: f32,
     max_steps: u32,
+    // First image row of this dispatch: a frame may be drawn in bands of rows over several
+    // submissions (progressive rendering); each pixel's result does not depend on the band.
+    row0: u32,
+    // One past the last row of this dispatch.
+    row_end: u32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -196,11 +203,12 @@ fn features_at(c: Cell, q: vec3<f32>) -> vec4<f32> {
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= params.out_size.x || gid.y >= params.out_size.y {
+    let xy = vec2<u32>(gid.x, gid.y + params.row0);
+    if xy.x >= params.out_size.x || xy.y >= min(params.out_size.y, params.row_end) {
         return;
     }
-    let pixel = gid.x + params.out_size.x * gid.y;
-    let o = params.origin_v + params.du_v * f32(gid.x) + params.dv_v * f32(gid.y);
+    let pixel = xy.x + params.out_size.x * xy.y;
+    let o = params.origin_v + params.du_v * f32(xy.x) + params.dv_v * f32(xy.y);
     let d = params.dir_v;
     let span = box_interval(o, d);
     let t0 = max(span.x, params.slab_lo);
@@ -209,7 +217,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k1 = i32(floor(t1 / params.step_mm));
     let count = min(k1 - k0 + 1, i32(params.max_steps));
     if t0 > t1 || count <= 0 {
-        textureStore(image, vec2<i32>(gid.xy), vec4<f32>(0.0, 0.0, 0.0, 1.0));
+        textureStore(image, vec2<i32>(xy), vec4<f32>(0.0, 0.0, 0.0, 1.0));
         pick[pixel] = vec2<f32>(0.0, -1.0);
         return;
     }
@@ -297,7 +305,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     rgb = rgb + (vec3<f32>(1.0, 0.0, 0.0) - rgb) * a.x;
     rgb = rgb + (vec3<f32>(0.0, 0.4, 1.0) - rgb) * a.y;
     rgb = rgb + (vec3<f32>(1.0, 1.0, 0.0) - rgb) * a.z;
-    textureStore(image, vec2<i32>(gid.xy), vec4<f32>(rgb, 1.0));
+    textureStore(image, vec2<i32>(xy), vec4<f32>(rgb, 1.0));
 
     // The dominant channel: the largest share of the final colour. Yellow lies on top with
     // share a.z, blue under it a.y (1 - a.z), red a.x (1 - a.y) (1 - a.z), grey the rest times

@@ -16,7 +16,7 @@ use shapecast::cpu::pipeline::{Method, Request};
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use shapecast::phantom::{NODULE_RADIUS_MM, Phantom, bifurcation_nodule_centres};
-use shapecast::render::raycast::Pick;
+use shapecast::render::raycast::{FramePacer, Pick};
 
 /// The smallest app hosting the widget: the GPU textures, the widget, and the crosshair the
 /// picks move.
@@ -30,7 +30,7 @@ struct Host {
 }
 
 impl Host {
-    fn new(cc: &eframe::CreationContext<'_>) -> Self {
+    fn new(cc: &eframe::CreationContext<'_>, pacer: FramePacer) -> Self {
         let rs = cc.wgpu_render_state.as_ref().expect("wgpu renderer");
         let gpu = GpuContext::from_render_state(rs);
         let phantom = Phantom::by_name("bifurcation-nodules-far", None).expect("phantom");
@@ -41,6 +41,7 @@ impl Host {
         let render_volume = RenderVolume::upload(&gpu, &volume).expect("upload");
         let mut view = MipView::new();
         view.settings.window = (40.0, 140.0);
+        view.pacer = pacer;
         Self {
             gpu,
             volume: render_volume,
@@ -73,7 +74,12 @@ impl eframe::App for Host {
     }
 }
 
+/// Frames drawn whole: the interaction test below checks what each frame shows.
 fn harness() -> Option<Harness<'static, Host>> {
+    harness_with(FramePacer::new(None))
+}
+
+fn harness_with(pacer: FramePacer) -> Option<Harness<'static, Host>> {
     shapecast::gpu::context::test_context()?;
     let mut setup = egui_kittest::wgpu::default_wgpu_setup();
     if let eframe::egui_wgpu::WgpuSetup::CreateNew(create) = &mut setup {
@@ -82,7 +88,7 @@ fn harness() -> Option<Harness<'static, Host>> {
     let mut harness = Harness::builder()
         .with_size(egui::vec2(640.0, 560.0))
         .wgpu_setup(setup)
-        .build_eframe(|cc| Host::new(cc));
+        .build_eframe(move |cc| Host::new(cc, pacer));
     harness.run_steps(3);
     Some(harness)
 }
@@ -284,4 +290,58 @@ fn mip_view_renders_turns_zooms_pans_and_picks_a_nodule() {
     h.run_steps(2);
     let back = h.render().expect("render");
     assert!(count(&back, yellow) > 500);
+}
+
+/// Progressive rendering (issue "full-size scans", deliver 5): with a frame budget far below a
+/// full frame's cost, the first frame is a coarse one within the budget, the full frame follows
+/// in bands of rows, each band within the budget, and the settled picture is the same as the
+/// frame drawn whole.
+#[test]
+fn a_frame_over_budget_is_drawn_coarse_first_then_in_bands() {
+    let Some(mut whole) = harness() else { return };
+    let reference = whole.render().expect("render");
+    let whole_frames = whole.state().view.frames_rendered();
+    drop(whole);
+
+    // 2 M sample slots per frame: a twentieth of this viewport's full frame or less.
+    let budget_slots = 2.0e6;
+    let Some(mut h) = harness_with(FramePacer::fixed(Some(1.0), budget_slots)) else {
+        return;
+    };
+    // harness_with ran 3 frames: the coarse one and two bands.
+    assert!(
+        h.state().view.refining() && h.state().view.showing_preview(),
+        "a frame over budget starts coarse"
+    );
+    let coarse = h.render().expect("render");
+    save(&coarse, "mip_view_coarse.png");
+    let mut steps = 0;
+    let mut largest: f64 = h.state().view.last_dispatch_slots();
+    while h.state().view.refining() && steps < 2000 {
+        h.step();
+        steps += 1;
+        largest = largest.max(h.state().view.last_dispatch_slots());
+    }
+    let frames = h.state().view.frames_rendered();
+    eprintln!(
+        "progressive: {frames} dispatches (whole: {whole_frames}), largest {largest:.0} slots"
+    );
+    assert!(!h.state().view.refining(), "not done after {steps} steps");
+    assert!(!h.state().view.showing_preview());
+    assert!(frames >= 10, "only {frames} dispatches");
+    assert!(
+        largest <= budget_slots,
+        "a dispatch cost {largest} slots, over the budget of {budget_slots}"
+    );
+    let settled = h.render().expect("render");
+    save(&settled, "mip_view_progressive.png");
+    let differing = reference
+        .pixels()
+        .zip(settled.pixels())
+        .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 1))
+        .count();
+    assert_eq!(differing, 0, "the banded frame differs from the whole one");
+    // Idle again: nothing re-renders.
+    h.run_steps(3);
+    assert_eq!(h.state().view.frames_rendered(), frames);
 }

@@ -3,6 +3,13 @@
 //! moves and picks. It re-renders only when something that changes the picture changed (camera,
 //! settings, size, the textures), so an idle viewer costs nothing.
 //!
+//! No frame waits on more than [`MipView::frame_budget_s`] of GPU work (~100 ms on any device,
+//! lavapipe included): a frame that would cost more is drawn first at a coarse resolution that
+//! fits, then at full resolution in bands of rows over the following frames, shown when
+//! complete; while the mouse moves the view only the reduced preview is drawn, small enough to
+//! fit. The cost is counted in sample slots and the device's rate measured on its own frames
+//! ([`FramePacer`]).
+//!
 //! Mouse: left drag turns the volume (arcball), middle drag or shift + left drag pans, the
 //! wheel zooms towards the pointer, right drag sets the grey window (horizontal: width,
 //! vertical: level). A left click (press and release without moving: egui's click, not a drag)
@@ -29,8 +36,8 @@ use crate::gpu::GpuContext;
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::render::camera::{Camera, ViewPreset};
 use crate::render::raycast::{
-    Bricks, CHANNEL_COLOURS, PendingPick, Pick, Projection, RaycastTarget, Raycaster,
-    RenderSettings, Scene, Slab,
+    Bricks, CHANNEL_COLOURS, FrameCost, FramePacer, FramePlan, PendingPick, Pick, Projection,
+    RaycastTarget, Raycaster, RenderSettings, Scene, Slab, scale_within,
 };
 use crate::volume::orientation_label;
 
@@ -58,9 +65,18 @@ pub struct MipViewOutput {
 struct FrameKey {
     camera: Camera,
     settings: RenderSettings,
+    /// Full resolution.
     size: [u32; 2],
+    /// The mouse is moving the view (a reduced preview is drawn).
+    interacting: bool,
     volume: wgpu::Texture,
     features: Option<(wgpu::Texture, [f32; 3])>,
+}
+
+/// A full-resolution frame in progress: rows `[0, next_row)` of target 0 are drawn.
+struct Refining {
+    next_row: u32,
+    cost: FrameCost,
 }
 
 /// The MIP viewport widget (see the module documentation).
@@ -78,6 +94,12 @@ pub struct MipView {
     /// Resolution (fraction of the full one) of the frames drawn while a drag or the wheel
     /// moves the view; the full resolution follows when the mouse stops. 1 turns it off.
     pub interactive_scale: f32,
+    /// The GPU's measured speed and the budget of GPU seconds per frame (`budget_s: None`
+    /// draws every frame whole).
+    pub pacer: FramePacer,
+    /// The full-resolution frame being drawn band by band (the coarse one shown meanwhile).
+    refining: Option<Refining>,
+    last_slots: f64,
     mode_chosen: bool,
     caster: Option<Raycaster>,
     /// Brick extrema of the textures last shown (empty-space skipping), remade when they change.
@@ -102,6 +124,10 @@ impl Default for MipView {
 }
 
 impl MipView {
+    /// GPU seconds of work one frame may wait on (leaves headroom below ~100 ms, since the
+    /// measured rate lags).
+    pub const FRAME_BUDGET_S: f64 = 0.06;
+
     pub fn new() -> Self {
         Self {
             camera: Camera::default(),
@@ -114,6 +140,9 @@ impl MipView {
             mode: None,
             crosshair_mm: None,
             interactive_scale: 0.5,
+            pacer: FramePacer::new(Some(Self::FRAME_BUDGET_S)),
+            refining: None,
+            last_slots: 0.0,
             mode_chosen: false,
             caster: None,
             bricks: None,
@@ -153,6 +182,16 @@ impl MipView {
     /// Whether the reduced-resolution frame of a drag or wheel move is shown.
     pub fn showing_preview(&self) -> bool {
         self.shown == 1
+    }
+
+    /// Sample slots ([`FrameCost`]) of the last dispatch: what the frame budget bounds.
+    pub fn last_dispatch_slots(&self) -> f64 {
+        self.last_slots
+    }
+
+    /// Whether the full-resolution frame is still being drawn in bands (a coarse one shown).
+    pub fn refining(&self) -> bool {
+        self.refining.is_some()
     }
 
     /// Whether a pick is being read back.
@@ -412,21 +451,15 @@ impl MipView {
             }
         }
 
-        // Render if anything changed; a reduced resolution while the mouse moves the view.
+        // Render if anything changed: while the mouse moves the view a reduced preview that fits
+        // the frame budget; otherwise the full frame, whole if it fits, else a coarse frame first
+        // and the full one in bands over the following frames.
         let interacting = response.dragged() || wheeled;
-        let scale = if self.interactive_scale.is_finite() {
-            self.interactive_scale.clamp(0.1, 1.0)
-        } else {
-            1.0
-        };
-        let slot = usize::from(interacting && scale < 1.0);
-        let size = if slot == 1 {
-            full.map(|s| ((s as f32 * scale).round() as u32).max(1))
-        } else {
-            full
-        };
         if interacting {
             // The full frame follows when the mouse stops.
+            ui.ctx().request_repaint();
+        }
+        if self.pacer.poll(gpu) {
             ui.ctx().request_repaint();
         }
         let features = self.features(scene);
@@ -438,12 +471,52 @@ impl MipView {
         let key = FrameKey {
             camera: self.camera,
             settings,
-            size,
+            size: full,
+            interacting,
             volume: scene.volume.intensity.clone(),
             features: features.map(|f| (f.texture.clone(), f.reference())),
         };
         let mut rendered = false;
+        let mut step = None;
         if self.last.as_ref() != Some(&key) {
+            self.refining = None;
+            let cost = FrameCost::of(scene.volume, &self.camera, &settings);
+            let full_slots = cost.rows(full[0], full[1]);
+            let budget = self.pacer.budget_slots();
+            let cap = if self.interactive_scale.is_finite() {
+                self.interactive_scale.clamp(0.1, 1.0)
+            } else {
+                1.0
+            };
+            let scale = if interacting {
+                scale_within(full_slots, budget, cap)
+            } else {
+                match FramePlan::of(full_slots, budget) {
+                    FramePlan::Whole => 1.0,
+                    FramePlan::Progressive { coarse_scale } => {
+                        self.refining = Some(Refining { next_row: 0, cost });
+                        coarse_scale
+                    }
+                }
+            };
+            let slot = usize::from(scale < 1.0);
+            let size = if slot == 1 {
+                full.map(|s| ((s as f32 * scale).round() as u32).max(1))
+            } else {
+                full
+            };
+            step = Some((slot, size, 0..size[1], cost));
+            self.last = Some(key);
+        } else if let Some(r) = &self.refining {
+            let rows = r.cost.rows_within(full[0], self.pacer.budget_slots());
+            // Whole workgroups of 8 rows where the budget allows.
+            let rows = if rows >= 8 { rows / 8 * 8 } else { rows };
+            let end = r.next_row.saturating_add(rows).min(full[1]);
+            step = Some((0, full, r.next_row..end, r.cost));
+        }
+        if let Some((slot, size, rows, cost)) = step {
+            let started = web_time::Instant::now();
+            let slots = cost.rows(size[0], rows.end - rows.start);
             match self.render(
                 gpu,
                 render_state,
@@ -452,16 +525,34 @@ impl MipView {
                 &settings,
                 slot,
                 size,
+                rows.clone(),
             ) {
                 Ok(()) => {
-                    self.shown = slot;
+                    self.pacer.submitted(gpu, slots, started);
+                    self.last_slots = slots;
                     rendered = true;
                     self.frames += 1;
                     self.error = None;
+                    let refining_band = slot == 0 && self.refining.is_some();
+                    if refining_band {
+                        if rows.end >= full[1] {
+                            self.refining = None;
+                            self.shown = 0;
+                        } else if let Some(r) = &mut self.refining {
+                            r.next_row = rows.end;
+                        }
+                    } else {
+                        self.shown = slot;
+                    }
                 }
-                Err(e) => self.error = Some(e),
+                Err(e) => {
+                    self.error = Some(e);
+                    self.refining = None;
+                }
             }
-            self.last = Some(key);
+            if self.refining.is_some() {
+                ui.ctx().request_repaint();
+            }
         }
 
         // Draw.
@@ -508,6 +599,7 @@ impl MipView {
         settings: &RenderSettings,
         slot: usize,
         size: [u32; 2],
+        rows: std::ops::Range<u32>,
     ) -> Result<(), String> {
         if self.caster.is_none() {
             self.caster = Some(Raycaster::new(gpu).map_err(|e| e.to_string())?);
@@ -541,7 +633,7 @@ impl MipView {
             feature_bricks: self.feature_bricks.as_ref(),
         };
         caster
-            .render(gpu, &scene, &self.camera, settings, target)
+            .render_rows(gpu, &scene, &self.camera, settings, target, rows)
             .map_err(|e| e.to_string())?;
         if resized {
             let mut renderer = render_state.renderer.write();

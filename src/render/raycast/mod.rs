@@ -30,18 +30,24 @@
 //!   feature can exceed the running extremes, and skips the loads of one kind when only that kind
 //!   cannot. Updates need a strictly larger value, so the picture and the picks are unchanged
 //!   (tested against the unskipped GPU frame and the twin, which skips the same way).
-
+//! - Progressive frames: [`Raycaster::render_rows`] draws a band of rows; a frame drawn band by
+//!   band is the same, pixel for pixel, as one drawn whole. [`FrameCost`] counts a frame's sample
+//!   slots and [`FramePacer`] measures how many the device projects per second, so the viewer
+//!   keeps every frame's GPU work within a budget (a coarse frame first, then bands).
 //!
 //! One file per concern: `settings` (the frame's settings and the uniforms mirroring
 //! raycast.wgsl), `bricks` (the brick tables of the skipping), `target` (the render target, its
-//! readbacks and the picks), `twin` (the CPU twin of the pass); here, the pass itself.
+//! readbacks and the picks), `twin` (the CPU twin of the pass), `pace` (the progressive
+//! renderer's clock); here, the pass itself.
 
 mod bricks;
+mod pace;
 mod settings;
 mod target;
 mod twin;
 
 pub use bricks::{BRICK, Bricks, brick_dims, cpu_bricks};
+pub use pace::{FramePacer, FramePlan, MIN_COARSE_SCALE, scale_within};
 pub use settings::{
     CHANNEL_COLOURS, ChannelDisplay, Params, Projection, RenderSettings, Slab, VolumeGeometry,
     params,
@@ -52,6 +58,7 @@ pub use target::{
     Channel, PendingPick, Pick, RaycastTarget, RenderedView, pixel_of_uv, read_feature_texel,
 };
 pub use twin::{TwinImage, TwinScene, cpu_twin};
+
 
 use crate::gpu::readback::ReadbackError;
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
@@ -184,6 +191,26 @@ impl Raycaster {
         settings: &RenderSettings,
         target: &mut RaycastTarget,
     ) -> Result<(), RaycastError> {
+        let rows = 0..target.size[1];
+        self.render_rows(ctx, scene, camera, settings, target, rows)
+    }
+
+    /// Renders the image rows `rows` of a frame into `target` (submitted; not waited for), the
+    /// other rows untouched: a frame drawn band by band over several submissions (progressive
+    /// rendering, [`FrameCost`]) is the same, pixel for pixel, as one drawn whole.
+    pub fn render_rows(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene<'_>,
+        camera: &Camera,
+        settings: &RenderSettings,
+        target: &mut RaycastTarget,
+        rows: std::ops::Range<u32>,
+    ) -> Result<(), RaycastError> {
+        let rows = rows.start.min(target.size[1])..rows.end.min(target.size[1]);
+        if rows.is_empty() {
+            return Ok(());
+        }
         let (volume, features) = (scene.volume, scene.features);
         if let Some(f) = features
             && f.dims != volume.dims
@@ -202,7 +229,8 @@ impl Raycaster {
             features.map(|f| f.reference()),
         );
         let skipping = scene.skipping();
-        let p = if skipping { p.with_skipping() } else { p };
+        let mut p = if skipping { p.with_skipping() } else { p };
+        (p.row0, p.row_end) = (rows.start, rows.end);
         ctx.queue
             .write_buffer(&target.params, 0, bytemuck::bytes_of(&p));
         let feature_view = features.map_or(&self.no_features, |f| &f.view);
@@ -242,7 +270,7 @@ impl Raycaster {
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(target.size[0].div_ceil(8), target.size[1].div_ceil(8), 1);
+            pass.dispatch_workgroups(target.size[0].div_ceil(8), (rows.end - rows.start).div_ceil(8), 1);
         }
         ctx.queue.submit([encoder.finish()]);
         target.rendered = Some(RenderedView {
@@ -251,6 +279,34 @@ impl Raycaster {
             geometry,
         });
         Ok(())
+    }
+}
+
+/// What a frame costs the GPU, in sample slots (rays x the longest ray's samples): the unit of
+/// the progressive renderer's budget, whose rate (slots per second) it measures on the device.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameCost {
+    /// Samples along the longest ray through the volume.
+    pub samples_per_ray: f64,
+}
+
+impl FrameCost {
+    pub fn of(volume: &RenderVolume, camera: &Camera, settings: &RenderSettings) -> Self {
+        let p = params(&VolumeGeometry::of(volume), camera, settings, [1, 1], None);
+        Self {
+            samples_per_ray: f64::from(p.max_steps),
+        }
+    }
+
+    /// Sample slots of `rows` rows of an image `width` pixels wide.
+    pub fn rows(&self, width: u32, rows: u32) -> f64 {
+        f64::from(width) * f64::from(rows) * self.samples_per_ray
+    }
+
+    /// Rows per band so that a band costs at most `budget` slots (at least one row).
+    pub fn rows_within(&self, width: u32, budget: f64) -> u32 {
+        let per_row = self.rows(width, 1).max(1.0);
+        (budget / per_row).floor().clamp(1.0, f64::from(u32::MAX)) as u32
     }
 }
 

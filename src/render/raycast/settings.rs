@@ -26,8 +26,13 @@ pub struct Params {
     pub out_size: [u32; 2],
     pub window_hi: f32,
     pub max_steps: u32,
+    /// First image row of the dispatch (a frame drawn in bands of rows; 0 for a whole frame).
+    pub row0: u32,
+    /// One past the last image row of the dispatch.
+    pub row_end: u32,
+    pub _pad: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 112);
+const _: () = assert!(std::mem::size_of::<Params>() == 128);
 
 impl Params {
     /// The same frame with empty-space skipping on (the shader then reads the bricks; the CPU
@@ -219,5 +224,8 @@ pub fn params(
         out_size: size,
         window_hi: settings.window.1,
         max_steps,
+        row0: 0,
+        row_end: size[1],
+        _pad: [0; 2],
     }
 }

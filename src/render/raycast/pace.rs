@@ -1,0 +1,188 @@
+//! Progressive rendering's clock: how many sample slots ([`super::FrameCost`]) this device's GPU
+//! projects per second, measured on the frames themselves, and from it how much of a frame fits
+//! in one frame's GPU budget.
+//!
+//! A measurement runs from just before a submission to the queue's "work done" callback, so it
+//! includes queueing behind other work and the wait for the next poll: the rate is an
+//! underestimate, and bands come out smaller than the budget rather than larger.
+
+use std::sync::{Arc, Mutex};
+
+use web_time::Instant;
+
+use crate::gpu::GpuContext;
+
+/// First guess of the rate before anything was measured: a software rasteriser's order
+/// (lavapipe on two cores measures 30-150 M slots/s); a real GPU measures higher within a few
+/// frames.
+pub const INITIAL_SLOTS_PER_S: f64 = 20e6;
+
+/// The measured rate and the budget per frame.
+pub struct FramePacer {
+    /// GPU seconds one frame may take; `None`: frames are drawn whole, whatever they cost.
+    pub budget_s: Option<f64>,
+    slots_per_s: f64,
+    measured: bool,
+    /// The rate is given, never measured (tests, benchmarks).
+    fixed: bool,
+    measuring: Option<Measure>,
+}
+
+struct Measure {
+    start: Instant,
+    slots: f64,
+    done: Arc<Mutex<Option<Instant>>>,
+}
+
+impl FramePacer {
+    pub fn new(budget_s: Option<f64>) -> Self {
+        Self {
+            budget_s,
+            slots_per_s: INITIAL_SLOTS_PER_S,
+            measured: false,
+            fixed: false,
+            measuring: None,
+        }
+    }
+
+    /// A pacer with a given rate that it never measures (reproducible bands in tests).
+    pub fn fixed(budget_s: Option<f64>, slots_per_s: f64) -> Self {
+        Self {
+            budget_s,
+            slots_per_s: slots_per_s.max(1.0),
+            measured: true,
+            fixed: true,
+            measuring: None,
+        }
+    }
+
+    /// Sample slots per second, measured (or the first guess).
+    pub fn rate(&self) -> f64 {
+        self.slots_per_s
+    }
+
+    /// Whether [`Self::rate`] comes from a measurement.
+    pub fn measured(&self) -> bool {
+        self.measured
+    }
+
+    /// How many sample slots one frame may cost; infinite without a budget.
+    pub fn budget_slots(&self) -> f64 {
+        match self.budget_s {
+            Some(s) if s.is_finite() && s > 0.0 => s * self.slots_per_s,
+            _ => f64::INFINITY,
+        }
+    }
+
+    /// Call right after submitting `slots` sample slots of work, with the time taken just before
+    /// the submission: times it if no other measurement is running.
+    pub fn submitted(&mut self, ctx: &GpuContext, slots: f64, start: Instant) {
+        if self.fixed || self.measuring.is_some() || !(slots > 0.0) {
+            return;
+        }
+        let done = Arc::new(Mutex::new(None));
+        let d = Arc::clone(&done);
+        ctx.queue.on_submitted_work_done(move || {
+            if let Ok(mut d) = d.lock() {
+                *d = Some(Instant::now());
+            }
+        });
+        self.measuring = Some(Measure {
+            start,
+            slots,
+            done,
+        });
+    }
+
+    /// Takes a finished measurement into the rate; true while one is still running (the
+    /// caller keeps polling and repainting).
+    pub fn poll(&mut self, ctx: &GpuContext) -> bool {
+        let Some(m) = &self.measuring else {
+            return false;
+        };
+        #[cfg(not(target_arch = "wasm32"))]
+        let _ = ctx.device.poll(wgpu::PollType::Poll);
+        #[cfg(target_arch = "wasm32")]
+        let _ = ctx;
+        let done = m.done.lock().ok().and_then(|d| *d);
+        let Some(done) = done else {
+            return true;
+        };
+        // A millisecond floor: a tiny frame's time is mostly overhead.
+        let secs = done.duration_since(m.start).as_secs_f64().max(1e-3);
+        let sample = (m.slots / secs).clamp(1e5, 1e13);
+        self.slots_per_s = if self.measured {
+            // Geometric mean of the old rate and the new sample: steady, yet a factor of ten
+            // off is corrected in a few frames.
+            (self.slots_per_s * sample).sqrt()
+        } else {
+            sample
+        };
+        self.measured = true;
+        self.measuring = None;
+        false
+    }
+}
+
+/// How a frame of `full_slots` sample slots is drawn within `budget_slots`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FramePlan {
+    /// It fits: draw it whole.
+    Whole,
+    /// First a coarse frame at this fraction of the resolution (within the budget), then the
+    /// full one in bands of rows over the following frames.
+    Progressive { coarse_scale: f32 },
+}
+
+/// The coarsest resolution a progressive frame starts from.
+pub const MIN_COARSE_SCALE: f32 = 1.0 / 16.0;
+
+impl FramePlan {
+    pub fn of(full_slots: f64, budget_slots: f64) -> Self {
+        if !(full_slots > budget_slots) {
+            return Self::Whole;
+        }
+        let s = (budget_slots / full_slots).sqrt() as f32;
+        Self::Progressive {
+            coarse_scale: s.clamp(MIN_COARSE_SCALE, 0.5),
+        }
+    }
+}
+
+/// The largest resolution scale (at most `cap`) whose frame costs at most `budget_slots`
+/// (the preview drawn while the mouse moves the view), never below [`MIN_COARSE_SCALE`].
+pub fn scale_within(full_slots: f64, budget_slots: f64, cap: f32) -> f32 {
+    let cap = cap.clamp(MIN_COARSE_SCALE, 1.0);
+    if !(full_slots > budget_slots) {
+        return cap;
+    }
+    ((budget_slots / full_slots).sqrt() as f32).clamp(MIN_COARSE_SCALE, cap)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plans() {
+        assert_eq!(FramePlan::of(10.0, 100.0), FramePlan::Whole);
+        assert_eq!(FramePlan::of(100.0, f64::INFINITY), FramePlan::Whole);
+        assert_eq!(
+            FramePlan::of(400.0, 100.0),
+            FramePlan::Progressive { coarse_scale: 0.5 }
+        );
+        assert_eq!(
+            FramePlan::of(1600.0, 1.0),
+            FramePlan::Progressive {
+                coarse_scale: MIN_COARSE_SCALE
+            }
+        );
+        assert_eq!(
+            FramePlan::of(1e4, 100.0),
+            FramePlan::Progressive { coarse_scale: 0.1 }
+        );
+        assert_eq!(scale_within(10.0, 100.0, 0.5), 0.5);
+        assert_eq!(scale_within(1e4, 100.0, 0.5), 0.1);
+        assert_eq!(scale_within(1e9, 1.0, 0.5), MIN_COARSE_SCALE);
+    }
+}
