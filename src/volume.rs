@@ -57,6 +57,16 @@ impl Voxels {
         self.len() == 0
     }
 
+    /// Bytes the voxels occupy.
+    pub fn byte_len(&self) -> usize {
+        self.len()
+            * match self {
+                Self::U8(_) => 1,
+                Self::I16(_) | Self::U16(_) => 2,
+                Self::F32(_) => 4,
+            }
+    }
+
     /// The raw stored value at a linear index, as f32 (no rescale).
     #[inline]
     pub fn raw_f32(&self, index: usize) -> f32 {

@@ -303,12 +303,19 @@ fn a_frame_over_budget_is_drawn_coarse_first_then_in_bands() {
     let whole_frames = whole.state().view.frames_rendered();
     drop(whole);
 
-    // 2 M sample slots per frame: a twentieth of this viewport's full frame or less.
-    let budget_slots = 2.0e6;
-    let Some(mut h) = harness_with(FramePacer::fixed(Some(1.0), budget_slots)) else {
+    // 100 k samples per frame: a fiftieth of this viewport's full frame or less.
+    let budget_samples = 1.0e5;
+    let Some(mut h) = harness_with(FramePacer::fixed(Some(1.0), budget_samples)) else {
         return;
     };
     // harness_with ran 3 frames: the coarse one and two bands.
+    eprintln!(
+        "after 3 frames: refining {}, preview {}, {} dispatches, last {} samples",
+        h.state().view.refining(),
+        h.state().view.showing_preview(),
+        h.state().view.frames_rendered(),
+        h.state().view.last_dispatch_samples()
+    );
     assert!(
         h.state().view.refining() && h.state().view.showing_preview(),
         "a frame over budget starts coarse"
@@ -316,22 +323,22 @@ fn a_frame_over_budget_is_drawn_coarse_first_then_in_bands() {
     let coarse = h.render().expect("render");
     save(&coarse, "mip_view_coarse.png");
     let mut steps = 0;
-    let mut largest: f64 = h.state().view.last_dispatch_slots();
+    let mut largest: f64 = h.state().view.last_dispatch_samples();
     while h.state().view.refining() && steps < 2000 {
         h.step();
         steps += 1;
-        largest = largest.max(h.state().view.last_dispatch_slots());
+        largest = largest.max(h.state().view.last_dispatch_samples());
     }
     let frames = h.state().view.frames_rendered();
     eprintln!(
-        "progressive: {frames} dispatches (whole: {whole_frames}), largest {largest:.0} slots"
+        "progressive: {frames} dispatches (whole: {whole_frames}), largest {largest:.0} samples"
     );
     assert!(!h.state().view.refining(), "not done after {steps} steps");
     assert!(!h.state().view.showing_preview());
     assert!(frames >= 10, "only {frames} dispatches");
     assert!(
-        largest <= budget_slots,
-        "a dispatch cost {largest} slots, over the budget of {budget_slots}"
+        largest <= budget_samples,
+        "a dispatch cost {largest} samples, over the budget of {budget_samples}"
     );
     let settled = h.render().expect("render");
     save(&settled, "mip_view_progressive.png");

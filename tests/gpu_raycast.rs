@@ -8,8 +8,8 @@ use shapecast::gpu::context::test_context;
 use shapecast::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use shapecast::render::camera::{Camera, ViewPreset};
 use shapecast::render::raycast::{
-    Channel, ChannelDisplay, Projection, RaycastTarget, Raycaster, RenderSettings, Scene, Slab,
-    TwinScene, VolumeGeometry, cpu_twin, params,
+    Channel, ChannelDisplay, FrameCost, Projection, RaycastTarget, Raycaster, RenderSettings,
+    Scene, Slab, TwinScene, VolumeGeometry, cpu_twin, params,
 };
 use shapecast::volume::Volume;
 
@@ -820,8 +820,14 @@ fn bands_of_rows_draw_the_same_frame() {
     let partial = banded.read_image_blocking(&g.ctx).expect("image");
     let row = size[0] as usize * 4;
     assert_eq!(partial[5 * row..9 * row], image[5 * row..9 * row]);
-    assert!(partial[..5 * row].iter().all(|&b| b == 0), "rows above touched");
-    assert!(partial[9 * row..].iter().all(|&b| b == 0), "rows below touched");
+    assert!(
+        partial[..5 * row].iter().all(|&b| b == 0),
+        "rows above touched"
+    );
+    assert!(
+        partial[9 * row..].iter().all(|&b| b == 0),
+        "rows below touched"
+    );
     for rows in [0..5, 9..16, 16..17, 17..40, 40..100] {
         g.caster
             .render_rows(&g.ctx, &scene, &camera, &settings, &mut banded, rows)
@@ -829,4 +835,30 @@ fn bands_of_rows_draw_the_same_frame() {
     }
     assert_eq!(banded.read_image_blocking(&g.ctx).expect("image"), image);
     assert_eq!(banded.read_depths_blocking(&g.ctx).expect("depths"), depths);
+
+    // The cost model counts the samples the rays take (the twin's count, without skipping),
+    // plus 4 per ray for its setup; bands within a budget.
+    let cost = FrameCost::of(&g.volume, &camera, &settings, size);
+    let p = params(
+        &VolumeGeometry::of(&g.volume),
+        &camera,
+        &settings,
+        size,
+        Some(g.features.max),
+    );
+    let twin = cpu_twin(&TwinScene::new(&volume, Some(&comps)), &p);
+    let rays = f64::from(size[0] * size[1]);
+    assert_eq!(cost.total() - 4.0 * rays, twin.samples as f64);
+    assert!(twin.samples > 1000);
+    let budget = cost.total() / 5.0;
+    let mut row = 0;
+    let mut bands = 0;
+    while row < size[1] {
+        let end = cost.band_within(row, budget);
+        assert!(end > row);
+        assert!(cost.rows(row..end) <= budget || end == row + 1);
+        row = end;
+        bands += 1;
+    }
+    assert!((5..=12).contains(&bands), "{bands} bands");
 }

@@ -7,8 +7,8 @@
 //! lavapipe included): a frame that would cost more is drawn first at a coarse resolution that
 //! fits, then at full resolution in bands of rows over the following frames, shown when
 //! complete; while the mouse moves the view only the reduced preview is drawn, small enough to
-//! fit. The cost is counted in sample slots and the device's rate measured on its own frames
-//! ([`FramePacer`]).
+//! fit. The cost is counted in samples along the rays ([`FrameCost`]) and the device's rate
+//! measured on its own frames ([`FramePacer`]).
 //!
 //! Mouse: left drag turns the volume (arcball), middle drag or shift + left drag pans, the
 //! wheel zooms towards the pointer, right drag sets the grey window (horizontal: width,
@@ -76,6 +76,7 @@ struct FrameKey {
 /// A full-resolution frame in progress: rows `[0, next_row)` of target 0 are drawn.
 struct Refining {
     next_row: u32,
+    /// What each row of the full frame costs.
     cost: FrameCost,
 }
 
@@ -99,7 +100,7 @@ pub struct MipView {
     pub pacer: FramePacer,
     /// The full-resolution frame being drawn band by band (the coarse one shown meanwhile).
     refining: Option<Refining>,
-    last_slots: f64,
+    last_samples: f64,
     mode_chosen: bool,
     caster: Option<Raycaster>,
     /// Brick extrema of the textures last shown (empty-space skipping), remade when they change.
@@ -142,7 +143,7 @@ impl MipView {
             interactive_scale: 0.5,
             pacer: FramePacer::new(Some(Self::FRAME_BUDGET_S)),
             refining: None,
-            last_slots: 0.0,
+            last_samples: 0.0,
             mode_chosen: false,
             caster: None,
             bricks: None,
@@ -184,9 +185,9 @@ impl MipView {
         self.shown == 1
     }
 
-    /// Sample slots ([`FrameCost`]) of the last dispatch: what the frame budget bounds.
-    pub fn last_dispatch_slots(&self) -> f64 {
-        self.last_slots
+    /// Samples ([`FrameCost`]) of the last dispatch: what the frame budget bounds.
+    pub fn last_dispatch_samples(&self) -> f64 {
+        self.last_samples
     }
 
     /// Whether the full-resolution frame is still being drawn in bands (a coarse one shown).
@@ -480,23 +481,20 @@ impl MipView {
         let mut step = None;
         if self.last.as_ref() != Some(&key) {
             self.refining = None;
-            let cost = FrameCost::of(scene.volume, &self.camera, &settings);
-            let full_slots = cost.rows(full[0], full[1]);
-            let budget = self.pacer.budget_slots();
+            let cost = FrameCost::of(scene.volume, &self.camera, &settings, full);
+            let full_samples = cost.total();
+            let budget = self.pacer.budget_samples();
             let cap = if self.interactive_scale.is_finite() {
                 self.interactive_scale.clamp(0.1, 1.0)
             } else {
                 1.0
             };
             let scale = if interacting {
-                scale_within(full_slots, budget, cap)
+                scale_within(full_samples, budget, cap)
             } else {
-                match FramePlan::of(full_slots, budget) {
+                match FramePlan::of(full_samples, budget) {
                     FramePlan::Whole => 1.0,
-                    FramePlan::Progressive { coarse_scale } => {
-                        self.refining = Some(Refining { next_row: 0, cost });
-                        coarse_scale
-                    }
+                    FramePlan::Progressive { coarse_scale } => coarse_scale,
                 }
             };
             let slot = usize::from(scale < 1.0);
@@ -505,18 +503,19 @@ impl MipView {
             } else {
                 full
             };
-            step = Some((slot, size, 0..size[1], cost));
+            let samples = full_samples * f64::from(scale) * f64::from(scale);
+            if slot == 1 && !interacting {
+                self.refining = Some(Refining { next_row: 0, cost });
+            }
+            step = Some((slot, size, 0..size[1], samples));
             self.last = Some(key);
         } else if let Some(r) = &self.refining {
-            let rows = r.cost.rows_within(full[0], self.pacer.budget_slots());
-            // Whole workgroups of 8 rows where the budget allows.
-            let rows = if rows >= 8 { rows / 8 * 8 } else { rows };
-            let end = r.next_row.saturating_add(rows).min(full[1]);
-            step = Some((0, full, r.next_row..end, r.cost));
+            let end = r.cost.band_within(r.next_row, self.pacer.budget_samples());
+            let rows = r.next_row..end;
+            step = Some((0, full, rows.clone(), r.cost.rows(rows)));
         }
-        if let Some((slot, size, rows, cost)) = step {
+        if let Some((slot, size, rows, samples)) = step {
             let started = web_time::Instant::now();
-            let slots = cost.rows(size[0], rows.end - rows.start);
             match self.render(
                 gpu,
                 render_state,
@@ -528,8 +527,8 @@ impl MipView {
                 rows.clone(),
             ) {
                 Ok(()) => {
-                    self.pacer.submitted(gpu, slots, started);
-                    self.last_slots = slots;
+                    self.pacer.submitted(gpu, samples, started);
+                    self.last_samples = samples;
                     rendered = true;
                     self.frames += 1;
                     self.error = None;

@@ -64,11 +64,20 @@ pub struct BenchArgs {
     /// whole-body length from a real chest series, e.g. 2000) before timing.
     #[arg(long)]
     pub tile_z: Option<usize>,
+    /// A whole-body-length CT: INPUT's slices (default: ../shared/data's 512x512 chest series)
+    /// tiled along z to `--tile-z` slices (default 2000) at 0.8 mm; times load, upload, the
+    /// first MIP as the viewer draws it (coarse, then bands), `--method`'s features (default
+    /// hessian) and the feature MIP, with peak memory.
+    #[arg(long)]
+    pub whole_body: bool,
+    /// With --whole-body: write the feature MIP here.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
 }
 
 /// `volume` with its slices repeated back and forth along z to `nz` slices (no seam; compact
 /// voxels kept).
-fn tile_along_z(volume: &Volume, nz: usize) -> Volume {
+pub(crate) fn tile_along_z(volume: &Volume, nz: usize) -> Volume {
     use crate::volume::Voxels;
     fn tile<T: Copy>(v: &[T], plane: usize, n: usize, nz: usize) -> Vec<T> {
         let period = (2 * n).saturating_sub(1).max(1);
@@ -103,7 +112,7 @@ fn tile_along_z(volume: &Volume, nz: usize) -> Volume {
 }
 
 /// The process's peak resident memory (Linux), MB.
-fn peak_rss_mb() -> Option<f64> {
+pub(crate) fn peak_rss_mb() -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
@@ -263,6 +272,24 @@ fn timed(
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     let preset = Preset::from_name(&args.preset).context("unknown --preset")?;
+    if args.whole_body {
+        use crate::cpu::pipeline::Method;
+        let method = match args.method.as_str() {
+            "hessian" | "all" => Method::Hessian,
+            "li" => Method::Li,
+            "rst" => Method::Rst,
+            m => bail!("--whole-body --method {m}: hessian, li or rst"),
+        };
+        return super::whole_body::run(&super::whole_body::Options {
+            input: args.input.as_deref(),
+            slices: args.tile_z.unwrap_or(2000),
+            method,
+            preset,
+            webgpu_limits: args.webgpu_limits,
+            size: [768, 768],
+            png: args.png.as_deref(),
+        });
+    }
     if args.pipeline {
         return pipeline_bench(&args, preset);
     }

@@ -8,6 +8,7 @@ pub mod info;
 pub mod phantom;
 pub mod render;
 pub mod reproduce;
+pub mod whole_body;
 
 /// Shape-encoding MIPs of CT and MRI: Hessian and radial structure tensor features.
 ///

@@ -59,7 +59,6 @@ pub use target::{
 };
 pub use twin::{TwinImage, TwinScene, cpu_twin};
 
-
 use crate::gpu::readback::ReadbackError;
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::gpu::{GpuContext, shaders};
@@ -270,7 +269,11 @@ impl Raycaster {
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(target.size[0].div_ceil(8), (rows.end - rows.start).div_ceil(8), 1);
+            pass.dispatch_workgroups(
+                target.size[0].div_ceil(8),
+                (rows.end - rows.start).div_ceil(8),
+                1,
+            );
         }
         ctx.queue.submit([encoder.finish()]);
         target.rendered = Some(RenderedView {
@@ -282,31 +285,84 @@ impl Raycaster {
     }
 }
 
-/// What a frame costs the GPU, in sample slots (rays x the longest ray's samples): the unit of
-/// the progressive renderer's budget, whose rate (slots per second) it measures on the device.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// What a frame costs the GPU, in samples: each ray's sample count inside the box of the voxels
+/// and the slab, exactly as the shader finds it ([`twin`]'s `ray_span`), plus a few for the
+/// ray's setup; counted on every `stride`-th pixel of each row. Empty-space skipping makes the
+/// real cost lower in air; [`FramePacer`] measures the rate on the device's own frames.
+#[derive(Clone, Debug, PartialEq)]
 pub struct FrameCost {
-    /// Samples along the longest ray through the volume.
-    pub samples_per_ray: f64,
+    size: [u32; 2],
+    /// `prefix[r]`: samples of rows `[0, r)`.
+    prefix: Vec<f64>,
 }
 
+/// Samples a ray costs beyond its own (setup, the miss test).
+const RAY_SETUP_SAMPLES: f64 = 4.0;
+
 impl FrameCost {
-    pub fn of(volume: &RenderVolume, camera: &Camera, settings: &RenderSettings) -> Self {
-        let p = params(&VolumeGeometry::of(volume), camera, settings, [1, 1], None);
-        Self {
-            samples_per_ray: f64::from(p.max_steps),
+    /// The cost of each row of a `size` frame of `volume` from `camera`.
+    pub fn of(
+        volume: &RenderVolume,
+        camera: &Camera,
+        settings: &RenderSettings,
+        size: [u32; 2],
+    ) -> Self {
+        let p = params(&VolumeGeometry::of(volume), camera, settings, size, None);
+        let [w, h] = size;
+        let stride = (w / 128).max(1);
+        let per = f64::from(w) / f64::from(w.div_ceil(stride).max(1));
+        let mut prefix = Vec::with_capacity(h as usize + 1);
+        let mut total = 0.0;
+        prefix.push(total);
+        for y in 0..h {
+            let mut row = 0.0;
+            for x in (0..w).step_by(stride as usize) {
+                let o: [f32; 3] = std::array::from_fn(|a| {
+                    p.origin_v[a] + p.du_v[a] * x as f32 + p.dv_v[a] * y as f32
+                });
+                let (t0, t1, _, count) = twin::ray_span(&p, o);
+                if t0 <= t1 && count > 0 {
+                    row += f64::from(count);
+                }
+                row += RAY_SETUP_SAMPLES;
+            }
+            total += row * per;
+            prefix.push(total);
         }
+        Self { size, prefix }
     }
 
-    /// Sample slots of `rows` rows of an image `width` pixels wide.
-    pub fn rows(&self, width: u32, rows: u32) -> f64 {
-        f64::from(width) * f64::from(rows) * self.samples_per_ray
+    /// The frame's size.
+    pub fn size(&self) -> [u32; 2] {
+        self.size
     }
 
-    /// Rows per band so that a band costs at most `budget` slots (at least one row).
-    pub fn rows_within(&self, width: u32, budget: f64) -> u32 {
-        let per_row = self.rows(width, 1).max(1.0);
-        (budget / per_row).floor().clamp(1.0, f64::from(u32::MAX)) as u32
+    /// Samples of the whole frame.
+    pub fn total(&self) -> f64 {
+        self.prefix.last().copied().unwrap_or(0.0)
+    }
+
+    /// Samples of the rows `rows`.
+    pub fn rows(&self, rows: std::ops::Range<u32>) -> f64 {
+        let at = |r: u32| self.prefix[(r as usize).min(self.prefix.len() - 1)];
+        (at(rows.end) - at(rows.start)).max(0.0)
+    }
+
+    /// The band from row `start` that costs at most `budget` samples: its end (at least one
+    /// row, at most the frame's height). Bands of whole workgroups (8 rows) where the budget
+    /// allows.
+    pub fn band_within(&self, start: u32, budget: f64) -> u32 {
+        let h = self.size[1];
+        if start >= h {
+            return h;
+        }
+        let base = self.prefix[start as usize];
+        // The last end whose cost fits (the prefix is non-decreasing).
+        let fits =
+            self.prefix[start as usize + 1..].partition_point(|&c| c - base <= budget) as u32;
+        let rows = fits.max(1);
+        let rows = if rows >= 8 { rows / 8 * 8 } else { rows };
+        (start + rows).min(h)
     }
 }
 

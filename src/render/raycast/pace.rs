@@ -1,4 +1,4 @@
-//! Progressive rendering's clock: how many sample slots ([`super::FrameCost`]) this device's GPU
+//! Progressive rendering's clock: how many samples ([`super::FrameCost`]) this device's GPU
 //! projects per second, measured on the frames themselves, and from it how much of a frame fits
 //! in one frame's GPU budget.
 //!
@@ -12,16 +12,15 @@ use web_time::Instant;
 
 use crate::gpu::GpuContext;
 
-/// First guess of the rate before anything was measured: a software rasteriser's order
-/// (lavapipe on two cores measures 30-150 M slots/s); a real GPU measures higher within a few
-/// frames.
-pub const INITIAL_SLOTS_PER_S: f64 = 20e6;
+/// First guess of the rate (samples per second) before anything was measured: a software
+/// renderer's order (lavapipe on two cores); a real GPU measures higher within a few frames.
+pub const INITIAL_SAMPLES_PER_S: f64 = 50e6;
 
 /// The measured rate and the budget per frame.
 pub struct FramePacer {
     /// GPU seconds one frame may take; `None`: frames are drawn whole, whatever they cost.
     pub budget_s: Option<f64>,
-    slots_per_s: f64,
+    samples_per_s: f64,
     measured: bool,
     /// The rate is given, never measured (tests, benchmarks).
     fixed: bool,
@@ -30,7 +29,7 @@ pub struct FramePacer {
 
 struct Measure {
     start: Instant,
-    slots: f64,
+    samples: f64,
     done: Arc<Mutex<Option<Instant>>>,
 }
 
@@ -38,7 +37,7 @@ impl FramePacer {
     pub fn new(budget_s: Option<f64>) -> Self {
         Self {
             budget_s,
-            slots_per_s: INITIAL_SLOTS_PER_S,
+            samples_per_s: INITIAL_SAMPLES_PER_S,
             measured: false,
             fixed: false,
             measuring: None,
@@ -46,19 +45,19 @@ impl FramePacer {
     }
 
     /// A pacer with a given rate that it never measures (reproducible bands in tests).
-    pub fn fixed(budget_s: Option<f64>, slots_per_s: f64) -> Self {
+    pub fn fixed(budget_s: Option<f64>, samples_per_s: f64) -> Self {
         Self {
             budget_s,
-            slots_per_s: slots_per_s.max(1.0),
+            samples_per_s: samples_per_s.max(1.0),
             measured: true,
             fixed: true,
             measuring: None,
         }
     }
 
-    /// Sample slots per second, measured (or the first guess).
+    /// Samples per second, measured (or the first guess).
     pub fn rate(&self) -> f64 {
-        self.slots_per_s
+        self.samples_per_s
     }
 
     /// Whether [`Self::rate`] comes from a measurement.
@@ -66,18 +65,18 @@ impl FramePacer {
         self.measured
     }
 
-    /// How many sample slots one frame may cost; infinite without a budget.
-    pub fn budget_slots(&self) -> f64 {
+    /// How many samples one frame may cost; infinite without a budget.
+    pub fn budget_samples(&self) -> f64 {
         match self.budget_s {
-            Some(s) if s.is_finite() && s > 0.0 => s * self.slots_per_s,
+            Some(s) if s.is_finite() && s > 0.0 => s * self.samples_per_s,
             _ => f64::INFINITY,
         }
     }
 
-    /// Call right after submitting `slots` sample slots of work, with the time taken just before
+    /// Call right after submitting `samples` samples of work, with the time taken just before
     /// the submission: times it if no other measurement is running.
-    pub fn submitted(&mut self, ctx: &GpuContext, slots: f64, start: Instant) {
-        if self.fixed || self.measuring.is_some() || !(slots > 0.0) {
+    pub fn submitted(&mut self, ctx: &GpuContext, samples: f64, start: Instant) {
+        if self.fixed || self.measuring.is_some() || !(samples > 0.0) {
             return;
         }
         let done = Arc::new(Mutex::new(None));
@@ -89,7 +88,7 @@ impl FramePacer {
         });
         self.measuring = Some(Measure {
             start,
-            slots,
+            samples,
             done,
         });
     }
@@ -110,11 +109,11 @@ impl FramePacer {
         };
         // A millisecond floor: a tiny frame's time is mostly overhead.
         let secs = done.duration_since(m.start).as_secs_f64().max(1e-3);
-        let sample = (m.slots / secs).clamp(1e5, 1e13);
-        self.slots_per_s = if self.measured {
-            // Geometric mean of the old rate and the new sample: steady, yet a factor of ten
-            // off is corrected in a few frames.
-            (self.slots_per_s * sample).sqrt()
+        let sample = (m.samples / secs).clamp(1e5, 1e13);
+        self.samples_per_s = if self.measured && sample > self.samples_per_s {
+            // Up slowly (the geometric mean of the old rate and the new sample), down at once:
+            // a band over dense tissue after bands of air must not be planned at air's rate.
+            (self.samples_per_s * sample).sqrt()
         } else {
             sample
         };
@@ -124,7 +123,7 @@ impl FramePacer {
     }
 }
 
-/// How a frame of `full_slots` sample slots is drawn within `budget_slots`.
+/// How a frame of `full_samples` samples is drawn within `budget_samples`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FramePlan {
     /// It fits: draw it whole.
@@ -138,25 +137,25 @@ pub enum FramePlan {
 pub const MIN_COARSE_SCALE: f32 = 1.0 / 16.0;
 
 impl FramePlan {
-    pub fn of(full_slots: f64, budget_slots: f64) -> Self {
-        if !(full_slots > budget_slots) {
+    pub fn of(full_samples: f64, budget_samples: f64) -> Self {
+        if !(full_samples > budget_samples) {
             return Self::Whole;
         }
-        let s = (budget_slots / full_slots).sqrt() as f32;
+        let s = (budget_samples / full_samples).sqrt() as f32;
         Self::Progressive {
             coarse_scale: s.clamp(MIN_COARSE_SCALE, 0.5),
         }
     }
 }
 
-/// The largest resolution scale (at most `cap`) whose frame costs at most `budget_slots`
+/// The largest resolution scale (at most `cap`) whose frame costs at most `budget_samples`
 /// (the preview drawn while the mouse moves the view), never below [`MIN_COARSE_SCALE`].
-pub fn scale_within(full_slots: f64, budget_slots: f64, cap: f32) -> f32 {
+pub fn scale_within(full_samples: f64, budget_samples: f64, cap: f32) -> f32 {
     let cap = cap.clamp(MIN_COARSE_SCALE, 1.0);
-    if !(full_slots > budget_slots) {
+    if !(full_samples > budget_samples) {
         return cap;
     }
-    ((budget_slots / full_slots).sqrt() as f32).clamp(MIN_COARSE_SCALE, cap)
+    ((budget_samples / full_samples).sqrt() as f32).clamp(MIN_COARSE_SCALE, cap)
 }
 
 #[cfg(test)]

@@ -94,32 +94,7 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
                 p.origin_v[a] + p.du_v[a] * x as f32 + p.dv_v[a] * y as f32
             });
             let d = p.dir_v;
-            let mut t0 = -BIG;
-            let mut t1 = BIG;
-            let mut empty = false;
-            for a in 0..3 {
-                let lo = -0.5f32;
-                let hi = dims[a] as f32 - 0.5;
-                if d[a].abs() < 1e-20 {
-                    if o[a] < lo || o[a] > hi {
-                        empty = true;
-                    }
-                } else {
-                    let ta = (lo - o[a]) / d[a];
-                    let tb = (hi - o[a]) / d[a];
-                    t0 = t0.max(ta.min(tb));
-                    t1 = t1.min(ta.max(tb));
-                }
-            }
-            if empty {
-                t0 = 1.0;
-                t1 = 0.0;
-            }
-            let t0 = t0.max(p.slab_lo);
-            let t1 = t1.min(p.slab_hi);
-            let k0 = (t0 / p.step_mm).ceil() as i32;
-            let k1 = (t1 / p.step_mm).floor() as i32;
-            let count = (k1.saturating_sub(k0).saturating_add(1)).min(p.max_steps as i32);
+            let (t0, t1, k0, count) = ray_span(p, o);
             let out = &mut rgba[pixel * 4..pixel * 4 + 4];
             if t0 > t1 || count <= 0 {
                 out.copy_from_slice(&[0, 0, 0, 255]);
@@ -289,4 +264,39 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
         samples,
         feature_samples,
     }
+}
+
+/// A ray's samples as the shader finds them: the depth interval `(t0, t1)` inside the box of
+/// the voxels and the slab, the first sample index `k0` and the sample count (`t0 > t1` or
+/// `count <= 0`: the ray misses).
+pub(super) fn ray_span(p: &Params, o: [f32; 3]) -> (f32, f32, i32, i32) {
+    let d = p.dir_v;
+    let dims = p.dims;
+    let mut t0 = -BIG;
+    let mut t1 = BIG;
+    let mut empty = false;
+    for a in 0..3 {
+        let lo = -0.5f32;
+        let hi = dims[a] as f32 - 0.5;
+        if d[a].abs() < 1e-20 {
+            if o[a] < lo || o[a] > hi {
+                empty = true;
+            }
+        } else {
+            let ta = (lo - o[a]) / d[a];
+            let tb = (hi - o[a]) / d[a];
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+        }
+    }
+    if empty {
+        t0 = 1.0;
+        t1 = 0.0;
+    }
+    let t0 = t0.max(p.slab_lo);
+    let t1 = t1.min(p.slab_hi);
+    let k0 = (t0 / p.step_mm).ceil() as i32;
+    let k1 = (t1 / p.step_mm).floor() as i32;
+    let count = (k1.saturating_sub(k0).saturating_add(1)).min(p.max_steps as i32);
+    (t0, t1, k0, count)
 }
