@@ -123,9 +123,20 @@ pub fn pipeline(
     module: &wgpu::ShaderModule,
     entry_point: &str,
 ) -> wgpu::ComputePipeline {
+    labelled_pipeline(ctx, entry_point, module, entry_point)
+}
+
+/// [`pipeline`] under another label than its entry point (for shaders whose one entry point is
+/// a plain `main`).
+pub fn labelled_pipeline(
+    ctx: &GpuContext,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    entry_point: &str,
+) -> wgpu::ComputePipeline {
     ctx.device
         .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(entry_point),
+            label: Some(label),
             layout: None,
             module,
             entry_point: Some(entry_point),

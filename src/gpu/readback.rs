@@ -26,9 +26,7 @@ pub async fn read_bytes(
     src: &wgpu::Buffer,
     size: u64,
 ) -> Result<Vec<u8>, ReadbackError> {
-    let (staging, receiver) = start_read(ctx, src, size);
-    receiver.await.map_err(|_| ReadbackError::Lost)??;
-    finish_read(&staging, size)
+    PendingRead::start(ctx, src, size).finish().await
 }
 
 fn start_read(
@@ -72,6 +70,42 @@ fn start_copies(
         let _ = sender.send(result);
     });
     (staging, receiver)
+}
+
+/// Records the copy of one texel of `texture` (3D, or 2D with `texel[2] == 0`) to `offset` in
+/// `dst`.
+pub fn copy_texel(
+    encoder: &mut wgpu::CommandEncoder,
+    texture: &wgpu::Texture,
+    texel: [u32; 3],
+    dst: &wgpu::Buffer,
+    offset: u64,
+) {
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d {
+                x: texel[0],
+                y: texel[1],
+                z: texel[2],
+            },
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: dst,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset,
+                bytes_per_row: None,
+                rows_per_image: None,
+            },
+        },
+        wgpu::Extent3d {
+            width: 1,
+            height: 1,
+            depth_or_array_layers: 1,
+        },
+    );
 }
 
 fn finish_read(staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, ReadbackError> {
@@ -212,6 +246,13 @@ impl PendingRead {
             Ok(Some(Err(e))) => Some(Err(e.into())),
             Err(_) => Some(Err(ReadbackError::Lost)),
         }
+    }
+
+    /// The bytes, awaited (works on wasm, where the browser completes the mapping; natively
+    /// something must poll the device, see [`Self::wait`]).
+    pub async fn finish(self) -> Result<Vec<u8>, ReadbackError> {
+        self.receiver.await.map_err(|_| ReadbackError::Lost)??;
+        finish_read(&self.staging, self.size)
     }
 
     /// Native only: waits for the bytes.

@@ -4,6 +4,58 @@
 use glam::{DMat3, DVec3};
 
 use super::LoadError;
+use crate::volume::{Modality, Volume, Voxels};
+
+/// Where a header puts the voxels, checked: what a `Volume` takes from the geometry.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Grid {
+    pub spacing_mm: [f64; 3],
+    pub origin_mm: [f64; 3],
+    pub direction: DMat3,
+}
+
+/// The grid a header declares: `axes` the LPS vectors of one step along i, j, k and `origin`
+/// the LPS centre of voxel (0, 0, 0), each with the header field it came from (for errors),
+/// checked by [`from_axis_vectors`] and [`check_origin`].
+pub(crate) fn checked_grid(
+    file: &str,
+    axes: (&str, [DVec3; 3]),
+    origin: (&str, DVec3),
+    warnings: &mut Vec<String>,
+) -> Result<Grid, LoadError> {
+    let (spacing_mm, direction) = from_axis_vectors(file, axes.0, axes.1, warnings)?;
+    let origin_mm = check_origin(file, origin.0, origin.1)?;
+    Ok(Grid {
+        spacing_mm,
+        origin_mm,
+        direction,
+    })
+}
+
+impl Grid {
+    /// The volume of `voxels` on this grid, values as stored (slope 1, intercept 0), modality
+    /// unknown: a loader whose header says otherwise overrides those fields.
+    pub(crate) fn volume(
+        self,
+        dims: [usize; 3],
+        voxels: Voxels,
+        source: String,
+        warnings: Vec<String>,
+    ) -> Volume {
+        Volume {
+            dims,
+            spacing_mm: self.spacing_mm,
+            origin_mm: self.origin_mm,
+            direction: self.direction,
+            voxels,
+            value_slope: 1.0,
+            value_intercept: 0.0,
+            modality: Modality::Unknown,
+            source,
+            warnings,
+        }
+    }
+}
 
 /// Spacing and direction columns from the three LPS vectors that one voxel step along i, j, k
 /// moves (the columns of the 3x3 part of world_from_voxel). Refuses zero, non-finite or

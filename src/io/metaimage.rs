@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use super::geometry::{check_origin, from_axis_vectors};
+use super::geometry::checked_grid;
 use super::raw::{self, Endian, SampleLayout, SampleType};
 use super::{Companions, InputFile, Limits, LoadError};
 use crate::volume::{Modality, Volume};
@@ -268,25 +268,14 @@ pub(crate) fn read(
     let data_file = need("ElementDataFile")?;
     let (data_name, data): (String, &[u8]) = if data_file.eq_ignore_ascii_case("LOCAL") {
         (name.to_owned(), &file.bytes[data_start..])
-    } else if data_file.starts_with("LIST")
-        || data_file.contains('%')
-        || data_file.split_whitespace().count() > 1
-    {
-        return Err(LoadError::unsupported(
-            name,
-            "MetaImage ElementDataFile",
-            format!("\"{data_file}\" (one file per slice)"),
-        ));
     } else {
-        let f = companions
-            .find(data_file)
-            .ok_or_else(|| LoadError::MissingDataFile {
-                file: name.to_owned(),
-                data_file: data_file.to_owned(),
-            })?;
-        if let Some(note) = super::path_note("ElementDataFile", data_file, &f.name) {
-            warnings.push(note);
-        }
+        let f = companions.data_file(
+            name,
+            "ElementDataFile",
+            data_file,
+            ("MetaImage ElementDataFile", "one file per slice"),
+            &mut warnings,
+        )?;
         (f.name.clone(), f.bytes.as_slice())
     };
     let header_size: i64 = get(&fields, "HeaderSize")
@@ -329,9 +318,12 @@ pub(crate) fn read(
             limits,
         )?
     };
-    let (spacing_mm, direction) =
-        from_axis_vectors(name, "ElementSpacing/TransformMatrix", steps, &mut warnings)?;
-    let origin_mm = check_origin(name, "Offset", origin)?;
+    let grid = checked_grid(
+        name,
+        ("ElementSpacing/TransformMatrix", steps),
+        ("Offset", origin),
+        &mut warnings,
+    )?;
     let modality = match get(&fields, "Modality") {
         Some("MET_MOD_CT") => Modality::Ct,
         Some("MET_MOD_MR") => Modality::Mr,
@@ -339,16 +331,8 @@ pub(crate) fn read(
     };
     let source = raw::source_name(name, &data_name);
     Ok(Volume {
-        dims,
-        spacing_mm,
-        origin_mm,
-        direction,
-        voxels,
-        value_slope: 1.0,
-        value_intercept: 0.0,
         modality,
-        source,
-        warnings,
+        ..grid.volume(dims, voxels, source, warnings)
     })
 }
 

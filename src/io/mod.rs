@@ -140,6 +140,40 @@ impl<'a> Companions<'a> {
         Self { files }
     }
 
+    /// The one data file a header's `field` names (`wanted`): a list or a pattern of files (one
+    /// per slice) is refused as `unsupported` (what, then why), a file not given is
+    /// `MissingDataFile`, and a header that names a path gets a note in `warnings`.
+    pub(crate) fn data_file(
+        &self,
+        header: &str,
+        field: &str,
+        wanted: &str,
+        unsupported: (&str, &str),
+        warnings: &mut Vec<String>,
+    ) -> Result<&'a InputFile, LoadError> {
+        if wanted.starts_with("LIST")
+            || wanted.contains('%')
+            || wanted.split_whitespace().count() > 1
+        {
+            let (what, why) = unsupported;
+            return Err(LoadError::unsupported(
+                header,
+                what,
+                format!("\"{wanted}\" ({why})"),
+            ));
+        }
+        let f = self
+            .find(wanted)
+            .ok_or_else(|| LoadError::MissingDataFile {
+                file: header.to_owned(),
+                data_file: wanted.to_owned(),
+            })?;
+        if let Some(note) = path_note(field, wanted, &f.name) {
+            warnings.push(note);
+        }
+        Ok(f)
+    }
+
     /// A file whose last path component equals that of `wanted` (exactly, else ignoring case).
     pub(crate) fn find(&self, wanted: &str) -> Option<&'a InputFile> {
         let wanted = base_name(wanted.trim());

@@ -11,10 +11,10 @@ pub use write::{WriteIntent, write, write_volume};
 
 use glam::{DMat3, DVec3};
 
-use super::geometry::{check_origin, from_axis_vectors, ras_to_lps};
+use super::geometry::{checked_grid, ras_to_lps};
 use super::raw::{self, Endian, FieldReader, SampleLayout, SampleType};
 use super::{Companions, InputFile, Limits, LoadError, base_name};
-use crate::volume::{Modality, Volume};
+use crate::volume::Volume;
 
 const NIFTI1_HEADER_BYTES: usize = 348;
 const NIFTI2_HEADER_BYTES: usize = 540;
@@ -452,9 +452,12 @@ pub(crate) fn read(
     }
 
     let (axes_ras, origin_ras) = ras_geometry(&h, &mut warnings);
-    let (spacing_mm, direction) =
-        from_axis_vectors(name, "sform/qform", axes_ras.map(ras_to_lps), &mut warnings)?;
-    let origin_mm = check_origin(name, "sform/qform offset", ras_to_lps(origin_ras))?;
+    let grid = checked_grid(
+        name,
+        ("sform/qform", axes_ras.map(ras_to_lps)),
+        ("sform/qform offset", ras_to_lps(origin_ras)),
+        &mut warnings,
+    )?;
 
     // scl_slope = 0 (or NaN) means "no scaling" (nifti1.h).
     let (value_slope, value_intercept) = if h.scl_slope.is_finite() && h.scl_slope != 0.0 {
@@ -473,16 +476,9 @@ pub(crate) fn read(
         format!("{name} + {data_name}")
     };
     Ok(Volume {
-        dims,
-        spacing_mm,
-        origin_mm,
-        direction,
-        voxels,
         value_slope,
         value_intercept,
-        modality: Modality::Unknown,
-        source,
-        warnings,
+        ..grid.volume(dims, voxels, source, warnings)
     })
 }
 

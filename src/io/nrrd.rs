@@ -7,10 +7,10 @@ use std::collections::HashMap;
 
 use glam::DVec3;
 
-use super::geometry::{check_origin, from_axis_vectors};
+use super::geometry::checked_grid;
 use super::raw::{self, Endian, SampleLayout, SampleType};
 use super::{Companions, InputFile, Limits, LoadError};
-use crate::volume::{Modality, Volume};
+use crate::volume::Volume;
 
 /// Largest header we parse; real ones are a few kilobytes (a 451-direction DWI is 40 KB).
 const MAX_HEADER_BYTES: usize = 4 << 20;
@@ -387,23 +387,13 @@ pub(crate) fn read(
     // The data bytes: attached after the blank line, or in the named data file.
     let (data_name, data_file): (String, &[u8]) = match get(&fields, &["data file", "datafile"]) {
         Some(df) => {
-            let df = df.trim();
-            if df.starts_with("LIST") || df.contains('%') || df.split_whitespace().count() > 1 {
-                return Err(LoadError::unsupported(
-                    name,
-                    "NRRD data file",
-                    format!("\"{df}\" (multiple data files)"),
-                ));
-            }
-            let f = companions
-                .find(df)
-                .ok_or_else(|| LoadError::MissingDataFile {
-                    file: name.to_owned(),
-                    data_file: df.to_owned(),
-                })?;
-            if let Some(note) = super::path_note("data file", df, &f.name) {
-                warnings.push(note);
-            }
+            let f = companions.data_file(
+                name,
+                "data file",
+                df.trim(),
+                ("NRRD data file", "multiple data files"),
+                &mut warnings,
+            )?;
             (f.name.clone(), &f.bytes)
         }
         None => {
@@ -457,6 +447,15 @@ pub(crate) fn read(
         }
     };
     let encoding = need(&["encoding"])?.trim().to_ascii_lowercase();
+    // Only the first volume is read (a short file is still a broken file). Ascii data are
+    // parsed into f64 first.
+    let mut layout = SampleLayout {
+        ty,
+        endian,
+        offset: 0,
+        count: count as usize,
+        stride_samples: usize::try_from(stride).unwrap_or(usize::MAX),
+    };
     let decoded: std::borrow::Cow<'_, [u8]> = match encoding.as_str() {
         "raw" => {
             let skip = if byte_skip == -1 {
@@ -485,13 +484,6 @@ pub(crate) fn read(
                 LoadError::header(name, "byte skip", "-1 is only allowed with raw encoding")
             })?;
             // Straight from the stream into the voxels (the CRC-32 is checked at its end).
-            let layout = SampleLayout {
-                ty,
-                endian,
-                offset: 0,
-                count: count as usize,
-                stride_samples: usize::try_from(stride).unwrap_or(usize::MAX),
-            };
             let (voxels, _) = raw::inflate_voxels(
                 &data_name,
                 raw::Compression::Gzip,
@@ -514,20 +506,10 @@ pub(crate) fn read(
             ));
         }
     };
-    let (ty, endian) = if matches!(encoding.as_str(), "ascii" | "text" | "txt") {
-        (SampleType::F64, Endian::Little)
-    } else {
-        (ty, endian)
-    };
-    let needed = total.saturating_mul(ty.size() as u64);
-    // Only the first volume is read, but a short file is a broken file.
-    let layout = SampleLayout {
-        ty,
-        endian,
-        offset: 0,
-        count: count as usize,
-        stride_samples: usize::try_from(stride).unwrap_or(usize::MAX),
-    };
+    if matches!(encoding.as_str(), "ascii" | "text" | "txt") {
+        (layout.ty, layout.endian) = (SampleType::F64, Endian::Little);
+    }
+    let needed = total.saturating_mul(layout.ty.size() as u64);
     let voxels = raw::decode_present(&data_name, "NRRD data", &decoded, needed, layout, limits)?;
     finish(name, &data_name, dims, steps, origin, voxels, warnings)
 }
@@ -542,22 +524,14 @@ fn finish(
     voxels: crate::volume::Voxels,
     mut warnings: Vec<String>,
 ) -> Result<Volume, LoadError> {
-    let (spacing_mm, direction) =
-        from_axis_vectors(name, "space directions", steps, &mut warnings)?;
-    let origin_mm = check_origin(name, "space origin", origin)?;
+    let grid = checked_grid(
+        name,
+        ("space directions", steps),
+        ("space origin", origin),
+        &mut warnings,
+    )?;
     let source = raw::source_name(name, data_name);
-    Ok(Volume {
-        dims,
-        spacing_mm,
-        origin_mm,
-        direction,
-        voxels,
-        value_slope: 1.0,
-        value_intercept: 0.0,
-        modality: Modality::Unknown,
-        source,
-        warnings,
-    })
+    Ok(grid.volume(dims, voxels, source, warnings))
 }
 
 /// Parses whitespace-separated numbers (ascii encoding) into little-endian f64 bytes.

@@ -80,15 +80,67 @@ pub(crate) fn try_vec<T: Clone + Default>(
     what: &str,
     len: usize,
 ) -> Result<Vec<T>, LoadError> {
-    let mut v = Vec::new();
-    v.try_reserve_exact(len)
-        .map_err(|_| LoadError::OutOfMemory {
-            file: file.to_owned(),
-            what: what.to_owned(),
-            bytes: (len as u64).saturating_mul(std::mem::size_of::<T>() as u64),
-        })?;
+    let mut v = reserve(file, what, len)?;
     v.resize(len, T::default());
     Ok(v)
+}
+
+/// A buffer reserved for `n` values, not filled (so not yet touched).
+fn reserve<T>(file: &str, what: &str, n: usize) -> Result<Vec<T>, LoadError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|_| LoadError::OutOfMemory {
+        file: file.to_owned(),
+        what: what.to_owned(),
+        bytes: (n as u64).saturating_mul(std::mem::size_of::<T>() as u64),
+    })?;
+    Ok(v)
+}
+
+/// `n` voxel values, `value(i)` called in order, in a buffer reserved once.
+fn collect<T>(
+    file: &str,
+    n: usize,
+    mut value: impl FnMut(usize) -> Result<T, LoadError>,
+) -> Result<Vec<T>, LoadError> {
+    let mut v = reserve::<T>(file, "voxels", n)?;
+    for i in 0..n {
+        v.push(value(i)?);
+    }
+    Ok(v)
+}
+
+/// The smallest and largest of `n` values (`value(i)` called in order).
+fn value_range(
+    n: usize,
+    mut value: impl FnMut(usize) -> Result<f64, LoadError>,
+) -> Result<(f64, f64), LoadError> {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for i in 0..n {
+        let x = value(i)?;
+        lo = lo.min(x);
+        hi = hi.max(x);
+    }
+    Ok((lo, hi))
+}
+
+/// `n` wide integers (`value(i)`, called in order, all within `range`) as the most compact
+/// voxels that hold them exactly: i16 when they fit, else u16, else f32.
+fn compact_wide(
+    file: &str,
+    n: usize,
+    range: (f64, f64),
+    mut value: impl FnMut(usize) -> Result<f64, LoadError>,
+) -> Result<Voxels, LoadError> {
+    let (lo, hi) = range;
+    Ok(
+        if n == 0 || (lo >= f64::from(i16::MIN) && hi <= f64::from(i16::MAX)) {
+            Voxels::I16(collect(file, n, |i| Ok(value(i)? as i16))?)
+        } else if lo >= 0.0 && hi <= f64::from(u16::MAX) {
+            Voxels::U16(collect(file, n, |i| Ok(value(i)? as u16))?)
+        } else {
+            Voxels::F32(collect(file, n, |i| Ok(value(i)? as f32))?)
+        },
+    )
 }
 
 /// Whether the bytes start like a gzip stream.
@@ -140,23 +192,24 @@ const STREAM_SLACK_BYTES: u64 = 1 << 20;
 /// last member, zero bytes are padding (gzip accepts them too); anything else is refused.
 struct Members<'a> {
     kind: Compression,
-    gzip: Option<flate2::bufread::GzDecoder<&'a [u8]>>,
-    zlib: Option<flate2::bufread::ZlibDecoder<&'a [u8]>>,
+    /// The member being read; `None` once the stream has ended.
+    decoder: Option<Decoder<'a>>,
+}
+
+enum Decoder<'a> {
+    Gzip(flate2::bufread::GzDecoder<&'a [u8]>),
+    Zlib(flate2::bufread::ZlibDecoder<&'a [u8]>),
 }
 
 impl<'a> Members<'a> {
     fn new(kind: Compression, bytes: &'a [u8]) -> Self {
-        match kind {
-            Compression::Gzip => Self {
-                kind,
-                gzip: Some(flate2::bufread::GzDecoder::new(bytes)),
-                zlib: None,
-            },
-            Compression::Zlib => Self {
-                kind,
-                gzip: None,
-                zlib: Some(flate2::bufread::ZlibDecoder::new(bytes)),
-            },
+        let decoder = match kind {
+            Compression::Gzip => Decoder::Gzip(flate2::bufread::GzDecoder::new(bytes)),
+            Compression::Zlib => Decoder::Zlib(flate2::bufread::ZlibDecoder::new(bytes)),
+        };
+        Self {
+            kind,
+            decoder: Some(decoder),
         }
     }
 }
@@ -167,30 +220,21 @@ impl<'a> Read for Members<'a> {
             return Ok(0);
         }
         loop {
-            let rest: &'a [u8] = if let Some(z) = &mut self.zlib {
-                let n = z.read(buf)?;
-                if n > 0 {
-                    return Ok(n);
-                }
-                let rest = *z.get_ref();
-                self.zlib = None;
-                rest
-            } else if let Some(g) = &mut self.gzip {
-                let n = g.read(buf)?;
-                if n > 0 {
-                    return Ok(n);
-                }
-                let rest = *g.get_ref();
-                self.gzip = None;
-                rest
-            } else {
-                return Ok(0);
+            // The bytes after the member, once it has ended.
+            let (n, rest): (usize, &'a [u8]) = match &mut self.decoder {
+                Some(Decoder::Gzip(g)) => (g.read(buf)?, *g.get_ref()),
+                Some(Decoder::Zlib(z)) => (z.read(buf)?, *z.get_ref()),
+                None => return Ok(0),
             };
+            if n > 0 {
+                return Ok(n);
+            }
+            self.decoder = None;
             if rest.iter().all(|&b| b == 0) {
                 return Ok(0);
             }
             if self.kind == Compression::Gzip && is_gzip(rest) {
-                self.gzip = Some(flate2::bufread::GzDecoder::new(rest));
+                self.decoder = Some(Decoder::Gzip(flate2::bufread::GzDecoder::new(rest)));
                 continue;
             }
             return Err(std::io::Error::new(
@@ -263,21 +307,16 @@ pub(crate) fn inflate_voxels(
             limit: limits.max_decompressed_bytes,
         });
     }
-    check_voxel_budget(
+    layout.check_voxel_budget(file, limits)?;
+    let stream = Stream {
         file,
-        layout.count as u64,
-        layout.ty.output_size() as u64,
-        limits,
-    )?;
-    let err = |e: std::io::Error| decompress_error(file, kind, &e);
-    let truncated = |got: u64| {
-        LoadError::truncated(
-            file,
-            format!("decompressed {} data", kind.name()),
-            needed,
-            got,
-        )
+        kind,
+        layout,
+        skip,
+        needed,
     };
+    let err = |e: std::io::Error| stream.error(&e);
+    let truncated = |got: u64| stream.truncated(got);
     let mut reader = std::io::BufReader::with_capacity(64 << 10, Members::new(kind, compressed));
     if !skip_bytes(&mut reader, skip).map_err(err)? {
         return Err(truncated(skip));
@@ -290,26 +329,11 @@ pub(crate) fn inflate_voxels(
     // reads the stream to its end for its checksums), a second inflates again and converts,
     // so that no buffer of the stored bytes is ever held.
     let (voxels, range) = if wide {
-        let mut samples = SampleReader::new(file, &mut reader, layout, skip, needed, kind);
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for i in 0..layout.count {
-            let x = sample_value(layout.ty, samples.next(i)?);
-            lo = lo.min(x);
-            hi = hi.max(x);
-        }
-        (None, Some((lo, hi)))
+        let mut samples = SampleReader::new(stream, &mut reader);
+        let range = value_range(layout.count, |i| samples.value(i))?;
+        (None, Some(range))
     } else {
-        (
-            Some(stream_samples(
-                file,
-                &mut reader,
-                layout,
-                skip,
-                needed,
-                kind,
-            )?),
-            None,
-        )
+        (Some(stream_samples(stream, &mut reader)?), None)
     };
     // The rest of the stream, so that the checksums at its end are read and checked.
     let allowed = declared_bytes
@@ -332,200 +356,135 @@ pub(crate) fn inflate_voxels(
     let voxels = match (voxels, range) {
         (Some(v), _) => v,
         (None, range) => {
-            let (lo, hi) = range.unwrap_or((0.0, 0.0));
             let mut again =
                 std::io::BufReader::with_capacity(64 << 10, Members::new(kind, compressed));
             if !skip_bytes(&mut again, skip).map_err(err)? {
                 return Err(truncated(skip));
             }
-            let mut samples = SampleReader::new(file, &mut again, layout, skip, needed, kind);
-            let n = layout.count;
-            if n == 0 || (lo >= f64::from(i16::MIN) && hi <= f64::from(i16::MAX)) {
-                let mut v = reserve::<i16>(file, n)?;
-                for i in 0..n {
-                    v.push(sample_value(layout.ty, samples.next(i)?) as i16);
-                }
-                Voxels::I16(v)
-            } else if lo >= 0.0 && hi <= f64::from(u16::MAX) {
-                let mut v = reserve::<u16>(file, n)?;
-                for i in 0..n {
-                    v.push(sample_value(layout.ty, samples.next(i)?) as u16);
-                }
-                Voxels::U16(v)
-            } else {
-                let mut v = reserve::<f32>(file, n)?;
-                for i in 0..n {
-                    v.push(sample_value(layout.ty, samples.next(i)?) as f32);
-                }
-                Voxels::F32(v)
-            }
+            let mut samples = SampleReader::new(stream, &mut again);
+            let range = range.unwrap_or((0.0, 0.0));
+            compact_wide(file, layout.count, range, |i| samples.value(i))?
         }
     };
     Ok((voxels, needed + rest))
 }
 
-/// A buffer reserved for `n` values, not filled (so not yet touched).
-fn reserve<T>(file: &str, n: usize) -> Result<Vec<T>, LoadError> {
-    let mut v = Vec::new();
-    v.try_reserve_exact(n).map_err(|_| LoadError::OutOfMemory {
-        file: file.to_owned(),
-        what: "voxels".to_owned(),
-        bytes: (n as u64).saturating_mul(std::mem::size_of::<T>() as u64),
-    })?;
-    Ok(v)
-}
-
-/// A sample as 8 little-endian bytes (zero-extended) to its value.
-fn sample_value(ty: SampleType, a: [u8; 8]) -> f64 {
-    sample_f64(&a, ty, Endian::Little, 0).unwrap_or(0.0)
-}
-
-/// Reads the samples of a layout (offset 0) one by one from a decompressing stream.
-struct SampleReader<'r, 'a> {
-    file: &'r str,
-    reader: &'r mut std::io::BufReader<Members<'a>>,
+/// A layout's samples (offset 0) in a decompressing stream, after `skip` bytes: `needed` bytes
+/// in all.
+#[derive(Clone, Copy)]
+struct Stream<'f> {
+    file: &'f str,
+    kind: Compression,
     layout: SampleLayout,
     skip: u64,
     needed: u64,
-    kind: Compression,
-    done: u64,
 }
 
-impl<'r, 'a> SampleReader<'r, 'a> {
-    fn new(
-        file: &'r str,
-        reader: &'r mut std::io::BufReader<Members<'a>>,
-        layout: SampleLayout,
-        skip: u64,
-        needed: u64,
-        kind: Compression,
-    ) -> Self {
-        Self {
-            file,
-            reader,
-            layout,
-            skip,
-            needed,
-            kind,
-            done: 0,
-        }
-    }
-
-    fn truncated(&self) -> LoadError {
+impl Stream<'_> {
+    /// The stream ended after `got` of the `needed` bytes.
+    fn truncated(&self, got: u64) -> LoadError {
         LoadError::truncated(
             self.file,
             format!("decompressed {} data", self.kind.name()),
             self.needed,
-            self.skip + self.done,
+            got,
         )
+    }
+
+    fn error(&self, e: &std::io::Error) -> LoadError {
+        decompress_error(self.file, self.kind, e)
+    }
+}
+
+/// Reads the samples of a [`Stream`] one by one.
+struct SampleReader<'r, 'a> {
+    stream: Stream<'r>,
+    reader: &'r mut std::io::BufReader<Members<'a>>,
+    /// Bytes read since the skip.
+    done: u64,
+}
+
+impl<'r, 'a> SampleReader<'r, 'a> {
+    fn new(stream: Stream<'r>, reader: &'r mut std::io::BufReader<Members<'a>>) -> Self {
+        Self {
+            stream,
+            reader,
+            done: 0,
+        }
     }
 
     /// Sample `i` (called in order) as 8 little-endian bytes, zero-extended.
     fn next(&mut self, i: usize) -> Result<[u8; 8], LoadError> {
-        let size = self.layout.ty.size();
-        if i > 0 && self.layout.stride_samples > 1 {
-            let gap = ((self.layout.stride_samples - 1) * size) as u64;
+        let layout = self.stream.layout;
+        let size = layout.ty.size();
+        let truncated = |done: u64| self.stream.truncated(self.stream.skip + done);
+        if i > 0 && layout.stride_samples > 1 {
+            let gap = ((layout.stride_samples - 1) * size) as u64;
             match skip_bytes(self.reader, gap) {
                 Ok(true) => self.done += gap,
-                Ok(false) => return Err(self.truncated()),
-                Err(e) => return Err(decompress_error(self.file, self.kind, &e)),
+                Ok(false) => return Err(truncated(self.done)),
+                Err(e) => return Err(self.stream.error(&e)),
             }
         }
         let mut a = [0u8; 8];
         if let Err(e) = self.reader.read_exact(&mut a[..size]) {
             return Err(if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                self.truncated()
+                truncated(self.done)
             } else {
-                decompress_error(self.file, self.kind, &e)
+                self.stream.error(&e)
             });
         }
         self.done += size as u64;
-        if self.layout.endian == Endian::Big {
+        if layout.endian == Endian::Big {
             a[..size].reverse();
         }
         Ok(a)
+    }
+
+    /// Sample `i` (called in order) as its value.
+    fn value(&mut self, i: usize) -> Result<f64, LoadError> {
+        let a = self.next(i)?;
+        Ok(sample_f64(&a, self.stream.layout.ty, Endian::Little, 0).unwrap_or(0.0))
     }
 }
 
 /// Decodes `layout` (offset 0) from a stream into a buffer of the final type that grows as the
 /// samples arrive (reserved once, never zero-filled ahead of the data).
 fn stream_samples(
-    file: &str,
+    stream: Stream<'_>,
     reader: &mut std::io::BufReader<Members<'_>>,
-    layout: SampleLayout,
-    skip: u64,
-    needed: u64,
-    kind: Compression,
 ) -> Result<Voxels, LoadError> {
+    let (file, layout) = (stream.file, stream.layout);
     let n = layout.count;
+    if layout.ty == SampleType::U8 && layout.stride_samples == 1 {
+        // The common case in bulk: read straight into the buffer's spare capacity.
+        let mut v = reserve::<u8>(file, "voxels", n)?;
+        (&mut *reader)
+            .take(n as u64)
+            .read_to_end(&mut v)
+            .map_err(|e| stream.error(&e))?;
+        if v.len() < n {
+            return Err(stream.truncated(stream.skip + v.len() as u64));
+        }
+        return Ok(Voxels::U8(v));
+    }
+    let mut samples = SampleReader::new(stream, reader);
+    let mut next = |i| samples.next(i);
     Ok(match layout.ty {
-        SampleType::U8 => {
-            let mut v = reserve::<u8>(file, n)?;
-            if layout.stride_samples == 1 {
-                // The common case in bulk: read straight into the buffer's spare capacity.
-                (&mut *reader)
-                    .take(n as u64)
-                    .read_to_end(&mut v)
-                    .map_err(|e| decompress_error(file, kind, &e))?;
-                if v.len() < n {
-                    return Err(LoadError::truncated(
-                        file,
-                        format!("decompressed {} data", kind.name()),
-                        needed,
-                        skip + v.len() as u64,
-                    ));
-                }
-            } else {
-                let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
-                for i in 0..n {
-                    v.push(samples.next(i)?[0]);
-                }
-            }
-            Voxels::U8(v)
-        }
-        SampleType::I8 => {
-            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
-            let mut v = reserve::<i16>(file, n)?;
-            for i in 0..n {
-                v.push(i16::from(samples.next(i)?[0] as i8));
-            }
-            Voxels::I16(v)
-        }
-        SampleType::U16 => {
-            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
-            let mut v = reserve::<u16>(file, n)?;
-            for i in 0..n {
-                let a = samples.next(i)?;
-                v.push(u16::from_le_bytes([a[0], a[1]]));
-            }
-            Voxels::U16(v)
-        }
-        SampleType::I16 => {
-            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
-            let mut v = reserve::<i16>(file, n)?;
-            for i in 0..n {
-                let a = samples.next(i)?;
-                v.push(i16::from_le_bytes([a[0], a[1]]));
-            }
-            Voxels::I16(v)
-        }
-        SampleType::F32 => {
-            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
-            let mut v = reserve::<f32>(file, n)?;
-            for i in 0..n {
-                let a = samples.next(i)?;
-                v.push(f32::from_le_bytes([a[0], a[1], a[2], a[3]]));
-            }
-            Voxels::F32(v)
-        }
-        SampleType::F64 => {
-            let mut samples = SampleReader::new(file, reader, layout, skip, needed, kind);
-            let mut v = reserve::<f32>(file, n)?;
-            for i in 0..n {
-                v.push(f64::from_le_bytes(samples.next(i)?) as f32);
-            }
-            Voxels::F32(v)
-        }
+        SampleType::U8 => Voxels::U8(collect(file, n, |i| Ok(next(i)?[0]))?),
+        SampleType::I8 => Voxels::I16(collect(file, n, |i| Ok(i16::from(next(i)?[0] as i8)))?),
+        SampleType::U16 => Voxels::U16(collect(file, n, |i| {
+            next(i).map(|a| u16::from_le_bytes([a[0], a[1]]))
+        })?),
+        SampleType::I16 => Voxels::I16(collect(file, n, |i| {
+            next(i).map(|a| i16::from_le_bytes([a[0], a[1]]))
+        })?),
+        SampleType::F32 => Voxels::F32(collect(file, n, |i| {
+            next(i).map(|a| f32::from_le_bytes([a[0], a[1], a[2], a[3]]))
+        })?),
+        SampleType::F64 => Voxels::F32(collect(file, n, |i| {
+            next(i).map(|a| f64::from_le_bytes(a) as f32)
+        })?),
         SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64 => {
             return Err(LoadError::unsupported(
                 file,
@@ -650,6 +609,16 @@ impl SampleLayout {
         let last = (self.count as u64 - 1).checked_mul(self.stride_samples as u64)?;
         last.checked_add(1)?.checked_mul(self.ty.size() as u64)
     }
+
+    /// Refuses the voxels of this layout when they would exceed the voxel budget.
+    fn check_voxel_budget(&self, file: &str, limits: &Limits) -> Result<(), LoadError> {
+        check_voxel_budget(
+            file,
+            self.count as u64,
+            self.ty.output_size() as u64,
+            limits,
+        )
+    }
 }
 
 /// Checks that `needed` bytes of `what` are present, then decodes them (NRRD and MetaImage data).
@@ -697,89 +666,30 @@ pub(crate) fn decode_samples(
             bytes.len() as u64,
         ));
     }
-    check_voxel_budget(
-        file,
-        layout.count as u64,
-        layout.ty.output_size() as u64,
-        limits,
-    )?;
+    layout.check_voxel_budget(file, limits)?;
     let n = layout.count;
     let size = layout.ty.size();
     let step = layout.stride_samples * size;
     let at = |i: usize| layout.offset + i * step;
     let get = |i: usize| sample_f64(bytes, layout.ty, layout.endian, at(i)).unwrap_or(0.0);
+    let read16 = |i: usize| {
+        let p = at(i);
+        let b = [bytes[p], bytes[p + 1]];
+        match layout.endian {
+            Endian::Little => u16::from_le_bytes(b),
+            Endian::Big => u16::from_be_bytes(b),
+        }
+    };
     Ok(match layout.ty {
-        SampleType::U8 => {
-            let mut v = try_vec::<u8>(file, "voxels", n)?;
-            for (i, o) in v.iter_mut().enumerate() {
-                *o = bytes[at(i)];
-            }
-            Voxels::U8(v)
-        }
-        SampleType::I8 => {
-            let mut v = try_vec::<i16>(file, "voxels", n)?;
-            for (i, o) in v.iter_mut().enumerate() {
-                *o = i16::from(bytes[at(i)] as i8);
-            }
-            Voxels::I16(v)
-        }
-        SampleType::U16 | SampleType::I16 => {
-            let read = |i: usize| {
-                let p = at(i);
-                let b = [bytes[p], bytes[p + 1]];
-                match layout.endian {
-                    Endian::Little => u16::from_le_bytes(b),
-                    Endian::Big => u16::from_be_bytes(b),
-                }
-            };
-            if layout.ty == SampleType::U16 {
-                let mut v = try_vec::<u16>(file, "voxels", n)?;
-                for (i, o) in v.iter_mut().enumerate() {
-                    *o = read(i);
-                }
-                Voxels::U16(v)
-            } else {
-                let mut v = try_vec::<i16>(file, "voxels", n)?;
-                for (i, o) in v.iter_mut().enumerate() {
-                    *o = read(i) as i16;
-                }
-                Voxels::I16(v)
-            }
-        }
-        SampleType::F32 | SampleType::F64 => {
-            let mut v = try_vec::<f32>(file, "voxels", n)?;
-            for (i, o) in v.iter_mut().enumerate() {
-                *o = get(i) as f32;
-            }
-            Voxels::F32(v)
-        }
+        SampleType::U8 => Voxels::U8(collect(file, n, |i| Ok(bytes[at(i)]))?),
+        SampleType::I8 => Voxels::I16(collect(file, n, |i| Ok(i16::from(bytes[at(i)] as i8)))?),
+        SampleType::U16 => Voxels::U16(collect(file, n, |i| Ok(read16(i)))?),
+        SampleType::I16 => Voxels::I16(collect(file, n, |i| Ok(read16(i) as i16))?),
+        SampleType::F32 | SampleType::F64 => Voxels::F32(collect(file, n, |i| Ok(get(i) as f32))?),
         SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64 => {
             // One pass for the range decides the compact type; a second converts.
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for i in 0..n {
-                let x = get(i);
-                lo = lo.min(x);
-                hi = hi.max(x);
-            }
-            if n == 0 || (lo >= f64::from(i16::MIN) && hi <= f64::from(i16::MAX)) {
-                let mut v = try_vec::<i16>(file, "voxels", n)?;
-                for (i, o) in v.iter_mut().enumerate() {
-                    *o = get(i) as i16;
-                }
-                Voxels::I16(v)
-            } else if lo >= 0.0 && hi <= f64::from(u16::MAX) {
-                let mut v = try_vec::<u16>(file, "voxels", n)?;
-                for (i, o) in v.iter_mut().enumerate() {
-                    *o = get(i) as u16;
-                }
-                Voxels::U16(v)
-            } else {
-                let mut v = try_vec::<f32>(file, "voxels", n)?;
-                for (i, o) in v.iter_mut().enumerate() {
-                    *o = get(i) as f32;
-                }
-                Voxels::F32(v)
-            }
+            let range = value_range(n, |i| Ok(get(i)))?;
+            compact_wide(file, n, range, |i| Ok(get(i)))?
         }
     })
 }

@@ -8,7 +8,7 @@
 //! move is nothing.
 
 use crate::gpu::GpuContext;
-use crate::gpu::readback::{PendingRead, ReadbackError};
+use crate::gpu::readback::{PendingRead, ReadbackError, copy_texel};
 use crate::gpu::volume_texture::FeatureTexture;
 
 /// Bytes of one `Rgba16Float` texel.
@@ -26,32 +26,13 @@ impl TexelProbe {
         let size = voxels.len().max(1) as u64 * TEXEL_BYTES;
         let read = PendingRead::start_with(ctx, size, "texel probe", |encoder, staging| {
             for (n, v) in voxels.iter().enumerate() {
-                let origin: [u32; 3] =
-                    std::array::from_fn(|a| v[a].min(features.dims[a].saturating_sub(1)));
-                encoder.copy_texture_to_buffer(
-                    wgpu::TexelCopyTextureInfo {
-                        texture: &features.texture,
-                        mip_level: 0,
-                        origin: wgpu::Origin3d {
-                            x: origin[0],
-                            y: origin[1],
-                            z: origin[2],
-                        },
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    wgpu::TexelCopyBufferInfo {
-                        buffer: staging,
-                        layout: wgpu::TexelCopyBufferLayout {
-                            offset: n as u64 * TEXEL_BYTES,
-                            bytes_per_row: None,
-                            rows_per_image: None,
-                        },
-                    },
-                    wgpu::Extent3d {
-                        width: 1,
-                        height: 1,
-                        depth_or_array_layers: 1,
-                    },
+                let origin = std::array::from_fn(|a| v[a].min(features.dims[a].saturating_sub(1)));
+                copy_texel(
+                    encoder,
+                    &features.texture,
+                    origin,
+                    staging,
+                    n as u64 * TEXEL_BYTES,
                 );
             }
         });
@@ -69,6 +50,12 @@ impl TexelProbe {
             .map(|bytes| bytes.map(|b| decode(&b, count)))
     }
 
+    /// The texels, awaited (works on wasm; natively something must poll the device).
+    pub async fn finish(self) -> Result<Vec<[f32; 4]>, ReadbackError> {
+        let count = self.count;
+        self.read.finish().await.map(|b| decode(&b, count))
+    }
+
     /// Native only: waits for the texels.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn wait(self, ctx: &GpuContext) -> Result<Vec<[f32; 4]>, ReadbackError> {
@@ -77,8 +64,8 @@ impl TexelProbe {
     }
 }
 
-/// `count` half-float texels `(V, A, B, 0)` as f32.
-fn decode(bytes: &[u8], count: usize) -> Vec<[f32; 4]> {
+/// The first `count` half-float texels `(V, A, B, 0)` of `bytes` as f32.
+pub(crate) fn decode(bytes: &[u8], count: usize) -> Vec<[f32; 4]> {
     let halves: Vec<half::f16> = bytemuck::pod_collect_to_vec(bytes);
     halves
         .chunks_exact(4)

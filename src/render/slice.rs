@@ -10,8 +10,10 @@
 //! slice `index` of the `fixed` axis (no flips; the pane flips for patient orientation).
 
 use crate::cpu::Components3;
+use crate::gpu::kernel::{bind_group, uniform_buffer};
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
-use crate::gpu::{GpuContext, shaders};
+use crate::gpu::{GpuContext, checks, shaders};
+use crate::render::{no_features_view, output_texture, submit_dispatch};
 
 /// Colours of vesselness, airwayness and blobness: the MIP's (`render::raycast::CHANNEL_COLOURS`;
 /// shaders/slice.wgsl and raycast.wgsl repeat them as WGSL constants).
@@ -104,34 +106,9 @@ pub struct SliceRenderer {
 impl SliceRenderer {
     pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
         let module = shaders::create_module(&ctx.device, "slice.wgsl")?;
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("slice"),
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-        let none = ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("slice: no features"),
-            size: wgpu::Extent3d {
-                width: 1,
-                height: 1,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
-            format: crate::gpu::volume_texture::FEATURE_FORMAT,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        });
-        let no_features = none.create_view(&wgpu::TextureViewDescriptor::default());
         Ok(Self {
-            pipeline,
-            no_features,
+            pipeline: checks::labelled_pipeline(ctx, "slice", &module, "main"),
+            no_features: no_features_view(ctx, "slice: no features"),
         })
     }
 
@@ -192,73 +169,33 @@ impl SliceRenderer {
             window_hi: request.window.1,
             scale,
         };
-        let device = &ctx.device;
-        let params_buf = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("slice params"),
-            size: std::mem::size_of::<Params>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        ctx.queue
-            .write_buffer(&params_buf, 0, bytemuck::bytes_of(&params));
+        let params_buf = uniform_buffer(&ctx.device, "slice params", &params);
         let feature_view = features.map_or(&self.no_features, |f| &f.view);
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("slice"),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&volume.intensity_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(feature_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&image.view),
-                },
+        let bind_group = bind_group(
+            &ctx.device,
+            "slice",
+            &self.pipeline,
+            [
+                params_buf.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&volume.intensity_view),
+                wgpu::BindingResource::TextureView(feature_view),
+                wgpu::BindingResource::TextureView(&image.view),
             ],
-        });
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("slice"),
-        });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("slice"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(size[0].div_ceil(8), size[1].div_ceil(8), 1);
-        }
-        ctx.queue.submit([encoder.finish()]);
+        );
+        let groups = [size[0].div_ceil(8), size[1].div_ceil(8), 1];
+        submit_dispatch(ctx, "slice", &self.pipeline, &bind_group, groups);
         Ok(image)
     }
 }
 
 fn new_image(ctx: &GpuContext, size: [u32; 2]) -> SliceImage {
-    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("slice image"),
-        size: wgpu::Extent3d {
-            width: size[0].max(1),
-            height: size[1].max(1),
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba8Unorm,
-        usage: wgpu::TextureUsages::STORAGE_BINDING
-            | wgpu::TextureUsages::TEXTURE_BINDING
-            | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    });
-    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+    let (texture, view) = output_texture(
+        ctx,
+        "slice image",
+        wgpu::TextureDimension::D2,
+        [size[0].max(1), size[1].max(1), 1],
+        wgpu::TextureFormat::Rgba8Unorm,
+    );
     SliceImage {
         texture,
         view,
@@ -316,45 +253,9 @@ pub fn read_image_blocking(
     image: &SliceImage,
 ) -> Result<Vec<[u8; 4]>, crate::gpu::readback::ReadbackError> {
     let [w, h] = image.size;
-    let row =
-        (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let size = u64::from(row) * u64::from(h);
-    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("slice readback"),
-        size,
-        usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("slice readback"),
-        });
-    encoder.copy_texture_to_buffer(
-        image.texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(row),
-                rows_per_image: Some(h),
-            },
-        },
-        wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: 1,
-        },
-    );
-    ctx.queue.submit([encoder.finish()]);
-    let bytes = crate::gpu::readback::read_bytes_blocking(ctx, &buffer, size)?;
-    let mut out = Vec::with_capacity((w * h) as usize);
-    for y in 0..h as usize {
-        let start = y * row as usize;
-        for x in 0..w as usize {
-            let p = start + 4 * x;
-            out.push([bytes[p], bytes[p + 1], bytes[p + 2], bytes[p + 3]]);
-        }
-    }
-    Ok(out)
+    let bytes = crate::gpu::readback::read_texture_blocking(ctx, &image.texture, [w, h, 1], 4)?;
+    Ok(bytes
+        .chunks_exact(4)
+        .map(|p| [p[0], p[1], p[2], p[3]])
+        .collect())
 }

@@ -11,7 +11,7 @@ use glam::DVec3;
 use super::{
     FileHeader, FrameInfo, NATIVE_SYNTAXES, check_transfer_syntax, encapsulated, open, read_header,
 };
-use crate::io::geometry::{check_origin, from_axis_vectors};
+use crate::io::geometry::checked_grid;
 use crate::io::raw::{self, try_vec};
 use crate::io::{InputFile, Limits, LoadError, Loaded};
 use crate::volume::{Volume, Voxels};
@@ -368,16 +368,11 @@ fn assemble(
         col_dir * pixel_spacing[0],
         slice_step,
     ];
-    let (spacing_mm, direction) = from_axis_vectors(
+    let grid = checked_grid(
         name0,
-        "ImagePositionPatient/ImageOrientationPatient",
-        axes,
+        ("ImagePositionPatient/ImageOrientationPatient", axes),
+        ("ImagePositionPatient", first_pos.unwrap_or(DVec3::ZERO)),
         &mut warnings,
-    )?;
-    let origin_mm = check_origin(
-        name0,
-        "ImagePositionPatient",
-        first_pos.unwrap_or(DVec3::ZERO),
     )?;
 
     let (voxels, value_slope, value_intercept) =
@@ -389,16 +384,10 @@ fn assemble(
         format!("DICOM series {series} ({} files)", files.len())
     };
     Ok(Volume {
-        dims,
-        spacing_mm,
-        origin_mm,
-        direction,
-        voxels,
         value_slope,
         value_intercept,
         modality: first.modality,
-        source,
-        warnings,
+        ..grid.volume(dims, voxels, source, warnings)
     })
 }
 

@@ -2,14 +2,14 @@
 //! compute pass per texture) and its CPU twin [`cpu_bricks`].
 
 use crate::gpu::GpuContext;
+use crate::gpu::kernel::bind_group;
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
+use crate::render::{output_texture, submit_dispatch};
 
 #[cfg(not(target_arch = "wasm32"))]
 use super::RaycastError;
+use super::Raycaster;
 use super::settings::BIG;
-#[cfg(not(target_arch = "wasm32"))]
-use super::target::decode_texel;
-use super::{Raycaster, entry};
 
 /// Edge of the bricks of the empty-space skipping, voxels (raycast_bricks.wgsl).
 pub const BRICK: u32 = 8;
@@ -35,7 +35,7 @@ impl Bricks {
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_blocking(&self, ctx: &GpuContext) -> Result<Vec<[f32; 4]>, RaycastError> {
         let bytes = crate::gpu::readback::read_texture_blocking(ctx, &self.texture, self.dims, 8)?;
-        Ok(bytes.chunks_exact(8).map(decode_texel).collect())
+        Ok(crate::render::probe::decode(&bytes, usize::MAX))
     }
 
     /// Whether these are the bricks of `texture`.
@@ -76,46 +76,24 @@ impl Raycaster {
         dims: [u32; 3],
     ) -> Bricks {
         let nb = brick_dims(dims);
-        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("raycast bricks"),
-            size: wgpu::Extent3d {
-                width: nb[0],
-                height: nb[1],
-                depth_or_array_layers: nb[2],
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
-            format: wgpu::TextureFormat::Rgba16Float,
-            usage: wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
-        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("raycast bricks"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                entry(0, wgpu::BindingResource::TextureView(source_view)),
-                entry(1, wgpu::BindingResource::TextureView(&view)),
+        let (texture, view) = output_texture(
+            ctx,
+            "raycast bricks",
+            wgpu::TextureDimension::D3,
+            nb,
+            wgpu::TextureFormat::Rgba16Float,
+        );
+        let bind_group = bind_group(
+            &ctx.device,
+            "raycast bricks",
+            pipeline,
+            [
+                wgpu::BindingResource::TextureView(source_view),
+                wgpu::BindingResource::TextureView(&view),
             ],
-        });
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("raycast bricks"),
-            });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("raycast bricks"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(nb[0].div_ceil(4), nb[1].div_ceil(4), nb[2].div_ceil(4));
-        }
-        ctx.queue.submit([encoder.finish()]);
+        );
+        let groups = nb.map(|n| n.div_ceil(4));
+        submit_dispatch(ctx, "raycast bricks", pipeline, &bind_group, groups);
         Bricks {
             dims: nb,
             texture,

@@ -59,10 +59,12 @@ pub use target::{
 };
 pub use twin::{TwinImage, TwinScene, cpu_twin};
 
+use crate::gpu::kernel::bind_group;
 use crate::gpu::readback::ReadbackError;
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
-use crate::gpu::{GpuContext, shaders};
+use crate::gpu::{GpuContext, checks, shaders};
 use crate::render::camera::Camera;
+use crate::render::{no_features_view, submit_dispatch};
 
 /// Why a frame or a pick failed.
 #[derive(Debug, thiserror::Error)]
@@ -122,33 +124,6 @@ impl<'a> Scene<'a> {
 impl Raycaster {
     pub fn new(ctx: &GpuContext) -> Result<Self, RaycastError> {
         let module = shaders::create_module(&ctx.device, "raycast.wgsl")?;
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("raycast"),
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-        let no_features = ctx
-            .device
-            .create_texture(&wgpu::TextureDescriptor {
-                label: Some("raycast no features"),
-                size: wgpu::Extent3d {
-                    width: 1,
-                    height: 1,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format: crate::gpu::volume_texture::FEATURE_FORMAT,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            })
-            .create_view(&wgpu::TextureViewDescriptor::default());
         let linear_clamp = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("raycast linear clamp"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -160,23 +135,12 @@ impl Raycaster {
             ..Default::default()
         });
         let bricks_module = shaders::create_module(&ctx.device, "raycast_bricks.wgsl")?;
-        let make = |entry: &str| {
-            ctx.device
-                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(entry),
-                    layout: None,
-                    module: &bricks_module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
-        };
         Ok(Self {
-            pipeline,
-            no_features,
+            pipeline: checks::labelled_pipeline(ctx, "raycast", &module, "main"),
+            no_features: no_features_view(ctx, "raycast no features"),
             linear_clamp,
-            bricks_intensity: make("bricks_intensity"),
-            bricks_features: make("bricks_features"),
+            bricks_intensity: checks::pipeline(ctx, &bricks_module, "bricks_intensity"),
+            bricks_features: checks::pipeline(ctx, &bricks_module, "bricks_features"),
         })
     }
 
@@ -240,42 +204,27 @@ impl Raycaster {
             ),
             _ => (&self.no_features, &self.no_features),
         };
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("raycast"),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &[
-                entry(0, target.params.as_entire_binding()),
-                entry(
-                    1,
-                    wgpu::BindingResource::TextureView(&volume.intensity_view),
-                ),
-                entry(2, wgpu::BindingResource::TextureView(feature_view)),
-                entry(3, wgpu::BindingResource::TextureView(&target.view)),
-                entry(4, target.pick.as_entire_binding()),
-                entry(5, wgpu::BindingResource::Sampler(&self.linear_clamp)),
-                entry(6, wgpu::BindingResource::TextureView(brick_view)),
-                entry(7, wgpu::BindingResource::TextureView(feature_brick_view)),
+        let bind_group = bind_group(
+            &ctx.device,
+            "raycast",
+            &self.pipeline,
+            [
+                target.params.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&volume.intensity_view),
+                wgpu::BindingResource::TextureView(feature_view),
+                wgpu::BindingResource::TextureView(&target.view),
+                target.pick.as_entire_binding(),
+                wgpu::BindingResource::Sampler(&self.linear_clamp),
+                wgpu::BindingResource::TextureView(brick_view),
+                wgpu::BindingResource::TextureView(feature_brick_view),
             ],
-        });
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("raycast"),
-            });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("raycast"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(
-                target.size[0].div_ceil(8),
-                (rows.end - rows.start).div_ceil(8),
-                1,
-            );
-        }
-        ctx.queue.submit([encoder.finish()]);
+        );
+        let groups = [
+            target.size[0].div_ceil(8),
+            (rows.end - rows.start).div_ceil(8),
+            1,
+        ];
+        submit_dispatch(ctx, "raycast", &self.pipeline, &bind_group, groups);
         target.rendered = Some(RenderedView {
             camera: *camera,
             size: target.size,
@@ -364,8 +313,4 @@ impl FrameCost {
         let rows = if rows >= 8 { rows / 8 * 8 } else { rows };
         (start + rows).min(h)
     }
-}
-
-fn entry(binding: u32, resource: wgpu::BindingResource<'_>) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry { binding, resource }
 }

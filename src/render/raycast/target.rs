@@ -5,9 +5,11 @@
 use glam::{DVec2, DVec3};
 
 use crate::gpu::GpuContext;
-use crate::gpu::readback::{self, ReadbackError};
+use crate::gpu::readback::{self, PendingRead, ReadbackError};
 use crate::gpu::volume_texture::FeatureTexture;
 use crate::render::camera::Camera;
+use crate::render::output_texture;
+use crate::render::probe::TexelProbe;
 
 use super::RaycastError;
 use super::settings::{Params, VolumeGeometry};
@@ -108,23 +110,13 @@ impl RaycastTarget {
         if size[0] == 0 || size[1] == 0 || size[0] > max || size[1] > max {
             return Err(RaycastError::Size(size[0], size[1], max));
         }
-        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("raycast image"),
-            size: wgpu::Extent3d {
-                width: size[0],
-                height: size[1],
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba8Unorm,
-            usage: wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
-        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let (texture, view) = output_texture(
+            ctx,
+            "raycast image",
+            wgpu::TextureDimension::D2,
+            [size[0], size[1], 1],
+            wgpu::TextureFormat::Rgba8Unorm,
+        );
         let pick = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("raycast pick"),
             size: u64::from(size[0]) * u64::from(size[1]) * 8,
@@ -161,30 +153,15 @@ impl RaycastTarget {
             return None;
         }
         let offset = (u64::from(pixel[1]) * u64::from(self.size[0]) + u64::from(pixel[0])) * 8;
-        let one = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("raycast pick texel"),
-            size: 8,
-            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
+        let read = PendingRead::start_with(ctx, 8, "raycast pick", |encoder, staging| {
+            encoder.copy_buffer_to_buffer(&self.pick, offset, staging, 0, 8);
         });
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("raycast pick"),
-            });
-        encoder.copy_buffer_to_buffer(&self.pick, offset, &one, 0, 8);
-        ctx.queue.submit([encoder.finish()]);
-        let ctx2 = ctx.clone();
-        let future = Box::pin(async move { readback::read_bytes(&ctx2, &one, 8).await });
-        let mut pending = PendingPick {
+        Some(PendingPick {
             view,
             pixel,
-            future: Some(future),
+            read: Some(read),
             ctx: ctx.clone(),
-        };
-        // The first poll records the copy and asks for the mapping.
-        pending.poll_once();
-        Some(pending)
+        })
     }
 
     /// The pick of `pixel` of the last frame, awaited (works on wasm; natively something must
@@ -194,14 +171,10 @@ impl RaycastTarget {
         ctx: &GpuContext,
         pixel: [u32; 2],
     ) -> Result<Option<Pick>, RaycastError> {
-        let Some(mut pending) = self.start_pick(ctx, pixel) else {
-            return Ok(None);
-        };
-        let Some(future) = pending.future.take() else {
-            return Ok(None);
-        };
-        let bytes = future.await?;
-        Ok(decode_pick(&pending.view, pending.pixel, &bytes))
+        match self.start_pick(ctx, pixel) {
+            Some(pending) => pending.finish().await,
+            None => Ok(None),
+        }
     }
 
     /// Native only: the pick of `pixel` of the last frame, waiting for the GPU.
@@ -211,17 +184,8 @@ impl RaycastTarget {
         ctx: &GpuContext,
         pixel: [u32; 2],
     ) -> Result<Option<Pick>, RaycastError> {
-        let Some(mut pending) = self.start_pick(ctx, pixel) else {
-            return Ok(None);
-        };
-        loop {
-            if let Some(result) = pending.poll() {
-                return result;
-            }
-            ctx.device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .map_err(ReadbackError::from)?;
-        }
+        self.start_pick(ctx, pixel)
+            .map_or(Ok(None), |pending| pending.wait())
     }
 
     /// Native only: the whole image as tightly packed RGBA8 rows, top row first.
@@ -240,30 +204,18 @@ impl RaycastTarget {
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_depths_blocking(&self, ctx: &GpuContext) -> Result<Vec<[f32; 2]>, RaycastError> {
         let n = self.size[0] as usize * self.size[1] as usize;
-        let bytes = read_buffer_blocking(ctx, &self.pick, n as u64 * 8)?;
+        let bytes = readback::read_bytes_blocking(ctx, &self.pick, n as u64 * 8)?;
         let values: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes);
         Ok(values.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
     }
 }
 
-/// Native only: reads a buffer back, blocking (the one readback, `gpu::readback`).
-#[cfg(not(target_arch = "wasm32"))]
-pub(super) fn read_buffer_blocking(
-    ctx: &GpuContext,
-    src: &wgpu::Buffer,
-    size: u64,
-) -> Result<Vec<u8>, RaycastError> {
-    Ok(readback::read_bytes_blocking(ctx, src, size)?)
-}
-
-type PickFuture =
-    std::pin::Pin<Box<dyn std::future::Future<Output = Result<Vec<u8>, ReadbackError>>>>;
-
 /// A pick being read back; poll it once per frame.
 pub struct PendingPick {
     view: RenderedView,
     pixel: [u32; 2],
-    future: Option<PickFuture>,
+    /// `None` once read.
+    read: Option<PendingRead>,
     ctx: GpuContext,
 }
 
@@ -277,90 +229,52 @@ impl PendingPick {
     /// Never blocks (natively it lets the device run its callbacks; in the browser they run on
     /// their own).
     pub fn poll(&mut self) -> Option<Result<Option<Pick>, RaycastError>> {
-        let _ = self.ctx.device.poll(wgpu::PollType::Poll);
-        self.poll_once()
+        let result = self.read.as_mut()?.poll(&self.ctx)?;
+        self.read = None;
+        Some(self.decode(result))
     }
 
-    fn poll_once(&mut self) -> Option<Result<Option<Pick>, RaycastError>> {
-        let future = self.future.as_mut()?;
-        let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
-        match future.as_mut().poll(&mut cx) {
-            std::task::Poll::Pending => None,
-            std::task::Poll::Ready(result) => {
-                self.future = None;
-                Some(
-                    result
-                        .map(|bytes| decode_pick(&self.view, self.pixel, &bytes))
-                        .map_err(RaycastError::from),
-                )
-            }
+    /// The pick, awaited (works on wasm; natively something must poll the device).
+    async fn finish(mut self) -> Result<Option<Pick>, RaycastError> {
+        match self.read.take() {
+            Some(read) => self.decode(read.finish().await),
+            None => Ok(None),
         }
     }
+
+    /// Native only: the pick, waiting for the GPU.
+    #[cfg(not(target_arch = "wasm32"))]
+    fn wait(mut self) -> Result<Option<Pick>, RaycastError> {
+        match self.read.take() {
+            Some(read) => self.decode(read.wait(&self.ctx)),
+            None => Ok(None),
+        }
+    }
+
+    fn decode(&self, bytes: Result<Vec<u8>, ReadbackError>) -> Result<Option<Pick>, RaycastError> {
+        let bytes = bytes?;
+        let Some(depth_channel) = bytes.get(..8) else {
+            return Ok(None);
+        };
+        let values: [f32; 2] = bytemuck::pod_read_unaligned(depth_channel);
+        Ok(self.view.pick_from(self.pixel, values))
+    }
 }
 
-fn decode_pick(view: &RenderedView, pixel: [u32; 2], bytes: &[u8]) -> Option<Pick> {
-    let values: [f32; 2] = bytemuck::pod_read_unaligned(bytes.get(..8)?);
-    view.pick_from(pixel, values)
-}
-
-/// Copies the feature texel of `voxel` into a small buffer (8 bytes: four half floats).
-fn copy_feature_texel(
+/// Starts reading the texel of `voxel`; `None` outside the texture.
+fn probe_voxel(
     ctx: &GpuContext,
     features: &FeatureTexture,
     voxel: [usize; 3],
-) -> Option<wgpu::Buffer> {
+) -> Option<TexelProbe> {
     let v: [u32; 3] = std::array::from_fn(|a| u32::try_from(voxel[a]).unwrap_or(u32::MAX));
-    if (0..3).any(|a| v[a] >= features.dims[a]) {
-        return None;
-    }
-    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("feature texel"),
-        size: 8,
-        usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("feature texel"),
-        });
-    encoder.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo {
-            texture: &features.texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d {
-                x: v[0],
-                y: v[1],
-                z: v[2],
-            },
-            aspect: wgpu::TextureAspect::All,
-        },
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: None,
-                rows_per_image: None,
-            },
-        },
-        wgpu::Extent3d {
-            width: 1,
-            height: 1,
-            depth_or_array_layers: 1,
-        },
-    );
-    ctx.queue.submit([encoder.finish()]);
-    Some(buffer)
+    let inside = (0..3).all(|a| v[a] < features.dims[a]);
+    inside.then(|| TexelProbe::start(ctx, features, &[v]))
 }
 
-pub(super) fn decode_texel(bytes: &[u8]) -> [f32; 4] {
-    std::array::from_fn(|c| {
-        let b = [
-            bytes.get(2 * c).copied().unwrap_or(0),
-            bytes.get(2 * c + 1).copied().unwrap_or(0),
-        ];
-        half::f16::from_le_bytes(b).to_f32()
-    })
+/// The one texel a probe of one voxel read.
+fn first_texel(texels: Result<Vec<[f32; 4]>, ReadbackError>) -> Result<[f32; 4], RaycastError> {
+    Ok(texels?.first().copied().unwrap_or_default())
 }
 
 /// The feature values `(V, A, B, 0)` the GPU holds at `voxel` (for the status bar and
@@ -370,10 +284,10 @@ pub async fn read_feature_texel(
     features: &FeatureTexture,
     voxel: [usize; 3],
 ) -> Result<[f32; 4], RaycastError> {
-    let Some(buffer) = copy_feature_texel(ctx, features, voxel) else {
-        return Ok([0.0; 4]);
-    };
-    Ok(decode_texel(&readback::read_bytes(ctx, &buffer, 8).await?))
+    match probe_voxel(ctx, features, voxel) {
+        Some(probe) => first_texel(probe.finish().await),
+        None => Ok([0.0; 4]),
+    }
 }
 
 /// Native only: [`read_feature_texel`], waiting for the GPU.
@@ -383,10 +297,7 @@ pub fn read_feature_texel_blocking(
     features: &FeatureTexture,
     voxel: [usize; 3],
 ) -> Result<[f32; 4], RaycastError> {
-    let Some(buffer) = copy_feature_texel(ctx, features, voxel) else {
-        return Ok([0.0; 4]);
-    };
-    Ok(decode_texel(&read_buffer_blocking(ctx, &buffer, 8)?))
+    probe_voxel(ctx, features, voxel).map_or(Ok([0.0; 4]), |probe| first_texel(probe.wait(ctx)))
 }
 
 /// The continuous pixel under a point of the widget/image (helper for callers mapping UI

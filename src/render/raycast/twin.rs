@@ -162,28 +162,13 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
                         if cz { i1[2] } else { i0[2] },
                     ])
                 };
+                // Along x on the four edges, then y, then z: the shader's order, so the f32
+                // results are the same.
                 let tri = |get: &dyn Fn(usize) -> f32| {
-                    let v00 = lerp(
-                        get(corner(false, false, false)),
-                        get(corner(true, false, false)),
-                        f[0],
-                    );
-                    let v10 = lerp(
-                        get(corner(false, true, false)),
-                        get(corner(true, true, false)),
-                        f[0],
-                    );
-                    let v01 = lerp(
-                        get(corner(false, false, true)),
-                        get(corner(true, false, true)),
-                        f[0],
-                    );
-                    let v11 = lerp(
-                        get(corner(false, true, true)),
-                        get(corner(true, true, true)),
-                        f[0],
-                    );
-                    lerp(lerp(v00, v10, f[1]), lerp(v01, v11, f[1]), f[2])
+                    let edge =
+                        |cy, cz| lerp(get(corner(false, cy, cz)), get(corner(true, cy, cz)), f[0]);
+                    let face = |cz| lerp(edge(false, cz), edge(true, cz), f[1]);
+                    lerp(face(false), face(true), f[2])
                 };
                 if !skip_i {
                     samples += 1;
