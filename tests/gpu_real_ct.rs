@@ -137,3 +137,65 @@ fn chest_ct_1_5_mm_eigenvalues() {
         &[(Method::Hessian, true), (Method::Rst, true)],
     );
 }
+
+/// Compact features (issue "full-size scans", deliver 3): the MIP drawn from the 4-byte
+/// shared-exponent feature texels is within 2 grey levels (of 255) of the MIP drawn from the
+/// 8-byte half floats they replaced, on the real features of the 5 mm chest CT (RST, lung
+/// preset, and the Hessian), from three directions, through the ray caster's CPU twin (exact
+/// to the GPU, tested in gpu_raycast.rs).
+#[test]
+fn compact_feature_texels_keep_the_mip_within_two_grey_levels() {
+    use shapecast::cpu::Preset;
+    use shapecast::render::camera::{Camera, ViewPreset};
+    use shapecast::render::raycast::{RenderSettings, TwinScene, VolumeGeometry, cpu_twin, params};
+    let Some(volume) = crop("ct/lung2_image.nrrd", [128, 128, 30]) else {
+        return;
+    };
+    let Some(ctx) = test_context() else { return };
+    for (method, preset) in [
+        (Method::Rst, Preset::LungNodules),
+        (Method::Li, Preset::LungNodules),
+    ] {
+        let mut req = Request::new(method);
+        req.preset = preset;
+        let comps = gpu(&ctx, &volume, &req);
+        let compact = TwinScene::new(&volume, Some(&comps));
+        let mut halves = TwinScene::new(&volume, Some(&comps));
+        let half = |v: f32| half::f16::from_f32(v.clamp(-65504.0, 65504.0)).to_f32();
+        halves.features = Some(
+            (0..volume.voxel_count())
+                .map(|n| [half(comps[0][n]), half(comps[1][n]), half(comps[2][n]), 0.0])
+                .collect(),
+        );
+        let geometry = VolumeGeometry::of_volume(&volume);
+        let settings = RenderSettings {
+            window: (-1000.0, 400.0),
+            ..Default::default()
+        };
+        let mut worst = 0u8;
+        let mut coloured = 0usize;
+        for view in [ViewPreset::Anterior, ViewPreset::Superior, ViewPreset::Left] {
+            let camera = Camera::for_volume(&geometry.world_from_voxel, geometry.dims, view);
+            let p = params(
+                &geometry,
+                &camera,
+                &settings,
+                [128, 128],
+                compact.feature_max,
+            );
+            let (a, b) = (cpu_twin(&compact, &p), cpu_twin(&halves, &p));
+            for (x, y) in a.rgba.chunks(4).zip(b.rgba.chunks(4)) {
+                for c in 0..3 {
+                    worst = worst.max(x[c].abs_diff(y[c]));
+                }
+                coloured += usize::from(x[0].abs_diff(x[2]) > 60);
+            }
+        }
+        eprintln!("{method:?}: largest difference {worst} grey levels, {coloured} coloured pixels");
+        assert!(
+            coloured > 500,
+            "{method:?}: hardly any colour ({coloured} pixels)"
+        );
+        assert!(worst <= 2, "{method:?}: {worst} grey levels apart");
+    }
+}

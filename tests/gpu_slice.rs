@@ -219,10 +219,17 @@ fn texel_probe_reads_the_uploaded_features() {
     assert_eq!(texels.len(), voxels.len());
     for (v, t) in voxels.iter().zip(&texels) {
         let idx = v[0] as usize + DIMS[0] * (v[1] as usize + DIMS[1] * v[2] as usize);
+        // Exactly the shared-exponent texel the upload encoded.
+        let texel = shapecast::gpu::volume_texture::feature_texel([
+            comps[0][idx],
+            comps[1][idx],
+            comps[2][idx],
+        ]);
         for c in 0..3 {
             let want = comps[c][idx];
+            assert_eq!(t[c], texel[c], "voxel {v:?} component {c}");
             assert!(
-                (t[c] - want).abs() <= 1e-3 * want.abs().max(1.0),
+                (t[c] - want).abs() <= texel.iter().copied().fold(0.0, f32::max) / 512.0 + 1e-6,
                 "voxel {v:?} component {c}: {} vs {want}",
                 t[c]
             );

@@ -479,6 +479,7 @@ impl MipView {
         };
         let mut rendered = false;
         let mut step = None;
+        self.pacer.set_scene(features.is_some());
         if self.last.as_ref() != Some(&key) {
             self.refining = None;
             let cost = FrameCost::of(scene.volume, &self.camera, &settings, full);

@@ -75,6 +75,7 @@ fn draw_like_the_viewer(
             .poll(wgpu::PollType::wait_indefinitely())
             .context("waiting for the GPU")
     };
+    pacer.set_scene(scene.features.is_some());
     let cost = FrameCost::of(scene.volume, camera, settings, size);
     let full = cost.total();
     let mut timing = MipTiming {

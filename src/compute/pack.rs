@@ -1,9 +1,13 @@
 //! Packing feature blocks into a method's feature texture (shaders/pack_features.wgsl): the last
-//! step of the slab pipeline, keeping the features on the GPU for rendering. The CPU twin is the
-//! half-float conversion of [`crate::gpu::volume_texture::FeatureTexture::from_components`].
+//! step of the slab pipeline, keeping the features on the GPU for rendering. The kernel encodes
+//! shared-exponent texels into a staging buffer that is then copied into the texture's box; the
+//! CPU twin is [`crate::gpu::volume_texture::encode_rgb9e5`], as
+//! [`crate::gpu::volume_texture::FeatureTexture::from_components`] uses it.
 
 use crate::gpu::kernel::{SlabGrid, WORKGROUP, uniform_buffer};
-use crate::gpu::volume_texture::{FeatureTexture, HISTOGRAM_BINS, histogram_quantile};
+use crate::gpu::volume_texture::{
+    FEATURE_TEXEL_BYTES, FeatureTexture, HISTOGRAM_BINS, histogram_quantile,
+};
 use crate::gpu::{GpuContext, shaders};
 
 /// Mirrors `Params` in pack_features.wgsl.
@@ -15,7 +19,9 @@ struct Params {
     src_dims: [u32; 3],
     src_y0: u32,
     y0: u32,
-    _pad: [u32; 3],
+    pitch: u32,
+    src_z0: u32,
+    _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 48);
 
@@ -86,17 +92,60 @@ impl Pack {
         dst: &FeatureTexture,
         at: PackBox,
     ) {
-        let block = SlabGrid::new([at.src_dims[0], at.ny, at.src_dims[2]], [1.0; 3]);
+        let [nx, ny, nz] = [at.src_dims[0], at.ny, at.src_dims[2]];
+        // Copies into a texture take rows of a multiple of 256 bytes; the staging buffer of one
+        // chunk of slices stays within one storage binding.
+        let row_bytes =
+            (nx * FEATURE_TEXEL_BYTES).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let pitch = row_bytes / FEATURE_TEXEL_BYTES;
+        let limit = ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(ctx.limits.max_buffer_size);
+        let slice_bytes = u64::from(row_bytes) * u64::from(ny);
+        let chunk = (limit / slice_bytes.max(1)).clamp(1, u64::from(nz.max(1))) as u32;
+        let mut z = 0;
+        while z < nz {
+            let cz = chunk.min(nz - z);
+            self.record_chunk(ctx, encoder, src, dst, at, [nx, ny, cz], z, pitch);
+            z += cz;
+        }
+    }
+
+    /// Slices `src_z0..src_z0 + dims[2]` of the box: encoded into a staging buffer, copied.
+    #[allow(clippy::too_many_arguments)]
+    fn record_chunk(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        src: &wgpu::Buffer,
+        dst: &FeatureTexture,
+        at: PackBox,
+        dims: [u32; 3],
+        src_z0: u32,
+        pitch: u32,
+    ) {
+        let block = SlabGrid::new(dims, [1.0; 3]);
+        let [nx, ny, nz] = dims;
+        let row_bytes = pitch * FEATURE_TEXEL_BYTES;
+        let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pack staging"),
+            size: (u64::from(row_bytes) * u64::from(ny) * u64::from(nz)).max(4),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
         let params = uniform_buffer(
             &ctx.device,
             "pack params",
             &Params {
-                dims: block.dims,
-                z0: at.z0,
+                dims,
+                z0: at.z0 + src_z0,
                 src_dims: at.src_dims,
                 src_y0: at.src_y0,
                 y0: at.y0,
-                _pad: [0; 3],
+                pitch,
+                src_z0,
+                _pad: 0,
             },
         );
         let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -113,7 +162,7 @@ impl Pack {
                 },
                 wgpu::BindGroupEntry {
                     binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&dst.view),
+                    resource: staging.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 3,
@@ -121,14 +170,41 @@ impl Pack {
                 },
             ],
         });
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("pack"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        let [x, y, z] = block.workgroups(WORKGROUP);
-        pass.dispatch_workgroups(x, y, z);
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("pack"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            let [x, y, z] = block.workgroups(WORKGROUP);
+            pass.dispatch_workgroups(x, y, z);
+        }
+        encoder.copy_buffer_to_texture(
+            wgpu::TexelCopyBufferInfo {
+                buffer: &staging,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row_bytes),
+                    rows_per_image: Some(ny),
+                },
+            },
+            wgpu::TexelCopyTextureInfo {
+                texture: &dst.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: 0,
+                    y: at.y0,
+                    z: at.z0 + src_z0,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::Extent3d {
+                width: nx,
+                height: ny,
+                depth_or_array_layers: nz,
+            },
+        );
     }
 
     /// Bytes of [`Pack::maxima`]: three maxima, a pad, three histograms.

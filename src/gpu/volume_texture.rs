@@ -5,9 +5,16 @@
 //! - Intensity: `R16Float`, physical values (HU), uploaded once from the CPU volume. Half floats
 //!   hold integers exactly up to 2048 and in steps of 2 up to 4096: enough for display; values
 //!   shown to the user come from the CPU volume.
-//! - Features: `Rgba16Float` per method, `(V, A, B, 0)` in their physical units (no scale to keep),
-//!   written slab by slab by the GPU feature pipeline (`STORAGE_BINDING`) or uploaded from CPU
-//!   components. `max` is the largest value of each feature, for default gains.
+//! - Features: `Rgb9e5Ufloat` per method, `(V, A, B)` in their physical units (no scale to
+//!   keep): three 9-bit mantissas with a shared 5-bit exponent, 4 bytes per voxel (half of
+//!   `Rgba16Float`), filterable everywhere, the features' range (0 to 65408) without a
+//!   per-volume scale. Each channel is exact to half a step of the texel's largest channel
+//!   (1/512 to 1/1024 of it): on the MIP a fraction of a grey level where that channel is the
+//!   one shown. Written brick by brick by the GPU pipeline (the pack kernel encodes into a
+//!   buffer, copied into the texture: the format cannot be a storage texture) or uploaded from
+//!   CPU components with the same encoding ([`encode_rgb9e5`], bit for bit the kernel's).
+//!   Features are non-negative (negative values are stored as 0). `max` is the largest value of
+//!   each feature, for default gains.
 //!
 //! Both are on the volume's own voxel grid (the input grid), whatever grid features used.
 
@@ -16,7 +23,47 @@ use crate::gpu::GpuContext;
 use crate::volume::Volume;
 
 pub const INTENSITY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R16Float;
-pub const FEATURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+pub const FEATURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgb9e5Ufloat;
+/// Bytes of one feature texel.
+pub const FEATURE_TEXEL_BYTES: u32 = 4;
+
+/// The largest value a shared-exponent texel holds: (2^9 - 1) / 2^9 * 2^16.
+pub const RGB9E5_MAX: f32 = 65408.0;
+
+/// 2^k for an integer k in f32's normal range, exactly.
+fn pow2(k: i32) -> f32 {
+    f32::from_bits(((k + 127) as u32) << 23)
+}
+
+/// Encodes three non-negative values as an `Rgb9e5Ufloat` texel (the algorithm of
+/// EXT_texture_shared_exponent, with round to nearest; shaders/pack_features.wgsl does the same
+/// arithmetic, all of it exact in f32, so both give the same bits). NaN and negative values are
+/// stored as 0, values above [`RGB9E5_MAX`] as the maximum.
+pub fn encode_rgb9e5(v: [f32; 3]) -> u32 {
+    let c = v.map(|x| if x > 0.0 { x.min(RGB9E5_MAX) } else { 0.0 });
+    let m = c[0].max(c[1]).max(c[2]);
+    // floor(log2(m)) from the exponent bits (m < 2^-15 counts as 2^-16: the smallest exponent).
+    let e_m = ((m.to_bits() >> 23) & 0xff) as i32 - 127;
+    let mut e = e_m.max(-16) + 16;
+    let top = (m * pow2(24 - e) + 0.5).floor();
+    if top >= 512.0 {
+        e += 1;
+    }
+    let scale = pow2(24 - e);
+    let q = c.map(|x| ((x * scale + 0.5).floor() as u32).min(511));
+    q[0] | (q[1] << 9) | (q[2] << 18) | ((e as u32) << 27)
+}
+
+/// Decodes an `Rgb9e5Ufloat` texel (what a shader's `textureLoad` returns).
+pub fn decode_rgb9e5(t: u32) -> [f32; 3] {
+    let scale = pow2(((t >> 27) & 31) as i32 - 24);
+    [t & 511, (t >> 9) & 511, (t >> 18) & 511].map(|q| q as f32 * scale)
+}
+
+/// The values a feature texel holds for `v` (the twins' feature data).
+pub fn feature_texel(v: [f32; 3]) -> [f32; 3] {
+    decode_rgb9e5(encode_rgb9e5(v))
+}
 
 /// Why a volume cannot be shown on this device.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
@@ -252,7 +299,7 @@ impl FeatureTexture {
 }
 
 impl FeatureTexture {
-    /// An empty feature texture the GPU pipeline writes into (storage) and renderers sample.
+    /// An empty feature texture the GPU pipeline copies into and renderers sample.
     pub fn new(ctx: &GpuContext, dims: [u32; 3], label: &str) -> Result<Self, RenderVolumeError> {
         check_dims(ctx, dims)?;
         let texture = texture_3d(
@@ -261,7 +308,6 @@ impl FeatureTexture {
             dims,
             FEATURE_FORMAT,
             wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::STORAGE_BINDING
                 | wgpu::TextureUsages::COPY_DST
                 | wgpu::TextureUsages::COPY_SRC,
         );
@@ -287,25 +333,22 @@ impl FeatureTexture {
         if let Some(c) = components.iter().find(|c| c.len() != want) {
             return Err(RenderVolumeError::Length { got: c.len(), want });
         }
-        let per = slices_per_chunk(dims, 8);
+        let per = slices_per_chunk(dims, FEATURE_TEXEL_BYTES);
         let slice = dims[0] as usize * dims[1] as usize;
-        let mut texels: Vec<half::f16> = Vec::with_capacity(slice * per as usize * 4);
+        let mut texels: Vec<u32> = Vec::with_capacity(slice * per as usize);
         let mut z0 = 0;
         while z0 < dims[2] {
             let nz = per.min(dims[2] - z0);
             let range = z0 as usize * slice..(z0 + nz) as usize * slice;
             texels.clear();
-            for idx in range {
-                for c in components {
-                    texels.push(half::f16::from_f32(c[idx].clamp(-65504.0, 65504.0)));
-                }
-                texels.push(half::f16::ZERO);
-            }
+            texels.extend(
+                range.map(|idx| encode_rgb9e5(std::array::from_fn(|c| components[c][idx]))),
+            );
             write_slices(
                 ctx,
                 &tex.texture,
                 dims,
-                8,
+                FEATURE_TEXEL_BYTES,
                 z0,
                 nz,
                 bytemuck::cast_slice(&texels),
@@ -317,15 +360,66 @@ impl FeatureTexture {
     }
 }
 
+/// Decodes feature texels (`Rgb9e5Ufloat`, as copied out of a feature texture) into
+/// `(V, A, B, 0)`.
+pub fn decode_feature_texels(bytes: &[u8]) -> impl Iterator<Item = [f32; 4]> + '_ {
+    bytes.chunks_exact(4).map(|b| {
+        let [v, a, c] = decode_rgb9e5(u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        [v, a, c, 0.0]
+    })
+}
+
 /// Native only (tests, export): a feature texture's texels `(V, A, B, 0)` as f32, i fastest.
 #[cfg(not(target_arch = "wasm32"))]
 pub fn read_texture_blocking(
     ctx: &GpuContext,
     tex: &FeatureTexture,
 ) -> Result<Vec<f32>, crate::gpu::readback::ReadbackError> {
-    let bytes = crate::gpu::readback::read_texture_blocking(ctx, &tex.texture, tex.dims, 8)?;
-    Ok(bytes
-        .chunks_exact(2)
-        .map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32())
-        .collect())
+    let bytes = crate::gpu::readback::read_texture_blocking(
+        ctx,
+        &tex.texture,
+        tex.dims,
+        FEATURE_TEXEL_BYTES,
+    )?;
+    Ok(decode_feature_texels(&bytes).flatten().collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shared_exponent_round_trip() {
+        // Exact where the mantissas hold the values.
+        for v in [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.5, 0.25],
+            [511.0, 3.0, 0.0],
+            [65408.0, 0.0, 128.0],
+        ] {
+            assert_eq!(feature_texel(v), v, "{v:?}");
+        }
+        // Clamped: negative and NaN to 0, above the range to the maximum.
+        assert_eq!(feature_texel([-1.0, f32::NAN, 1e9]), [0.0, 0.0, 65408.0]);
+        // Rounding carries into the exponent: 511.75 needs 2^10 steps of 1.
+        assert_eq!(feature_texel([511.75, 0.0, 0.0]), [512.0, 0.0, 0.0]);
+        // Every channel within half a step of the texel's largest: (1/512 .. 1/1024 of it).
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for _ in 0..200_000 {
+            let scale = 2f32.powf(next() * 35.0 - 20.0);
+            let v = [next() * scale, next() * scale * next(), next() * scale];
+            let t = feature_texel(v);
+            let m = v[0].max(v[1]).max(v[2]);
+            for c in 0..3 {
+                let step = (m / 256.0).max(2f32.powi(-24));
+                assert!((t[c] - v[c]).abs() <= 0.5 * step, "{v:?} -> {t:?}");
+            }
+        }
+    }
 }

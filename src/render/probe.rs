@@ -9,10 +9,10 @@
 
 use crate::gpu::GpuContext;
 use crate::gpu::readback::{PendingRead, ReadbackError, copy_texel};
-use crate::gpu::volume_texture::FeatureTexture;
+use crate::gpu::volume_texture::{FEATURE_TEXEL_BYTES, FeatureTexture, decode_feature_texels};
 
-/// Bytes of one `Rgba16Float` texel.
-const TEXEL_BYTES: u64 = 8;
+/// Bytes of one feature texel.
+const TEXEL_BYTES: u64 = FEATURE_TEXEL_BYTES as u64;
 
 /// A readback of `(V, A, B, 0)` at a few voxels, in flight.
 pub struct TexelProbe {
@@ -64,12 +64,7 @@ impl TexelProbe {
     }
 }
 
-/// The first `count` half-float texels `(V, A, B, 0)` of `bytes` as f32.
-pub(crate) fn decode(bytes: &[u8], count: usize) -> Vec<[f32; 4]> {
-    let halves: Vec<half::f16> = bytemuck::pod_collect_to_vec(bytes);
-    halves
-        .chunks_exact(4)
-        .take(count)
-        .map(|t| [t[0].to_f32(), t[1].to_f32(), t[2].to_f32(), t[3].to_f32()])
-        .collect()
+/// The first `count` feature texels `(V, A, B, 0)` of `bytes` as f32.
+fn decode(bytes: &[u8], count: usize) -> Vec<[f32; 4]> {
+    decode_feature_texels(bytes).take(count).collect()
 }

@@ -209,7 +209,8 @@ fn as_f16(v: f32) -> f32 {
 }
 
 /// The CPU twin of the kernel: the same image from physical `values` and feature `components`
-/// on `dims` (rounded through half floats as the GPU textures hold them), row-major, RGBA8.
+/// on `dims` (rounded as the GPU textures hold them: half floats, shared-exponent feature
+/// texels), row-major, RGBA8.
 pub fn cpu_twin(
     values: &[f32],
     dims: [usize; 3],
@@ -231,9 +232,9 @@ pub fn cpu_twin(
             let g = ((v - lo) / (hi - lo).max(1e-6)).clamp(0.0, 1.0);
             let mut rgb = [g; 3];
             if let (Some(o), Some(f)) = (request.overlay, features) {
+                let texel = crate::gpu::volume_texture::feature_texel([f[0][n], f[1][n], f[2][n]]);
                 for (c, colour) in FEATURE_RGB.iter().enumerate() {
-                    let a =
-                        (as_f16(f[c][n]) * o.scale[c]).clamp(0.0, 1.0) * o.opacity.clamp(0.0, 1.0);
+                    let a = (texel[c] * o.scale[c]).clamp(0.0, 1.0) * o.opacity.clamp(0.0, 1.0);
                     for (out, col) in rgb.iter_mut().zip(colour) {
                         *out += (col - *out) * a;
                     }

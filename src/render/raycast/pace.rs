@@ -12,24 +12,29 @@ use web_time::Instant;
 
 use crate::gpu::GpuContext;
 
-/// First guess of the rate (samples per second) before anything was measured: a software
-/// renderer's order (lavapipe on two cores); a real GPU measures higher within a few frames.
-pub const INITIAL_SAMPLES_PER_S: f64 = 50e6;
+/// First guess of the rate (samples per second) before a kind of frame was measured: below a
+/// software renderer's (lavapipe on two cores: ~100 M/s intensity only, ~15 M/s with features);
+/// a real GPU measures higher within a few frames.
+pub const INITIAL_SAMPLES_PER_S: f64 = 10e6;
 
 /// The measured rate and the budget per frame.
 pub struct FramePacer {
     /// GPU seconds one frame may take; `None`: frames are drawn whole, whatever they cost.
     pub budget_s: Option<f64>,
-    samples_per_s: f64,
-    measured: bool,
+    /// Measured rates per kind of frame (intensity only, with features: a feature sample costs
+    /// several times an intensity one, and skips less), `None` until measured.
+    rates: [Option<f64>; 2],
+    /// The kind of the frames being planned.
+    kind: usize,
     /// The rate is given, never measured (tests, benchmarks).
-    fixed: bool,
+    fixed: Option<f64>,
     measuring: Option<Measure>,
 }
 
 struct Measure {
     start: Instant,
     samples: f64,
+    kind: usize,
     done: Arc<Mutex<Option<Instant>>>,
 }
 
@@ -37,9 +42,9 @@ impl FramePacer {
     pub fn new(budget_s: Option<f64>) -> Self {
         Self {
             budget_s,
-            samples_per_s: INITIAL_SAMPLES_PER_S,
-            measured: false,
-            fixed: false,
+            rates: [None; 2],
+            kind: 0,
+            fixed: None,
             measuring: None,
         }
     }
@@ -48,27 +53,34 @@ impl FramePacer {
     pub fn fixed(budget_s: Option<f64>, samples_per_s: f64) -> Self {
         Self {
             budget_s,
-            samples_per_s: samples_per_s.max(1.0),
-            measured: true,
-            fixed: true,
+            rates: [None; 2],
+            kind: 0,
+            fixed: Some(samples_per_s.max(1.0)),
             measuring: None,
         }
     }
 
-    /// Samples per second, measured (or the first guess).
+    /// Plans the following frames for a scene with or without features.
+    pub fn set_scene(&mut self, with_features: bool) {
+        self.kind = usize::from(with_features);
+    }
+
+    /// Samples per second of the current kind of frame, measured (or the first guess).
     pub fn rate(&self) -> f64 {
-        self.samples_per_s
+        self.fixed
+            .or(self.rates[self.kind])
+            .unwrap_or(INITIAL_SAMPLES_PER_S)
     }
 
     /// Whether [`Self::rate`] comes from a measurement.
     pub fn measured(&self) -> bool {
-        self.measured
+        self.fixed.is_some() || self.rates[self.kind].is_some()
     }
 
     /// How many samples one frame may cost; infinite without a budget.
     pub fn budget_samples(&self) -> f64 {
         match self.budget_s {
-            Some(s) if s.is_finite() && s > 0.0 => s * self.samples_per_s,
+            Some(s) if s.is_finite() && s > 0.0 => s * self.rate(),
             _ => f64::INFINITY,
         }
     }
@@ -76,7 +88,7 @@ impl FramePacer {
     /// Call right after submitting `samples` samples of work, with the time taken just before
     /// the submission: times it if no other measurement is running.
     pub fn submitted(&mut self, ctx: &GpuContext, samples: f64, start: Instant) {
-        if self.fixed || self.measuring.is_some() || !(samples > 0.0) {
+        if self.fixed.is_some() || self.measuring.is_some() || samples.is_nan() || samples <= 0.0 {
             return;
         }
         let done = Arc::new(Mutex::new(None));
@@ -89,6 +101,7 @@ impl FramePacer {
         self.measuring = Some(Measure {
             start,
             samples,
+            kind: self.kind,
             done,
         });
     }
@@ -110,14 +123,13 @@ impl FramePacer {
         // A millisecond floor: a tiny frame's time is mostly overhead.
         let secs = done.duration_since(m.start).as_secs_f64().max(1e-3);
         let sample = (m.samples / secs).clamp(1e5, 1e13);
-        self.samples_per_s = if self.measured && sample > self.samples_per_s {
+        let rate = &mut self.rates[m.kind];
+        *rate = Some(match *rate {
             // Up slowly (the geometric mean of the old rate and the new sample), down at once:
             // a band over dense tissue after bands of air must not be planned at air's rate.
-            (self.samples_per_s * sample).sqrt()
-        } else {
-            sample
-        };
-        self.measured = true;
+            Some(old) if sample > old => (old * sample).sqrt(),
+            _ => sample,
+        });
         self.measuring = None;
         false
     }
@@ -138,7 +150,8 @@ pub const MIN_COARSE_SCALE: f32 = 1.0 / 16.0;
 
 impl FramePlan {
     pub fn of(full_samples: f64, budget_samples: f64) -> Self {
-        if !(full_samples > budget_samples) {
+        // NaN budgets or costs draw whole.
+        if full_samples.partial_cmp(&budget_samples) != Some(std::cmp::Ordering::Greater) {
             return Self::Whole;
         }
         let s = (budget_samples / full_samples).sqrt() as f32;
@@ -152,7 +165,7 @@ impl FramePlan {
 /// (the preview drawn while the mouse moves the view), never below [`MIN_COARSE_SCALE`].
 pub fn scale_within(full_samples: f64, budget_samples: f64, cap: f32) -> f32 {
     let cap = cap.clamp(MIN_COARSE_SCALE, 1.0);
-    if !(full_samples > budget_samples) {
+    if full_samples.partial_cmp(&budget_samples) != Some(std::cmp::Ordering::Greater) {
         return cap;
     }
     ((budget_samples / full_samples).sqrt() as f32).clamp(MIN_COARSE_SCALE, cap)

@@ -5,7 +5,9 @@
 use glam::{DVec2, DVec3};
 
 use crate::gpu::GpuContext;
-use crate::gpu::readback::{self, PendingRead, ReadbackError};
+#[cfg(not(target_arch = "wasm32"))]
+use crate::gpu::readback;
+use crate::gpu::readback::{PendingRead, ReadbackError};
 use crate::gpu::volume_texture::FeatureTexture;
 use crate::render::camera::Camera;
 use crate::render::output_texture;

@@ -8,8 +8,9 @@ use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use super::bricks::{BRICK, brick_dims, cpu_bricks};
 use super::settings::{BIG, CHANNEL_COLOURS, FLAG_BRICKS, FLAG_FEATURES, FLAG_INTENSITY, Params};
 
-/// The data of the CPU twin: exactly the values the GPU textures hold (half floats, features
-/// clamped to the half range as [`FeatureTexture::from_components`] does), as f32.
+/// The data of the CPU twin: exactly the values the GPU textures hold (the intensity as half
+/// floats, the features as the shared-exponent texels [`FeatureTexture::from_components`]
+/// writes), as f32.
 pub struct TwinScene {
     pub dims: [u32; 3],
     pub intensity: Vec<f32>,
@@ -29,12 +30,9 @@ impl TwinScene {
         let features: Option<Vec<[f32; 4]>> = components.map(|c| {
             (0..volume.voxel_count())
                 .map(|n| {
-                    [
-                        half(c[0][n].clamp(-65504.0, 65504.0)),
-                        half(c[1][n].clamp(-65504.0, 65504.0)),
-                        half(c[2][n].clamp(-65504.0, 65504.0)),
-                        0.0,
-                    ]
+                    let [v, a, b] =
+                        crate::gpu::volume_texture::feature_texel([c[0][n], c[1][n], c[2][n]]);
+                    [v, a, b, 0.0]
                 })
                 .collect()
         });
