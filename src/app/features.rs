@@ -415,7 +415,8 @@ impl FeatureManager {
 }
 
 fn texture_bytes(t: &FeatureTexture) -> u64 {
-    t.dims.iter().map(|&d| u64::from(d)).product::<u64>() * 8
+    t.dims.iter().map(|&d| u64::from(d)).product::<u64>()
+        * u64::from(crate::gpu::volume_texture::FEATURE_TEXEL_BYTES)
 }
 
 /// The parameter panel. Returns true when the user asked to recompute.
