@@ -78,6 +78,20 @@ pub fn f32_buffer_init(device: &wgpu::Device, label: &str, data: &[f32]) -> wgpu
     })
 }
 
+/// A read-only storage buffer holding `data` (tables a kernel reads: taps, rays).
+pub fn storage_buffer_init<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    label: &str,
+    data: &[T],
+) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt as _;
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: bytemuck::cast_slice(data),
+        usage: wgpu::BufferUsages::STORAGE,
+    })
+}
+
 /// A uniform buffer holding one `#[repr(C)]` parameter struct.
 pub fn uniform_buffer<T: bytemuck::Pod>(
     device: &wgpu::Device,
