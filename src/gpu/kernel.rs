@@ -1,5 +1,5 @@
 //! What every compute kernel module shares: the grid of the slab it works on, storage buffers of
-//! `f32`, and workgroup counts.
+//! `f32` and tables, uniforms, textures, bind groups, and workgroup counts.
 //!
 //! Conventions every kernel follows (ARCHITECTURE.md, "GPU kernels"):
 //! - A volume on the GPU is a storage buffer of `f32`, voxel `i` fastest
