@@ -233,6 +233,23 @@ impl Phantom {
         self
     }
 
+    /// With a sphere of `value_hu` for each `(centre_mm, radius_mm)`, in order.
+    pub fn with_spheres(
+        self,
+        spheres: impl IntoIterator<Item = ([f64; 3], f64)>,
+        value_hu: f32,
+    ) -> Self {
+        spheres.into_iter().fold(self, |p, (centre_mm, radius_mm)| {
+            p.with(
+                Shape::Sphere {
+                    centre_mm,
+                    radius_mm,
+                },
+                value_hu,
+            )
+        })
+    }
+
     /// Moves every object by `d_mm` (the box stays): sub-voxel offsets for tests.
     pub fn shifted(mut self, d_mm: [f64; 3]) -> Self {
         for o in &mut self.objects {

@@ -8,18 +8,9 @@ use anyhow::{Context, bail};
 
 use crate::compute::pipeline::{FeatureJob, JobOptions};
 use crate::cpu::pipeline::{self, Method, Request};
-use crate::cpu::{FeatureMap, Grid, OpacityRule, Preset, TransferFunction};
+use crate::cpu::{FeatureMap, Grid, OpacityRule, TransferFunction};
 use crate::gpu::GpuContext;
 use crate::io::{self, InputFile};
-
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum MethodArg {
-    Hessian,
-    Li,
-    Frangi,
-    Gst,
-    Rst,
-}
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OpacityArg {
@@ -59,7 +50,7 @@ pub struct FeaturesArgs {
     /// header with its data file.
     pub input: PathBuf,
     #[arg(long, value_enum)]
-    pub method: MethodArg,
+    pub method: Method,
     /// Output file (.nii or .nii.gz).
     #[arg(long)]
     pub out: PathBuf,
@@ -115,21 +106,8 @@ pub fn read_input(path: &Path) -> anyhow::Result<Vec<InputFile>> {
 }
 
 pub fn request(args: &FeaturesArgs) -> anyhow::Result<Request> {
-    let method = match args.method {
-        MethodArg::Hessian => Method::Hessian,
-        MethodArg::Li => Method::Li,
-        MethodArg::Frangi => Method::Frangi,
-        MethodArg::Gst => Method::Gst,
-        MethodArg::Rst => Method::Rst,
-    };
-    let preset = Preset::from_name(&args.preset).with_context(|| {
-        let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
-        format!(
-            "unknown preset {:?}; known: {}",
-            args.preset,
-            names.join(", ")
-        )
-    })?;
+    let method = args.method;
+    let preset = crate::cli::preset(&args.preset)?;
     let mut req = Request::new(method);
     req.preset = preset;
     req.sigmas_mm = args.sigma_mm.clone();

@@ -10,6 +10,36 @@ pub mod render;
 pub mod reproduce;
 pub mod whole_body;
 
+/// Command-line values of a type that lists itself in `ALL` and names each value with `name()`,
+/// so that the command line spells them as the rest of Shapecast does.
+macro_rules! value_enum_by_name {
+    ($($ty:ty),*) => {$(
+        impl clap::ValueEnum for $ty {
+            fn value_variants<'a>() -> &'a [Self] {
+                &Self::ALL
+            }
+
+            fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+                Some(clap::builder::PossibleValue::new(self.name()))
+            }
+        }
+    )*};
+}
+
+/// The feature preset named `name`, or an error listing the known ones.
+pub fn preset(name: &str) -> anyhow::Result<crate::cpu::Preset> {
+    use crate::cpu::Preset;
+    Preset::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
+        anyhow::anyhow!("unknown preset {name:?}; known: {}", names.join(", "))
+    })
+}
+
+value_enum_by_name!(
+    crate::cpu::pipeline::Method,
+    crate::render::camera::ViewPreset
+);
+
 /// Shape-encoding MIPs of CT and MRI: Hessian and radial structure tensor features.
 ///
 /// Run without a subcommand to open the viewer in a window.

@@ -33,16 +33,6 @@ pub enum RenderMethod {
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ViewArg {
-    Anterior,
-    Posterior,
-    Left,
-    Right,
-    Superior,
-    Inferior,
-}
-
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OnlyArg {
     Vesselness,
     Airwayness,
@@ -58,7 +48,7 @@ pub struct RenderArgs {
     pub method: RenderMethod,
     /// Preset view (radiological convention; see src/render/camera.rs).
     #[arg(long, value_enum, default_value = "anterior")]
-    pub view: ViewArg,
+    pub view: ViewPreset,
     /// Turn the view: positive yaw moves the viewer to the screen's right, degrees.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub yaw_deg: f64,
@@ -173,17 +163,6 @@ fn method(m: RenderMethod) -> Option<Method> {
     }
 }
 
-fn preset_view(v: ViewArg) -> ViewPreset {
-    match v {
-        ViewArg::Anterior => ViewPreset::Anterior,
-        ViewArg::Posterior => ViewPreset::Posterior,
-        ViewArg::Left => ViewPreset::Left,
-        ViewArg::Right => ViewPreset::Right,
-        ViewArg::Superior => ViewPreset::Superior,
-        ViewArg::Inferior => ViewPreset::Inferior,
-    }
-}
-
 /// The grey window a radiologist would start with.
 pub fn default_window(volume: &Volume, preset: Preset) -> (f32, f32) {
     if volume.modality == Modality::Ct {
@@ -248,14 +227,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         bail!("nothing to do: give --out MIP.png, --pick PX,PY or --bench N");
     }
     let size = parse_size(&args.size)?;
-    let preset = Preset::from_name(&args.preset).with_context(|| {
-        let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
-        format!(
-            "unknown preset {:?}; known: {}",
-            args.preset,
-            names.join(", ")
-        )
-    })?;
+    let preset = crate::cli::preset(&args.preset)?;
     let pick_pixel = match args.pick.as_deref() {
         None => None,
         Some([x, y]) if *x < size[0] && *y < size[1] => Some([*x, *y]),
@@ -284,7 +256,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let mut camera = Camera::for_volume(
         &render_volume.world_from_voxel,
         render_volume.dims,
-        preset_view(args.view),
+        args.view,
     );
     if let Some(c) = &args.centre_mm {
         let [x, y, z] = c[..] else {

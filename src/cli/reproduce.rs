@@ -218,17 +218,8 @@ fn section_adjacency(md: &mut String, dir: &Path, quick: bool) -> anyhow::Result
         md,
         "Sphere r = 4 mm, cylinder r = 3 mm along z at the given surface gap. Relative blobness at the sphere centre (1 = unaffected).\n"
     );
-    let mut header = vec!["gap (mm)"];
-    header.extend(ex::MEASURES);
-    let rows: Vec<Vec<String>> = res
-        .iter()
-        .map(|(g, m)| {
-            std::iter::once(format!("{g}"))
-                .chain(m.iter().map(|&x| f3(x)))
-                .collect()
-        })
-        .collect();
-    table(md, &header, &rows);
+    let rows = res.iter().map(|(g, m)| (vec![format!("{g}")], *m));
+    measures_table(md, &["gap (mm)"], rows);
     let series: Vec<Series> = ex::MEASURES
         .iter()
         .enumerate()
@@ -253,6 +244,25 @@ fn section_adjacency(md: &mut String, dir: &Path, quick: bool) -> anyhow::Result
     Ok(())
 }
 
+/// A table of the six relative measures (`ex::MEASURES`), each row led by its label cells
+/// (columns `labels`).
+fn measures_table(
+    md: &mut String,
+    labels: &[&str],
+    rows: impl IntoIterator<Item = (Vec<String>, [f64; 6])>,
+) {
+    let mut header = labels.to_vec();
+    header.extend(ex::MEASURES);
+    let rows: Vec<Vec<String>> = rows
+        .into_iter()
+        .map(|(mut cells, m)| {
+            cells.extend(m.iter().map(|&x| f3(x)));
+            cells
+        })
+        .collect();
+    table(md, &header, &rows);
+}
+
 fn section_string(md: &mut String, dir: &Path) -> anyhow::Result<()> {
     let gap = 1.0;
     let res = ex::sphere_string(gap);
@@ -264,26 +274,39 @@ fn section_string(md: &mut String, dir: &Path) -> anyhow::Result<()> {
         md,
         "Four spheres r = 4 mm in a row, 1 mm apart, inside four cylinders r = 3 mm at 1 mm. Relative blobness at each sphere centre.\n"
     );
-    let mut header = vec!["sphere centre (mm)"];
-    header.extend(ex::MEASURES);
-    let rows: Vec<Vec<String>> = res
+    let rows = res
         .iter()
-        .map(|(c, m)| {
-            std::iter::once(format!("{:.1}, {:.1}, {:.1}", c[0], c[1], c[2]))
-                .chain(m.iter().map(|&x| f3(x)))
-                .collect()
-        })
-        .collect();
-    table(md, &header, &rows);
+        .map(|(c, m)| (vec![format!("{:.1}, {:.1}, {:.1}", c[0], c[1], c[2])], *m));
+    measures_table(md, &["sphere centre (mm)"], rows);
     let s = ex::Scene::new(phantom::sphere_string(gap), [0.5; 3]);
-    let (w, h, maps) = ex::slice_maps(&s, 2, [0.0; 3]);
-    let names = [
+    slice_panels(
+        md,
+        dir,
+        &s,
+        2,
+        "string",
+        "Central slice (z = 0), each panel scaled to its own maximum",
+    )
+}
+
+/// The central slice across `axis` of a scene as four panels (intensity, Hessian blobness,
+/// RST blobness, structure tensor l2) in `{name}_slices.png`, and its caption in `md`.
+fn slice_panels(
+    md: &mut String,
+    dir: &Path,
+    s: &ex::Scene,
+    axis: usize,
+    name: &str,
+    caption: &str,
+) -> anyhow::Result<()> {
+    let (w, h, maps) = ex::slice_maps(s, axis, [0.0; 3]);
+    let titles = [
         "intensity",
         "Hessian blobness, sigma = r",
         "RST blobness",
         "structure tensor l2",
     ];
-    let panels: Vec<Panel> = names
+    let panels: Vec<Panel> = titles
         .iter()
         .zip(maps)
         .map(|(n, v)| Panel {
@@ -293,11 +316,9 @@ fn section_string(md: &mut String, dir: &Path) -> anyhow::Result<()> {
             values: v,
         })
         .collect();
-    plot::panels_png(&dir.join("string_slices.png"), &panels, 3)?;
-    let _ = writeln!(
-        md,
-        "Central slice (z = 0), each panel scaled to its own maximum:\n\n![string](reproduction/string_slices.png)\n"
-    );
+    let file = format!("{name}_slices.png");
+    plot::panels_png(&dir.join(&file), &panels, 3)?;
+    let _ = writeln!(md, "{caption}:\n\n![{name}](reproduction/{file})\n");
     Ok(())
 }
 
@@ -308,20 +329,13 @@ fn section_bifurcation(md: &mut String, dir: &Path) -> anyhow::Result<()> {
         "Vessels r = 3 mm, branches at +-35 degrees; nodules r = 4 mm in the crotch, beside a branch and in front of the branch point, at a surface gap of 3 mm (far) and 1 mm (near).\n"
     );
     let names = ["crotch", "beside branch", "in front"];
-    let mut header = vec!["gap", "nodule"];
-    header.extend(ex::MEASURES);
-    let mut rows = Vec::new();
-    for gap in [3.0, 1.0] {
-        for (n, (_, m)) in ex::bifurcation_nodules(gap).into_iter().enumerate() {
-            rows.push(
-                [format!("{gap} mm"), names[n].to_owned()]
-                    .into_iter()
-                    .chain(m.iter().map(|&x| f3(x)))
-                    .collect(),
-            );
-        }
-    }
-    table(md, &header, &rows);
+    let rows = [3.0, 1.0].into_iter().flat_map(|gap| {
+        ex::bifurcation_nodules(gap)
+            .into_iter()
+            .enumerate()
+            .map(move |(n, (_, m))| (vec![format!("{gap} mm"), names[n].to_owned()], m))
+    });
+    measures_table(md, &["gap", "nodule"], rows);
     let _ = writeln!(
         md,
         "Bifurcation response: the strongest blobness within 4 mm of the branch point of a Y without nodules, relative to an isolated nodule's (for the structure tensor: its third eigenvalue relative to that at a nodule centre).\n"
@@ -350,29 +364,14 @@ fn section_bifurcation(md: &mut String, dir: &Path) -> anyhow::Result<()> {
         &rows,
     );
     let s = ex::Scene::new(phantom::bifurcation_nodules(1.0), [0.5; 3]);
-    let (w, h, maps) = ex::slice_maps(&s, 1, [0.0; 3]);
-    let names = [
-        "intensity",
-        "Hessian blobness, sigma = r",
-        "RST blobness",
-        "structure tensor l2",
-    ];
-    let panels: Vec<Panel> = names
-        .iter()
-        .zip(maps)
-        .map(|(n, v)| Panel {
-            title: (*n).to_owned(),
-            width: w,
-            height: h,
-            values: v,
-        })
-        .collect();
-    plot::panels_png(&dir.join("bifurcation_slices.png"), &panels, 3)?;
-    let _ = writeln!(
+    slice_panels(
         md,
-        "Slice y = 0 of the near phantom (the crotch and the side nodule; the front nodule is out of plane):\n\n![bifurcation](reproduction/bifurcation_slices.png)\n"
-    );
-    Ok(())
+        dir,
+        &s,
+        1,
+        "bifurcation",
+        "Slice y = 0 of the near phantom (the crotch and the side nodule; the front nodule is out of plane)",
+    )
 }
 
 fn section_noise(md: &mut String, dir: &Path, quick: bool, draws: usize) -> anyhow::Result<()> {

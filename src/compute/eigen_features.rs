@@ -120,11 +120,9 @@ pub struct EigenFeatures {
 
 impl EigenFeatures {
     pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
-        let module = shaders::create_module(&ctx.device, "eigen_features.wgsl")?;
-        Ok(Self {
-            features: checks::pipeline(ctx, &module, "eigen_features"),
-            max_norm: checks::pipeline(ctx, &module, "max_norm"),
-        })
+        let [features, max_norm] =
+            checks::pipelines(ctx, "eigen_features.wgsl", ["eigen_features", "max_norm"])?;
+        Ok(Self { features, max_norm })
     }
 
     fn check(

@@ -221,11 +221,15 @@ struct PassTaps<'a> {
 
 impl Gaussian {
     pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
-        let module = shaders::create_module(&ctx.device, "gaussian.wgsl")?;
+        let [fallback, block, block3] = checks::pipelines(
+            ctx,
+            "gaussian.wgsl",
+            ["convolve", "convolve_block", "convolve_block3"],
+        )?;
         Ok(Self {
-            fallback: checks::pipeline(ctx, &module, "convolve"),
-            block: checks::pipeline(ctx, &module, "convolve_block"),
-            block3: checks::pipeline(ctx, &module, "convolve_block3"),
+            fallback,
+            block,
+            block3,
             unused: crate::gpu::kernel::f32_buffer(&ctx.device, "gaussian unused output", 4),
         })
     }
@@ -245,13 +249,7 @@ impl Gaussian {
                 "a convolution cannot run in place (src == dst)",
             ));
         }
-        for (n, a) in dst.iter().enumerate() {
-            if dst[n + 1..].contains(a) {
-                return Err(RecordError::Invalid(
-                    "a convolution's outputs must be different buffers",
-                ));
-            }
-        }
+        checks::distinct(dst, "a convolution's outputs must be different buffers")?;
         if grid.is_empty() {
             return Ok(());
         }
@@ -293,28 +291,31 @@ impl Gaussian {
             _ => (d[0], d[1]),
         };
         let (pipeline, entries, groups) = match (taps.uniform, dst) {
-            (Some(u), [d0]) => (
-                &self.block,
-                vec![
+            (Some(u), [d0, more @ ..]) => {
+                let mut entries = vec![
                     checks::entry(0, &params),
                     checks::entry(1, src),
                     checks::entry(3, d0),
                     checks::entry(4, u),
-                ],
-                [a.div_ceil(8), b.div_ceil(8), d[axis].div_ceil(BLOCK)],
-            ),
-            (Some(u), [d0, d1, rest @ ..]) => (
-                &self.block3,
-                vec![
-                    checks::entry(0, &params),
-                    checks::entry(1, src),
-                    checks::entry(3, d0),
-                    checks::entry(4, u),
-                    checks::entry(5, d1),
-                    checks::entry(6, rest.first().copied().unwrap_or(&self.unused)),
-                ],
-                [a.div_ceil(8), b.div_ceil(8), d[axis].div_ceil(BLOCK3)],
-            ),
+                ];
+                match more {
+                    [] => (
+                        &self.block,
+                        entries,
+                        [a.div_ceil(8), b.div_ceil(8), d[axis].div_ceil(BLOCK)],
+                    ),
+                    [d1, rest @ ..] => {
+                        entries.push(checks::entry(5, d1));
+                        let d2 = rest.first().copied().unwrap_or(&self.unused);
+                        entries.push(checks::entry(6, d2));
+                        (
+                            &self.block3,
+                            entries,
+                            [a.div_ceil(8), b.div_ceil(8), d[axis].div_ceil(BLOCK3)],
+                        )
+                    }
+                }
+            }
             (None, [d0]) => match taps.storage {
                 Some(t) => (
                     &self.fallback,

@@ -64,18 +64,18 @@ pub struct ResampleGeometry {
 impl ResampleGeometry {
     /// Whole grids refined by `factors`.
     pub fn refine(factors: [u32; 3], src_whole: [u32; 3]) -> Self {
-        Self {
-            map: factors.map(|f| AxisMap::Refine { f }),
-            src_origin: [0; 3],
-            dst_origin: [0; 3],
-            src_whole,
-        }
+        Self::whole(factors.map(|f| AxisMap::Refine { f }), src_whole)
     }
 
     /// Whole grids subsampled by `factors`.
     pub fn subsample(factors: [u32; 3], src_whole: [u32; 3]) -> Self {
+        Self::whole(factors.map(|f| AxisMap::Subsample { f }), src_whole)
+    }
+
+    /// Whole grids mapped by `map`.
+    fn whole(map: [AxisMap; 3], src_whole: [u32; 3]) -> Self {
         Self {
-            map: factors.map(|f| AxisMap::Subsample { f }),
+            map,
             src_origin: [0; 3],
             dst_origin: [0; 3],
             src_whole,
@@ -179,15 +179,7 @@ impl Resample {
         for axis in 0..3 {
             taps.extend(axis_taps(geometry, axis, src_dims[axis], dst_dims[axis]));
         }
-        let taps = {
-            use wgpu::util::DeviceExt as _;
-            ctx.device
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("resample taps"),
-                    contents: bytemuck::cast_slice(&taps),
-                    usage: wgpu::BufferUsages::STORAGE,
-                })
-        };
+        let taps = crate::gpu::kernel::storage_buffer_init(&ctx.device, "resample taps", &taps);
         let params = Params {
             src_dims,
             components,

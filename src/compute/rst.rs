@@ -228,15 +228,7 @@ impl RstRays {
                 ],
             });
         }
-        let buffer = {
-            use wgpu::util::DeviceExt as _;
-            ctx.device
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("rst rays"),
-                    contents: bytemuck::cast_slice(&rays),
-                    usage: wgpu::BufferUsages::STORAGE,
-                })
-        };
+        let buffer = crate::gpu::kernel::storage_buffer_init(&ctx.device, "rst rays", &rays);
         let min_spacing = spacing_mm.iter().copied().fold(f64::INFINITY, f64::min);
         Ok(Self {
             buffer,

@@ -43,9 +43,9 @@ pub struct StructureTensor {
 
 impl StructureTensor {
     pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
-        let module = shaders::create_module(&ctx.device, "structure_tensor.wgsl")?;
+        let [product] = checks::pipelines(ctx, "structure_tensor.wgsl", ["outer_product"])?;
         Ok(Self {
-            product: checks::pipeline(ctx, &module, "outer_product"),
+            product,
             gaussian: Gaussian::new(ctx)?,
         })
     }
@@ -65,13 +65,10 @@ impl StructureTensor {
         out: [&wgpu::Buffer; 6],
     ) -> Result<(), RecordError> {
         let all: Vec<&wgpu::Buffer> = gradient.iter().chain(&tmp).chain(&out).copied().collect();
-        for (n, a) in all.iter().enumerate() {
-            if all[n + 1..].contains(a) {
-                return Err(RecordError::Invalid(
-                    "structure tensor: gradient, temporaries and outputs must be different buffers",
-                ));
-            }
-        }
+        checks::distinct(
+            &all,
+            "structure tensor: gradient, temporaries and outputs must be different buffers",
+        )?;
         if grid.is_empty() {
             return Ok(());
         }

@@ -32,6 +32,22 @@ pub enum Method {
     Rst,
 }
 
+impl Method {
+    /// Every method, in the order the command line lists them.
+    pub const ALL: [Self; 5] = [Self::Hessian, Self::Li, Self::Frangi, Self::Gst, Self::Rst];
+
+    /// The lower-case name the command line (and the app's URLs) use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Hessian => "hessian",
+            Self::Li => "li",
+            Self::Frangi => "frangi",
+            Self::Gst => "gst",
+            Self::Rst => "rst",
+        }
+    }
+}
+
 /// Everything `features` can be told; `None` means "the preset's value".
 #[derive(Clone, Debug, PartialEq)]
 pub struct Request {

@@ -66,20 +66,31 @@ pub fn refine_linear(grid: &Grid, values: &[f32], factors: [usize; 3]) -> (Grid,
             .map(|t| refine_tap(t, factors[a], grid.dims[a]))
             .collect()
     });
-    let plane = fine.dims[0] * fine.dims[1];
-    let mut out = vec![0.0f32; fine.len()];
+    (fine, trilinear_at_taps(grid, values, &fine, &taps))
+}
+
+/// The values of `to` by trilinear interpolation of `values` (on `from`) at per-axis `taps`:
+/// for every index of `to` along an axis, the two source indices and the upper one's weight.
+fn trilinear_at_taps(
+    from: &Grid,
+    values: &[f32],
+    to: &Grid,
+    taps: &[Vec<(usize, usize, f64)>; 3],
+) -> Vec<f32> {
+    let plane = to.dims[0] * to.dims[1];
+    let mut out = vec![0.0f32; to.len()];
     parallel::for_each_chunk(&mut out, plane, |k, slice| {
         let (z0, z1, wz) = taps[2][k];
-        for j in 0..fine.dims[1] {
+        for j in 0..to.dims[1] {
             let (y0, y1, wy) = taps[1][j];
-            for i in 0..fine.dims[0] {
+            for i in 0..to.dims[0] {
                 let (x0, x1, wx) = taps[0][i];
-                slice[i + fine.dims[0] * j] =
-                    trilinear(grid, values, [x0, x1], [y0, y1], [z0, z1], [wx, wy, wz]);
+                slice[i + to.dims[0] * j] =
+                    trilinear(from, values, [x0, x1], [y0, y1], [z0, z1], [wx, wy, wz]);
             }
         }
     });
-    (fine, out)
+    out
 }
 
 /// Trilinear interpolation with f64 arithmetic; a zero weight takes the first voxel exactly.
@@ -120,8 +131,6 @@ pub fn subsample(fine: &Grid, values: &[f32], factors: [usize; 3], coarse: &Grid
 /// trilinear interpolation, clamping at the borders: a general resampler for tests and tools
 /// (the feature pipelines use [`refine_linear`] and [`subsample`]).
 pub fn resample_linear(from: &Grid, values: &[f32], to: &Grid) -> Vec<f32> {
-    let plane = to.dims[0] * to.dims[1];
-    let mut out = vec![0.0f32; to.len()];
     // Per axis, the two source indices and the weight of the upper one, for every target index.
     let taps: [Vec<(usize, usize, f64)>; 3] = std::array::from_fn(|a| {
         (0..to.dims[a])
@@ -134,18 +143,7 @@ pub fn resample_linear(from: &Grid, values: &[f32], to: &Grid) -> Vec<f32> {
             })
             .collect()
     });
-    parallel::for_each_chunk(&mut out, plane, |k, slice| {
-        let (z0, z1, wz) = taps[2][k];
-        for j in 0..to.dims[1] {
-            let (y0, y1, wy) = taps[1][j];
-            for i in 0..to.dims[0] {
-                let (x0, x1, wx) = taps[0][i];
-                slice[i + to.dims[0] * j] =
-                    trilinear(from, values, [x0, x1], [y0, y1], [z0, z1], [wx, wy, wz]);
-            }
-        }
-    });
-    out
+    trilinear_at_taps(from, values, to, &taps)
 }
 
 #[cfg(test)]

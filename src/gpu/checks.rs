@@ -1,7 +1,7 @@
 //! Checks the feature kernels' `record_*` methods make before recording, so that a wrong size
 //! becomes a typed error instead of a wgpu validation panic.
 
-use crate::gpu::GpuContext;
+use crate::gpu::{GpuContext, shaders};
 
 /// Why a kernel could not be recorded or dispatched: the one error of every kernel module, so
 /// that a bad size never reaches wgpu's validation (which panics natively).
@@ -104,6 +104,17 @@ pub fn workgroups(
     }
 }
 
+/// `buffers` are all different (a kernel may not bind one buffer twice); `Invalid(what)`
+/// otherwise.
+pub fn distinct(buffers: &[&wgpu::Buffer], what: &'static str) -> Result<(), RecordError> {
+    for (n, a) in buffers.iter().enumerate() {
+        if buffers[n + 1..].contains(a) {
+            return Err(RecordError::Invalid(what));
+        }
+    }
+    Ok(())
+}
+
 /// Bytes of `components` f32 values per voxel of `voxels` voxels.
 pub fn f32_bytes(voxels: u64, components: u64) -> u64 {
     voxels.saturating_mul(components).saturating_mul(4)
@@ -124,6 +135,16 @@ pub fn pipeline(
     entry_point: &str,
 ) -> wgpu::ComputePipeline {
     labelled_pipeline(ctx, entry_point, module, entry_point)
+}
+
+/// The pipelines of `entry_points` in the shader file `file` (one module for all).
+pub fn pipelines<const N: usize>(
+    ctx: &GpuContext,
+    file: &str,
+    entry_points: [&str; N],
+) -> Result<[wgpu::ComputePipeline; N], shaders::ShaderSourceError> {
+    let module = shaders::create_module(&ctx.device, file)?;
+    Ok(entry_points.map(|entry_point| pipeline(ctx, &module, entry_point)))
 }
 
 /// [`pipeline`] under another label than its entry point (for shaders whose one entry point is

@@ -1,5 +1,5 @@
 //! What every compute kernel module shares: the grid of the slab it works on, storage buffers of
-//! `f32`, and workgroup counts.
+//! `f32` and tables, uniforms, textures, bind groups, and workgroup counts.
 //!
 //! Conventions every kernel follows (ARCHITECTURE.md, "GPU kernels"):
 //! - A volume on the GPU is a storage buffer of `f32`, voxel `i` fastest
@@ -75,6 +75,20 @@ pub fn f32_buffer_init(device: &wgpu::Device, label: &str, data: &[f32]) -> wgpu
         usage: wgpu::BufferUsages::STORAGE
             | wgpu::BufferUsages::COPY_SRC
             | wgpu::BufferUsages::COPY_DST,
+    })
+}
+
+/// A read-only storage buffer holding `data` (tables a kernel reads: taps, rays).
+pub fn storage_buffer_init<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    label: &str,
+    data: &[T],
+) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt as _;
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: bytemuck::cast_slice(data),
+        usage: wgpu::BufferUsages::STORAGE,
     })
 }
 

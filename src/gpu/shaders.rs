@@ -1,40 +1,29 @@
 //! The WGSL sources, embedded with `include_str!` (the wasm build has no file system), and a tiny
 //! `#import name.wgsl` resolver in the spirit of rerun's and vello's.
 
+/// `(file name, source)` of each named file in `shaders/`.
+macro_rules! shader_files {
+    ($($name:literal),* $(,)?) => {
+        &[$(($name, include_str!(concat!("../../shaders/", $name)))),*]
+    };
+}
+
 /// Every shader file in `shaders/`, by file name.
-pub const FILES: &[(&str, &str)] = &[
-    ("common.wgsl", include_str!("../../shaders/common.wgsl")),
-    (
-        "noise_windows.wgsl",
-        include_str!("../../shaders/noise_windows.wgsl"),
-    ),
-    (
-        "pack_features.wgsl",
-        include_str!("../../shaders/pack_features.wgsl"),
-    ),
-    ("eigen.wgsl", include_str!("../../shaders/eigen.wgsl")),
-    (
-        "feature_maps.wgsl",
-        include_str!("../../shaders/feature_maps.wgsl"),
-    ),
-    ("gaussian.wgsl", include_str!("../../shaders/gaussian.wgsl")),
-    (
-        "eigen_features.wgsl",
-        include_str!("../../shaders/eigen_features.wgsl"),
-    ),
-    (
-        "structure_tensor.wgsl",
-        include_str!("../../shaders/structure_tensor.wgsl"),
-    ),
-    ("resample.wgsl", include_str!("../../shaders/resample.wgsl")),
-    ("gradient.wgsl", include_str!("../../shaders/gradient.wgsl")),
-    ("rst.wgsl", include_str!("../../shaders/rst.wgsl")),
-    ("slice.wgsl", include_str!("../../shaders/slice.wgsl")),
-    ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
-    (
-        "raycast_bricks.wgsl",
-        include_str!("../../shaders/raycast_bricks.wgsl"),
-    ),
+pub const FILES: &[(&str, &str)] = shader_files![
+    "common.wgsl",
+    "noise_windows.wgsl",
+    "pack_features.wgsl",
+    "eigen.wgsl",
+    "feature_maps.wgsl",
+    "gaussian.wgsl",
+    "eigen_features.wgsl",
+    "structure_tensor.wgsl",
+    "resample.wgsl",
+    "gradient.wgsl",
+    "rst.wgsl",
+    "slice.wgsl",
+    "raycast.wgsl",
+    "raycast_bricks.wgsl",
 ];
 
 /// Why a shader source could not be assembled.

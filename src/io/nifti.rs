@@ -49,6 +49,15 @@ enum Kind {
     Analyze,
 }
 
+/// The kind a NIfTI-`version` magic names ("n+1", "ni2", ...), `None` for any other bytes.
+fn kind_of_magic(magic: &[u8], version: u8) -> Option<Kind> {
+    match magic {
+        [b'n', b'+', v, 0] if *v == version => Some(Kind::Single),
+        [b'n', b'i', v, 0] if *v == version => Some(Kind::Pair),
+        _ => None,
+    }
+}
+
 /// The fields of a NIfTI-1 or NIfTI-2 header that loading needs, widened to 64 bits.
 #[derive(Clone, Debug)]
 pub(crate) struct Header {
@@ -98,14 +107,8 @@ fn parse_header(file: &str, bytes: &[u8]) -> Result<Header, LoadError> {
     }
     let r = FieldReader { bytes, endian };
     let h = if size == 348 {
-        let magic = &bytes[344..348];
-        let kind = if magic == b"n+1\0" {
-            Kind::Single
-        } else if magic == b"ni1\0" {
-            Kind::Pair
-        } else {
-            Kind::Analyze
-        };
+        // No NIfTI-1 magic: an Analyze 7.5 header.
+        let kind = kind_of_magic(&bytes[344..348], b'1').unwrap_or(Kind::Analyze);
         let dim = std::array::from_fn(|i| i64::from(r.i16(40 + 2 * i)));
         let pixdim = std::array::from_fn(|i| f64::from(r.f32(76 + 4 * i)));
         let srow = std::array::from_fn(|row| {
@@ -132,12 +135,7 @@ fn parse_header(file: &str, bytes: &[u8]) -> Result<Header, LoadError> {
             intent_code: if is_nifti { i32::from(r.i16(68)) } else { 0 },
         }
     } else {
-        let magic = &bytes[4..8];
-        let kind = if magic == b"n+2\0" {
-            Kind::Single
-        } else if magic == b"ni2\0" {
-            Kind::Pair
-        } else {
+        let Some(kind) = kind_of_magic(&bytes[4..8], b'2') else {
             return Err(LoadError::header(
                 file,
                 "magic",

@@ -101,15 +101,7 @@ pub fn sphere_string(gap_mm: f64) -> Phantom {
         [half_x, half_yz, half_yz],
         BACKGROUND_HU,
     );
-    for c in sphere_string_centres(gap_mm) {
-        p = p.with(
-            Shape::Sphere {
-                centre_mm: c,
-                radius_mm: NODULE_RADIUS_MM,
-            },
-            BACKGROUND_HU + CONTRAST_HU,
-        );
-    }
+    p = with_nodules(p, sphere_string_centres(gap_mm));
     for (y, z) in [(d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d)] {
         p = p.with(
             Shape::Cylinder {
@@ -184,16 +176,13 @@ pub fn bifurcation_nodules(gap_mm: f64) -> Phantom {
         VESSEL_RADIUS_MM,
     );
     p.name = format!("bifurcation-nodules (gap {gap_mm} mm)");
-    for c in bifurcation_nodule_centres(gap_mm) {
-        p = p.with(
-            Shape::Sphere {
-                centre_mm: c,
-                radius_mm: NODULE_RADIUS_MM,
-            },
-            BACKGROUND_HU + CONTRAST_HU,
-        );
-    }
-    p
+    with_nodules(p, bifurcation_nodule_centres(gap_mm))
+}
+
+/// `p` with a nodule (sphere r = `NODULE_RADIUS_MM`, vessel contrast) at each of `centres`.
+fn with_nodules(p: Phantom, centres: impl IntoIterator<Item = [f64; 3]>) -> Phantom {
+    let spheres = centres.into_iter().map(|c| (c, NODULE_RADIUS_MM));
+    p.with_spheres(spheres, BACKGROUND_HU + CONTRAST_HU)
 }
 
 /// Paper fig. 7: a vessel r = 4 mm bifurcating into two r = 2.5 mm; the branch point at 0.
@@ -237,21 +226,13 @@ pub fn airway() -> Phantom {
 /// The built-in demo: a 96^3 volume at 1 mm holding a few "nodules" (spheres) beside and between
 /// "vessels" (cylinders) in soft tissue, anti-aliased.
 pub fn demo() -> Volume {
-    let mut p = Phantom::new("demo", [0.0; 3], [95.0; 3], 0.0);
-    for (c, r) in [
+    let nodules = [
         ([30.0, 40.0, 48.0], 5.0),
         ([62.0, 58.0, 40.0], 4.0),
         ([48.0, 70.0, 66.0], 6.0),
         ([70.0, 30.0, 60.0], 3.0),
-    ] {
-        p = p.with(
-            Shape::Sphere {
-                centre_mm: c,
-                radius_mm: r,
-            },
-            200.0,
-        );
-    }
+    ];
+    let mut p = Phantom::new("demo", [0.0; 3], [95.0; 3], 0.0).with_spheres(nodules, 200.0);
     let s = std::f64::consts::FRAC_1_SQRT_2 * 100.0;
     p = p
         .with(

@@ -124,19 +124,28 @@ pub fn isolated_nodule() -> [f64; 6] {
 
 /// Relative measures at each sphere of the string (fig. 4).
 pub fn sphere_string(gap_mm: f64) -> Vec<([f64; 3], [f64; 6])> {
-    let reference = isolated_nodule();
-    let s = Scene::new(phantom::sphere_string(gap_mm), [0.5; 3]);
-    phantom::sphere_string_centres(gap_mm)
-        .into_iter()
-        .map(|c| (c, ratio(measures(&s, c), reference)))
-        .collect()
+    relative_to_isolated_nodule(
+        phantom::sphere_string(gap_mm),
+        phantom::sphere_string_centres(gap_mm),
+    )
 }
 
 /// Relative measures at the three nodules near a bifurcation (fig. 5, 6).
 pub fn bifurcation_nodules(gap_mm: f64) -> Vec<([f64; 3], [f64; 6])> {
+    relative_to_isolated_nodule(
+        phantom::bifurcation_nodules(gap_mm),
+        phantom::bifurcation_nodule_centres(gap_mm),
+    )
+}
+
+/// The measures of `p` at each of its nodule `centres`, relative to the isolated nodule's.
+fn relative_to_isolated_nodule(
+    p: Phantom,
+    centres: impl IntoIterator<Item = [f64; 3]>,
+) -> Vec<([f64; 3], [f64; 6])> {
     let reference = isolated_nodule();
-    let s = Scene::new(phantom::bifurcation_nodules(gap_mm), [0.5; 3]);
-    phantom::bifurcation_nodule_centres(gap_mm)
+    let s = Scene::new(p, [0.5; 3]);
+    centres
         .into_iter()
         .map(|c| (c, ratio(measures(&s, c), reference)))
         .collect()

@@ -65,17 +65,9 @@ pub fn section_stability(md: &mut String, dir: &Path) -> anyhow::Result<()> {
         rows.push(vec![
             name.to_owned(),
             format!("{:.4}", s / m),
-            spacing
-                .iter()
-                .map(|x| format!("{x:.3}"))
-                .collect::<Vec<_>>()
-                .join(", "),
+            list(&spacing, 3),
             format!("{half:.3}"),
-            contrast
-                .iter()
-                .map(|x| format!("{x:.2}"))
-                .collect::<Vec<_>>()
-                .join(", "),
+            list(&contrast, 2),
             format!("{orient:.3}"),
         ]);
     }
@@ -192,4 +184,13 @@ pub fn section_thick_slices(md: &mut String) {
             b[3] / b[0]
         );
     }
+}
+
+/// `values` with `decimals` digits after the point, comma-separated.
+fn list(values: &[f64], decimals: usize) -> String {
+    values
+        .iter()
+        .map(|x| format!("{x:.decimals$}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }

@@ -200,51 +200,30 @@ fn frame_info(levels: &[Option<&InMemDicomObject>]) -> FrameInfo {
             None => elem_floats(obj, tag),
         })
     };
-    let position = find(
-        Some(tags::PLANE_POSITION_SEQUENCE),
-        tags::IMAGE_POSITION_PATIENT,
-    )
-    .or_else(|| find(None, tags::IMAGE_POSITION_PATIENT))
-    .filter(|v| v.len() == 3)
-    .map(|v| DVec3::new(v[0], v[1], v[2]));
-    let orientation = find(
-        Some(tags::PLANE_ORIENTATION_SEQUENCE),
+    // A tag of a functional group (inside its sequence), else the same tag outside any.
+    let grouped = |seq, tag| find(Some(seq), tag).or_else(|| find(None, tag));
+    let first = |seq, tag| grouped(seq, tag).and_then(|v| v.first().copied());
+    let position = grouped(tags::PLANE_POSITION_SEQUENCE, tags::IMAGE_POSITION_PATIENT)
+        .filter(|v| v.len() == 3)
+        .map(|v| DVec3::new(v[0], v[1], v[2]));
+    let orientation = grouped(
+        tags::PLANE_ORIENTATION_SEQUENCE,
         tags::IMAGE_ORIENTATION_PATIENT,
     )
-    .or_else(|| find(None, tags::IMAGE_ORIENTATION_PATIENT))
     .filter(|v| v.len() == 6)
     .map(|v| std::array::from_fn(|i| v[i]));
-    let pixel_spacing = find(Some(tags::PIXEL_MEASURES_SEQUENCE), tags::PIXEL_SPACING)
-        .or_else(|| find(None, tags::PIXEL_SPACING))
+    let pixel_spacing = grouped(tags::PIXEL_MEASURES_SEQUENCE, tags::PIXEL_SPACING)
         .or_else(|| find(None, tags::IMAGER_PIXEL_SPACING))
         .filter(|v| v.len() == 2 && v[0] > 0.0 && v[1] > 0.0)
         .map(|v| [v[0], v[1]]);
-    let thickness = find(Some(tags::PIXEL_MEASURES_SEQUENCE), tags::SLICE_THICKNESS)
-        .or_else(|| find(None, tags::SLICE_THICKNESS))
-        .and_then(|v| v.first().copied())
-        .filter(|t| *t > 0.0);
-    let spacing_between = find(
-        Some(tags::PIXEL_MEASURES_SEQUENCE),
-        tags::SPACING_BETWEEN_SLICES,
-    )
-    .or_else(|| find(None, tags::SPACING_BETWEEN_SLICES))
-    .and_then(|v| v.first().copied())
-    .filter(|t| *t > 0.0);
-    let slope = find(
-        Some(tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE),
-        tags::RESCALE_SLOPE,
-    )
-    .or_else(|| find(None, tags::RESCALE_SLOPE))
-    .and_then(|v| v.first().copied())
-    .filter(|s| *s != 0.0)
-    .unwrap_or(1.0);
-    let intercept = find(
-        Some(tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE),
-        tags::RESCALE_INTERCEPT,
-    )
-    .or_else(|| find(None, tags::RESCALE_INTERCEPT))
-    .and_then(|v| v.first().copied())
-    .unwrap_or(0.0);
+    let measure = |tag| first(tags::PIXEL_MEASURES_SEQUENCE, tag).filter(|t| *t > 0.0);
+    let thickness = measure(tags::SLICE_THICKNESS);
+    let spacing_between = measure(tags::SPACING_BETWEEN_SLICES);
+    let rescale = |tag| first(tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE, tag);
+    let slope = rescale(tags::RESCALE_SLOPE)
+        .filter(|s| *s != 0.0)
+        .unwrap_or(1.0);
+    let intercept = rescale(tags::RESCALE_INTERCEPT).unwrap_or(0.0);
     FrameInfo {
         position,
         orientation,

@@ -5,8 +5,6 @@
 use glam::{DVec2, DVec3};
 
 use crate::gpu::GpuContext;
-#[cfg(not(target_arch = "wasm32"))]
-use crate::gpu::readback;
 use crate::gpu::readback::{PendingRead, ReadbackError};
 use crate::gpu::volume_texture::FeatureTexture;
 use crate::render::camera::Camera;
@@ -194,7 +192,7 @@ impl RaycastTarget {
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_image_blocking(&self, ctx: &GpuContext) -> Result<Vec<u8>, RaycastError> {
         let [w, h] = self.size;
-        Ok(readback::read_texture_blocking(
+        Ok(crate::gpu::readback::read_texture_blocking(
             ctx,
             &self.texture,
             [w, h, 1],
@@ -206,7 +204,7 @@ impl RaycastTarget {
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_depths_blocking(&self, ctx: &GpuContext) -> Result<Vec<[f32; 2]>, RaycastError> {
         let n = self.size[0] as usize * self.size[1] as usize;
-        let bytes = readback::read_bytes_blocking(ctx, &self.pick, n as u64 * 8)?;
+        let bytes = crate::gpu::readback::read_bytes_blocking(ctx, &self.pick, n as u64 * 8)?;
         let values: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes);
         Ok(values.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
     }
