@@ -14,6 +14,7 @@ pub mod nifti;
 mod nrrd;
 mod raw;
 
+pub use dicom::SeriesBuilder;
 pub use error::LoadError;
 
 use crate::volume::Volume;

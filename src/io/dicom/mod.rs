@@ -4,9 +4,13 @@
 
 mod encapsulated;
 mod series;
+mod stream;
+#[cfg(test)]
+pub(crate) mod synth;
 mod validate;
 
 pub(crate) use series::load_series;
+pub use stream::SeriesBuilder;
 
 use dicom_dictionary_std::tags;
 use dicom_encoding::transfer_syntax::TransferSyntaxIndex;
