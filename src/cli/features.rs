@@ -48,7 +48,10 @@ pub enum BackendArg {
 pub struct FeaturesArgs {
     /// A volume file (NIfTI, NRRD, MetaImage, DICOM) or a folder holding a DICOM series or a
     /// header with its data file.
-    pub input: PathBuf,
+    #[arg(required_unless_present = "dicomweb", conflicts_with = "dicomweb")]
+    pub input: Option<PathBuf>,
+    #[command(flatten)]
+    pub dicomweb: crate::cli::dicomweb::DicomWebArgs,
     #[arg(long, value_enum)]
     pub method: Method,
     /// Output file (.nii or .nii.gz).
@@ -157,8 +160,12 @@ fn backend_context(backend: BackendArg) -> anyhow::Result<Option<GpuContext>> {
 
 pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
     let req = request(&args)?;
-    let files = read_input(&args.input)?;
-    let loaded = io::load(&files).with_context(|| format!("loading {}", args.input.display()))?;
+    let loaded = match &args.input {
+        Some(input) => {
+            io::load(&read_input(input)?).with_context(|| format!("loading {}", input.display()))?
+        }
+        None => args.dicomweb.load()?,
+    };
     for n in &loaded.notes {
         eprintln!("note: {n}");
     }

@@ -11,11 +11,13 @@ use crate::volume::orientation_label;
 pub struct InfoArgs {
     /// Files and folders (folders are read recursively, e.g. a DICOM series). A header and its
     /// data file (.hdr/.img, .nhdr/.raw.gz, .mhd/.raw) are given together.
-    #[arg(required = true)]
+    #[arg(required_unless_present = "dicomweb", conflicts_with = "dicomweb")]
     pub paths: Vec<PathBuf>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub dicomweb: crate::cli::dicomweb::DicomWebArgs,
 }
 
 /// Reads files and (recursively) folders into `InputFile`s named by their path, sorted by name
@@ -41,8 +43,11 @@ pub fn read_inputs(paths: &[PathBuf]) -> anyhow::Result<Vec<InputFile>> {
 
 /// Runs `shapecast info`.
 pub fn run(args: &InfoArgs) -> anyhow::Result<()> {
-    let files = read_inputs(&args.paths)?;
-    let loaded = io::load(&files)?;
+    let loaded = if args.dicomweb.is_set() {
+        args.dicomweb.load()?
+    } else {
+        io::load(&read_inputs(&args.paths)?)?
+    };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&to_json(&loaded))?);
     } else {

@@ -3,6 +3,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod dicomweb;
 pub mod features;
 pub mod info;
 pub mod phantom;

@@ -43,7 +43,10 @@ pub enum OnlyArg {
 pub struct RenderArgs {
     /// A volume file or folder (as `shapecast features` reads them), or `phantom:NAME`
     /// (e.g. phantom:bifurcation-nodules-far, phantom:demo).
-    pub input: String,
+    #[arg(required_unless_present = "dicomweb", conflicts_with = "dicomweb")]
+    pub input: Option<String>,
+    #[command(flatten)]
+    pub dicomweb: crate::cli::dicomweb::DicomWebArgs,
     #[arg(long, value_enum, default_value = "rst")]
     pub method: RenderMethod,
     /// Preset view (radiological convention; see src/render/camera.rs).
@@ -236,7 +239,19 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     if !(args.zoom.is_finite() && args.zoom > 0.0) {
         bail!("--zoom must be positive");
     }
-    let volume = load_input(&args.input, &args.spacing_mm)?;
+    let volume = match &args.input {
+        Some(input) => load_input(input, &args.spacing_mm)?,
+        None => {
+            let loaded = args.dicomweb.load()?;
+            for n in &loaded.notes {
+                eprintln!("note: {n}");
+            }
+            for w in &loaded.volume.warnings {
+                eprintln!("warning: {w}");
+            }
+            loaded.volume
+        }
+    };
     let ctx = pollster::block_on(GpuContext::new_headless())?;
     let render_volume = RenderVolume::upload(&ctx, &volume)?;
     let features = match method(args.method) {

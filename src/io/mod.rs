@@ -7,6 +7,7 @@
 //! against [`Limits`] before anything is allocated.
 
 mod dicom;
+pub mod dicomweb;
 mod error;
 mod geometry;
 mod metaimage;
@@ -14,6 +15,7 @@ pub mod nifti;
 mod nrrd;
 mod raw;
 
+pub use dicom::{SeriesBuilder, decodable_transfer_syntaxes};
 pub use error::LoadError;
 
 use crate::volume::Volume;

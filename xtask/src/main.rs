@@ -7,7 +7,15 @@ use std::process::{Command, ExitCode};
 use std::time::Instant;
 
 const TRUNK_VERSION: &str = "0.21.14";
-const APT_PACKAGES: &[&str] = &["mesa-vulkan-drivers", "chromium"];
+/// Debian packages the checks need: lavapipe (Vulkan on the CPU) for the GPU tests, Chromium for
+/// the browser test, and Orthanc with its DICOMweb plugin, the real archive that
+/// tests/dicomweb_orthanc.rs starts on a free 127.0.0.1 port.
+const APT_PACKAGES: &[&str] = &[
+    "mesa-vulkan-drivers",
+    "chromium",
+    "orthanc",
+    "orthanc-dicomweb",
+];
 const WASM_TARGET: &str = "wasm32-unknown-unknown";
 
 fn main() -> ExitCode {

@@ -4,9 +4,13 @@
 
 mod encapsulated;
 mod series;
+mod stream;
+#[cfg(test)]
+pub(crate) mod synth;
 mod validate;
 
 pub(crate) use series::load_series;
+pub use stream::SeriesBuilder;
 
 use dicom_dictionary_std::tags;
 use dicom_encoding::transfer_syntax::TransferSyntaxIndex;
@@ -118,6 +122,35 @@ pub(super) fn check_transfer_syntax(file: &str, uid: &str) -> Result<(), LoadErr
         });
     }
     Ok(())
+}
+
+/// Transfer syntaxes worth asking an archive for (DICOMweb's Accept header): the common
+/// uncompressed and compressed ones, each with whether it is lossless. Those this build cannot
+/// decode are filtered out by [`decodable_transfer_syntaxes`].
+const ASKABLE_SYNTAXES: &[(&str, bool)] = &[
+    ("1.2.840.10008.1.2.1", true),
+    ("1.2.840.10008.1.2", true),
+    ("1.2.840.10008.1.2.1.99", true),
+    ("1.2.840.10008.1.2.5", true),
+    ("1.2.840.10008.1.2.4.57", true),
+    ("1.2.840.10008.1.2.4.70", true),
+    ("1.2.840.10008.1.2.4.90", true),
+    ("1.2.840.10008.1.2.4.80", true),
+    ("1.2.840.10008.1.2.4.50", false),
+    ("1.2.840.10008.1.2.4.51", false),
+    ("1.2.840.10008.1.2.4.91", false),
+    ("1.2.840.10008.1.2.4.81", false),
+];
+
+/// The transfer syntaxes this build decodes (the loader's own check, so JPEG 2000 only
+/// natively and JPEG-LS nowhere), each with whether it is lossless; explicit VR little endian
+/// first.
+pub fn decodable_transfer_syntaxes() -> Vec<(&'static str, bool)> {
+    ASKABLE_SYNTAXES
+        .iter()
+        .copied()
+        .filter(|(uid, _)| check_transfer_syntax("-", uid).is_ok())
+        .collect()
 }
 
 /// The registry's name of a transfer syntax, for messages.
@@ -412,6 +445,14 @@ mod tests {
         assert!(
             e.contains("JPEG-LS") && e.contains("1.2.840.10008.1.2.4.80"),
             "{e}"
+        );
+        let decodable: Vec<&str> = decodable_transfer_syntaxes().iter().map(|t| t.0).collect();
+        assert_eq!(decodable[0], "1.2.840.10008.1.2.1");
+        assert!(decodable.contains(&"1.2.840.10008.1.2.5"));
+        assert!(!decodable.contains(&"1.2.840.10008.1.2.4.80"));
+        assert_eq!(
+            decodable.contains(&"1.2.840.10008.1.2.4.90"),
+            cfg!(not(target_arch = "wasm32"))
         );
         let e = check_transfer_syntax("f", "1.2.3.4")
             .unwrap_err()

@@ -17,10 +17,10 @@ use crate::io::{InputFile, Limits, LoadError, Loaded};
 use crate::volume::{Volume, Voxels};
 
 /// One frame of the chosen series: which file, which frame in it, and its header values.
-struct Frame<'a> {
-    file: usize,
-    frame: usize,
-    info: &'a FrameInfo,
+pub(super) struct Frame<'a> {
+    pub file: usize,
+    pub frame: usize,
+    pub info: &'a FrameInfo,
 }
 
 /// Loads the largest series among DICOM files (in any order, from any folders).
@@ -39,27 +39,63 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
         }
     }
     if headers.is_empty() {
-        return Err(first_error.unwrap_or_else(|| match files {
-            [one] => LoadError::Dicom {
-                file: one.name.clone(),
-                message: "holds no image (no Rows and Columns)".to_owned(),
-            },
-            many => LoadError::DicomSeries {
-                series: "-".to_owned(),
-                message: format!(
-                    "none of the {} DICOM files holds an image ({}{})",
-                    many.len(),
-                    many.iter()
-                        .take(3)
-                        .map(|f| f.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", "),
-                    if many.len() > 3 { ", ..." } else { "" }
-                ),
-            },
+        return Err(first_error.unwrap_or_else(|| {
+            let names: Vec<&str> = files.iter().map(|f| f.name.as_str()).collect();
+            no_image_error(&names)
         }));
     }
+    let named: Vec<(&str, &FileHeader)> = headers
+        .iter()
+        .map(|(i, h)| (files[*i].name.as_str(), h))
+        .collect();
+    let (series, members) = choose_stack(&named, &mut notes)?;
+    let chosen: Vec<(&InputFile, &FileHeader)> = members
+        .iter()
+        .map(|&m| (files[headers[m].0], &headers[m].1))
+        .collect();
+    let mut volume = assemble(&series, &chosen, limits)?;
+    volume
+        .warnings
+        .extend(header_warnings(chosen.iter().map(|(_, h)| *h)));
+    Ok(Loaded { volume, notes })
+}
 
+/// What the headers of a series' images say for the user, sorted so that the volume does not
+/// depend on the order the files came in.
+pub(super) fn header_warnings<'a>(headers: impl Iterator<Item = &'a FileHeader>) -> Vec<String> {
+    let mut file_warnings: Vec<String> = headers.flat_map(|h| h.warnings.iter().cloned()).collect();
+    file_warnings.sort();
+    file_warnings.dedup();
+    file_warnings
+}
+
+/// The error when no file holds an image: the first file's own error if there was one.
+pub(super) fn no_image_error(names: &[&str]) -> LoadError {
+    match names {
+        [one] => LoadError::Dicom {
+            file: (*one).to_owned(),
+            message: "holds no image (no Rows and Columns)".to_owned(),
+        },
+        many => LoadError::DicomSeries {
+            series: "-".to_owned(),
+            message: format!(
+                "none of the {} DICOM files holds an image ({}{})",
+                many.len(),
+                many.iter().take(3).copied().collect::<Vec<_>>().join(", "),
+                if many.len() > 3 { ", ..." } else { "" }
+            ),
+        },
+    }
+}
+
+/// Groups images (named headers) by series and image size, which must be shared within a
+/// volume, and splits a series into stacks by ImageOrientationPatient; returns the largest
+/// stack's series UID and its members (indices into `headers`), and notes the others. The
+/// file loader and the streaming builder ([`super::stream::SeriesBuilder`]) share it.
+pub(super) fn choose_stack(
+    headers: &[(&str, &FileHeader)],
+    notes: &mut Vec<String>,
+) -> Result<(String, Vec<usize>), LoadError> {
     // Group by series and image size, which must be shared within a volume, and split a
     // series into stacks by ImageOrientationPatient (as dcm2niix does): a localizer, a sagittal
     // slice among axial ones or a slice rotated in plane is not stacked with the others. Files
@@ -67,14 +103,13 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
     // depend on the order the files came in.
     let mut order: Vec<usize> = (0..headers.len()).collect();
     order.sort_by(|&a, &b| {
-        let (ha, hb) = (&headers[a].1, &headers[b].1);
-        (&ha.sop_instance_uid, &files[headers[a].0].name)
-            .cmp(&(&hb.sop_instance_uid, &files[headers[b].0].name))
+        let (ha, hb) = (headers[a].1, headers[b].1);
+        (&ha.sop_instance_uid, headers[a].0).cmp(&(&hb.sop_instance_uid, headers[b].0))
     });
     let mut stacks: BTreeMap<(String, u32, u32), Vec<[f64; 6]>> = BTreeMap::new();
     let mut groups: BTreeMap<(String, u32, u32, usize), Vec<usize>> = BTreeMap::new();
     for h_index in order {
-        let h = &headers[h_index].1;
+        let h = headers[h_index].1;
         let series_key = (h.series_uid.clone(), h.rows, h.cols);
         let known = stacks.entry(series_key).or_default();
         // Files without an orientation join the first stack.
@@ -124,7 +159,7 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
         if *key == chosen_key {
             continue;
         }
-        let h = &headers[members[0]].1;
+        let h = headers[members[0]].1;
         if (&key.0, key.1, key.2) == (&chosen_key.0, chosen_key.1, chosen_key.2) {
             notes.push(format!(
                 "{} image(s) of series {} were not stacked with the others: their ImageOrientationPatient {:?} differs from the loaded images' {:?} (a localizer, another plane or a rotated slice?); first: {}",
@@ -132,7 +167,7 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
                 key.0,
                 orientation_of(key).unwrap_or_default(),
                 orientation_of(&chosen_key).unwrap_or_default(),
-                files[headers[members[0]].0].name
+                headers[members[0]].0
             ));
         } else {
             notes.push(format!(
@@ -147,21 +182,7 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
         }
     }
     let members = groups.remove(&chosen_key).unwrap_or_default();
-    let series = chosen_key.0.clone();
-    let chosen: Vec<(&InputFile, &FileHeader)> = members
-        .iter()
-        .map(|&m| (files[headers[m].0], &headers[m].1))
-        .collect();
-    let mut volume = assemble(&series, &chosen, limits)?;
-    // Sorted so that the volume does not depend on the order the files came in.
-    let mut file_warnings: Vec<String> = chosen
-        .iter()
-        .flat_map(|(_, h)| h.warnings.iter().cloned())
-        .collect();
-    file_warnings.sort();
-    file_warnings.dedup();
-    volume.warnings.extend(file_warnings);
-    Ok(Loaded { volume, notes })
+    Ok((chosen_key.0, members))
 }
 
 /// Geometry and voxels of one series.
@@ -170,8 +191,60 @@ fn assemble(
     files: &[(&InputFile, &FileHeader)],
     limits: &Limits,
 ) -> Result<Volume, LoadError> {
+    let named: Vec<(&str, &FileHeader)> =
+        files.iter().map(|(f, h)| (f.name.as_str(), *h)).collect();
+    let mut layout = layout(&named)?;
+    let (voxels, value_slope, value_intercept) =
+        read_pixels(series, files, &layout.frames, limits, &mut layout.warnings)?;
+    Ok(layout.into_volume(series, &named, voxels, value_slope, value_intercept))
+}
+
+/// The geometry of one stack of images and the order of its frames (slot `s` of the volume is
+/// `frames[s]`), from the headers alone.
+pub(super) struct Layout<'a> {
+    pub frames: Vec<Frame<'a>>,
+    pub dims: [usize; 3],
+    pub spacing_mm: [f64; 3],
+    pub origin_mm: [f64; 3],
+    pub direction: glam::DMat3,
+    pub warnings: Vec<String>,
+}
+
+impl Layout<'_> {
+    /// The volume of this layout with its voxels (files named as in [`layout`]).
+    pub(super) fn into_volume(
+        self,
+        series: &str,
+        files: &[(&str, &FileHeader)],
+        voxels: Voxels,
+        value_slope: f32,
+        value_intercept: f32,
+    ) -> Volume {
+        let source = if files.len() == 1 {
+            files[0].0.to_owned()
+        } else {
+            format!("DICOM series {series} ({} files)", files.len())
+        };
+        Volume {
+            dims: self.dims,
+            spacing_mm: self.spacing_mm,
+            origin_mm: self.origin_mm,
+            direction: self.direction,
+            voxels,
+            value_slope,
+            value_intercept,
+            modality: files[0].1.modality,
+            source,
+            warnings: self.warnings,
+        }
+    }
+}
+
+/// Checks that the images of a stack store pixels alike, orders their frames and works out
+/// the geometry (the file loader and the streaming builder share it).
+pub(super) fn layout<'a>(files: &[(&str, &'a FileHeader)]) -> Result<Layout<'a>, LoadError> {
     let first = files[0].1;
-    let name0 = files[0].0.name.as_str();
+    let name0 = files[0].0;
     let mut warnings = Vec::new();
     if first.samples_per_pixel != 1 {
         return Err(LoadError::unsupported(
@@ -188,10 +261,9 @@ fn assemble(
             != (first.bits_allocated, first.signed, first.samples_per_pixel)
         {
             return Err(LoadError::DicomSeries {
-                series: series.to_owned(),
+                series: first.series_uid.clone(),
                 message: format!(
-                    "{} stores pixels differently from {name0} (BitsAllocated/PixelRepresentation)",
-                    f.name
+                    "{f} stores pixels differently from {name0} (BitsAllocated/PixelRepresentation)"
                 ),
             });
         }
@@ -267,7 +339,7 @@ fn assemble(
         (
             files[f.file].1.instance_number,
             files[f.file].1.sop_instance_uid.clone(),
-            files[f.file].0.name.clone(),
+            files[f.file].0,
             f.frame,
         )
     };
@@ -375,29 +447,161 @@ fn assemble(
         &mut warnings,
     )?;
 
-    let (voxels, value_slope, value_intercept) =
-        read_pixels(series, files, &frames, limits, &mut warnings)?;
-    let dims = [first.cols as usize, first.rows as usize, n];
-    let source = if files.len() == 1 {
-        files[0].0.name.clone()
-    } else {
-        format!("DICOM series {series} ({} files)", files.len())
-    };
-    Ok(Volume {
-        value_slope,
-        value_intercept,
-        modality: first.modality,
-        ..grid.volume(dims, voxels, source, warnings)
+    Ok(Layout {
+        frames,
+        dims: [first.cols as usize, first.rows as usize, n],
+        spacing_mm: grid.spacing_mm,
+        origin_mm: grid.origin_mm,
+        direction: grid.direction,
+        warnings,
     })
 }
 
 /// How decoded samples are stored in the volume.
-#[derive(Clone, Copy, PartialEq)]
-enum Target {
+#[derive(Clone, Copy, PartialEq, Debug)]
+pub(super) enum Target {
     U8,
     I16,
     U16,
     F32,
+}
+
+impl Target {
+    /// The compact type that holds a stored sample of these bits without loss (32-bit samples
+    /// go to f32).
+    pub(super) fn raw(bits_allocated: u16, signed: bool) -> Self {
+        match (bits_allocated, signed) {
+            (1, _) | (8, false) => Self::U8,
+            (8, true) => Self::I16,
+            (16, false) => Self::U16,
+            (16, true) => Self::I16,
+            _ => Self::F32,
+        }
+    }
+
+    pub(super) fn bytes(self) -> u64 {
+        match self {
+            Self::U8 => 1,
+            Self::I16 | Self::U16 => 2,
+            Self::F32 => 4,
+        }
+    }
+
+    /// An empty voxel buffer of this type.
+    pub(super) fn empty(self) -> Voxels {
+        match self {
+            Self::U8 => Voxels::U8(Vec::new()),
+            Self::I16 => Voxels::I16(Vec::new()),
+            Self::U16 => Voxels::U16(Vec::new()),
+            Self::F32 => Voxels::F32(Vec::new()),
+        }
+    }
+}
+
+/// Whether every frame shares one rescale (then the volume keeps the raw type) and the type the
+/// voxels are stored in; differing rescales need physical floats, which the user is told.
+pub(super) fn pixel_target(
+    first: &FileHeader,
+    frames: &[Frame<'_>],
+    warnings: &mut Vec<String>,
+) -> (Target, bool) {
+    let same_rescale = frames.iter().all(|f| {
+        f.info.slope == frames[0].info.slope && f.info.intercept == frames[0].info.intercept
+    });
+    if same_rescale {
+        (Target::raw(first.bits_allocated, first.signed), true)
+    } else {
+        warnings.push("RescaleSlope/RescaleIntercept differ between slices: values are stored as 32-bit floats".to_owned());
+        (Target::F32, false)
+    }
+}
+
+/// The volume's rescale: the frames' own when they share one, else identity (the voxels then
+/// hold physical values).
+pub(super) fn volume_rescale(frames: &[Frame<'_>], same_rescale: bool) -> (f32, f32) {
+    if same_rescale {
+        (frames[0].info.slope as f32, frames[0].info.intercept as f32)
+    } else {
+        (1.0, 0.0)
+    }
+}
+
+/// Writes one frame's stored samples into `voxels[dst]`: as they are, or (into f32 voxels)
+/// through `rescale` = (slope, intercept).
+pub(super) fn store_frame(
+    voxels: &mut Voxels,
+    dst: std::ops::Range<usize>,
+    samples: &[i64],
+    rescale: (f64, f64),
+) {
+    match voxels {
+        Voxels::U8(v) => v[dst]
+            .iter_mut()
+            .zip(samples)
+            .for_each(|(o, s)| *o = *s as u8),
+        Voxels::I16(v) => v[dst]
+            .iter_mut()
+            .zip(samples)
+            .for_each(|(o, s)| *o = *s as i16),
+        Voxels::U16(v) => v[dst]
+            .iter_mut()
+            .zip(samples)
+            .for_each(|(o, s)| *o = *s as u16),
+        Voxels::F32(v) => {
+            let (a, b) = rescale;
+            v[dst]
+                .iter_mut()
+                .zip(samples)
+                .for_each(|(o, s)| *o = (*s as f64 * a + b) as f32)
+        }
+    }
+}
+
+/// Opens a file, decodes its pixel data once and hands the bytes of all its frames to `f`
+/// (native samples are read where the parsed object holds them, without a copy).
+pub(super) fn with_pixel_data<R>(
+    file: &InputFile,
+    header: &FileHeader,
+    limits: &Limits,
+    f: impl FnOnce(&[u8]) -> Result<R, LoadError>,
+) -> Result<R, LoadError> {
+    let obj = open(file, false, limits)?;
+    let fragments = encapsulated::fragments(&obj);
+    let rle_data;
+    let decoded;
+    let native;
+    let data: &[u8] = match &fragments {
+        Some(frags)
+            if header.transfer_syntax.trim_end_matches(['\0', ' '])
+                == encapsulated::RLE_LOSSLESS =>
+        {
+            rle_data = encapsulated::decode_rle(&file.name, header, frags)?;
+            &rle_data
+        }
+        // Native samples are read where the object holds them: dicom-pixeldata would copy
+        // them twice (to bytes, then to a vector), a third and fourth copy of the pixels.
+        None if header.bits_allocated != 1
+            && let Some(bytes) = native_pixel_bytes(&obj) =>
+        {
+            native = bytes;
+            &native
+        }
+        _ => {
+            if let Some(frags) = &fragments {
+                encapsulated::check_codestreams(&file.name, header, frags)?;
+            }
+            decoded = obj.decode_pixel_data().map_err(|e| LoadError::Dicom {
+                file: file.name.clone(),
+                message: format!(
+                    "cannot decode pixel data ({}): {}",
+                    header.transfer_syntax,
+                    super::chain(&e)
+                ),
+            })?;
+            decoded.data()
+        }
+    };
+    f(data)
 }
 
 /// Decodes each file's pixel data once and copies its frames into their slots.
@@ -412,27 +616,8 @@ fn read_pixels(
     let frame_len = first.rows as usize * first.cols as usize;
     let count = (frame_len as u64).saturating_mul(frames.len() as u64);
     // One rescale for the whole volume keeps the raw type; differing ones need physical floats.
-    let same_rescale = frames.iter().all(|f| {
-        f.info.slope == frames[0].info.slope && f.info.intercept == frames[0].info.intercept
-    });
-    let target = if !same_rescale {
-        warnings.push("RescaleSlope/RescaleIntercept differ between slices: values are stored as 32-bit floats".to_owned());
-        Target::F32
-    } else {
-        match (first.bits_allocated, first.signed) {
-            (1, _) | (8, false) => Target::U8,
-            (8, true) => Target::I16,
-            (16, false) => Target::U16,
-            (16, true) => Target::I16,
-            _ => Target::F32,
-        }
-    };
-    let out_bytes = match target {
-        Target::U8 => 1,
-        Target::I16 | Target::U16 => 2,
-        Target::F32 => 4,
-    };
-    raw::check_voxel_budget(files[0].0.name.as_str(), count, out_bytes, limits)?;
+    let (target, same_rescale) = pixel_target(first, frames, warnings);
+    raw::check_voxel_budget(files[0].0.name.as_str(), count, target.bytes(), limits)?;
     let count = count as usize;
     let allocate = || -> Result<Voxels, LoadError> {
         let name = &files[0].0.name;
@@ -466,93 +651,41 @@ fn read_pixels(
             continue;
         }
         let (file, header) = files[fi];
-        let obj = open(file, false, limits)?;
-        let fragments = encapsulated::fragments(&obj);
-        let rle_data;
-        let decoded;
-        let native;
-        let data: &[u8] = match &fragments {
-            Some(frags)
-                if header.transfer_syntax.trim_end_matches(['\0', ' '])
-                    == encapsulated::RLE_LOSSLESS =>
-            {
-                rle_data = encapsulated::decode_rle(&file.name, header, frags)?;
-                &rle_data
+        with_pixel_data(file, header, limits, |data| {
+            let n_frames = header.frames.len();
+            if voxels.is_none() {
+                voxels = Some(allocate()?);
             }
-            // Native samples are read where the object holds them: dicom-pixeldata would copy
-            // them twice (to bytes, then to a vector), a third and fourth copy of the pixels.
-            None if header.bits_allocated != 1
-                && let Some(bytes) = native_pixel_bytes(&obj) =>
-            {
-                native = bytes;
-                &native
-            }
-            _ => {
-                if let Some(frags) = &fragments {
-                    encapsulated::check_codestreams(&file.name, header, frags)?;
-                }
-                decoded = obj.decode_pixel_data().map_err(|e| LoadError::Dicom {
-                    file: file.name.clone(),
-                    message: format!(
-                        "cannot decode pixel data ({}): {}",
-                        header.transfer_syntax,
-                        super::chain(&e)
-                    ),
-                })?;
-                decoded.data()
-            }
-        };
-        let n_frames = header.frames.len();
-        if voxels.is_none() {
-            voxels = Some(allocate()?);
-        }
-        let Some(voxels) = voxels.as_mut() else {
-            continue;
-        };
-        for &(frame, slot) in slots {
-            let slice_error = |message: String| LoadError::DicomSlice {
-                series: series.to_owned(),
-                slice: slot,
-                file: file.name.clone(),
-                message,
+            let Some(voxels) = voxels.as_mut() else {
+                return Ok(());
             };
-            samples.clear();
-            frame_samples(header, data, frame, n_frames, frame_len, &mut samples)
-                .map_err(slice_error)?;
-            let info = frames[slot].info;
-            let dst = slot * frame_len..(slot + 1) * frame_len;
-            match voxels {
-                Voxels::U8(v) => v[dst]
-                    .iter_mut()
-                    .zip(&samples)
-                    .for_each(|(o, s)| *o = *s as u8),
-                Voxels::I16(v) => v[dst]
-                    .iter_mut()
-                    .zip(&samples)
-                    .for_each(|(o, s)| *o = *s as i16),
-                Voxels::U16(v) => v[dst]
-                    .iter_mut()
-                    .zip(&samples)
-                    .for_each(|(o, s)| *o = *s as u16),
-                Voxels::F32(v) => {
-                    let (a, b) = if same_rescale {
-                        (1.0, 0.0)
-                    } else {
-                        (info.slope, info.intercept)
-                    };
-                    v[dst]
-                        .iter_mut()
-                        .zip(&samples)
-                        .for_each(|(o, s)| *o = (*s as f64 * a + b) as f32)
-                }
+            for &(frame, slot) in slots {
+                let slice_error = |message: String| LoadError::DicomSlice {
+                    series: series.to_owned(),
+                    slice: slot,
+                    file: file.name.clone(),
+                    message,
+                };
+                samples.clear();
+                frame_samples(header, data, frame, n_frames, frame_len, &mut samples)
+                    .map_err(slice_error)?;
+                let info = frames[slot].info;
+                let rescale = if same_rescale {
+                    (1.0, 0.0)
+                } else {
+                    (info.slope, info.intercept)
+                };
+                store_frame(
+                    voxels,
+                    slot * frame_len..(slot + 1) * frame_len,
+                    &samples,
+                    rescale,
+                );
             }
-        }
+            Ok(())
+        })?;
     }
-    let (slope, intercept) = if same_rescale {
-        (frames[0].info.slope as f32, frames[0].info.intercept as f32)
-    } else {
-        (1.0, 0.0)
-    };
+    let (slope, intercept) = volume_rescale(frames, same_rescale);
     let voxels = match voxels {
         Some(v) => v,
         None => allocate()?,
@@ -582,7 +715,10 @@ fn native_pixel_bytes(
 
 /// What can be refused from a file's header and size alone: a transfer syntax without a
 /// decoder, 1-bit data in a compressed syntax, RLE data too small to hold the frames.
-fn check_before_decoding(file: &InputFile, header: &FileHeader) -> Result<(), LoadError> {
+pub(super) fn check_before_decoding(
+    file: &InputFile,
+    header: &FileHeader,
+) -> Result<(), LoadError> {
     check_transfer_syntax(&file.name, &header.transfer_syntax)?;
     let ts = header.transfer_syntax.trim_end_matches(['\0', ' ']);
     if header.bits_allocated == 1 && !NATIVE_SYNTAXES.contains(&ts) {
@@ -605,7 +741,7 @@ fn check_before_decoding(file: &InputFile, header: &FileHeader) -> Result<(), Lo
 
 /// The stored values of one frame as i64 (sign-extended or masked to BitsStored), checking that
 /// the decoded data hold the whole frame.
-fn frame_samples(
+pub(super) fn frame_samples(
     h: &FileHeader,
     data: &[u8],
     frame: usize,

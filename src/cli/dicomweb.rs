@@ -1,0 +1,183 @@
+//! `--dicomweb BASE --study UID [--series UID] [--token T | --user USER:PASS]`: the input of
+//! `info`, `features` and `render` retrieved from an archive over DICOMweb
+//! (`crate::io::dicomweb`) instead of read from files. Without `--series` the study's series are
+//! listed on stderr and the chooser's pick (the CT or MR series with the most instances) is
+//! opened. Patient names are not printed (batch logs travel); the patient ID and study date are.
+
+use std::io::IsTerminal as _;
+
+use anyhow::Context as _;
+
+use crate::io::Loaded;
+use crate::io::dicomweb::client::Client;
+use crate::io::dicomweb::{Auth, Base, DicomWebError};
+
+/// Environment variables read when the flags are not given (a command line is visible to
+/// other users of the machine; the environment is not).
+pub const TOKEN_ENV: &str = "SHAPECAST_DICOMWEB_TOKEN";
+pub const USER_ENV: &str = "SHAPECAST_DICOMWEB_USER";
+
+#[derive(clap::Args, Debug, Default, Clone)]
+pub struct DicomWebArgs {
+    /// Read the volume from a DICOMweb archive instead of files: its root URL, e.g.
+    /// http://127.0.0.1:8042/dicom-web (Orthanc's DICOMweb plugin). Plain HTTP only.
+    #[arg(long, value_name = "BASE", requires = "study")]
+    pub dicomweb: Option<String>,
+    /// StudyInstanceUID of the study to open from --dicomweb.
+    #[arg(long, value_name = "UID", requires = "dicomweb")]
+    pub study: Option<String>,
+    /// SeriesInstanceUID to open (default: the CT or MR series with the most instances; the
+    /// study's series are then listed on stderr).
+    #[arg(long, value_name = "UID", requires = "dicomweb")]
+    pub series: Option<String>,
+    /// Bearer token for the archive (Authorization: Bearer). Better in the environment
+    /// variable SHAPECAST_DICOMWEB_TOKEN, out of the process list.
+    #[arg(long, value_name = "T", requires = "dicomweb", conflicts_with = "user")]
+    pub token: Option<String>,
+    /// USER:PASSWORD for an archive with HTTP Basic authentication (e.g. Orthanc's
+    /// RegisteredUsers); also SHAPECAST_DICOMWEB_USER.
+    #[arg(long, value_name = "USER:PASS", requires = "dicomweb")]
+    pub user: Option<String>,
+}
+
+fn env(name: &str) -> Option<String> {
+    std::env::var(name).ok().filter(|v| !v.trim().is_empty())
+}
+
+impl DicomWebArgs {
+    pub fn is_set(&self) -> bool {
+        self.dicomweb.is_some()
+    }
+
+    /// The credentials from the flags, else from the environment.
+    fn auth(&self) -> anyhow::Result<Auth> {
+        let token = self.token.clone().or_else(|| env(TOKEN_ENV));
+        let user = self.user.clone().or_else(|| env(USER_ENV));
+        Ok(match (token, user) {
+            (Some(_), Some(_)) => anyhow::bail!(
+                "both a token and a user name are set (--token/{TOKEN_ENV}, --user/{USER_ENV}); give one"
+            ),
+            (Some(t), None) => Auth::bearer(&t)?,
+            (None, Some(u)) => Auth::basic(&u)?,
+            (None, None) => Auth::None,
+        })
+    }
+
+    /// Resolves the study, lists its series when none is named, and retrieves the series.
+    pub fn load(&self) -> anyhow::Result<Loaded> {
+        let (Some(base), Some(study)) = (&self.dicomweb, &self.study) else {
+            anyhow::bail!("--dicomweb needs --study");
+        };
+        let base = Base::parse(base)?;
+        let client = Client::new(base.clone(), self.auth()?)?;
+        let hint = |e: DicomWebError| {
+            let unauthorized = matches!(e, DicomWebError::Unauthorized { .. });
+            let e = anyhow::Error::new(e);
+            if unauthorized {
+                e.context(format!(
+                    "DICOMweb {}: give a token with --token T or {TOKEN_ENV}, or --user USER:PASS (or {USER_ENV}) for Basic authentication",
+                    base.as_str()
+                ))
+            } else {
+                e.context(format!("DICOMweb {}", base.as_str()))
+            }
+        };
+        let resolved = client
+            .resolve(study, self.series.as_deref())
+            .map_err(hint)?;
+        let s = &resolved.study;
+        let about: Vec<String> = [
+            s.study_date.as_ref().map(|d| format!("date {d}")),
+            s.patient_id.as_ref().map(|p| format!("patient ID {p}")),
+            s.description.as_ref().map(|d| format!("\"{d}\"")),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        let chosen = &resolved.series[resolved.chosen];
+        if resolved.by_chooser && resolved.series.len() > 1 {
+            eprintln!(
+                "DICOMweb {}: study {} ({}), {} series:",
+                base.as_str(),
+                s.study_uid,
+                about.join(", "),
+                resolved.series.len()
+            );
+            for (i, series) in resolved.series.iter().enumerate() {
+                let mark = if i == resolved.chosen { "*" } else { " " };
+                eprintln!("  {mark} {}", series.summary());
+            }
+            eprintln!(
+                "opening * (the CT or MR series with the most instances; --series UID opens another)"
+            );
+        } else {
+            eprintln!(
+                "DICOMweb {}: study {} ({}), series {}",
+                base.as_str(),
+                s.study_uid,
+                about.join(", "),
+                chosen.summary()
+            );
+        }
+        let started = web_time::Instant::now();
+        let tty = std::io::stderr().is_terminal();
+        let mut last = (0, 0);
+        let loaded = client
+            .retrieve(study, &chosen.series_uid, &mut |p| {
+                if tty && (p.instances_done, p.instances_total) != last {
+                    last = (p.instances_done, p.instances_total);
+                    eprint!(
+                        "\rretrieving: {}/{} instances, {:.1} MB",
+                        p.instances_done,
+                        p.instances_total,
+                        p.bytes as f64 / 1e6
+                    );
+                }
+            })
+            .map_err(hint)
+            .with_context(|| format!("retrieving series {}", chosen.series_uid))?;
+        if tty {
+            eprintln!();
+        }
+        eprintln!(
+            "retrieved series {} in {:.2} s",
+            chosen.series_uid,
+            started.elapsed().as_secs_f64()
+        );
+        Ok(loaded)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser, Debug)]
+    struct T {
+        #[command(flatten)]
+        d: DicomWebArgs,
+    }
+
+    #[test]
+    fn flags_need_each_other() {
+        let ok = T::try_parse_from(["t", "--dicomweb", "http://h/dw", "--study", "1.2"]);
+        assert!(ok.is_ok_and(|t| t.d.is_set()));
+        assert!(T::try_parse_from(["t", "--dicomweb", "http://h/dw"]).is_err());
+        assert!(T::try_parse_from(["t", "--study", "1.2"]).is_err());
+        assert!(
+            T::try_parse_from([
+                "t",
+                "--dicomweb",
+                "x",
+                "--study",
+                "1",
+                "--token",
+                "a",
+                "--user",
+                "u:p"
+            ])
+            .is_err()
+        );
+    }
+}

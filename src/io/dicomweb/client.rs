@@ -1,0 +1,554 @@
+//! The native DICOMweb client: a blocking HTTP transport (ureq, plain HTTP) behind the
+//! [`Transport`] trait, and the driver that runs a [`Retrieval`] with several instance requests
+//! in flight on a few threads while the calling thread decodes what arrives. This is the only
+//! code of `src/io` that does I/O; the page drives the same `Retrieval` with `fetch`.
+
+use std::io::Read;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Mutex, mpsc};
+use std::time::Duration;
+
+use super::multipart::{MultipartLimits, Part};
+use super::qido::{self, InstanceInfo, SeriesInfo, StudyInfo};
+use super::retrieve::{Fetch, InstanceResponse, Progress, Retrieval};
+use super::{Auth, Base, DicomWebError, Request, check_status};
+use crate::io::{Limits, Loaded};
+
+/// Largest QIDO-RS answer read, bytes.
+pub const MAX_JSON_BYTES: u64 = 64 << 20;
+
+/// Instance requests in flight by default.
+pub const DEFAULT_PARALLEL: usize = 4;
+
+/// An answer: status, Content-Type and the body, read as it arrives.
+pub struct HttpResponse {
+    pub status: u16,
+    pub content_type: Option<String>,
+    pub body: Box<dyn Read>,
+}
+
+/// A blocking HTTP GET. The native client uses [`UreqTransport`]; tests plug in their own.
+pub trait Transport: Sync {
+    fn get(&self, request: &Request) -> Result<HttpResponse, DicomWebError>;
+}
+
+/// Plain HTTP with ureq: one agent, its connections kept alive and shared by the threads.
+/// No TLS is built in, so `https://` bases are refused with a message.
+pub struct UreqTransport {
+    agent: ureq::Agent,
+}
+
+impl UreqTransport {
+    pub fn new(parallel: usize) -> Self {
+        let config = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .timeout_connect(Some(Duration::from_secs(10)))
+            // An archive may transcode before it answers; once it sends, reads must progress.
+            .timeout_recv_response(Some(Duration::from_secs(300)))
+            .timeout_per_read(Some(Duration::from_secs(60)))
+            .max_idle_connections_per_host(parallel.max(1) + 2)
+            .user_agent(concat!("shapecast/", env!("CARGO_PKG_VERSION")))
+            .build();
+        Self {
+            agent: ureq::Agent::new_with_config(config),
+        }
+    }
+}
+
+/// `host:port` of a URL, for messages.
+fn host_of(url: &str) -> String {
+    url.split_once("://")
+        .map_or(url, |(_, rest)| rest)
+        .split('/')
+        .next()
+        .unwrap_or(url)
+        .to_owned()
+}
+
+impl Transport for UreqTransport {
+    fn get(&self, request: &Request) -> Result<HttpResponse, DicomWebError> {
+        let url = request.url.as_str();
+        let mut req = self.agent.get(url);
+        for (name, value) in &request.headers {
+            req = req.header(*name, value);
+        }
+        let connect = |message: String| DicomWebError::Connect {
+            host: host_of(url),
+            message,
+        };
+        let response = req.call().map_err(|e| match e {
+            ureq::Error::Io(io) if is_connect_error(io.kind()) => connect(io.to_string()),
+            ureq::Error::ConnectionFailed => connect("the connection failed".to_owned()),
+            ureq::Error::HostNotFound => connect("host not found".to_owned()),
+            other => DicomWebError::Transport {
+                url: url.to_owned(),
+                message: other.to_string(),
+            },
+        })?;
+        let status = response.status().as_u16();
+        let content_type = response
+            .headers()
+            .get("content-type")
+            .and_then(|v| v.to_str().ok())
+            .map(str::to_owned);
+        Ok(HttpResponse {
+            status,
+            content_type,
+            body: Box::new(response.into_body().into_reader()),
+        })
+    }
+}
+
+fn is_connect_error(kind: std::io::ErrorKind) -> bool {
+    use std::io::ErrorKind as K;
+    matches!(
+        kind,
+        K::ConnectionRefused
+            | K::HostUnreachable
+            | K::NetworkUnreachable
+            | K::AddrNotAvailable
+            | K::NetworkDown
+    )
+}
+
+/// A study resolved to the series to open: the study, its series, and the one chosen.
+#[derive(Clone, Debug)]
+pub struct Resolved {
+    pub study: StudyInfo,
+    pub series: Vec<SeriesInfo>,
+    pub chosen: usize,
+    /// Whether the chooser picked it (no series was named).
+    pub by_chooser: bool,
+}
+
+/// A DICOMweb client of one archive.
+pub struct Client<T: Transport = UreqTransport> {
+    transport: T,
+    base: Base,
+    auth: Auth,
+    limits: Limits,
+    parallel: usize,
+}
+
+impl Client<UreqTransport> {
+    /// A client with the plain-HTTP transport. The base must be absolute and http://.
+    pub fn new(base: Base, auth: Auth) -> Result<Self, DicomWebError> {
+        if base.is_relative() {
+            return Err(DicomWebError::InvalidBase {
+                base: base.as_str().to_owned(),
+                reason: "a relative base works only from a page served by the archive; give http://host:port/path".to_owned(),
+            });
+        }
+        if base.as_str().to_ascii_lowercase().starts_with("https://") {
+            return Err(DicomWebError::InvalidBase {
+                base: base.as_str().to_owned(),
+                reason: "this build's native client speaks plain HTTP only (no TLS is built in); use http:// on a trusted network or through a local TLS-terminating proxy".to_owned(),
+            });
+        }
+        Ok(Self::with_transport(
+            UreqTransport::new(DEFAULT_PARALLEL),
+            base,
+            auth,
+        ))
+    }
+}
+
+impl<T: Transport> Client<T> {
+    pub fn with_transport(transport: T, base: Base, auth: Auth) -> Self {
+        Self {
+            transport,
+            base,
+            auth,
+            limits: Limits::default(),
+            parallel: DEFAULT_PARALLEL,
+        }
+    }
+
+    /// Instance requests in flight at once (at least 1).
+    pub fn with_parallel(mut self, parallel: usize) -> Self {
+        self.parallel = parallel.clamp(1, 32);
+        self
+    }
+
+    pub fn with_limits(mut self, limits: Limits) -> Self {
+        self.limits = limits;
+        self
+    }
+
+    pub fn base(&self) -> &Base {
+        &self.base
+    }
+
+    /// A QIDO-RS answer's bytes (at most [`MAX_JSON_BYTES`]).
+    fn get_json(&self, url: String, what: &str) -> Result<Vec<u8>, DicomWebError> {
+        let request = Request::qido(url, &self.auth);
+        let response = self.transport.get(&request)?;
+        check_status(response.status, &request.url, what, &self.auth)?;
+        let mut body = Vec::new();
+        response
+            .body
+            .take(MAX_JSON_BYTES + 1)
+            .read_to_end(&mut body)
+            .map_err(|e| DicomWebError::Transport {
+                url: request.url.clone(),
+                message: format!("reading the answer: {e}"),
+            })?;
+        if body.len() as u64 > MAX_JSON_BYTES {
+            return Err(DicomWebError::TooLarge {
+                what: request.url,
+                size: body.len() as u64,
+                limit: MAX_JSON_BYTES,
+            });
+        }
+        Ok(body)
+    }
+
+    /// The study's patient, date and description; `NotFound` when the archive lacks it.
+    pub fn find_study(&self, study: &str) -> Result<StudyInfo, DicomWebError> {
+        let url = self.base.study_query(study)?;
+        let what = format!("study {study}");
+        let body = self.get_json(url.clone(), &what)?;
+        qido::parse_studies(&url, &body)?
+            .into_iter()
+            .find(|s| s.study_uid == study.trim())
+            .ok_or(DicomWebError::NotFound { what, url })
+    }
+
+    pub fn list_series(&self, study: &str) -> Result<Vec<SeriesInfo>, DicomWebError> {
+        let url = self.base.series_query(study)?;
+        let body = self.get_json(url.clone(), &format!("study {study}"))?;
+        qido::parse_series(&url, &body)
+    }
+
+    pub fn list_instances(
+        &self,
+        study: &str,
+        series: &str,
+    ) -> Result<Vec<InstanceInfo>, DicomWebError> {
+        let url = self.base.instances_query(study, series)?;
+        let body = self.get_json(url.clone(), &format!("series {series} of study {study}"))?;
+        qido::parse_instances(&url, &body)
+    }
+
+    /// The study and the series to open: the one named, else the chooser's.
+    pub fn resolve(&self, study: &str, series: Option<&str>) -> Result<Resolved, DicomWebError> {
+        let info = self.find_study(study)?;
+        let list = self.list_series(study)?;
+        let (chosen, by_chooser) = match series {
+            Some(uid) => {
+                let uid = super::check_uid("SeriesInstanceUID", uid)?;
+                let i = list
+                    .iter()
+                    .position(|s| s.series_uid == uid)
+                    .ok_or_else(|| DicomWebError::SeriesNotInStudy {
+                        study: study.to_owned(),
+                        series: uid.to_owned(),
+                        available: list
+                            .iter()
+                            .map(|s| s.series_uid.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    })?;
+                (i, false)
+            }
+            None => (
+                qido::choose_series(&list).ok_or_else(|| DicomWebError::NotFound {
+                    what: format!("a series of study {study}"),
+                    url: self.base.series_query(study).unwrap_or_default(),
+                })?,
+                true,
+            ),
+        };
+        Ok(Resolved {
+            study: info,
+            series: list,
+            chosen,
+            by_chooser,
+        })
+    }
+
+    /// Retrieves one series (WADO-RS, instance by instance, several in flight, a failed one
+    /// asked for again once) and decodes it as it arrives; `progress` is told after each
+    /// instance.
+    pub fn retrieve(
+        &self,
+        study: &str,
+        series: &str,
+        progress: &mut dyn FnMut(&Progress),
+    ) -> Result<Loaded, DicomWebError> {
+        let instances = self.list_instances(study, series)?;
+        let mut retrieval = Retrieval::new(
+            self.base.clone(),
+            study,
+            series,
+            instances,
+            self.auth.clone(),
+            self.limits,
+        )?;
+        let limits = retrieval.multipart_limits();
+        let auth = &self.auth;
+        let transport = &self.transport;
+        let stop = AtomicBool::new(false);
+        let (job_tx, job_rx) = mpsc::channel::<Fetch>();
+        let job_rx = Mutex::new(job_rx);
+        // Bounded: at most `parallel` answers wait to be decoded.
+        let (done_tx, done_rx) =
+            mpsc::sync_channel::<(usize, Result<Vec<Part>, DicomWebError>)>(self.parallel);
+        std::thread::scope(|scope| {
+            for _ in 0..self.parallel {
+                let done_tx = done_tx.clone();
+                let (job_rx, stop) = (&job_rx, &stop);
+                scope.spawn(move || {
+                    loop {
+                        let job = match job_rx.lock() {
+                            Ok(rx) => rx.recv(),
+                            Err(_) => return,
+                        };
+                        let Ok(fetch) = job else { return };
+                        if stop.load(Ordering::Relaxed) {
+                            return;
+                        }
+                        let result = fetch_instance(transport, &fetch, auth, limits);
+                        if done_tx.send((fetch.id, result)).is_err() {
+                            return;
+                        }
+                    }
+                });
+            }
+            drop(done_tx);
+            let mut in_flight = 0;
+            let result = (|| {
+                loop {
+                    while in_flight < self.parallel
+                        && let Some(fetch) = retrieval.next_fetch()
+                    {
+                        job_tx
+                            .send(fetch)
+                            .map_err(|_| internal("the request threads stopped"))?;
+                        in_flight += 1;
+                    }
+                    if retrieval.is_complete() {
+                        return Ok(());
+                    }
+                    if in_flight == 0 {
+                        return Err(internal("nothing in flight and nothing to ask for"));
+                    }
+                    let (id, result) = done_rx
+                        .recv()
+                        .map_err(|_| internal("the request threads stopped"))?;
+                    in_flight -= 1;
+                    match result {
+                        Ok(parts) => retrieval.received(id, parts)?,
+                        Err(e) => retrieval.failed(id, e)?,
+                    }
+                    progress(&retrieval.progress());
+                }
+            })();
+            stop.store(true, Ordering::Relaxed);
+            drop(job_tx);
+            result
+        })?;
+        retrieval.finish()
+    }
+}
+
+fn internal(message: &str) -> DicomWebError {
+    DicomWebError::Transport {
+        url: "-".to_owned(),
+        message: format!("internal: {message}"),
+    }
+}
+
+/// One instance's request, read to its end through the multipart parser.
+fn fetch_instance<T: Transport>(
+    transport: &T,
+    fetch: &Fetch,
+    auth: &Auth,
+    limits: MultipartLimits,
+) -> Result<Vec<Part>, DicomWebError> {
+    let response = transport.get(&fetch.request)?;
+    let mut reader = InstanceResponse::start(
+        fetch,
+        response.status,
+        response.content_type.as_deref(),
+        auth,
+        limits,
+    )?;
+    let mut body = response.body;
+    let mut buf = vec![0u8; 256 << 10];
+    loop {
+        let n = match body.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => {
+                return Err(DicomWebError::Transport {
+                    url: fetch.request.url.clone(),
+                    message: format!("the body broke off: {e}"),
+                });
+            }
+        };
+        reader.feed(&buf[..n])?;
+    }
+    reader.finish()
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+    use crate::io::dicom::synth::Slice;
+    use std::collections::HashMap;
+    use std::sync::atomic::AtomicUsize;
+
+    const STUDY: &str = "1.2.826.0.1.3680043.10.9";
+    const SERIES: &str = "1.2.826.0.1.3680043.10.9.1";
+
+    /// An archive in memory: QIDO answers and instances by URL; the first request of each
+    /// URL in `flaky` is cut short.
+    struct FakeArchive {
+        answers: HashMap<String, (u16, String, Vec<u8>)>,
+        flaky: Vec<String>,
+        seen: Mutex<Vec<String>>,
+        in_flight: AtomicUsize,
+        most_in_flight: AtomicUsize,
+    }
+
+    impl Transport for FakeArchive {
+        fn get(&self, request: &Request) -> Result<HttpResponse, DicomWebError> {
+            let now = self.in_flight.fetch_add(1, Ordering::SeqCst) + 1;
+            self.most_in_flight.fetch_max(now, Ordering::SeqCst);
+            std::thread::sleep(Duration::from_millis(5));
+            self.in_flight.fetch_sub(1, Ordering::SeqCst);
+            let first_time = {
+                let mut seen = self.seen.lock().unwrap();
+                let first = !seen.contains(&request.url);
+                seen.push(request.url.clone());
+                first
+            };
+            let Some((status, ct, body)) = self.answers.get(&request.url) else {
+                return Ok(HttpResponse {
+                    status: 404,
+                    content_type: None,
+                    body: Box::new(std::io::empty()),
+                });
+            };
+            let mut body = body.clone();
+            if first_time && self.flaky.contains(&request.url) {
+                body.truncate(body.len() / 2);
+            }
+            Ok(HttpResponse {
+                status: *status,
+                content_type: Some(ct.clone()),
+                body: Box::new(std::io::Cursor::new(body)),
+            })
+        }
+    }
+
+    fn archive(n: i32) -> FakeArchive {
+        let base = "http://archive/dw";
+        let mut answers = HashMap::new();
+        let json = |v: serde_json::Value| {
+            (
+                200,
+                "application/dicom+json".to_owned(),
+                serde_json::to_vec(&v).unwrap(),
+            )
+        };
+        answers.insert(
+            format!("{base}/studies?StudyInstanceUID={STUDY}"),
+            json(serde_json::json!([{"0020000D": {"vr": "UI", "Value": [STUDY]}}])),
+        );
+        answers.insert(
+            format!("{base}/studies/{STUDY}/series?includefield=00180050"),
+            json(serde_json::json!([
+                {"0020000E": {"vr": "UI", "Value": ["1.2.3"]}, "00080060": {"vr": "CS", "Value": ["SR"]}, "00201209": {"vr": "IS", "Value": [1]}},
+                {"0020000E": {"vr": "UI", "Value": [SERIES]}, "00080060": {"vr": "CS", "Value": ["CT"]}, "00201209": {"vr": "IS", "Value": [n]}}
+            ])),
+        );
+        let list: Vec<serde_json::Value> = (0..n)
+            .map(|k| serde_json::json!({"00080018": {"vr": "UI", "Value": [format!("{SERIES}.{k}")]}}))
+            .collect();
+        answers.insert(
+            format!("{base}/studies/{STUDY}/series/{SERIES}/instances"),
+            json(serde_json::Value::Array(list)),
+        );
+        for k in 0..n {
+            let dicom = Slice::axial(SERIES, k, 4, 5).bytes();
+            let mut body = b"--XX\r\nContent-Type: application/dicom\r\n\r\n".to_vec();
+            body.extend_from_slice(&dicom);
+            body.extend_from_slice(b"\r\n--XX--");
+            answers.insert(
+                format!("{base}/studies/{STUDY}/series/{SERIES}/instances/{SERIES}.{k}"),
+                (
+                    200,
+                    "multipart/related; type=\"application/dicom\"; boundary=XX".to_owned(),
+                    body,
+                ),
+            );
+        }
+        FakeArchive {
+            answers,
+            flaky: Vec::new(),
+            seen: Mutex::new(Vec::new()),
+            in_flight: AtomicUsize::new(0),
+            most_in_flight: AtomicUsize::new(0),
+        }
+    }
+
+    fn client(a: FakeArchive) -> Client<FakeArchive> {
+        Client::with_transport(a, Base::parse("http://archive/dw").unwrap(), Auth::None)
+    }
+
+    #[test]
+    fn resolves_and_retrieves_with_requests_in_flight_and_a_retry() {
+        let mut a = archive(12);
+        a.flaky = vec![format!(
+            "http://archive/dw/studies/{STUDY}/series/{SERIES}/instances/{SERIES}.5"
+        )];
+        let c = client(a).with_parallel(3);
+        let r = c.resolve(STUDY, None).unwrap();
+        assert_eq!(r.series[r.chosen].series_uid, SERIES);
+        assert!(r.by_chooser);
+        let mut reports = Vec::new();
+        let loaded = c
+            .retrieve(STUDY, SERIES, &mut |p| reports.push(*p))
+            .unwrap();
+        assert_eq!(loaded.volume.dims, [5, 4, 12]);
+        assert_eq!(loaded.volume.value_at(2, 1, 7), (700 + 7) as f32 - 1024.0);
+        assert_eq!(reports.last().unwrap().instances_done, 12);
+        let most = c.transport.most_in_flight.load(Ordering::SeqCst);
+        assert!((2..=3).contains(&most), "in flight at once: {most}");
+        let seen = c.transport.seen.lock().unwrap();
+        assert_eq!(
+            seen.iter().filter(|u| u.ends_with(".5")).count(),
+            2,
+            "retried once"
+        );
+    }
+
+    #[test]
+    fn named_series_missing_study_and_failures_are_messages() {
+        let c = client(archive(2));
+        let r = c.resolve(STUDY, Some("1.2.3")).unwrap();
+        assert!(!r.by_chooser);
+        let e = c.resolve(STUDY, Some("9.9")).unwrap_err().to_string();
+        assert!(e.contains("has no series 9.9") && e.contains(SERIES), "{e}");
+        let e = c.resolve("7.7.7", None).unwrap_err().to_string();
+        assert!(e.starts_with("study 7.7.7 not found"), "{e}");
+
+        // An instance cut short every time fails with its name after two attempts.
+        let mut a = archive(3);
+        let url = format!("http://archive/dw/studies/{STUDY}/series/{SERIES}/instances/{SERIES}.1");
+        a.answers.get_mut(&url).unwrap().2.truncate(100);
+        let e = client(a)
+            .retrieve(STUDY, SERIES, &mut |_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with(&format!("instance 2 of 3 ({SERIES}.1) failed 2 times"))
+                && e.contains("cut short"),
+            "{e}"
+        );
+    }
+}

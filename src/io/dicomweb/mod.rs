@@ -1,0 +1,638 @@
+//! DICOMweb: finding a study in an archive (QIDO-RS) and retrieving a series (WADO-RS) into a
+//! `Volume`. Everything here but `client` is pure and platform-neutral (bytes and strings in,
+//! requests and typed results out), so the native client and the page's `fetch` share it:
+//!
+//! - this file: the archive's base URL, UIDs, credentials, the requests (URL, Accept,
+//!   Authorization) and what an HTTP status means;
+//! - `qido`: the QIDO-RS JSON of studies, series and instances, and the series chooser;
+//! - `multipart`: a push parser of WADO-RS `multipart/related; type="application/dicom"`
+//!   bodies, fed in chunks as they arrive;
+//! - `retrieve`: one series' retrieval as a state machine (which instance to ask for next,
+//!   one retry of a failed instance, progress), decoding each instance as it arrives into
+//!   [`crate::io::SeriesBuilder`], the file loader's own series code;
+//! - `client` (native only): the blocking HTTP transport (ureq) behind the [`client::Transport`]
+//!   trait and the driver that keeps several instance requests in flight.
+
+#[cfg(not(target_arch = "wasm32"))]
+pub mod client;
+pub mod multipart;
+pub mod qido;
+pub mod retrieve;
+
+pub use multipart::{MultipartParser, Part};
+pub use qido::{InstanceInfo, SeriesInfo, StudyInfo, choose_series};
+pub use retrieve::{Fetch, InstanceResponse, Progress, Retrieval};
+
+use crate::io::LoadError;
+
+/// Why a DICOMweb request or retrieval failed; each message names the URL, host or instance.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DicomWebError {
+    #[error("DICOMweb base URL {base:?}: {reason}")]
+    InvalidBase { base: String, reason: String },
+
+    #[error("{what} {uid:?} is not a DICOM UID (digits and dots, at most 64 characters)")]
+    InvalidUid { what: String, uid: String },
+
+    #[error("credentials: {0}")]
+    InvalidAuth(String),
+
+    #[error("{}", unauthorized_message(*status, url, *credentials))]
+    Unauthorized {
+        status: u16,
+        url: String,
+        /// What was sent: `None`, or a description of the credentials.
+        credentials: Option<&'static str>,
+    },
+
+    #[error("{what} not found ({url})")]
+    NotFound { what: String, url: String },
+
+    #[error(
+        "{url}: HTTP 406: the archive cannot send any transfer syntax this build decodes (asked for {asked})"
+    )]
+    NotAcceptable { url: String, asked: String },
+
+    #[error("{url}: HTTP {status} {reason}")]
+    Http {
+        url: String,
+        status: u16,
+        reason: String,
+    },
+
+    #[error(
+        "cannot connect to {host}: {message} (is the archive running there, and is the base URL right?)"
+    )]
+    Connect { host: String, message: String },
+
+    #[error("{url}: {message}")]
+    Transport { url: String, message: String },
+
+    #[error("{url}: the answer is not QIDO-RS JSON: {message}")]
+    Json { url: String, message: String },
+
+    #[error("{what}: multipart body: {message}")]
+    Multipart { what: String, message: String },
+
+    #[error("{what}: {size} bytes is more than the limit of {limit} bytes")]
+    TooLarge { what: String, size: u64, limit: u64 },
+
+    #[error("series {series} of study {study}: the archive lists no instances")]
+    NoInstances { study: String, series: String },
+
+    #[error("study {study} has no series {series} (it has: {available})")]
+    SeriesNotInStudy {
+        study: String,
+        series: String,
+        available: String,
+    },
+
+    #[error("{instance}: {source}")]
+    Load {
+        instance: String,
+        #[source]
+        source: LoadError,
+    },
+
+    #[error("{instance} failed {attempts} times; the last time: {source}")]
+    Failed {
+        instance: String,
+        attempts: u32,
+        #[source]
+        source: Box<DicomWebError>,
+    },
+
+    #[error("the retrieval was cancelled")]
+    Cancelled,
+}
+
+fn unauthorized_message(status: u16, url: &str, credentials: Option<&str>) -> String {
+    let what = if status == 403 {
+        "403 Forbidden"
+    } else {
+        "401 Unauthorized"
+    };
+    match credentials {
+        None => format!(
+            "{url}: HTTP {what}: the archive asks for credentials; give a bearer token (or, for an archive with HTTP Basic authentication such as Orthanc, a user name and password)"
+        ),
+        Some(c) => format!(
+            "{url}: HTTP {what}: the archive did not accept the {c} given; give a valid token (or user name and password)"
+        ),
+    }
+}
+
+impl DicomWebError {
+    /// Whether trying the same request again may help (a dropped connection, a body cut short,
+    /// a busy server), as opposed to an answer that will not change (401, 404, 406, bad data).
+    pub fn is_retryable(&self) -> bool {
+        match self {
+            Self::Transport { .. } | Self::Multipart { .. } | Self::Connect { .. } => true,
+            Self::Http { status, .. } => *status >= 500 || *status == 408 || *status == 429,
+            _ => false,
+        }
+    }
+}
+
+/// The archive's DICOMweb root: absolute (`http://host:8042/dicom-web`) or, for a page served
+/// by the archive itself, relative to the page's origin (`/dicom-web`). No trailing slash.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Base {
+    url: String,
+}
+
+impl Base {
+    pub fn parse(base: &str) -> Result<Self, DicomWebError> {
+        let invalid = |reason: &str| DicomWebError::InvalidBase {
+            base: base.to_owned(),
+            reason: reason.to_owned(),
+        };
+        let s = base.trim();
+        if s.is_empty() {
+            return Err(invalid("empty"));
+        }
+        if s.len() > 2048 {
+            return Err(invalid("longer than 2048 characters"));
+        }
+        if s.chars()
+            .any(|c| c.is_whitespace() || c.is_control() || "?#\"<>\\{}|^`".contains(c))
+        {
+            return Err(invalid(
+                "has a space, a control character, a query (?) or a fragment (#); give the archive's DICOMweb root, e.g. http://127.0.0.1:8042/dicom-web",
+            ));
+        }
+        let lower = s.to_ascii_lowercase();
+        let rest = if lower.starts_with("http://") {
+            &s[7..]
+        } else if lower.starts_with("https://") {
+            &s[8..]
+        } else if s.starts_with('/') && !s.starts_with("//") {
+            return Ok(Self {
+                url: s.trim_end_matches('/').to_owned(),
+            });
+        } else {
+            return Err(invalid(
+                "must start with http://, https:// or / (e.g. http://127.0.0.1:8042/dicom-web, or /dicom-web on the archive's own origin)",
+            ));
+        };
+        let authority = rest.split('/').next().unwrap_or("");
+        if authority.is_empty() {
+            return Err(invalid("has no host"));
+        }
+        if authority.contains('@') {
+            return Err(invalid(
+                "holds credentials (user@host); give them as a token instead, so they stay out of URLs and messages",
+            ));
+        }
+        Ok(Self {
+            url: s.trim_end_matches('/').to_owned(),
+        })
+    }
+
+    pub fn as_str(&self) -> &str {
+        &self.url
+    }
+
+    /// Relative to the page's origin (`/dicom-web`): usable only from a page.
+    pub fn is_relative(&self) -> bool {
+        self.url.starts_with('/')
+    }
+
+    /// `host:port` of an absolute base, for messages.
+    pub fn host(&self) -> Option<&str> {
+        let rest = self.url.split_once("://")?.1;
+        rest.split('/').next()
+    }
+
+    /// `{base}/studies?StudyInstanceUID={study}`: the study's patient and date (an empty list
+    /// when the archive does not hold it).
+    pub fn study_query(&self, study: &str) -> Result<String, DicomWebError> {
+        let study = check_uid("StudyInstanceUID", study)?;
+        Ok(format!("{}/studies?StudyInstanceUID={study}", self.url))
+    }
+
+    /// `{base}/studies/{study}/series`, asking for SliceThickness too where the archive has it.
+    pub fn series_query(&self, study: &str) -> Result<String, DicomWebError> {
+        let study = check_uid("StudyInstanceUID", study)?;
+        Ok(format!(
+            "{}/studies/{study}/series?includefield=00180050",
+            self.url
+        ))
+    }
+
+    /// `{base}/studies/{study}/series/{series}/instances`.
+    pub fn instances_query(&self, study: &str, series: &str) -> Result<String, DicomWebError> {
+        let study = check_uid("StudyInstanceUID", study)?;
+        let series = check_uid("SeriesInstanceUID", series)?;
+        Ok(format!(
+            "{}/studies/{study}/series/{series}/instances",
+            self.url
+        ))
+    }
+
+    /// `{base}/studies/{study}/series/{series}/instances/{instance}` (WADO-RS).
+    pub fn instance_url(
+        &self,
+        study: &str,
+        series: &str,
+        instance: &str,
+    ) -> Result<String, DicomWebError> {
+        let study = check_uid("StudyInstanceUID", study)?;
+        let series = check_uid("SeriesInstanceUID", series)?;
+        let instance = check_uid("SOPInstanceUID", instance)?;
+        Ok(format!(
+            "{}/studies/{study}/series/{series}/instances/{instance}",
+            self.url
+        ))
+    }
+}
+
+/// Checks that a UID is digits and dots (1 to 64 characters), so that it can go into a URL
+/// path as it is; a UID from the user or from an archive's answer is never trusted.
+pub fn check_uid<'a>(what: &str, uid: &'a str) -> Result<&'a str, DicomWebError> {
+    let u = uid.trim_end_matches(['\0', ' ']);
+    if u.is_empty()
+        || u.len() > 64
+        || !u.bytes().all(|b| b.is_ascii_digit() || b == b'.')
+        || u.starts_with('.')
+        || u.ends_with('.')
+        || u.contains("..")
+    {
+        return Err(DicomWebError::InvalidUid {
+            what: what.to_owned(),
+            uid: uid.chars().take(80).collect(),
+        });
+    }
+    Ok(u)
+}
+
+/// Credentials for the archive. `Debug` never shows them.
+#[derive(Clone, Default, PartialEq, Eq)]
+pub enum Auth {
+    #[default]
+    None,
+    /// `Authorization: Bearer <token>` (OAuth, cloud archives, a proxy in front of a PACS).
+    Bearer(String),
+    /// `Authorization: Basic` (Orthanc's RegisteredUsers, many plain archives).
+    Basic { user: String, password: String },
+}
+
+impl std::fmt::Debug for Auth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::None => "Auth::None",
+            Self::Bearer(_) => "Auth::Bearer(..)",
+            Self::Basic { .. } => "Auth::Basic(..)",
+        })
+    }
+}
+
+impl Auth {
+    /// A bearer token; refused if it holds characters that cannot go into a header.
+    pub fn bearer(token: &str) -> Result<Self, DicomWebError> {
+        let t = token.trim();
+        if t.is_empty() {
+            return Err(DicomWebError::InvalidAuth("the token is empty".to_owned()));
+        }
+        if !t.chars().all(|c| c.is_ascii_graphic()) {
+            return Err(DicomWebError::InvalidAuth(
+                "the token holds spaces, control or non-ASCII characters".to_owned(),
+            ));
+        }
+        Ok(Self::Bearer(t.to_owned()))
+    }
+
+    /// `user:password` for HTTP Basic authentication.
+    pub fn basic(user_password: &str) -> Result<Self, DicomWebError> {
+        let (user, password) = user_password
+            .split_once(':')
+            .ok_or_else(|| DicomWebError::InvalidAuth("expected user:password".to_owned()))?;
+        if user.is_empty() || user_password.chars().any(|c| c.is_control()) {
+            return Err(DicomWebError::InvalidAuth(
+                "expected user:password with a non-empty user and no control characters".to_owned(),
+            ));
+        }
+        Ok(Self::Basic {
+            user: user.to_owned(),
+            password: password.to_owned(),
+        })
+    }
+
+    /// The Authorization header's value, if any.
+    pub fn header(&self) -> Option<String> {
+        match self {
+            Self::None => None,
+            Self::Bearer(t) => Some(format!("Bearer {t}")),
+            Self::Basic { user, password } => Some(format!(
+                "Basic {}",
+                base64(format!("{user}:{password}").as_bytes())
+            )),
+        }
+    }
+
+    /// What was sent, for messages (never the secret itself).
+    pub fn describe(&self) -> Option<&'static str> {
+        match self {
+            Self::None => None,
+            Self::Bearer(_) => Some("bearer token"),
+            Self::Basic { .. } => Some("user name and password"),
+        }
+    }
+}
+
+/// Standard base64 with padding (RFC 4648), for Basic authentication.
+fn base64(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            chunk.get(1).copied().unwrap_or(0),
+            chunk.get(2).copied().unwrap_or(0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for i in 0..4 {
+            if i <= chunk.len() {
+                out.push(char::from(ALPHABET[((n >> (18 - 6 * i)) & 63) as usize]));
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+/// One GET the client makes: its URL and headers.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Request {
+    pub url: String,
+    /// Header names and values; the Authorization value is a secret (never logged).
+    pub headers: Vec<(&'static str, String)>,
+}
+
+impl Request {
+    /// A QIDO-RS query (JSON).
+    pub fn qido(url: String, auth: &Auth) -> Self {
+        Self::with_accept(url, "application/dicom+json".to_owned(), auth)
+    }
+
+    /// A WADO-RS retrieval of DICOM instances in the transfer syntaxes this build decodes.
+    pub fn wado(url: String, auth: &Auth) -> Self {
+        Self::with_accept(url, wado_accept(), auth)
+    }
+
+    fn with_accept(url: String, accept: String, auth: &Auth) -> Self {
+        let mut headers = vec![("Accept", accept)];
+        if let Some(a) = auth.header() {
+            headers.push(("Authorization", a));
+        }
+        Self { url, headers }
+    }
+}
+
+/// The Accept header of WADO-RS retrievals: one `multipart/related; type="application/dicom"`
+/// media range per transfer syntax this build decodes. Explicit VR little endian has the
+/// highest quality and comes last: archives that follow RFC 9110 choose by quality (lossless
+/// compressed next, lossy, which an archive only sends as it stored it, last), and some
+/// (Orthanc's DICOMweb plugin 1.7) take the last range given.
+pub fn wado_accept() -> String {
+    let range = |uid: &str, q: Option<&str>| {
+        let mut s = format!("multipart/related; type=\"application/dicom\"; transfer-syntax={uid}");
+        if let Some(q) = q {
+            s.push_str("; q=");
+            s.push_str(q);
+        }
+        s
+    };
+    let syntaxes = crate::io::decodable_transfer_syntaxes();
+    let mut ranges: Vec<String> = syntaxes
+        .iter()
+        .filter(|(uid, _)| *uid != EXPLICIT_LE)
+        .map(|(uid, lossless)| range(uid, Some(if *lossless { "0.9" } else { "0.5" })))
+        .collect();
+    ranges.push(range(EXPLICIT_LE, None));
+    ranges.join(", ")
+}
+
+/// The transfer syntaxes asked for, for messages.
+pub fn asked_syntaxes() -> String {
+    crate::io::decodable_transfer_syntaxes()
+        .iter()
+        .map(|(uid, _)| *uid)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
+
+/// What an HTTP status means for a request of `what` (e.g. "study 1.2.3"): `Ok` for 2xx.
+pub fn check_status(status: u16, url: &str, what: &str, auth: &Auth) -> Result<(), DicomWebError> {
+    match status {
+        200..=299 => Ok(()),
+        401 | 403 => Err(DicomWebError::Unauthorized {
+            status,
+            url: url.to_owned(),
+            credentials: auth.describe(),
+        }),
+        404 => Err(DicomWebError::NotFound {
+            what: what.to_owned(),
+            url: url.to_owned(),
+        }),
+        406 => Err(DicomWebError::NotAcceptable {
+            url: url.to_owned(),
+            asked: asked_syntaxes(),
+        }),
+        _ => Err(DicomWebError::Http {
+            url: url.to_owned(),
+            status,
+            reason: reason_phrase(status).to_owned(),
+        }),
+    }
+}
+
+fn reason_phrase(status: u16) -> &'static str {
+    match status {
+        400 => "Bad Request",
+        405 => "Method Not Allowed",
+        408 => "Request Timeout",
+        410 => "Gone",
+        413 => "Content Too Large",
+        415 => "Unsupported Media Type",
+        429 => "Too Many Requests",
+        500 => "Internal Server Error",
+        501 => "Not Implemented",
+        502 => "Bad Gateway",
+        503 => "Service Unavailable",
+        504 => "Gateway Timeout",
+        300..=399 => "(a redirect that was not followed)",
+        _ => "",
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bases_absolute_and_relative() {
+        let b = Base::parse("http://127.0.0.1:8042/dicom-web/").unwrap();
+        assert_eq!(b.as_str(), "http://127.0.0.1:8042/dicom-web");
+        assert_eq!(b.host(), Some("127.0.0.1:8042"));
+        assert!(!b.is_relative());
+        assert_eq!(
+            b.instance_url("1.2", "1.2.3", "4.5").unwrap(),
+            "http://127.0.0.1:8042/dicom-web/studies/1.2/series/1.2.3/instances/4.5"
+        );
+        assert_eq!(
+            b.study_query("1.2").unwrap(),
+            "http://127.0.0.1:8042/dicom-web/studies?StudyInstanceUID=1.2"
+        );
+        assert_eq!(
+            b.series_query("1.2").unwrap(),
+            "http://127.0.0.1:8042/dicom-web/studies/1.2/series?includefield=00180050"
+        );
+        let r = Base::parse("/dicom-web").unwrap();
+        assert!(r.is_relative());
+        assert_eq!(r.host(), None);
+        assert_eq!(
+            r.instances_query("1.2", "3").unwrap(),
+            "/dicom-web/studies/1.2/series/3/instances"
+        );
+        assert_eq!(
+            Base::parse("HTTPS://pacs.example/wado").unwrap().host(),
+            Some("pacs.example")
+        );
+        for bad in [
+            "",
+            "dicom-web",
+            "//host/x",
+            "ftp://x",
+            "http://",
+            "http://u:p@host/x",
+            "http://host/x?y=1",
+            "http://host/a b",
+            "http://host/#x",
+        ] {
+            let e = Base::parse(bad).unwrap_err();
+            assert!(matches!(e, DicomWebError::InvalidBase { .. }), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn uids_are_digits_and_dots_only() {
+        assert_eq!(check_uid("x", "1.2.840.10008\0").unwrap(), "1.2.840.10008");
+        for bad in [
+            "",
+            "1.2/../3",
+            "1.2.3a",
+            ".1",
+            "1.",
+            "1..2",
+            &"1".repeat(65),
+            "1 2",
+        ] {
+            assert!(check_uid("x", bad).is_err(), "{bad}");
+        }
+        let e = Base::parse("http://h")
+            .unwrap()
+            .instance_url("1.2", "../../x", "3")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("SeriesInstanceUID") && e.contains("../../x"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn credentials_headers_and_redaction() {
+        assert_eq!(base64(b""), "");
+        assert_eq!(base64(b"f"), "Zg==");
+        assert_eq!(base64(b"fo"), "Zm8=");
+        assert_eq!(base64(b"foo"), "Zm9v");
+        assert_eq!(base64(b"foob"), "Zm9vYg==");
+        assert_eq!(
+            Auth::basic("Aladdin:open sesame")
+                .unwrap()
+                .header()
+                .unwrap(),
+            "Basic QWxhZGRpbjpvcGVuIHNlc2FtZQ=="
+        );
+        let t = Auth::bearer(" abc.def ").unwrap();
+        assert_eq!(t.header().unwrap(), "Bearer abc.def");
+        assert!(!format!("{t:?}").contains("abc"));
+        assert!(Auth::bearer("a\r\nX-Evil: 1").is_err());
+        assert!(Auth::bearer("").is_err());
+        assert!(Auth::basic("nopassword").is_err());
+        assert!(Auth::basic(":p").is_err());
+        let r = Request::wado("http://h/x".to_owned(), &t);
+        assert!(
+            r.headers
+                .iter()
+                .any(|(k, v)| *k == "Authorization" && v == "Bearer abc.def")
+        );
+        assert!(
+            Request::qido("u".to_owned(), &Auth::None)
+                .headers
+                .iter()
+                .all(|(k, _)| *k != "Authorization")
+        );
+    }
+
+    #[test]
+    fn accept_lists_what_this_build_decodes_explicit_le_last() {
+        let a = wado_accept();
+        let ranges: Vec<&str> = a.split(", ").collect();
+        assert!(ranges.len() >= 5, "{a}");
+        assert!(ranges.iter().all(|r| {
+            r.starts_with("multipart/related; type=\"application/dicom\"; transfer-syntax=")
+        }));
+        assert!(
+            ranges
+                .last()
+                .unwrap()
+                .ends_with("transfer-syntax=1.2.840.10008.1.2.1")
+        );
+        assert!(a.contains("1.2.840.10008.1.2.5; q=0.9"), "{a}");
+        assert!(
+            !a.contains("1.2.840.10008.1.2.4.80"),
+            "JPEG-LS is not decoded: {a}"
+        );
+        assert!(!a.contains('*'));
+    }
+
+    #[test]
+    fn statuses_become_messages() {
+        let e = check_status(401, "http://h/x", "study 1", &Auth::None).unwrap_err();
+        assert!(e.to_string().contains("asks for credentials"), "{e}");
+        assert!(!e.is_retryable());
+        let e = check_status(403, "u", "s", &Auth::Bearer("t".to_owned())).unwrap_err();
+        let m = e.to_string();
+        assert!(
+            m.contains("403") && m.contains("did not accept the bearer token"),
+            "{m}"
+        );
+        assert!(!m.contains(" t "), "{m}");
+        let e = check_status(404, "u", "study 9.9", &Auth::None).unwrap_err();
+        assert_eq!(e.to_string(), "study 9.9 not found (u)");
+        assert!(
+            check_status(406, "u", "s", &Auth::None)
+                .unwrap_err()
+                .to_string()
+                .contains("1.2.840.10008.1.2.1")
+        );
+        assert!(
+            check_status(503, "u", "s", &Auth::None)
+                .unwrap_err()
+                .is_retryable()
+        );
+        assert!(
+            !check_status(400, "u", "s", &Auth::None)
+                .unwrap_err()
+                .is_retryable()
+        );
+        assert!(check_status(204, "u", "s", &Auth::None).is_ok());
+    }
+}

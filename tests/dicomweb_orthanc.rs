@@ -1,0 +1,740 @@
+//! The DICOMweb client against a real archive: Debian's Orthanc with its DICOMweb plugin,
+//! started on a free 127.0.0.1 port with a temporary storage folder, fed the DICOM series of
+//! ../shared/data/series through its REST API, and stopped by its pid at the end (a Drop guard,
+//! so also when a check fails). Where Orthanc or ../shared/data is missing the tests say so and
+//! skip, except under CI=true, where that is a failure (`cargo xtask setup` installs Orthanc).
+//! Two tests need neither: a connection refused, and an instance cut short by a tiny local
+//! server.
+
+mod common;
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+use shapecast::io::dicomweb::client::{Client, Transport, UreqTransport};
+use shapecast::io::dicomweb::{Auth, Base, DicomWebError, Request, Retrieval};
+use shapecast::io::{InputFile, Limits};
+
+fn ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+/// Orthanc's binary and its DICOMweb plugin, or a visible skip (a failure under CI=true).
+fn orthanc_install() -> Option<(PathBuf, PathBuf)> {
+    let binary = ["/usr/sbin/Orthanc", "/usr/bin/Orthanc"]
+        .iter()
+        .map(PathBuf::from)
+        .find(|p| p.exists());
+    // Debian links the plugin into /usr/share/orthanc/plugins (`dpkg -L orthanc-dicomweb`).
+    let plugin_dirs = ["/usr/share/orthanc/plugins", "/usr/lib/orthanc"];
+    let plugin = plugin_dirs.iter().find_map(|d| {
+        let mut found: Vec<PathBuf> = std::fs::read_dir(d)
+            .ok()?
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| {
+                p.file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with("libOrthancDicomWeb.so"))
+            })
+            .collect();
+        found.sort();
+        found.into_iter().next()
+    });
+    match (binary, plugin) {
+        (Some(b), Some(p)) => Some((b, p)),
+        (b, p) => {
+            let what = format!(
+                "Orthanc {} and its DICOMweb plugin {} (Debian packages orthanc, orthanc-dicomweb; `cargo xtask setup` installs them)",
+                if b.is_some() { "found" } else { "missing" },
+                if p.is_some() { "found" } else { "missing" }
+            );
+            if ci() {
+                panic!("CI=true but {what}");
+            }
+            eprintln!("SKIPPED: {what}");
+            None
+        }
+    }
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port on 127.0.0.1")
+}
+
+const USER: &str = "shapecast";
+const PASSWORD: &str = "test-password";
+
+/// A running Orthanc; dropping it kills the process by its pid and removes its folder.
+struct Orthanc {
+    child: Child,
+    port: u16,
+    dir: PathBuf,
+    auth: bool,
+    agent: ureq::Agent,
+}
+
+impl Drop for Orthanc {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+impl Orthanc {
+    /// Starts Orthanc with the DICOMweb plugin (and HTTP Basic authentication if `auth`).
+    fn start(auth: bool) -> Option<Self> {
+        let (binary, plugin) = orthanc_install()?;
+        static N: AtomicUsize = AtomicUsize::new(0);
+        let dir = std::env::temp_dir().join(format!(
+            "shapecast-orthanc-{}-{}",
+            std::process::id(),
+            N.fetch_add(1, Ordering::SeqCst)
+        ));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("db")).expect("temporary folder");
+        let port = free_port();
+        let config = serde_json::json!({
+            "Name": "shapecast-test",
+            "StorageDirectory": dir.join("db"),
+            "IndexDirectory": dir.join("db"),
+            "HttpPort": port,
+            "DicomServerEnabled": false,
+            "RemoteAccessAllowed": false,
+            "AuthenticationEnabled": auth,
+            "RegisteredUsers": if auth { serde_json::json!({ USER: PASSWORD }) } else { serde_json::json!({}) },
+            "HttpCompressionEnabled": false,
+            "Plugins": [plugin],
+            "DicomWeb": { "Enable": true, "Root": "/dicom-web/" },
+        });
+        let config_path = dir.join("orthanc.json");
+        std::fs::write(
+            &config_path,
+            serde_json::to_vec_pretty(&config).unwrap_or_default(),
+        )
+        .expect("write the config");
+        let log = std::fs::File::create(dir.join("orthanc.log")).expect("log file");
+        let child = Command::new(&binary)
+            .arg(&config_path)
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("start Orthanc");
+        let agent = ureq::Agent::new_with_config(
+            ureq::Agent::config_builder()
+                .http_status_as_error(false)
+                .build(),
+        );
+        let mut o = Self {
+            child,
+            port,
+            dir,
+            auth,
+            agent,
+        };
+        let started = Instant::now();
+        loop {
+            if let Ok(Some(status)) = o.child.try_wait() {
+                panic!("Orthanc exited ({status}): {}", o.log());
+            }
+            if o.rest_get("/system").is_ok_and(|s| s == 200) {
+                break;
+            }
+            if started.elapsed() > Duration::from_secs(30) {
+                panic!("Orthanc did not answer within 30 s: {}", o.log());
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        Some(o)
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.join("orthanc.log")).unwrap_or_default()
+    }
+
+    fn url(&self, path: &str) -> String {
+        format!("http://127.0.0.1:{}{path}", self.port)
+    }
+
+    fn base(&self) -> Base {
+        Base::parse(&self.url("/dicom-web")).expect("base")
+    }
+
+    fn basic(&self) -> Option<String> {
+        self.auth.then(|| {
+            Auth::basic(&format!("{USER}:{PASSWORD}"))
+                .ok()
+                .and_then(|a| a.header())
+                .unwrap_or_default()
+        })
+    }
+
+    fn rest_get(&self, path: &str) -> Result<u16, ureq::Error> {
+        let mut req = self.agent.get(self.url(path));
+        if let Some(a) = self.basic() {
+            req = req.header("Authorization", a);
+        }
+        Ok(req.call()?.status().as_u16())
+    }
+
+    fn rest_post(&self, path: &str, body: &[u8]) -> Vec<u8> {
+        let mut req = self.agent.post(self.url(path));
+        if let Some(a) = self.basic() {
+            req = req.header("Authorization", a);
+        }
+        let mut resp = req
+            .send(body)
+            .unwrap_or_else(|e| panic!("POST {path}: {e}"));
+        assert_eq!(resp.status().as_u16(), 200, "POST {path}");
+        resp.body_mut()
+            .with_config()
+            .limit(64 << 20)
+            .read_to_vec()
+            .unwrap_or_else(|e| panic!("POST {path}: {e}"))
+    }
+
+    /// Uploads files (POST /instances, four at a time); returns Orthanc's instance IDs.
+    fn upload(&self, files: &[PathBuf]) -> Vec<String> {
+        let ids = std::sync::Mutex::new(vec![String::new(); files.len()]);
+        let next = AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            for _ in 0..4 {
+                s.spawn(|| {
+                    loop {
+                        let i = next.fetch_add(1, Ordering::SeqCst);
+                        let Some(f) = files.get(i) else { return };
+                        let bytes = std::fs::read(f).expect("read a DICOM file");
+                        let answer = self.rest_post("/instances", &bytes);
+                        let v: serde_json::Value =
+                            serde_json::from_slice(&answer).expect("Orthanc's JSON");
+                        if let Ok(mut ids) = ids.lock() {
+                            ids[i] = v["ID"].as_str().unwrap_or_default().to_owned();
+                        }
+                    }
+                });
+            }
+        });
+        ids.into_inner().unwrap_or_default()
+    }
+}
+
+/// The files of a ../shared/data series folder, sorted.
+fn series_files(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .expect("series folder")
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_file())
+        .collect();
+    v.sort();
+    v
+}
+
+/// StudyInstanceUID and SeriesInstanceUID of a DICOM file.
+fn uids(path: &Path) -> (String, String) {
+    let obj = dicom_object::open_file(path).expect("a DICOM file");
+    let get = |name: &str| {
+        obj.element_by_name(name)
+            .ok()
+            .and_then(|e| e.to_str().ok())
+            .map(|s| s.trim_end_matches(['\0', ' ']).to_owned())
+            .unwrap_or_default()
+    };
+    (get("StudyInstanceUID"), get("SeriesInstanceUID"))
+}
+
+fn shapecast(args: &[&str], env: &[(&str, &str)]) -> (bool, String, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_shapecast"));
+    cmd.args(args)
+        .env_remove("SHAPECAST_DICOMWEB_TOKEN")
+        .env_remove("SHAPECAST_DICOMWEB_USER");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let out = cmd.output().expect("run shapecast");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn orthanc_listing_retrieval_geometry_and_messages() {
+    let Some(series_root) = common::shared_data("series") else {
+        return;
+    };
+    let Some(orthanc) = Orthanc::start(false) else {
+        return;
+    };
+    let chest_dir = series_root.join("ct-chest-lung-kernel");
+    let chest = series_files(&chest_dir);
+    let mut all = Vec::new();
+    for name in [
+        "ct-chest-lung-kernel",
+        "ct-3slice-liver",
+        "ct-head-64px",
+        "mr-prostate-adc-oblique",
+    ] {
+        all.extend(series_files(&series_root.join(name)));
+    }
+    let t = Instant::now();
+    let ids = orthanc.upload(&all);
+    eprintln!(
+        "uploaded {} files in {:.1} s",
+        all.len(),
+        t.elapsed().as_secs_f64()
+    );
+    let (study, series) = uids(&chest[0]);
+
+    // The 3-slice liver CT copied into the chest study as a second series (Orthanc rewrites
+    // the UIDs), so that the study lists two series and the chooser has to pick.
+    let liver_series = "1.2.826.0.1.3680043.8.498.16016";
+    for id in &ids[chest.len()..chest.len() + 3] {
+        let modify = serde_json::json!({
+            "Replace": {
+                "StudyInstanceUID": study,
+                "SeriesInstanceUID": liver_series,
+                "PatientID": "Lung_Dx-A0002",
+                "PatientName": "Lung_Dx-A0002",
+                "StudyDate": "20070425",
+            },
+            "Force": true,
+        });
+        let copy = orthanc.rest_post(
+            &format!("/instances/{id}/modify"),
+            &serde_json::to_vec(&modify).unwrap_or_default(),
+        );
+        orthanc.rest_post("/instances", &copy);
+    }
+
+    let client = Client::new(orthanc.base(), Auth::None).expect("client");
+    // QIDO-RS: the study and its two series; the chooser takes the 30-slice CT.
+    let resolved = client.resolve(&study, None).expect("resolve");
+    assert_eq!(resolved.study.study_uid, study);
+    assert_eq!(resolved.study.patient_id.as_deref(), Some("Lung_Dx-A0002"));
+    assert_eq!(resolved.study.study_date.as_deref(), Some("20070425"));
+    assert_eq!(resolved.series.len(), 2, "{:?}", resolved.series);
+    let chosen = &resolved.series[resolved.chosen];
+    assert!(resolved.by_chooser);
+    assert_eq!(chosen.series_uid, series);
+    assert_eq!(chosen.modality.as_deref(), Some("CT"));
+    assert_eq!(chosen.instances, Some(30));
+    assert_eq!(chosen.slice_thickness_mm, Some(8.0));
+    assert_eq!(
+        chosen.description.as_deref(),
+        Some("ThoraxRoutine  8.0.0  B70f")
+    );
+    let liver = resolved
+        .series
+        .iter()
+        .find(|s| s.series_uid == liver_series)
+        .expect("the copied series is listed");
+    assert_eq!(liver.instances, Some(3));
+    assert_eq!(liver.slice_thickness_mm, Some(1.25));
+    let instances = client.list_instances(&study, &series).expect("instances");
+    assert_eq!(instances.len(), 30);
+
+    // WADO-RS: the series equals the file loader's volume of the same folder, voxel for voxel.
+    let t = Instant::now();
+    let mut reports = 0;
+    let got = client
+        .retrieve(&study, &series, &mut |_| reports += 1)
+        .expect("retrieve");
+    let retrieve_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let files: Vec<InputFile> = chest.iter().map(|p| common::input(p)).collect();
+    let want = shapecast::io::load(&files).expect("file loader");
+    let disk_s = t.elapsed().as_secs_f64();
+    eprintln!(
+        "ct-chest-lung-kernel (30 x 512x512): DICOMweb retrieval {retrieve_s:.2} s, files from disk {disk_s:.2} s"
+    );
+    assert_eq!(reports, 30);
+    assert_eq!(got.volume.dims, [512, 512, 30]);
+    assert!(
+        got.volume.source.starts_with("DICOMweb http://127.0.0.1:"),
+        "{}",
+        got.volume.source
+    );
+    let mut got_volume = got.volume.clone();
+    got_volume.source = want.volume.source.clone();
+    assert!(got_volume == want.volume, "the volumes differ");
+    assert_eq!(got.volume.spacing_mm, want.volume.spacing_mm);
+    assert_eq!(got.volume.origin_mm, want.volume.origin_mm);
+    assert_eq!(got.volume.direction, want.volume.direction);
+
+    // A study the archive does not hold, a series not in the study.
+    let e = client
+        .resolve("1.2.826.0.1.3680043.8.498.999", None)
+        .expect_err("an error")
+        .to_string();
+    assert!(
+        e.starts_with("study 1.2.826.0.1.3680043.8.498.999 not found"),
+        "{e}"
+    );
+    let e = client
+        .resolve(&study, Some("1.2.3.4"))
+        .expect_err("an error")
+        .to_string();
+    assert!(
+        e.contains("has no series 1.2.3.4") && e.contains(&series),
+        "{e}"
+    );
+    let e = client
+        .retrieve(&study, "1.2.3.4", &mut |_| {})
+        .expect_err("an error")
+        .to_string();
+    assert!(e.contains("lists no instances"), "{e}");
+
+    // A syntax this build cannot decode, as Orthanc sends it when asked (JPEG-LS): named.
+    let transport = UreqTransport::new(1);
+    let url = orthanc
+        .base()
+        .instance_url(&study, &series, &instances[0].sop_uid)
+        .expect("url");
+    let mut request = Request::wado(url, &Auth::None);
+    request.headers[0].1 =
+        "multipart/related; type=\"application/dicom\"; transfer-syntax=1.2.840.10008.1.2.4.80"
+            .to_owned();
+    let response = transport.get(&request).expect("JPEG-LS answer");
+    assert_eq!(response.status, 200);
+    let mut body = Vec::new();
+    let (ct, mut reader) = (response.content_type, response.body);
+    reader.read_to_end(&mut body).expect("body");
+    let mut retrieval = Retrieval::new(
+        orthanc.base(),
+        &study,
+        &series,
+        instances[..1].to_vec(),
+        Auth::None,
+        Limits::default(),
+    )
+    .expect("retrieval");
+    let fetch = retrieval.next_fetch().expect("a fetch");
+    let mut parts = Vec::new();
+    let mut parser = shapecast::io::dicomweb::MultipartParser::new(
+        ct.as_deref(),
+        "jpeg-ls",
+        retrieval.multipart_limits(),
+    )
+    .expect("multipart");
+    parser
+        .feed(&body, &mut |p| {
+            parts.push(p);
+            Ok(())
+        })
+        .expect("parse");
+    parser
+        .finish(&mut |p| {
+            parts.push(p);
+            Ok(())
+        })
+        .expect("parse");
+    assert_eq!(parts.len(), 1);
+    let e = retrieval
+        .received(fetch.id, parts)
+        .expect_err("an error")
+        .to_string();
+    assert!(
+        e.contains("1.2.840.10008.1.2.4.80")
+            && e.contains("JPEG-LS")
+            && e.contains("instance 1 of 1"),
+        "{e}"
+    );
+
+    // The command line: the series list on stderr, the volume as `info --json` on the folder.
+    let base = orthanc.url("/dicom-web");
+    let (ok, stdout, stderr) = shapecast(
+        &["info", "--json", "--dicomweb", &base, "--study", &study],
+        &[],
+    );
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("2 series:") && stderr.contains("* CT     30 instances, 8 mm"),
+        "{stderr}"
+    );
+    assert!(stderr.contains(liver_series), "{stderr}");
+    let (ok, disk_stdout, stderr_disk) =
+        shapecast(&["info", "--json", &chest_dir.to_string_lossy()], &[]);
+    assert!(ok, "{stderr_disk}");
+    let web: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+    let disk: serde_json::Value = serde_json::from_str(&disk_stdout).expect("JSON");
+    for key in [
+        "dims",
+        "spacing_mm",
+        "origin_mm",
+        "direction",
+        "min",
+        "max",
+        "voxel_type",
+        "modality",
+        "warnings",
+    ] {
+        assert_eq!(web[key], disk[key], "{key}");
+    }
+    // With --series: no list, the named series.
+    let (ok, stdout, stderr) = shapecast(
+        &[
+            "info",
+            "--json",
+            "--dicomweb",
+            &base,
+            "--study",
+            &study,
+            "--series",
+            liver_series,
+        ],
+        &[],
+    );
+    assert!(ok, "{stderr}");
+    assert!(!stderr.contains("series:"), "{stderr}");
+    let liver: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+    assert_eq!(liver["dims"], serde_json::json!([512, 512, 3]));
+    let (ok, _, stderr) = shapecast(&["info", "--dicomweb", &base, "--study", "1.2.3.4.5"], &[]);
+    assert!(
+        !ok && stderr.contains("study 1.2.3.4.5 not found"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn orthanc_with_authentication() {
+    let Some(series_root) = common::shared_data("series/ct-3slice-liver") else {
+        return;
+    };
+    let Some(orthanc) = Orthanc::start(true) else {
+        return;
+    };
+    let files = series_files(&series_root);
+    orthanc.upload(&files);
+    let (study, series) = uids(&files[0]);
+    let base = orthanc.base();
+
+    let e = Client::new(base.clone(), Auth::None)
+        .expect("client")
+        .resolve(&study, None)
+        .expect_err("an error");
+    assert!(
+        matches!(e, DicomWebError::Unauthorized { status: 401, .. }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("asks for credentials"), "{e}");
+    // Orthanc knows Basic authentication only: a bearer token is refused, and said so.
+    let token = Auth::bearer("not-a-real-token").expect("token");
+    let e = Client::new(base.clone(), token)
+        .expect("client")
+        .resolve(&study, None)
+        .expect_err("an error")
+        .to_string();
+    assert!(
+        e.contains("401") && e.contains("did not accept the bearer token"),
+        "{e}"
+    );
+    assert!(!e.contains("not-a-real-token"), "{e}");
+    let wrong = Auth::basic(&format!("{USER}:wrong")).expect("user");
+    let e = Client::new(base.clone(), wrong)
+        .expect("client")
+        .resolve(&study, None)
+        .expect_err("an error")
+        .to_string();
+    assert!(
+        e.contains("did not accept the user name and password"),
+        "{e}"
+    );
+
+    let right = Auth::basic(&format!("{USER}:{PASSWORD}")).expect("user");
+    let client = Client::new(base, right).expect("client");
+    let r = client.resolve(&study, None).expect("resolve");
+    assert_eq!(r.series[r.chosen].series_uid, series);
+    let got = client
+        .retrieve(&study, &series, &mut |_| {})
+        .expect("retrieve");
+    let inputs: Vec<InputFile> = files.iter().map(|p| common::input(p)).collect();
+    let mut want = shapecast::io::load(&inputs).expect("file loader").volume;
+    want.source = got.volume.source.clone();
+    assert!(got.volume == want, "the volumes differ");
+
+    // The command line asks for a token, and takes credentials from the environment.
+    let url = orthanc.url("/dicom-web");
+    let (ok, _, stderr) = shapecast(&["info", "--dicomweb", &url, "--study", &study], &[]);
+    assert!(!ok, "{stderr}");
+    assert!(
+        stderr.contains("401") && stderr.contains("--token") && stderr.contains("--user"),
+        "{stderr}"
+    );
+    let user = format!("{USER}:{PASSWORD}");
+    let (ok, stdout, stderr) = shapecast(
+        &["info", "--json", "--dicomweb", &url, "--study", &study],
+        &[("SHAPECAST_DICOMWEB_USER", &user)],
+    );
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("\"dims\""), "{stdout}");
+}
+
+#[test]
+fn connection_refused_names_the_host() {
+    let port = free_port();
+    let base = Base::parse(&format!("http://127.0.0.1:{port}/dicom-web")).expect("base");
+    let e = Client::new(base, Auth::None)
+        .expect("client")
+        .resolve("1.2.3", None)
+        .expect_err("an error");
+    assert!(matches!(e, DicomWebError::Connect { .. }), "{e}");
+    let m = e.to_string();
+    assert!(
+        m.starts_with(&format!("cannot connect to 127.0.0.1:{port}")),
+        "{m}"
+    );
+    let (ok, _, stderr) = shapecast(
+        &[
+            "info",
+            "--dicomweb",
+            &format!("http://127.0.0.1:{port}/dicom-web"),
+            "--study",
+            "1.2.3",
+        ],
+        &[],
+    );
+    assert!(
+        !ok && stderr.contains(&format!("cannot connect to 127.0.0.1:{port}")),
+        "{stderr}"
+    );
+}
+
+/// A tiny HTTP server on 127.0.0.1 that answers QIDO-RS for one series of two instances and
+/// sends the second instance cut short: with a Content-Length it does not honour
+/// (`declared_length`), or without one, closing the connection mid-body.
+struct CutShortServer {
+    port: u16,
+    stop: Arc<AtomicBool>,
+    hits: Arc<AtomicUsize>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+const STUDY: &str = "1.2.826.0.1.3680043.8.498.1";
+const SERIES: &str = "1.2.826.0.1.3680043.8.498.1.1";
+
+impl CutShortServer {
+    fn start(instance: Vec<u8>, declared_length: bool) -> Self {
+        let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+        let port = listener.local_addr().expect("address").port();
+        let stop = Arc::new(AtomicBool::new(false));
+        let hits = Arc::new(AtomicUsize::new(0));
+        let (stop2, hits2) = (stop.clone(), hits.clone());
+        let thread = std::thread::spawn(move || {
+            for stream in listener.incoming() {
+                if stop2.load(Ordering::SeqCst) {
+                    return;
+                }
+                let Ok(stream) = stream else { continue };
+                serve(stream, &instance, declared_length, &hits2);
+            }
+        });
+        Self {
+            port,
+            stop,
+            hits,
+            thread: Some(thread),
+        }
+    }
+}
+
+impl Drop for CutShortServer {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        let _ = TcpStream::connect(("127.0.0.1", self.port));
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn serve(mut stream: TcpStream, instance: &[u8], declared_length: bool, hits: &AtomicUsize) {
+    let _ = stream.set_read_timeout(Some(Duration::from_secs(5)));
+    let mut head = Vec::new();
+    let mut byte = [0u8; 1];
+    while !head.ends_with(b"\r\n\r\n") && head.len() < 16384 {
+        match stream.read(&mut byte) {
+            Ok(1) => head.push(byte[0]),
+            _ => return,
+        }
+    }
+    let head = String::from_utf8_lossy(&head);
+    let path = head.split_whitespace().nth(1).unwrap_or("").to_owned();
+    let json = |v: serde_json::Value| {
+        let body = v.to_string();
+        format!(
+            "HTTP/1.1 200 OK\r\nContent-Type: application/dicom+json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+            body.len()
+        )
+        .into_bytes()
+    };
+    let uid = |tag: &str, v: &str| serde_json::json!({ tag: { "vr": "UI", "Value": [v] } });
+    let answer: Vec<u8> = if path.starts_with("/dw/studies?") {
+        json(serde_json::json!([uid("0020000D", STUDY)]))
+    } else if path.ends_with("/series?includefield=00180050") {
+        json(serde_json::json!([uid("0020000E", SERIES)]))
+    } else if path.ends_with("/instances") {
+        json(serde_json::json!([
+            uid("00080018", &format!("{SERIES}.1")),
+            uid("00080018", &format!("{SERIES}.2"))
+        ]))
+    } else if path.contains("/instances/") {
+        let mut body = b"--CUT\r\nContent-Type: application/dicom\r\n\r\n".to_vec();
+        body.extend_from_slice(instance);
+        body.extend_from_slice(b"\r\n--CUT--\r\n");
+        let full = body.len();
+        if path.ends_with(".2") {
+            hits.fetch_add(1, Ordering::SeqCst);
+            body.truncate(full / 2);
+        }
+        let length = if declared_length {
+            format!("Content-Length: {full}\r\n")
+        } else {
+            String::new()
+        };
+        let mut a = format!(
+            "HTTP/1.1 200 OK\r\nContent-Type: multipart/related; type=\"application/dicom\"; boundary=CUT\r\n{length}Connection: close\r\n\r\n"
+        )
+        .into_bytes();
+        a.extend_from_slice(&body);
+        a
+    } else {
+        b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n".to_vec()
+    };
+    let _ = stream.write_all(&answer);
+    let _ = stream.flush();
+}
+
+#[test]
+fn an_instance_cut_short_is_asked_for_again_then_named() {
+    let instance =
+        std::fs::read(common::test_data("dicom/ct-head-64px/CTHead40.dcm")).expect("bundled DICOM");
+    for declared_length in [false, true] {
+        let server = CutShortServer::start(instance.clone(), declared_length);
+        let base = Base::parse(&format!("http://127.0.0.1:{}/dw", server.port)).expect("base");
+        let client = Client::new(base, Auth::None).expect("client");
+        let e = client
+            .retrieve(STUDY, SERIES, &mut |_| {})
+            .expect_err("an error")
+            .to_string();
+        assert!(
+            e.starts_with(&format!("instance 2 of 2 ({SERIES}.2) failed 2 times")),
+            "{e}"
+        );
+        if declared_length {
+            assert!(e.contains("the body broke off"), "{e}");
+        } else {
+            assert!(e.contains("part 1 was cut short"), "{e}");
+        }
+        assert_eq!(server.hits.load(Ordering::SeqCst), 2, "asked for twice");
+    }
+}
