@@ -103,7 +103,7 @@ fn both(
     };
     assert_eq!(scene.skipping(), skip);
     g.caster
-        .render(&g.ctx, &scene, camera, settings, &mut target)
+        .render(&g.ctx, &scene, camera, settings, &mut target, ..)
         .expect("render");
     let image = target.read_image_blocking(&g.ctx).expect("image");
     let depths = target.read_depths_blocking(&g.ctx).expect("depths");
@@ -306,6 +306,7 @@ fn bright_spot_lands_where_the_camera_projects_it() {
                 &camera,
                 &settings,
                 &mut target,
+                ..,
             )
             .expect("render");
         let image = target.read_image_blocking(&g.ctx).expect("image");
@@ -377,6 +378,7 @@ fn slab_minip_and_misses() {
                 &camera,
                 &settings,
                 &mut target,
+                ..,
             )
             .expect("render");
         let image = target.read_image_blocking(&g.ctx).expect("image");
@@ -602,7 +604,7 @@ fn bench_256_cubed_at_768() {
         };
         // Warm-up frame: pipeline compilation.
         caster
-            .render(&ctx, &scene, &camera, &settings, &mut target)
+            .render(&ctx, &scene, &camera, &settings, &mut target, ..)
             .expect("render");
         ctx.device
             .poll(wgpu::PollType::wait_indefinitely())
@@ -612,7 +614,7 @@ fn bench_256_cubed_at_768() {
             camera.orbit(2.0, 0.0);
             let t = std::time::Instant::now();
             caster
-                .render(&ctx, &scene, &camera, &settings, &mut target)
+                .render(&ctx, &scene, &camera, &settings, &mut target, ..)
                 .expect("render");
             ctx.device
                 .poll(wgpu::PollType::wait_indefinitely())
@@ -804,7 +806,7 @@ fn bands_of_rows_draw_the_same_frame() {
     };
     let mut whole = RaycastTarget::new(&g.ctx, size).expect("target");
     g.caster
-        .render(&g.ctx, &scene, &camera, &settings, &mut whole)
+        .render(&g.ctx, &scene, &camera, &settings, &mut whole, ..)
         .expect("render");
     let (image, depths) = (
         whole.read_image_blocking(&g.ctx).expect("image"),
@@ -815,7 +817,7 @@ fn bands_of_rows_draw_the_same_frame() {
     let mut banded = RaycastTarget::new(&g.ctx, size).expect("target");
     // One band first: rows outside it stay as the new target was (zeros).
     g.caster
-        .render_rows(&g.ctx, &scene, &camera, &settings, &mut banded, 5..9)
+        .render(&g.ctx, &scene, &camera, &settings, &mut banded, 5..9)
         .expect("band");
     let partial = banded.read_image_blocking(&g.ctx).expect("image");
     let row = size[0] as usize * 4;
@@ -830,7 +832,7 @@ fn bands_of_rows_draw_the_same_frame() {
     );
     for rows in [0..5, 9..16, 16..17, 17..40, 40..100] {
         g.caster
-            .render_rows(&g.ctx, &scene, &camera, &settings, &mut banded, rows)
+            .render(&g.ctx, &scene, &camera, &settings, &mut banded, rows)
             .expect("band");
     }
     assert_eq!(banded.read_image_blocking(&g.ctx).expect("image"), image);

@@ -633,7 +633,7 @@ impl MipView {
             feature_bricks: self.feature_bricks.as_ref(),
         };
         caster
-            .render_rows(gpu, &scene, &self.camera, settings, target, rows)
+            .render(gpu, &scene, &self.camera, settings, target, rows)
             .map_err(|e| e.to_string())?;
         if resized {
             let mut renderer = render_state.renderer.write();

@@ -341,7 +341,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         feature_bricks: feature_bricks.as_ref(),
     };
     let mut target = RaycastTarget::new(&ctx, size)?;
-    caster.render(&ctx, &scene, &camera, &settings, &mut target)?;
+    caster.render(&ctx, &scene, &camera, &settings, &mut target, ..)?;
 
     if let Some(frames) = args.bench {
         bench(
@@ -400,7 +400,7 @@ fn bench(
         // Turn a little every frame, as a drag does.
         cam.orbit(2.0, 0.0);
         let t = web_time::Instant::now();
-        caster.render(ctx, scene, &cam, settings, target)?;
+        caster.render(ctx, scene, &cam, settings, target, ..)?;
         ctx.device
             .poll(wgpu::PollType::wait_indefinitely())
             .context("waiting for the GPU")?;

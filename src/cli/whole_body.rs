@@ -91,7 +91,7 @@ fn draw_like_the_viewer(
         let small = size.map(|s| ((s as f32 * coarse_scale).round() as u32).max(1));
         let mut coarse = RaycastTarget::new(ctx, small)?;
         let t = Instant::now();
-        caster.render(ctx, scene, camera, settings, &mut coarse)?;
+        caster.render(ctx, scene, camera, settings, &mut coarse, ..)?;
         let s = f64::from(coarse_scale);
         pacer.submitted(ctx, full * s * s, t);
         wait(ctx)?;
@@ -104,7 +104,7 @@ fn draw_like_the_viewer(
     while row < size[1] {
         let end = cost.band_within(row, pacer.budget_samples());
         let t = Instant::now();
-        caster.render_rows(ctx, scene, camera, settings, &mut target, row..end)?;
+        caster.render(ctx, scene, camera, settings, &mut target, row..end)?;
         pacer.submitted(ctx, cost.rows(row..end), t);
         wait(ctx)?;
         pacer.poll(ctx);

@@ -4,8 +4,8 @@
 //! the CPU over the whole volume ([`crate::cpu::tf::median`]).
 
 use crate::cpu::tf::{NOISE_WINDOW, noise_window_counts};
-use crate::gpu::kernel::{SlabGrid, uniform_buffer};
-use crate::gpu::{GpuContext, shaders};
+use crate::gpu::kernel::{self, SlabGrid, uniform_buffer};
+use crate::gpu::{GpuContext, checks, shaders};
 
 /// Mirrors `Params` in noise_windows.wgsl.
 #[repr(C)]
@@ -36,16 +36,7 @@ pub fn output_len(slab: SlabGrid, nz: u32) -> u64 {
 impl NoiseWindows {
     pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
         let module = shaders::create_module(&ctx.device, "noise_windows.wgsl")?;
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("noise_windows"),
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
+        let pipeline = checks::labelled_pipeline(ctx, "noise_windows", &module, "main");
         Ok(Self { pipeline })
     }
 
@@ -83,31 +74,18 @@ impl NoiseWindows {
                 pad: [0; 2],
             },
         );
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("noise windows"),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: smoothed.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: out.as_entire_binding(),
-                },
+        let bind = kernel::bind_group(
+            &ctx.device,
+            "noise windows",
+            &self.pipeline,
+            [
+                params.as_entire_binding(),
+                smoothed.as_entire_binding(),
+                out.as_entire_binding(),
             ],
-        });
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("noise windows"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups(nwx.div_ceil(8), nwy.div_ceil(8), nz);
+        );
+        let groups = [nwx.div_ceil(8), nwy.div_ceil(8), nz];
+        checks::dispatch(encoder, "noise windows", &self.pipeline, &bind, groups);
     }
 
     /// The sigmas of windows inside the band, from the bytes of a readback of `out`.

@@ -4,11 +4,11 @@
 //! CPU twin is [`crate::gpu::volume_texture::encode_rgb9e5`], as
 //! [`crate::gpu::volume_texture::FeatureTexture::from_components`] uses it.
 
-use crate::gpu::kernel::{SlabGrid, WORKGROUP, uniform_buffer};
+use crate::gpu::kernel::{self, SlabGrid, WORKGROUP, uniform_buffer};
 use crate::gpu::volume_texture::{
     FEATURE_TEXEL_BYTES, FeatureTexture, HISTOGRAM_BINS, histogram_quantile,
 };
-use crate::gpu::{GpuContext, shaders};
+use crate::gpu::{GpuContext, checks, shaders};
 
 /// Mirrors `Params` in pack_features.wgsl.
 #[repr(C)]
@@ -62,16 +62,7 @@ pub struct Pack {
 impl Pack {
     pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
         let module = shaders::create_module(&ctx.device, "pack_features.wgsl")?;
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("pack_features"),
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
+        let pipeline = checks::labelled_pipeline(ctx, "pack_features", &module, "main");
         let maxima = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("feature maxima and histograms"),
             size: Self::MAXIMA_BYTES,
@@ -104,26 +95,22 @@ impl Pack {
             .min(ctx.limits.max_buffer_size);
         let slice_bytes = u64::from(row_bytes) * u64::from(ny);
         let chunk = (limit / slice_bytes.max(1)).clamp(1, u64::from(nz.max(1))) as u32;
-        let mut z = 0;
-        while z < nz {
-            let cz = chunk.min(nz - z);
-            self.record_chunk(ctx, encoder, src, dst, at, [nx, ny, cz], z, pitch);
-            z += cz;
+        let mut src_z0 = 0;
+        while src_z0 < nz {
+            let dims = [nx, ny, chunk.min(nz - src_z0)];
+            // Slices src_z0.. of the box: encoded into a staging buffer, then copied.
+            self.record_chunk(ctx, encoder, (src, at), dst, (dims, src_z0, pitch));
+            src_z0 += dims[2];
         }
     }
 
-    /// Slices `src_z0..src_z0 + dims[2]` of the box: encoded into a staging buffer, copied.
-    #[allow(clippy::too_many_arguments)]
     fn record_chunk(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
-        src: &wgpu::Buffer,
+        (src, at): (&wgpu::Buffer, PackBox),
         dst: &FeatureTexture,
-        at: PackBox,
-        dims: [u32; 3],
-        src_z0: u32,
-        pitch: u32,
+        (dims, src_z0, pitch): ([u32; 3], u32, u32),
     ) {
         let block = SlabGrid::new(dims, [1.0; 3]);
         let [nx, ny, nz] = dims;
@@ -148,38 +135,19 @@ impl Pack {
                 _pad: 0,
             },
         );
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("pack"),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: src.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: staging.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: self.maxima.as_entire_binding(),
-                },
+        let bind = kernel::bind_group(
+            &ctx.device,
+            "pack",
+            &self.pipeline,
+            [
+                params.as_entire_binding(),
+                src.as_entire_binding(),
+                staging.as_entire_binding(),
+                self.maxima.as_entire_binding(),
             ],
-        });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("pack"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            let [x, y, z] = block.workgroups(WORKGROUP);
-            pass.dispatch_workgroups(x, y, z);
-        }
+        );
+        let groups = block.workgroups(WORKGROUP);
+        checks::dispatch(encoder, "pack", &self.pipeline, &bind, groups);
         encoder.copy_buffer_to_texture(
             wgpu::TexelCopyBufferInfo {
                 buffer: &staging,

@@ -30,7 +30,7 @@
 //!   feature can exceed the running extremes, and skips the loads of one kind when only that kind
 //!   cannot. Updates need a strictly larger value, so the picture and the picks are unchanged
 //!   (tested against the unskipped GPU frame and the twin, which skips the same way).
-//! - Progressive frames: [`Raycaster::render_rows`] draws a band of rows; a frame drawn band by
+//! - Progressive frames: [`Raycaster::render`] draws a band of rows; a frame drawn band by
 //!   band is the same, pixel for pixel, as one drawn whole. [`FrameCost`] counts a frame's sample
 //!   slots and [`FramePacer`] measures how many the device projects per second, so the viewer
 //!   keeps every frame's GPU work within a budget (a coarse frame first, then bands).
@@ -144,8 +144,11 @@ impl Raycaster {
         })
     }
 
-    /// Renders one frame into `target` (submitted; not waited for). Bricks in the scene turn
-    /// on empty-space skipping, which does not change the picture or the picks.
+    /// Renders the image rows `rows` (`..` for the whole frame) into `target` (submitted; not
+    /// waited for), the other rows untouched: a frame drawn band by band over several
+    /// submissions (progressive rendering, [`FrameCost`]) is the same, pixel for pixel, as one
+    /// drawn whole. Bricks in the scene turn on empty-space skipping, which does not change the
+    /// picture or the picks.
     pub fn render(
         &self,
         ctx: &GpuContext,
@@ -153,24 +156,21 @@ impl Raycaster {
         camera: &Camera,
         settings: &RenderSettings,
         target: &mut RaycastTarget,
+        rows: impl std::ops::RangeBounds<u32>,
     ) -> Result<(), RaycastError> {
-        let rows = 0..target.size[1];
-        self.render_rows(ctx, scene, camera, settings, target, rows)
-    }
-
-    /// Renders the image rows `rows` of a frame into `target` (submitted; not waited for), the
-    /// other rows untouched: a frame drawn band by band over several submissions (progressive
-    /// rendering, [`FrameCost`]) is the same, pixel for pixel, as one drawn whole.
-    pub fn render_rows(
-        &self,
-        ctx: &GpuContext,
-        scene: &Scene<'_>,
-        camera: &Camera,
-        settings: &RenderSettings,
-        target: &mut RaycastTarget,
-        rows: std::ops::Range<u32>,
-    ) -> Result<(), RaycastError> {
-        let rows = rows.start.min(target.size[1])..rows.end.min(target.size[1]);
+        use std::ops::Bound;
+        let h = target.size[1];
+        let start = match rows.start_bound() {
+            Bound::Included(&r) => r,
+            Bound::Excluded(&r) => r.saturating_add(1),
+            Bound::Unbounded => 0,
+        };
+        let end = match rows.end_bound() {
+            Bound::Included(&r) => r.saturating_add(1),
+            Bound::Excluded(&r) => r,
+            Bound::Unbounded => h,
+        };
+        let rows = start.min(h)..end.min(h);
         if rows.is_empty() {
             return Ok(());
         }
