@@ -13,6 +13,7 @@ mod metaimage;
 pub mod nifti;
 mod nrrd;
 mod raw;
+pub mod zip;
 
 pub use error::LoadError;
 
