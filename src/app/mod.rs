@@ -14,6 +14,7 @@ mod panels;
 mod probe;
 mod share;
 pub mod slices;
+pub mod url_params;
 pub mod view_link;
 #[cfg(target_arch = "wasm32")]
 mod web_fetch;

@@ -121,7 +121,7 @@ fn file_name(url: &str) -> String {
         .next()
         .filter(|s| !s.is_empty() && !s.contains(':'))
         .unwrap_or("download");
-    super::view_link::decode(last)
+    super::url_params::decode(last)
 }
 
 async fn download_all(

@@ -438,7 +438,7 @@ pub fn query_params() -> Vec<(String, String)> {
     let search = web_sys::window()
         .and_then(|w| w.location().search().ok())
         .unwrap_or_default();
-    super::view_link::parse_params(&search)
+    super::url_params::parse_params(&search)
 }
 
 /// The page's fragment (a shared view), with its `#`.
