@@ -34,6 +34,10 @@ pub struct AdapterStatus {
 pub struct VolumeStatus {
     pub dims: [usize; 3],
     pub spacing_mm: [f64; 3],
+    /// LPS position of voxel (0, 0, 0), mm.
+    pub origin_mm: [f64; 3],
+    /// Direction cosines, column by column (column `c`: the LPS direction of voxel axis `c`).
+    pub direction: [f64; 9],
     pub source: String,
     /// "CT", "MR", "phantom" or "unknown".
     pub modality: String,
@@ -80,6 +84,16 @@ pub struct AppStatus {
     pub crosshair: Option<CrosshairStatus>,
     /// "mip+slices", "grid", "mip", "axial", "coronal" or "sagittal".
     pub layout: String,
+    /// A link to the current view (`app::view_link`): the page's address and the view as its
+    /// fragment.
+    pub link: String,
+    /// The same view as a JSON object's text (published as the object `view`).
+    pub view_json: String,
+    /// Something the user is asked to do (a link's file to drop), or `None`.
+    pub notice: Option<String>,
+    /// Where some controls were drawn last frame, `[x, y, width, height]` in CSS pixels, by
+    /// name ("mode:li", "gain:0", "copy-link", "cancel-download", "pane:mip", "pane:axial"...).
+    pub controls: Vec<(String, [f32; 4])>,
 }
 
 impl AppStatus {
@@ -126,6 +140,8 @@ mod web {
                 let o = Object::new();
                 set(&o, "dims", array_f64(v.dims.iter().map(|&d| d as f64)));
                 set(&o, "spacing_mm", array_f64(v.spacing_mm));
+                set(&o, "origin_mm", array_f64(v.origin_mm));
+                set(&o, "direction", array_f64(v.direction));
                 set(&o, "source", v.source.as_str());
                 set(&o, "modality", v.modality.as_str());
                 set(&obj, "volume", o);
@@ -164,6 +180,18 @@ mod web {
             None => set(&obj, "crosshair", JsValue::NULL),
         }
         set(&obj, "layout", status.layout.as_str());
+        set(&obj, "link", status.link.as_str());
+        let view = js_sys::JSON::parse(&status.view_json).unwrap_or(JsValue::NULL);
+        set(&obj, "view", view);
+        match &status.notice {
+            Some(n) => set(&obj, "notice", n.as_str()),
+            None => set(&obj, "notice", JsValue::NULL),
+        }
+        let controls = Object::new();
+        for (name, r) in &status.controls {
+            set(&controls, name, array_f64(r.iter().map(|&x| f64::from(x))));
+        }
+        set(&obj, "controls", controls);
         let _ = Reflect::set(&window, &JsValue::from_str("shapecastStatus"), &obj);
     }
 }

@@ -1,5 +1,6 @@
 //! The web page's entry point (wasm only): checks for WebGPU, starts eframe on the canvas, and
-//! replaces the canvas by a plain message when the browser cannot run the app.
+//! replaces the canvas by a plain message when the browser cannot run the app: no WebGPU, a page
+//! served over plain http (browsers offer WebGPU only to secure pages), or a panic.
 
 use wasm_bindgen::JsCast as _;
 use wasm_bindgen::JsValue;
@@ -15,9 +16,39 @@ and ChromeOS, and on Linux with <code>chrome://flags/#enable-unsafe-webgpu</code
 <code>dom.webgpu.enabled</code> in <code>about:config</code>). Hospital browsers with hardware \
 acceleration switched off in their policy cannot run it.</p>";
 
+const NOT_SECURE: &str = "<h2>Shapecast needs an HTTPS address</h2>\
+<p>This page was opened over plain <code>http</code> from another computer. Browsers offer WebGPU, \
+which Shapecast uses to compute and project the shape features on your graphics card, only to \
+pages served over <b>HTTPS</b> (or from this computer itself, <code>localhost</code>). Nothing was \
+sent anywhere.</p>\
+<p>Open the page by its <code>https://</code> address, or ask whoever hosts it to serve it over \
+HTTPS (README, \"Deploy\").</p>";
+
 /// Starts the app on the page's `<canvas id="shapecast_canvas">`.
 pub fn start() {
-    console_error_panic_hook::set_once();
+    // A panic stops the app for good (the wasm instance is poisoned): say so on the page rather
+    // than leave a frozen canvas. eframe's own hook (installed when its runner starts) logs it
+    // to the console and then calls this one.
+    std::panic::set_hook(Box::new(|info| {
+        let message = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown".to_owned());
+        let place = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        log::error!("panic: {message}{place}");
+        show_message(&format!(
+            "<h2>Shapecast stopped after an internal error</h2><p>{}</p>\
+             <p>Reload the page to start again. Nothing was sent anywhere; please report the \
+             message above with what you were doing.</p>",
+            html_escape(&format!("{message}{place}"))
+        ));
+        publish_error(&format!("internal error (panic): {message}{place}"));
+    }));
     eframe::WebLogger::init(log::LevelFilter::Info).ok();
     wasm_bindgen_futures::spawn_local(async {
         if let Err(message) = run().await {
@@ -31,6 +62,13 @@ async fn run() -> Result<(), String> {
     let document = window.document().ok_or("no document object")?;
     let gpu = js_sys::Reflect::get(&window.navigator(), &JsValue::from_str("gpu"))
         .unwrap_or(JsValue::UNDEFINED);
+    if (gpu.is_undefined() || gpu.is_null()) && !window.is_secure_context() {
+        show_message(NOT_SECURE);
+        publish_error(
+            "WebGPU needs a secure page: this one was served over plain http (use https://)",
+        );
+        return Ok(());
+    }
     if gpu.is_undefined() || gpu.is_null() {
         show_message(NO_WEBGPU);
         publish_error("this browser has no WebGPU (navigator.gpu is missing)");

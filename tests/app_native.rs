@@ -63,6 +63,7 @@ fn intensity_only(start: StartWith) -> AppOptions {
         mode: DisplayMode::Intensity,
         compute_on_load: false,
         preset: None,
+        ..AppOptions::default()
     }
 }
 
@@ -300,6 +301,7 @@ fn phantom_features_overlay_and_mode_switch_reuse() {
         mode: DisplayMode::Features(Method::Li),
         compute_on_load: true,
         preset: None,
+        ..AppOptions::default()
     }) else {
         return;
     };
@@ -493,4 +495,84 @@ fn the_preset_fits_what_was_loaded() {
     mr.modality = Modality::Mr;
     let (_, why) = preset_for(&mr, false);
     assert!(why.contains("Hounsfield"), "{why}");
+}
+
+/// A link restores the view: the MIP turned by a left drag, the slice window right-dragged and
+/// the layout changed in one app; its link's fragment read back (with an unknown field, ignored,
+/// and a bad one, named in an error) opens a second app on the same view, camera included (set
+/// once the MIP has framed the new volume).
+#[test]
+fn a_link_restores_the_view() {
+    use shapecast::app::ViewState;
+    let start = || intensity_only(StartWith::Phantom("sphere".into()));
+    let Some(mut harness) = harness(start()) else {
+        return;
+    };
+    let control = |h: &Harness<'static, ShapecastApp>, name: &str| {
+        let r = h
+            .state()
+            .status()
+            .controls
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, r)| *r)
+            .unwrap_or_else(|| panic!("no control {name}"));
+        egui::Rect::from_min_size(egui::pos2(r[0], r[1]), egui::vec2(r[2], r[3]))
+    };
+    let before = harness.state().view_state();
+    let mip = control(&harness, "pane:mip").center() + egui::vec2(0.0, 60.0);
+    harness.hover_at(mip);
+    harness.drag_at(mip);
+    harness.run_steps(1);
+    for t in 1..=5 {
+        harness.hover_at(mip + egui::vec2(15.0 * t as f32, -6.0 * t as f32));
+        harness.run_steps(1);
+    }
+    harness.drop_at(mip + egui::vec2(75.0, -30.0));
+    harness.run_steps(2);
+    let axial = control(&harness, "pane:axial").center();
+    let press = |pos, pressed| egui::Event::PointerButton {
+        pos,
+        button: egui::PointerButton::Secondary,
+        pressed,
+        modifiers: egui::Modifiers::NONE,
+    };
+    harness.hover_at(axial);
+    harness.event(press(axial, true));
+    harness.run_steps(1);
+    for t in 1..=4 {
+        harness.hover_at(axial + egui::vec2(10.0 * t as f32, 5.0 * t as f32));
+        harness.run_steps(1);
+    }
+    harness.event(press(axial + egui::vec2(40.0, 20.0), false));
+    harness.run_steps(2);
+    harness.state_mut().set_layout(Layout::Grid);
+    harness.run_steps(2);
+    let view = harness.state().view_state();
+    assert_ne!(view.camera, before.camera, "the drag turned the MIP");
+    assert_ne!(
+        view.window, before.window,
+        "the right-drag changed the window"
+    );
+    let fragment = view.fragment();
+    assert!(
+        fragment.starts_with("v=1&phantom=sphere&mode=intensity"),
+        "{fragment}"
+    );
+    drop(harness);
+
+    let (read, problems) = ViewState::from_fragment(&format!("#{fragment}&future=1&opacity=7"));
+    let mut options = start();
+    options.link_problems = problems;
+    options.apply_link(read);
+    let Some(mut opened) = self::harness(options) else {
+        return;
+    };
+    run_until(&mut opened, "the linked view", 50, |app| {
+        app.view_state() == view && Some(app.mip_camera()) == view.camera
+    });
+    assert_eq!(opened.state().layout(), Layout::Grid);
+    let errors = opened.state().errors().join("\n");
+    assert!(errors.contains("opacity=\"7\""), "{errors}");
+    assert!(!errors.contains("future"), "{errors}");
 }

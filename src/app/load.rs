@@ -187,9 +187,17 @@ impl LoadJob {
                         what,
                     };
                 }
+                // Archives (a zipped DICOM series, a header and its data) are unpacked first,
+                // then loaded as if their files had been dropped.
+                let (files, mut unpacked) =
+                    match crate::io::zip::expand(files, &crate::io::Limits::default()) {
+                        Ok(r) => r,
+                        Err(e) => return LoadStep::Failed(e.to_string()),
+                    };
                 match crate::io::load(&files) {
                     Ok(mut loaded) => {
                         let mut notes = skipped;
+                        notes.append(&mut unpacked);
                         notes.append(&mut loaded.notes);
                         loaded.notes = notes;
                         LoadStep::Done(Box::new(loaded))
@@ -311,6 +319,31 @@ mod tests {
         }));
         assert_eq!(said, vec!["decoding s.nii".to_owned()]);
         assert_eq!(r.unwrap().volume.dims, volume.dims);
+    }
+
+    #[test]
+    fn a_zip_archive_is_unpacked_and_loaded() {
+        use std::io::Write as _;
+        let volume = crate::phantom::Phantom::by_name("sphere", None)
+            .unwrap()
+            .render([2.0; 3]);
+        let nii = crate::io::nifti::write_volume("s.nii", &volume).unwrap();
+        let mut w = ::zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        w.start_file("scan/s.nii", ::zip::write::SimpleFileOptions::default())
+            .unwrap();
+        w.write_all(&nii).unwrap();
+        let zip = w.finish().unwrap().into_inner();
+        let (_, r) = run(LoadJob::new(LoadSource::Files {
+            label: "s.zip".into(),
+            files: vec![InputFile::new("s.zip", zip)],
+        }));
+        let loaded = r.unwrap();
+        assert_eq!(loaded.volume.dims, volume.dims);
+        assert!(
+            loaded.volume.source.contains("s.zip/scan/s.nii"),
+            "{}",
+            loaded.volume.source
+        );
     }
 
     #[test]

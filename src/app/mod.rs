@@ -12,7 +12,12 @@ pub mod load;
 pub mod mip_view;
 mod panels;
 mod probe;
+mod share;
 pub mod slices;
+pub mod url_params;
+pub mod view_link;
+#[cfg(target_arch = "wasm32")]
+mod web_fetch;
 #[cfg(target_arch = "wasm32")]
 mod web_files;
 pub mod window_level;
@@ -34,6 +39,7 @@ use crate::volume::Volume;
 pub use features::{DisplayMode, FeatureDisplay, FeatureEntry, FeatureParams, JobOutcome};
 pub use load::LoadSource;
 pub use slices::SliceKind;
+pub use view_link::{ViewSource, ViewState};
 pub use window_level::{Window, WindowPreset};
 
 use features::{FeatureManager, JobEvent};
@@ -92,6 +98,8 @@ pub enum StartWith {
     /// Files and folders on this machine (`shapecast view PATH...`).
     #[cfg(not(target_arch = "wasm32"))]
     Paths(Vec<std::path::PathBuf>),
+    /// Files downloaded from these URLs (the page's `?url=`, a link; web only).
+    Urls(Vec<String>),
     /// Nothing: an empty app that asks for files.
     Nothing,
 }
@@ -106,6 +114,10 @@ pub struct AppOptions {
     pub compute_on_load: bool,
     /// The feature preset; `None`: vessels for the demo CT (a CTA), lymph nodes otherwise.
     pub preset: Option<Preset>,
+    /// A shared view (a link's fragment): applied when its volume is loaded.
+    pub view: Option<ViewState>,
+    /// What could not be read from the link, one message per field.
+    pub link_problems: Vec<String>,
 }
 
 impl Default for AppOptions {
@@ -115,36 +127,77 @@ impl Default for AppOptions {
             mode: features::DEFAULT_MODE,
             compute_on_load: true,
             preset: None,
+            view: None,
+            link_problems: Vec::new(),
         }
     }
 }
 
 impl AppOptions {
-    /// The defaults, changed by the page's URL on the web: `?phantom=NAME` opens a phantom
-    /// instead of the demo CT, `?method=intensity|hessian|rst|li|frangi|gst` the mode,
+    /// The defaults, changed by the page's URL on the web: `?url=URL` (repeatable) downloads a
+    /// volume instead of the demo CT, `?phantom=NAME` opens a phantom,
+    /// `?method=intensity|hessian|rst|li|frangi|gst` the mode,
     /// `?preset=lymph-nodes|lung-nodules|airways|vessels` the preset, `?compute=0` waits for
-    /// the Recompute button.
+    /// the Recompute button; a link's `#fragment` (a shared view, `view_link`) overrides them.
     pub fn from_environment() -> Self {
         #[allow(unused_mut)]
         let mut o = Self::default();
         #[cfg(target_arch = "wasm32")]
         {
-            if let Some(name) = web_files::query_param("phantom") {
+            let query = web_files::query_params();
+            let param = |name: &str| {
+                query
+                    .iter()
+                    .rev()
+                    .find(|(k, _)| k == name)
+                    .map(|(_, v)| v.clone())
+            };
+            if let Some(name) = param("phantom") {
                 o.start = StartWith::Phantom(name);
             }
-            if let Some(m) =
-                web_files::query_param("method").and_then(|m| DisplayMode::from_name(&m))
-            {
+            let urls: Vec<String> = query
+                .iter()
+                .filter(|(k, v)| k == "url" && !v.trim().is_empty())
+                .map(|(_, v)| web_files::absolute_url(v.trim()))
+                .collect();
+            if !urls.is_empty() {
+                o.start = StartWith::Urls(urls);
+            }
+            if let Some(m) = param("method").and_then(|m| DisplayMode::from_name(&m)) {
                 o.mode = m;
             }
-            if let Some(p) = web_files::query_param("preset").and_then(|p| Preset::from_name(&p)) {
+            if let Some(p) = param("preset").and_then(|p| Preset::from_name(&p)) {
                 o.preset = Some(p);
             }
-            if web_files::query_param("compute").as_deref() == Some("0") {
+            if param("compute").as_deref() == Some("0") {
                 o.compute_on_load = false;
+            }
+            let (view, problems) = ViewState::from_fragment(&web_files::fragment());
+            o.link_problems = problems;
+            if view != ViewState::default() {
+                o.apply_link(view);
             }
         }
         o
+    }
+
+    /// A link's view: its source replaces the start, its mode and preset the URL's.
+    pub fn apply_link(&mut self, view: ViewState) {
+        match &view.source {
+            Some(ViewSource::Demo) => self.start = StartWith::DemoCt,
+            Some(ViewSource::Phantom(name)) => self.start = StartWith::Phantom(name.clone()),
+            Some(ViewSource::Urls(urls)) => self.start = StartWith::Urls(urls.clone()),
+            // The user has the file; the app waits for it to be dropped.
+            Some(ViewSource::Dropped { .. }) => self.start = StartWith::Nothing,
+            None => {}
+        }
+        if let Some(m) = view.mode {
+            self.mode = m;
+        }
+        if let Some(p) = &view.params {
+            self.preset = Some(p.preset);
+        }
+        self.view = Some(view);
     }
 }
 
@@ -194,6 +247,8 @@ struct Scene {
     generation: u64,
     /// Whether values are shown as HU.
     is_ct: bool,
+    /// Where it came from, as a link names it.
+    origin: Option<ViewSource>,
 }
 
 pub struct ShapecastApp {
@@ -238,6 +293,17 @@ pub struct ShapecastApp {
     drop_hover: bool,
     #[cfg(not(target_arch = "wasm32"))]
     open_path: String,
+
+    /// Where the volume being loaded comes from (becomes the scene's `origin`).
+    loading_origin: Option<ViewSource>,
+    /// A link's view waiting for its volume.
+    pending_view: Option<share::PendingView>,
+    /// A link's camera for the volume of this generation, set once the MIP has framed it.
+    pending_camera: Option<(u64, crate::render::camera::Camera)>,
+    /// Controls drawn this frame and where (for automation).
+    controls: Vec<(String, egui::Rect)>,
+    /// When "Copy link" was last clicked (egui time), for its "copied" feedback.
+    link_copied_at: Option<f64>,
 }
 
 impl ShapecastApp {
@@ -272,6 +338,9 @@ impl ShapecastApp {
                 status.error = Some("eframe started without a wgpu renderer".to_owned());
             }
         }
+        let mut errors = options.link_problems.clone();
+        errors.truncate(5);
+        let pending_view = options.view.clone().map(|view| share::PendingView { view });
         let preset = options.preset.unwrap_or(match options.start {
             StartWith::DemoCt => Preset::Vessels,
             _ => Preset::default(),
@@ -295,7 +364,7 @@ impl ShapecastApp {
             load_progress: None,
             scene: None,
             generation: 0,
-            errors: Vec::new(),
+            errors,
             notes: Vec::new(),
             features: FeatureManager::default(),
             applied: params.clone(),
@@ -315,6 +384,11 @@ impl ShapecastApp {
             drop_hover: false,
             #[cfg(not(target_arch = "wasm32"))]
             open_path: String::new(),
+            loading_origin: None,
+            pending_view,
+            pending_camera: None,
+            controls: Vec::new(),
+            link_copied_at: None,
         }
     }
 
@@ -408,9 +482,25 @@ impl ShapecastApp {
         self.probe.value_at(entry.id, self.crosshair)
     }
 
-    /// Starts loading a volume (the current one stays until the new one is ready).
+    /// Starts loading a volume (the current one stays until the new one is ready). A link to
+    /// it names files by their label and size, phantoms by name.
     pub fn open(&mut self, source: LoadSource) {
+        let origin = match &source {
+            LoadSource::Files { label, files } => Some(ViewSource::Dropped {
+                name: label.clone(),
+                bytes: files.iter().map(|f| f.bytes.len() as u64).sum(),
+            }),
+            LoadSource::Phantom(name) => Some(ViewSource::Phantom(name.clone())),
+            #[cfg(not(target_arch = "wasm32"))]
+            LoadSource::Paths(_) => None,
+        };
+        self.open_from(source, origin);
+    }
+
+    /// Starts loading a volume that a link names by `origin`.
+    pub fn open_from(&mut self, source: LoadSource, origin: Option<ViewSource>) {
         self.load_progress = Some((0.0, format!("opening {}", source.label())));
+        self.loading_origin = origin;
         self.load = Some(LoadJob::new(source));
     }
 
@@ -496,13 +586,28 @@ impl ShapecastApp {
                     web_files::fetch_demo();
                 }
                 #[cfg(not(target_arch = "wasm32"))]
-                self.open(demo::demo_source());
+                self.open_from(demo::demo_source(), Some(ViewSource::Demo));
             }
             StartWith::Phantom(name) => self.open(LoadSource::Phantom(name)),
             #[cfg(not(target_arch = "wasm32"))]
             StartWith::Paths(paths) => self.open(LoadSource::Paths(paths)),
+            StartWith::Urls(urls) => self.open_urls(urls),
             StartWith::Nothing => {}
         }
+    }
+
+    /// Downloads volumes by URL (web; natively the command line opens paths instead).
+    pub fn open_urls(&mut self, urls: Vec<String>) {
+        #[cfg(target_arch = "wasm32")]
+        {
+            self.load_progress = Some((0.0, format!("downloading {}", urls.join(", "))));
+            web_fetch::fetch_urls(urls);
+        }
+        #[cfg(not(target_arch = "wasm32"))]
+        self.error(format!(
+            "{}: opening a volume by URL works in the browser; download it and open the file",
+            urls.join(", ")
+        ));
     }
 
     /// Files dropped on the window (native) or read by the page (web).
@@ -540,7 +645,12 @@ impl ShapecastApp {
             for event in web_files::take_events() {
                 match event {
                     web_files::WebEvent::Hover(on) => self.drop_hover = on,
-                    web_files::WebEvent::Progress { label, done, total } => {
+                    web_files::WebEvent::Progress {
+                        verb,
+                        label,
+                        done,
+                        total,
+                    } => {
                         let f = if total > 0.0 {
                             (done / total) as f32
                         } else {
@@ -548,22 +658,33 @@ impl ShapecastApp {
                         };
                         let what = if total > 0.0 {
                             format!(
-                                "reading {label} ({:.0} of {:.0} MB)",
+                                "{verb} {label} ({:.1} of {:.1} MB)",
                                 done / 1e6,
                                 total / 1e6
                             )
+                        } else if done > 0.0 {
+                            format!("{verb} {label} ({:.1} MB)", done / 1e6)
                         } else {
-                            format!("reading {label}")
+                            format!("{verb} {label}")
                         };
                         self.load_progress = Some((0.5 * f, what));
                     }
-                    web_files::WebEvent::Files { label, files } => {
-                        self.open(LoadSource::Files { label, files });
+                    web_files::WebEvent::Files {
+                        label,
+                        files,
+                        origin,
+                    } => {
+                        self.open_from(LoadSource::Files { label, files }, Some(origin));
                     }
                     web_files::WebEvent::Failed { message } => {
                         self.load_progress = None;
                         self.error(message);
                     }
+                    web_files::WebEvent::Cancelled { label } => {
+                        self.load_progress = None;
+                        self.notes.push(format!("{label}: download cancelled"));
+                    }
+                    web_files::WebEvent::Link { fragment } => self.open_link(&fragment),
                 }
             }
         }
@@ -584,6 +705,7 @@ impl ShapecastApp {
                 LoadStep::Failed(message) => {
                     self.load = None;
                     self.load_progress = None;
+                    self.loading_origin = None;
                     self.error(message);
                 }
             }
@@ -624,7 +746,10 @@ impl ShapecastApp {
         }
         let render = match RenderVolume::upload(gpu, &volume) {
             Ok(r) => r,
-            Err(e) => return self.error(format!("{}: {e}", volume.source)),
+            Err(e) => {
+                self.loading_origin = None;
+                return self.error(format!("{}: {e}", volume.source));
+            }
         };
         self.generation += 1;
         self.window = window_level::default_window(&volume);
@@ -654,7 +779,11 @@ impl ShapecastApp {
             volume: Arc::new(volume),
             render,
             generation: self.generation,
+            origin: self.loading_origin.take(),
         });
+        self.pending_camera = None;
+        // A link's view for this volume replaces the defaults it just got.
+        self.apply_pending_view();
         if self.options.compute_on_load {
             self.ensure_features();
         }
@@ -669,10 +798,24 @@ impl ShapecastApp {
     }
 
     fn update_status(&mut self) {
+        let view = self.view_state();
+        let link = format!("{}#{}", share::page_address(), view.fragment());
+        if self.status.link != link {
+            self.status.link = link;
+            self.status.view_json = view.json();
+        }
+        self.status.notice = self.link_notice();
+        self.status.controls = self
+            .controls
+            .iter()
+            .map(|(n, r)| (n.clone(), [r.left(), r.top(), r.width(), r.height()]))
+            .collect();
         let s = &mut self.status;
         s.volume = self.scene.as_ref().map(|sc| VolumeStatus {
             dims: sc.volume.dims,
             spacing_mm: sc.volume.spacing_mm,
+            origin_mm: sc.volume.origin_mm,
+            direction: sc.volume.direction.to_cols_array(),
             source: sc.volume.source.clone(),
             modality: sc.volume.modality.as_str().to_owned(),
         });
@@ -709,6 +852,7 @@ impl ShapecastApp {
         });
         s.layout = self.layout.name().to_owned();
         s.error = self.errors.last().cloned();
+
         let computing = self.features.running_request().is_some();
         if let Some((f, what)) = &self.load_progress {
             s.phase = Phase::Loading;
@@ -824,6 +968,14 @@ impl ShapecastApp {
         let mut toggle = None;
         let mut window_drag = egui::Vec2::ZERO;
         let mut errors = Vec::new();
+        let mut mip_drawn = false;
+        for (id, rect) in &rects {
+            let kind = match id {
+                PaneId::Mip => None,
+                PaneId::Slice(k) => Some(*k),
+            };
+            self.controls.push((share::pane_control(kind), *rect));
+        }
         for (id, rect) in rects {
             let frame_rect = rect.shrink(1.0);
             ui.scope_builder(egui::UiBuilder::new().max_rect(frame_rect), |ui| {
@@ -893,6 +1045,12 @@ impl ShapecastApp {
                                         features: &feats,
                                     },
                                 );
+                                // The toolbar's channel toggles and gains are the display's.
+                                for c in 0..3 {
+                                    self.display.enabled[c] = self.mip_view.settings.channels[c].on;
+                                    self.display.gain[c] = self.mip_view.settings.channels[c].gain;
+                                }
+                                mip_drawn = true;
                                 if let Some(pick) = out.pick {
                                     self.crosshair = pick.voxel;
                                 }
@@ -905,6 +1063,9 @@ impl ShapecastApp {
             });
         }
         self.hover = hover;
+        if mip_drawn {
+            self.restore_camera(ui.ctx());
+        }
         if window_drag != egui::Vec2::ZERO {
             self.window = self.window.dragged(window_drag);
         }
@@ -931,6 +1092,7 @@ impl eframe::App for ShapecastApp {
 
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
+        self.controls.clear();
         self.start_once(&ctx);
         self.take_external_files(&ctx);
         self.advance();
@@ -945,6 +1107,7 @@ impl eframe::App for ShapecastApp {
                 egui::ScrollArea::vertical().show(ui, |ui| self.side_panel_ui(ui));
             });
         egui::CentralPanel::default().show(ui, |ui| {
+            self.link_notice_ui(ui);
             self.errors_ui(ui);
             self.panes_ui(ui, frame);
         });

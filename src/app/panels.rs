@@ -46,6 +46,7 @@ impl ShapecastApp {
                     }
                     None => r.on_hover_text("grey values only"),
                 };
+                self.control(&format!("mode:{}", m.name()), r.rect);
                 if r.clicked() && self.mode != m {
                     self.set_mode(m);
                 }
@@ -72,20 +73,22 @@ impl ShapecastApp {
                 self.multi_layout = self.layout;
             }
             ui.separator();
+            self.copy_link_ui(ui);
+            ui.separator();
             if ui.button("About & data").clicked() {
                 self.show_about = !self.show_about;
             }
         });
     }
 
-    fn open_demo_ct(&mut self) {
+    pub(super) fn open_demo_ct(&mut self) {
         #[cfg(target_arch = "wasm32")]
         {
             self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
             super::web_files::fetch_demo();
         }
         #[cfg(not(target_arch = "wasm32"))]
-        self.open(demo::demo_source());
+        self.open_from(demo::demo_source(), Some(super::ViewSource::Demo));
     }
 
     #[cfg(target_arch = "wasm32")]
@@ -238,11 +241,12 @@ impl ShapecastApp {
                             ui.allocate_exact_size(egui::vec2(12.0, 12.0), egui::Sense::hover());
                         ui.painter().rect_filled(r, 2.0, col);
                         ui.checkbox(&mut self.display.enabled[c], FEATURE_NAMES[c]);
-                        ui.add(
+                        let r = ui.add(
                             egui::Slider::new(&mut self.display.gain[c], 0.1..=10.0)
                                 .logarithmic(true)
                                 .text("gain"),
                         );
+                        self.control(&format!("gain:{c}"), r.rect);
                     });
                 }
                 // Gain 1 shows the 99.9th percentile of a feature's positive values as full
@@ -346,6 +350,16 @@ impl ShapecastApp {
                         .desired_width(260.0)
                         .text(what.as_str()),
                 );
+                #[cfg(target_arch = "wasm32")]
+                if super::web_fetch::active() {
+                    let r = ui
+                        .small_button("Cancel")
+                        .on_hover_text("stop the download; the volume shown stays");
+                    self.control("cancel-download", r.rect);
+                    if r.clicked() {
+                        super::web_fetch::cancel();
+                    }
+                }
             } else if let Some((f, stage)) =
                 self.features.progress().map(|(f, s)| (f, s.to_owned()))
             {

@@ -1,5 +1,6 @@
 //! Files in the browser (wasm only): drag and drop of files and folders, the page's two file
-//! inputs (files, and a folder with `webkitdirectory`), and fetching the demo CT. Everything is
+//! inputs (files, and a folder with `webkitdirectory`), fetching the demo CT, and the page's
+//! address (query parameters, the link fragment). Downloads by URL are `web_fetch`. Everything is
 //! asynchronous (promises awaited with `spawn_local`); results are queued as [`WebEvent`]s that
 //! the app takes once per frame, so nothing ever blocks the page.
 //!
@@ -16,6 +17,7 @@ use wasm_bindgen::JsValue;
 use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
+use super::view_link::ViewSource;
 use crate::io::InputFile;
 
 /// The page's hidden file inputs (web/index.html).
@@ -26,19 +28,27 @@ pub const OPEN_FOLDER_INPUT: &str = "shapecast_open_folder";
 pub enum WebEvent {
     /// Files are dragged over the page (true) or not any more (false).
     Hover(bool),
-    /// Reading `label`: `done` of `total` bytes (`total` 0 while unknown).
+    /// `verb` ("reading", "downloading") `label`: `done` of `total` bytes (`total` 0 while
+    /// unknown).
     Progress {
+        verb: &'static str,
         label: String,
         done: f64,
         total: f64,
     },
-    /// All files of one drop, one input selection or the demo, read.
+    /// All files of one drop, one input selection, one download or the demo, read; `origin` is
+    /// how a link names them.
     Files {
         label: String,
         files: Vec<InputFile>,
+        origin: ViewSource,
     },
     /// Reading failed; the message names the file.
     Failed { message: String },
+    /// The user cancelled a download.
+    Cancelled { label: String },
+    /// A link was pasted into the address bar of the open page (only its fragment changed).
+    Link { fragment: String },
 }
 
 thread_local! {
@@ -47,7 +57,7 @@ thread_local! {
     static HOVERING: RefCell<bool> = const { RefCell::new(false) };
 }
 
-fn push(event: WebEvent) {
+pub(super) fn push(event: WebEvent) {
     INBOX.with(|q| q.borrow_mut().push_back(event));
     CONTEXT.with(|c| {
         if let Some(ctx) = c.borrow().as_ref() {
@@ -68,7 +78,7 @@ pub fn take_events() -> Vec<WebEvent> {
     INBOX.with(|q| q.borrow_mut().drain(..).collect())
 }
 
-fn js_error(e: &JsValue) -> String {
+pub(super) fn js_error(e: &JsValue) -> String {
     e.as_string()
         .or_else(|| {
             js_sys::Reflect::get(e, &JsValue::from_str("message"))
@@ -129,6 +139,21 @@ pub fn install(ctx: &egui::Context) -> Result<(), String> {
         .map_err(|e| js_error(&e))?;
     drop.forget();
 
+    // A link pasted into the address bar of an open page changes only the fragment, which does
+    // not reload the page: the app opens the link's volume (keeping the one shown until it
+    // arrives) or, for the volume shown, changes the view in place.
+    let link = Closure::<dyn FnMut(web_sys::Event)>::new(|_event: web_sys::Event| {
+        push(WebEvent::Link {
+            fragment: fragment(),
+        });
+    });
+    window
+        .add_event_listener_with_callback("hashchange", link.as_ref().unchecked_ref())
+        .map_err(|e| js_error(&e))?;
+    link.forget();
+
+    super::web_fetch::install();
+
     for id in [OPEN_FILES_INPUT, OPEN_FOLDER_INPUT] {
         let Some(input) = document
             .get_element_by_id(id)
@@ -143,6 +168,7 @@ pub fn install(ctx: &egui::Context) -> Result<(), String> {
             // Clear it so that choosing the same file again fires `change` again.
             target.set_value("");
             if !files.is_empty() {
+                super::web_fetch::cancel();
                 wasm_bindgen_futures::spawn_local(read_all(files));
             }
         });
@@ -225,9 +251,12 @@ fn on_drop(dt: &web_sys::DataTransfer) {
     if entries.is_empty() && plain.is_empty() {
         return;
     }
+    // A new drop replaces a download in progress.
+    super::web_fetch::cancel();
     wasm_bindgen_futures::spawn_local(async move {
         let label = drop_label(&entries, &plain);
         push(WebEvent::Progress {
+            verb: "reading",
             label: label.clone(),
             done: 0.0,
             total: 0.0,
@@ -332,6 +361,7 @@ async fn read_all(files: Vec<Named>) {
     let mut out = Vec::with_capacity(files.len());
     for f in files {
         push(WebEvent::Progress {
+            verb: "reading",
             label: label.clone(),
             done,
             total,
@@ -350,7 +380,15 @@ async fn read_all(files: Vec<Named>) {
             }
         }
     }
-    push(WebEvent::Files { label, files: out });
+    let origin = ViewSource::Dropped {
+        name: label.clone(),
+        bytes: total as u64,
+    };
+    push(WebEvent::Files {
+        label,
+        files: out,
+        origin,
+    });
 }
 
 /// Fetches the demo CT (a static file next to the page).
@@ -358,6 +396,7 @@ pub fn fetch_demo() {
     wasm_bindgen_futures::spawn_local(async {
         let label = "demo CT".to_owned();
         push(WebEvent::Progress {
+            verb: "reading",
             label: label.clone(),
             done: 0.0,
             total: 0.0,
@@ -366,6 +405,7 @@ pub fn fetch_demo() {
             Ok(bytes) => push(WebEvent::Files {
                 label,
                 files: vec![InputFile::new(super::demo::DEMO_FILE, bytes)],
+                origin: ViewSource::Demo,
             }),
             Err(e) => push(WebEvent::Failed {
                 message: format!(
@@ -392,13 +432,28 @@ async fn fetch_bytes(url: &str) -> Result<Vec<u8>, String> {
     Ok(js_sys::Uint8Array::new(&buffer).to_vec())
 }
 
-/// A parameter of the page's URL (`?phantom=sphere&method=li`).
-pub fn query_param(name: &str) -> Option<String> {
-    let search = web_sys::window()?.location().search().ok()?;
-    search
-        .trim_start_matches('?')
-        .split('&')
-        .filter_map(|kv| kv.split_once('=').or(Some((kv, ""))))
-        .find(|(k, _)| *k == name)
-        .map(|(_, v)| v.to_owned())
+/// The parameters of the page's URL (`?phantom=sphere&method=li&url=a%20b.nii`), decoded, in
+/// order (repeated ones kept).
+pub fn query_params() -> Vec<(String, String)> {
+    let search = web_sys::window()
+        .and_then(|w| w.location().search().ok())
+        .unwrap_or_default();
+    super::url_params::parse_params(&search)
+}
+
+/// The page's fragment (a shared view), with its `#`.
+pub fn fragment() -> String {
+    web_sys::window()
+        .and_then(|w| w.location().hash().ok())
+        .unwrap_or_default()
+}
+
+/// A URL as the page resolves it (relative ones against the page's address).
+pub fn absolute_url(url: &str) -> String {
+    let base = web_sys::window()
+        .and_then(|w| w.location().href().ok())
+        .unwrap_or_default();
+    web_sys::Url::new_with_base(url, &base)
+        .map(|u| u.href())
+        .unwrap_or_else(|_| url.to_owned())
 }

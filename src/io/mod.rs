@@ -14,6 +14,7 @@ mod metaimage;
 pub mod nifti;
 mod nrrd;
 mod raw;
+pub mod zip;
 
 pub use dicom::{SeriesBuilder, decodable_transfer_syntaxes};
 pub use error::LoadError;

@@ -1,6 +1,7 @@
-//! `cargo xtask serve` and `cargo xtask test`: the README's two commands. Each installs what is
-//! missing (idempotently, on a fresh Debian machine as root with only the Rust toolchain), then
-//! serves the web app or runs every check CI runs.
+//! `cargo xtask serve`, `cargo xtask build` and `cargo xtask test`: the README's commands. Each
+//! installs what is missing (idempotently, on a fresh Debian machine as root with only the Rust
+//! toolchain), then serves the web app, builds the site to deploy (dist/), or runs every check
+//! CI runs.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -22,14 +23,21 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("serve") => serve(&args[1..]),
+        Some("build") => setup(Needs {
+            web: true,
+            apt: false,
+            node: true,
+        })
+        .and_then(|()| build_site()),
         Some("test") => test(&args[1..]),
         Some("setup") => setup(Needs::all()),
         _ => {
             eprintln!(
                 "usage: cargo xtask serve [--port N]   build the web app and serve it on 127.0.0.1\n       \
+                 cargo xtask build                  build the site to deploy into dist/ (wasm-opt'd)\n       \
                  cargo xtask test [--skip STEP]...   install what is missing and run every check\n       \
                  cargo xtask setup                  only install what is missing\n\
-                 steps: fmt, clippy, clippy-wasm, test, web-build, browser"
+                 steps: fmt, clippy, clippy-wasm, test, web-build, browser, browser-links"
             );
             return ExitCode::from(2);
         }
@@ -210,7 +218,9 @@ fn ensure_apt() -> Result {
 
 fn ensure_node_modules() -> Result {
     let dir = root().join("tests/browser");
-    if dir.join("node_modules/playwright-core").is_dir() && dir.join("node_modules/pngjs").is_dir()
+    if ["playwright-core", "pngjs", "binaryen"]
+        .iter()
+        .all(|m| dir.join("node_modules").join(m).is_dir())
     {
         return Ok(());
     }
@@ -218,6 +228,8 @@ fn ensure_node_modules() -> Result {
         return Err("npm is missing: apt-get install -y nodejs npm".to_owned());
     }
     // playwright-core never downloads a browser; the test drives Debian's /usr/bin/chromium.
+    // binaryen is npm's build of wasm-opt (a working one: Debian's 108 breaks this wasm), used
+    // by `cargo xtask build`; it comes from npm like the rest, never a download of its own.
     run(Command::new("npm")
         .args(["ci", "--no-audit", "--no-fund", "--prefix"])
         .arg(&dir))
@@ -242,6 +254,9 @@ fn serve(args: &[String]) -> Result {
         .args([
             "serve",
             "--release",
+            // Its reload script would be an inline script the page's Content-Security-Policy
+            // (rightly) refuses.
+            "--no-autoreload",
             "--address",
             "127.0.0.1",
             "--port",
@@ -305,17 +320,132 @@ const STEPS: &[Step] = &[
     },
     Step {
         name: "web-build",
-        run: || {
-            run(Command::new(cargo_bin_dir().join("trunk"))
-                .args(["build", "--release"])
-                .env("PATH", path_with_cargo_bin()))
-        },
+        run: build_site,
     },
     Step {
         name: "browser",
         run: || run(Command::new("node").arg("tests/browser/smoke.mjs")),
     },
+    Step {
+        name: "browser-links",
+        run: || run(Command::new("node").arg("tests/browser/links.mjs")),
+    },
 ];
+
+/// wasm-opt's flags: the size-oriented level, and the wasm features rustc's wasm32 target
+/// emits (wasm-opt refuses instructions of features it was not told about).
+const WASM_OPT_ARGS: &[&str] = &[
+    "-Os",
+    "--enable-bulk-memory",
+    "--enable-mutable-globals",
+    "--enable-nontrapping-float-to-int",
+    "--enable-sign-ext",
+    "--enable-reference-types",
+    "--enable-multivalue",
+];
+
+/// The oldest binaryen that handles this wasm (Debian's 108 breaks it).
+const MIN_WASM_OPT: u32 = 120;
+
+/// A wasm-opt that works: npm's binaryen installed for the browser tests, else one on PATH,
+/// if its version is at least [`MIN_WASM_OPT`].
+fn working_wasm_opt() -> Option<(PathBuf, u32)> {
+    let npm = root().join("tests/browser/node_modules/.bin/wasm-opt");
+    [npm, PathBuf::from("wasm-opt")]
+        .into_iter()
+        .find_map(|bin| {
+            let text = output(&bin.to_string_lossy(), &["--version"])?;
+            // "wasm-opt version 132 (version_132)"
+            let version: u32 = text.split_whitespace().nth(2)?.parse().ok()?;
+            (version >= MIN_WASM_OPT).then_some((bin, version))
+        })
+}
+
+/// `trunk build --release`, then wasm-opt on the wasm where a working one is installed (the
+/// Subresource Integrity hash trunk wrote for the wasm is updated to match). The result in
+/// dist/ is the folder to deploy (README, "Deploy").
+fn build_site() -> Result {
+    run(Command::new(cargo_bin_dir().join("trunk"))
+        .args(["build", "--release"])
+        .env("PATH", path_with_cargo_bin()))?;
+    let dist = root().join("dist");
+    let wasm = std::fs::read_dir(&dist)
+        .map_err(|e| format!("cannot list {}: {e}", dist.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.to_string_lossy().ends_with("_bg.wasm"))
+        .ok_or("trunk built no _bg.wasm into dist/")?;
+    let before = file_size(&wasm);
+    let Some((wasm_opt, version)) = working_wasm_opt() else {
+        eprintln!(
+            "xtask: no working wasm-opt (binaryen >= {MIN_WASM_OPT}; `cargo xtask setup` installs npm's): the wasm stays unoptimised, {:.2} MB",
+            before as f64 / 1e6
+        );
+        return Ok(());
+    };
+    let t = Instant::now();
+    let optimised = wasm.with_extension("opt.wasm");
+    run(Command::new(&wasm_opt)
+        .args(WASM_OPT_ARGS)
+        .arg(&wasm)
+        .arg("-o")
+        .arg(&optimised))?;
+    std::fs::rename(&optimised, &wasm).map_err(|e| format!("cannot replace the wasm: {e}"))?;
+    update_integrity(&dist.join("index.html"), &wasm)?;
+    let after = file_size(&wasm);
+    eprintln!(
+        "xtask: wasm-opt {version} {}: {:.2} MB -> {:.2} MB in {:.0} s",
+        WASM_OPT_ARGS[0],
+        before as f64 / 1e6,
+        after as f64 / 1e6,
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn file_size(path: &Path) -> u64 {
+    std::fs::metadata(path).map(|m| m.len()).unwrap_or(0)
+}
+
+/// Rewrites the `integrity="sha384-..."` of the tag that names `file` in `index`.
+fn update_integrity(index: &Path, file: &Path) -> Result {
+    use base64::Engine as _;
+    use sha2::Digest as _;
+    let html = std::fs::read_to_string(index)
+        .map_err(|e| format!("cannot read {}: {e}", index.display()))?;
+    let name = file
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let bytes = std::fs::read(file).map_err(|e| format!("cannot read {}: {e}", file.display()))?;
+    let hash = base64::engine::general_purpose::STANDARD.encode(sha2::Sha384::digest(&bytes));
+    let mut out = String::with_capacity(html.len());
+    let mut changed = 0;
+    for tag in html.split_inclusive('>') {
+        if (tag.contains(&format!("/{name}\"")) || tag.contains(&format!("\"{name}\"")))
+            && let Some(start) = tag.find("integrity=\"sha384-")
+        {
+            let value_start = start + "integrity=\"".len();
+            let end = tag[value_start..]
+                .find('"')
+                .map(|e| value_start + e)
+                .ok_or("unterminated integrity attribute")?;
+            out.push_str(&tag[..value_start]);
+            out.push_str(&format!("sha384-{hash}"));
+            out.push_str(&tag[end..]);
+            changed += 1;
+            continue;
+        }
+        out.push_str(tag);
+    }
+    if changed == 0 && html.contains("integrity=") && html.contains(&name) {
+        return Err(format!(
+            "{} names {name} with an integrity hash this step could not find to update",
+            index.display()
+        ));
+    }
+    std::fs::write(index, out).map_err(|e| format!("cannot write {}: {e}", index.display()))
+}
 
 fn test(args: &[String]) -> Result {
     let mut skip: Vec<String> = Vec::new();

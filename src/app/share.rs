@@ -1,0 +1,281 @@
+//! Sharing the view: the app's state as a [`ViewState`] (published as
+//! `window.shapecastStatus.link` / `.view`, copied by the "Copy link" button) and a link's state
+//! applied to the app. A link's view waits for its volume: it is applied when the volume it names
+//! is installed (downloaded from its URLs, or dropped by the user: a link to a file from its
+//! author's computer says which file to drop), after the defaults a new volume gets.
+
+use super::view_link::{ViewSource, ViewState, human_bytes};
+use super::{Layout, ShapecastApp, slices::SliceKind};
+
+/// A link's view that waits for its volume.
+pub(super) struct PendingView {
+    pub view: ViewState,
+}
+
+impl ShapecastApp {
+    /// Everything a link carries, as the app shows it now.
+    pub fn view_state(&self) -> ViewState {
+        let scene = self.scene.as_ref();
+        let camera = match &self.pending_camera {
+            Some((generation, camera)) if scene.is_some_and(|s| s.generation == *generation) => {
+                *camera
+            }
+            _ => self.mip_view.camera,
+        };
+        ViewState {
+            source: scene.and_then(|s| s.origin.clone()),
+            mode: Some(self.mode),
+            params: Some(self.applied.clone()),
+            display: Some(self.display.clone()),
+            camera: scene.map(|_| camera),
+            slab_mm: Some(self.mip_view.slab_mm),
+            crosshair_mm: self.crosshair_lps_mm().map(|p| p.to_array()),
+            mip_window: scene.map(|_| self.mip_view.settings.window),
+            projection: Some(self.mip_view.settings.projection),
+            grey: Some(self.mip_view.settings.show_intensity),
+            window: scene.map(|_| self.window),
+            layout: Some(self.layout),
+        }
+    }
+
+    /// The camera the MIP pane draws with now (`view_state` gives a link's camera already
+    /// while it waits for the MIP pane to frame the volume).
+    pub fn mip_camera(&self) -> crate::render::camera::Camera {
+        self.mip_view.camera
+    }
+
+    /// The link to this view: the page's address (on the web) with the view as its fragment.
+    pub fn link(&self) -> String {
+        format!("{}#{}", page_address(), self.view_state().fragment())
+    }
+
+    /// Makes `view` the one to show: at once for what does not depend on the volume, and for
+    /// the rest when its volume is installed (now, if it is the one shown).
+    pub fn apply_view(&mut self, view: ViewState) {
+        let shown = self.scene.as_ref().and_then(|s| s.origin.clone());
+        if self.scene.is_some() && (view.source.is_none() || view.source == shown) {
+            self.apply_view_to_scene(&view);
+            self.ensure_features();
+        } else {
+            self.pending_view = Some(PendingView { view });
+        }
+    }
+
+    /// Opens a link in the running app (its fragment, e.g. pasted into the address bar): the
+    /// link's volume is loaded unless it is the one shown (the volume shown stays until the new
+    /// one arrives, and if it cannot be loaded), and its view applied.
+    pub fn open_link(&mut self, fragment: &str) {
+        let (view, problems) = ViewState::from_fragment(fragment);
+        for p in problems {
+            self.error(p);
+        }
+        let shown = self.scene.as_ref().and_then(|s| s.origin.clone());
+        match view.source.clone() {
+            Some(source) if Some(&source) != shown.as_ref() => {
+                self.pending_view = Some(PendingView { view });
+                match source {
+                    ViewSource::Urls(urls) => self.open_urls(urls),
+                    ViewSource::Phantom(name) => self.open(super::LoadSource::Phantom(name)),
+                    ViewSource::Demo => self.open_demo_ct(),
+                    // The link's file is on its author's computer: wait for the user's drop.
+                    ViewSource::Dropped { .. } => {}
+                }
+            }
+            _ => self.apply_view(view),
+        }
+    }
+
+    /// At install: the pending view, if it is for this volume. A view for a file that has to
+    /// be dropped stays pending when another one arrives, with a note.
+    pub(super) fn apply_pending_view(&mut self) {
+        let Some(pending) = self.pending_view.take() else {
+            return;
+        };
+        let shown = self.scene.as_ref().and_then(|s| s.origin.clone());
+        match (&pending.view.source, &shown) {
+            (None, _) => self.apply_view_to_scene(&pending.view),
+            (Some(wanted), Some(got)) if wanted == got => {
+                self.apply_view_to_scene(&pending.view);
+            }
+            (Some(ViewSource::Dropped { name, bytes }), got) => {
+                self.notes.push(format!(
+                    "the link's view is for {name} ({}); {} is another volume, so its view was not applied",
+                    human_bytes(*bytes),
+                    got.as_ref().map_or("this".to_owned(), ViewSource::describe)
+                ));
+                self.pending_view = Some(pending);
+            }
+            // Another volume was opened instead of the link's: the link is done with.
+            _ => {}
+        }
+    }
+
+    /// Applies every field of `view` to the loaded volume's display.
+    fn apply_view_to_scene(&mut self, view: &ViewState) {
+        let Some(scene) = &self.scene else { return };
+        let generation = scene.generation;
+        let volume = scene.volume.clone();
+        if let Some(m) = view.mode {
+            self.mode = m;
+        }
+        if let Some(p) = &view.params {
+            self.params = p.clone();
+            self.applied = p.clone();
+        }
+        if let Some(d) = &view.display {
+            self.display = d.clone();
+        }
+        if let Some(w) = view.window {
+            self.window = w;
+        }
+        if let Some(p) = view.crosshair_mm {
+            let v = volume
+                .voxel_from_world()
+                .transform_point3(glam::DVec3::from_array(p));
+            let voxel = [v.x, v.y, v.z];
+            self.crosshair = std::array::from_fn(|a| {
+                let max = volume.dims[a].saturating_sub(1) as f64;
+                voxel[a].round().clamp(0.0, max) as usize
+            });
+        }
+        if let Some(w) = view.mip_window {
+            self.mip_view.settings.window = w;
+            // The MIP keeps this window rather than setting its default for the volume.
+            self.mip_window_for = Some(generation);
+        }
+        if let Some(p) = view.projection {
+            self.mip_view.settings.projection = p;
+        }
+        if let Some(g) = view.grey {
+            self.mip_view.settings.show_intensity = g;
+        }
+        if let Some(s) = view.slab_mm {
+            self.mip_view.slab_mm = s;
+        }
+        if let Some(c) = view.camera {
+            // The MIP widget frames a new volume when it first draws it; the camera is set
+            // after that (`restore_camera`).
+            self.pending_camera = Some((generation, c));
+        }
+        if let Some(l) = view.layout {
+            self.set_layout(l);
+        }
+    }
+
+    /// Right after the MIP pane drew the current volume (the widget framed it then): the
+    /// link's camera replaces that framing.
+    pub(super) fn restore_camera(&mut self, ctx: &egui::Context) {
+        let Some(scene) = &self.scene else { return };
+        if let Some((generation, camera)) = self.pending_camera
+            && generation == scene.generation
+        {
+            self.mip_view.camera = camera;
+            self.pending_camera = None;
+            ctx.request_repaint();
+        }
+    }
+
+    /// What the user is asked to do for a link's view, if anything.
+    pub(super) fn link_notice(&self) -> Option<String> {
+        match &self.pending_view.as_ref()?.view.source {
+            Some(ViewSource::Dropped { name, bytes }) => Some(format!(
+                "This link shows a view of {name} ({}), a file from its author's computer: it is not on any server. Drop that file (or folder) here, or open it with \"Open files…\", and the view is restored.",
+                human_bytes(*bytes)
+            )),
+            _ => None,
+        }
+    }
+
+    /// The link notice, above the panes.
+    pub(super) fn link_notice_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(notice) = self.link_notice() else {
+            return;
+        };
+        let mut dismiss = false;
+        egui::Frame::new()
+            .fill(egui::Color32::from_rgb(25, 45, 70))
+            .inner_margin(6.0)
+            .corner_radius(4.0)
+            .show(ui, |ui| {
+                ui.with_layout(egui::Layout::right_to_left(egui::Align::TOP), |ui| {
+                    dismiss = ui.button("Dismiss").clicked();
+                    ui.with_layout(egui::Layout::left_to_right(egui::Align::TOP), |ui| {
+                        ui.colored_label(egui::Color32::from_rgb(160, 200, 255), "Link:");
+                        ui.add(egui::Label::new(notice).wrap());
+                    });
+                });
+            });
+        if dismiss {
+            self.pending_view = None;
+        }
+    }
+
+    /// The "Copy link" button.
+    pub(super) fn copy_link_ui(&mut self, ui: &mut egui::Ui) {
+        let r = ui.button("Copy link").on_hover_text(
+            "copies a link to exactly this view (volume, mode, parameters, camera, windows, layout); the view is in the link's #fragment, which browsers never send to a server",
+        );
+        self.control("copy-link", r.rect);
+        if r.clicked() {
+            let link = self.link();
+            ui.ctx().copy_text(link);
+            self.link_copied_at = Some(ui.ctx().input(|i| i.time));
+        }
+        if let Some(t) = self.link_copied_at {
+            if ui.ctx().input(|i| i.time) - t < 2.0 {
+                ui.label(egui::RichText::new("copied").small());
+                ui.ctx()
+                    .request_repaint_after(std::time::Duration::from_millis(500));
+            } else {
+                self.link_copied_at = None;
+            }
+        }
+    }
+
+    /// Remembers where a control was drawn (published for automation as
+    /// `window.shapecastStatus.controls`, in CSS pixels).
+    pub(super) fn control(&mut self, name: &str, rect: egui::Rect) {
+        self.controls.push((name.to_owned(), rect));
+    }
+}
+
+/// The name of a pane in `controls`.
+pub(super) fn pane_control(kind: Option<SliceKind>) -> String {
+    match kind {
+        None => "pane:mip".to_owned(),
+        Some(k) => format!("pane:{}", k.name()),
+    }
+}
+
+impl Layout {
+    /// The layout of a name as [`Layout::name`] writes it.
+    pub fn from_name(name: &str) -> Option<Self> {
+        use super::PaneId;
+        [
+            Self::MipAndSlices,
+            Self::Grid,
+            Self::Single(PaneId::Mip),
+            Self::Single(PaneId::Slice(SliceKind::Axial)),
+            Self::Single(PaneId::Slice(SliceKind::Coronal)),
+            Self::Single(PaneId::Slice(SliceKind::Sagittal)),
+        ]
+        .into_iter()
+        .find(|l| l.name() == name)
+    }
+}
+
+/// The page's address without query or fragment (the link's fragment holds the whole view);
+/// natively, nothing (the link is its fragment).
+pub(super) fn page_address() -> String {
+    #[cfg(target_arch = "wasm32")]
+    {
+        web_sys::window()
+            .and_then(|w| {
+                let l = w.location();
+                Some(format!("{}{}", l.origin().ok()?, l.pathname().ok()?))
+            })
+            .unwrap_or_default()
+    }
+    #[cfg(not(target_arch = "wasm32"))]
+    String::new()
+}

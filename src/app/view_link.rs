@@ -1,0 +1,838 @@
+//! The view as a link: everything needed to see again exactly what a user sees (the source, the
+//! display mode, the preset and edited parameters, channels and gains, camera, slab, crosshair,
+//! windows, layout), written into a URL fragment (`#v=1&url=...&mode=li&...`, which browsers
+//! never send to a server) and as the same fields in JSON (`window.shapecastStatus.view`).
+//!
+//! Pure code, no browser: the app captures and applies a [`ViewState`] (`share.rs`), the page
+//! reads the fragment and the query (`web_files.rs`). A link carries a version (`v`); unknown
+//! fields are ignored, and a field that cannot be read is named in a message while the rest
+//! applies. Numbers are written in their shortest exact form, so a view read back from its link
+//! is bit for bit the view that wrote it.
+
+use glam::{DQuat, DVec3};
+
+use super::Layout;
+use super::features::{DisplayMode, FeatureDisplay, FeatureParams};
+use super::url_params::{encode, parse_params};
+use super::window_level::Window;
+use crate::cpu::features::FeatureMap;
+use crate::cpu::rays::RAY_COUNTS;
+use crate::cpu::tf::{Preset, TransferFunction};
+use crate::render::camera::{Camera, MAX_ZOOM, MIN_ZOOM};
+use crate::render::raycast::Projection;
+
+/// The link format this build writes. Links of other versions are read field by field.
+pub const VERSION: u32 = 1;
+
+/// Where the viewed volume came from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ViewSource {
+    /// The demo CT the page ships with.
+    Demo,
+    /// A phantom by name.
+    Phantom(String),
+    /// Files downloaded from these (absolute) URLs.
+    Urls(Vec<String>),
+    /// Files from the author's own computer (dropped or opened): what to drop to see the view
+    /// (a file's name, or a folder's as the app labels it) and its size in bytes.
+    Dropped { name: String, bytes: u64 },
+}
+
+impl ViewSource {
+    /// What the user is told about it.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Demo => "the demo CT".to_owned(),
+            Self::Phantom(name) => format!("phantom {name}"),
+            Self::Urls(urls) => match urls.as_slice() {
+                [one] => one.clone(),
+                many => format!("{} files from {}", many.len(), host_of(&many[0])),
+            },
+            Self::Dropped { name, bytes } => format!("{name} ({})", human_bytes(*bytes)),
+        }
+    }
+}
+
+/// "12.3 MB" (or bytes for small files).
+pub fn human_bytes(bytes: u64) -> String {
+    if bytes < 10_000 {
+        format!("{bytes} bytes")
+    } else {
+        format!("{:.1} MB", bytes as f64 / 1e6)
+    }
+}
+
+/// The host part of a URL ("example.org:8080"), or the URL itself when it has none.
+pub fn host_of(url: &str) -> String {
+    url.split_once("://")
+        .map(|(_, rest)| rest.split(['/', '?', '#']).next().unwrap_or(rest))
+        .unwrap_or(url)
+        .to_owned()
+}
+
+/// Everything a link can carry. `None` fields are not in the link and leave the app as it is.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ViewState {
+    pub source: Option<ViewSource>,
+    pub mode: Option<DisplayMode>,
+    /// The preset and the parameters the displayed features were computed with.
+    pub params: Option<FeatureParams>,
+    pub display: Option<FeatureDisplay>,
+    /// The MIP's camera: rotation, zoom and pan (the orbit centre), and its field of view.
+    pub camera: Option<Camera>,
+    /// The MIP's slab thickness in mm; `Some(None)`: no slab.
+    pub slab_mm: Option<Option<f64>>,
+    /// The shared crosshair, LPS mm.
+    pub crosshair_mm: Option<[f64; 3]>,
+    /// The MIP's grey window (lo, hi).
+    pub mip_window: Option<(f32, f32)>,
+    pub projection: Option<Projection>,
+    /// The MIP's grey on or off.
+    pub grey: Option<bool>,
+    /// The slice panes' window.
+    pub window: Option<Window>,
+    pub layout: Option<Layout>,
+}
+
+/// One field's value, written the same way into the fragment and the JSON.
+#[derive(Clone, Debug, PartialEq)]
+enum Value {
+    Text(String),
+    /// Repeated in the fragment (`url=a&url=b`), an array in JSON.
+    Texts(Vec<String>),
+    /// A number already in its shortest exact decimal form.
+    Num(String),
+    Nums(Vec<String>),
+    Bool(bool),
+    Bools(Vec<bool>),
+}
+
+fn num64(x: f64) -> String {
+    // Rust prints the shortest decimal that reads back to the same f64 (JSON-valid for finite
+    // values; the callers never pass others).
+    format!("{}", if x.is_finite() { x } else { 0.0 })
+}
+
+fn num32(x: f32) -> String {
+    format!("{}", if x.is_finite() { x } else { 0.0 })
+}
+
+fn map_name(m: FeatureMap) -> &'static str {
+    match m {
+        FeatureMap::Simple => "eq1",
+        FeatureMap::Li => "li",
+    }
+}
+
+fn projection_name(p: Projection) -> &'static str {
+    match p {
+        Projection::Mip => "mip",
+        Projection::MinIp => "minip",
+    }
+}
+
+impl ViewState {
+    /// The fields in link order.
+    fn fields(&self) -> Vec<(&'static str, Value)> {
+        let mut f = vec![("v", Value::Num(VERSION.to_string()))];
+        match &self.source {
+            Some(ViewSource::Demo) => f.push(("demo", Value::Bool(true))),
+            Some(ViewSource::Phantom(name)) => f.push(("phantom", Value::Text(name.clone()))),
+            Some(ViewSource::Urls(urls)) => f.push(("url", Value::Texts(urls.clone()))),
+            Some(ViewSource::Dropped { name, bytes }) => {
+                f.push(("file", Value::Text(name.clone())));
+                f.push(("bytes", Value::Num(bytes.to_string())));
+            }
+            None => {}
+        }
+        if let Some(m) = self.mode {
+            f.push(("mode", Value::Text(m.name().to_owned())));
+        }
+        if let Some(p) = &self.params {
+            f.push(("preset", Value::Text(p.preset.name().to_owned())));
+            // Only what differs from the preset: short links, and a preset's defaults may
+            // improve without old links pinning the old values.
+            let d = FeatureParams::from_preset(p.preset);
+            if (p.sigma_min_mm, p.sigma_max_mm, p.sigma_count)
+                != (d.sigma_min_mm, d.sigma_max_mm, d.sigma_count)
+            {
+                f.push((
+                    "sigma",
+                    Value::Nums(vec![
+                        num64(p.sigma_min_mm),
+                        num64(p.sigma_max_mm),
+                        p.sigma_count.to_string(),
+                    ]),
+                ));
+            }
+            if p.rays != d.rays {
+                f.push(("rays", Value::Num(p.rays.to_string())));
+            }
+            if p.radius_mm != d.radius_mm {
+                f.push(("radius", Value::Num(num64(p.radius_mm))));
+            }
+            if p.step_mm != d.step_mm {
+                f.push(("step", Value::Num(num64(p.step_mm))));
+            }
+            if p.tf != d.tf {
+                f.push((
+                    "tf",
+                    match p.tf {
+                        None => Value::Text("auto".to_owned()),
+                        Some(tf) => Value::Nums(vec![num64(tf.d_min), num64(tf.d_max)]),
+                    },
+                ));
+            }
+            if p.map != d.map {
+                f.push(("map", Value::Text(map_name(p.map).to_owned())));
+            }
+        }
+        if let Some(d) = &self.display {
+            f.push(("on", Value::Bools(d.enabled.to_vec())));
+            f.push((
+                "gain",
+                Value::Nums(d.gain.iter().map(|&g| num32(g)).collect()),
+            ));
+            f.push(("overlay", Value::Bool(d.overlay_on_slices)));
+            f.push(("opacity", Value::Num(num32(d.opacity))));
+        }
+        if let Some(c) = &self.camera {
+            let q = c.rotation;
+            f.push(("rot", Value::Nums([q.x, q.y, q.z, q.w].map(num64).to_vec())));
+            f.push(("zoom", Value::Num(num64(c.zoom))));
+            f.push((
+                "centre",
+                Value::Nums(c.centre_mm.to_array().map(num64).to_vec()),
+            ));
+            f.push(("fov", Value::Num(num64(c.fov_mm))));
+        }
+        if let Some(slab) = self.slab_mm {
+            f.push((
+                "slab",
+                match slab {
+                    None => Value::Text("off".to_owned()),
+                    Some(t) => Value::Num(num64(t)),
+                },
+            ));
+        }
+        if let Some(p) = self.crosshair_mm {
+            f.push(("cross", Value::Nums(p.map(num64).to_vec())));
+        }
+        if let Some((lo, hi)) = self.mip_window {
+            f.push(("mipwin", Value::Nums(vec![num32(lo), num32(hi)])));
+        }
+        if let Some(p) = self.projection {
+            f.push(("proj", Value::Text(projection_name(p).to_owned())));
+        }
+        if let Some(g) = self.grey {
+            f.push(("grey", Value::Bool(g)));
+        }
+        if let Some(w) = self.window {
+            f.push(("wl", Value::Nums(vec![num32(w.width), num32(w.level)])));
+        }
+        if let Some(l) = self.layout {
+            f.push(("layout", Value::Text(l.name().to_owned())));
+        }
+        f
+    }
+
+    /// The URL fragment, without the `#`.
+    pub fn fragment(&self) -> String {
+        let mut parts = Vec::new();
+        for (key, value) in self.fields() {
+            match value {
+                Value::Text(s) => parts.push(format!("{key}={}", encode(&s))),
+                Value::Texts(v) => {
+                    parts.extend(v.iter().map(|s| format!("{key}={}", encode(s))));
+                }
+                Value::Num(n) => parts.push(format!("{key}={n}")),
+                Value::Nums(v) => parts.push(format!("{key}={}", v.join(","))),
+                Value::Bool(b) => parts.push(format!("{key}={}", u8::from(b))),
+                Value::Bools(v) => parts.push(format!(
+                    "{key}={}",
+                    v.iter()
+                        .map(|&b| if b { "1" } else { "0" })
+                        .collect::<Vec<_>>()
+                        .join(",")
+                )),
+            }
+        }
+        parts.join("&")
+    }
+
+    /// The same fields as a JSON object.
+    pub fn json(&self) -> String {
+        let mut out = String::from("{");
+        for (n, (key, value)) in self.fields().into_iter().enumerate() {
+            if n > 0 {
+                out.push(',');
+            }
+            out.push_str(&json_string(key));
+            out.push(':');
+            match value {
+                Value::Text(s) => out.push_str(&json_string(&s)),
+                Value::Texts(v) => out.push_str(&format!(
+                    "[{}]",
+                    v.iter()
+                        .map(|s| json_string(s))
+                        .collect::<Vec<_>>()
+                        .join(",")
+                )),
+                Value::Num(n) => out.push_str(&n),
+                Value::Nums(v) => out.push_str(&format!("[{}]", v.join(","))),
+                Value::Bool(b) => out.push_str(if b { "true" } else { "false" }),
+                Value::Bools(v) => out.push_str(&format!(
+                    "[{}]",
+                    v.iter()
+                        .map(|&b| if b { "true" } else { "false" })
+                        .collect::<Vec<_>>()
+                        .join(",")
+                )),
+            }
+        }
+        out.push('}');
+        out
+    }
+
+    /// Reads a fragment (with or without its `#`). Returns what could be read and a message per
+    /// field that could not (naming it); unknown fields are ignored.
+    pub fn from_fragment(fragment: &str) -> (Self, Vec<String>) {
+        let params = parse_params(fragment.trim_start_matches('#'));
+        let mut v = Self::default();
+        let mut problems = Vec::new();
+        if params.is_empty() {
+            return (v, problems);
+        }
+        let get = |key: &str| {
+            params
+                .iter()
+                .rev()
+                .find(|(k, _)| k == key)
+                .map(|(_, v)| v.as_str())
+        };
+
+        match get("v") {
+            None => {}
+            Some(s) => match s.parse::<u32>() {
+                Ok(VERSION) => {}
+                Ok(n) if n > VERSION => problems.push(format!(
+                    "this link was made by a newer Shapecast (link version {n}, this page reads {VERSION}): what this version knows is applied"
+                )),
+                Ok(_) => {}
+                Err(_) => bad(&mut problems, "v", s, "a version number"),
+            },
+        }
+
+        // The source.
+        let urls: Vec<String> = params
+            .iter()
+            .filter(|(k, _)| k == "url")
+            .map(|(_, u)| u.trim().to_owned())
+            .filter(|u| !u.is_empty())
+            .collect();
+        if !urls.is_empty() {
+            v.source = Some(ViewSource::Urls(urls));
+        } else if let Some(name) = get("file") {
+            match get("bytes").map(|b| b.parse::<u64>()) {
+                Some(Ok(bytes)) if !name.is_empty() => {
+                    v.source = Some(ViewSource::Dropped {
+                        name: name.to_owned(),
+                        bytes,
+                    });
+                }
+                Some(Ok(_)) => bad(&mut problems, "file", name, "a file name"),
+                Some(Err(_)) => bad(
+                    &mut problems,
+                    "bytes",
+                    get("bytes").unwrap_or(""),
+                    "a size in bytes",
+                ),
+                None => bad(
+                    &mut problems,
+                    "file",
+                    name,
+                    "a size in bytes beside it (bytes=...)",
+                ),
+            }
+        } else if let Some(name) = get("phantom") {
+            v.source = Some(ViewSource::Phantom(name.to_owned()));
+        } else if let Some(d) = get("demo") {
+            match d {
+                "1" | "true" | "ct" => v.source = Some(ViewSource::Demo),
+                _ => bad(&mut problems, "demo", d, "1"),
+            }
+        }
+
+        if let Some(s) = get("mode") {
+            match DisplayMode::from_name(s) {
+                Some(m) => v.mode = Some(m),
+                None => bad(
+                    &mut problems,
+                    "mode",
+                    s,
+                    "intensity, hessian, rst, li, frangi or gst",
+                ),
+            }
+        }
+
+        // Parameters: the preset's, then each edited one.
+        let preset = match get("preset") {
+            None => None,
+            Some(s) => match Preset::from_name(s) {
+                Some(p) => Some(p),
+                None => {
+                    bad(
+                        &mut problems,
+                        "preset",
+                        s,
+                        "lymph-nodes, lung-nodules, airways or vessels",
+                    );
+                    None
+                }
+            },
+        };
+        let edits = ["sigma", "rays", "radius", "step", "tf", "map"];
+        if preset.is_some() || edits.iter().any(|k| get(k).is_some()) {
+            let mut p = FeatureParams::from_preset(preset.unwrap_or_default());
+            if let Some(s) = get("sigma") {
+                match numbers(s, 3) {
+                    Some(n)
+                        if (0.3..=30.0).contains(&n[0])
+                            && (0.3..=30.0).contains(&n[1])
+                            && n[1] >= n[0]
+                            && n[2].fract() == 0.0
+                            && (1.0..=12.0).contains(&n[2]) =>
+                    {
+                        p.sigma_min_mm = n[0];
+                        p.sigma_max_mm = n[1];
+                        p.sigma_count = n[2] as usize;
+                    }
+                    _ => bad(
+                        &mut problems,
+                        "sigma",
+                        s,
+                        "min,max,count in mm (0.3-30, count 1-12)",
+                    ),
+                }
+            }
+            if let Some(s) = get("rays") {
+                match s.parse::<usize>() {
+                    Ok(n) if RAY_COUNTS.contains(&n) => p.rays = n,
+                    _ => bad(&mut problems, "rays", s, "26, 42, 98, 218 or 386"),
+                }
+            }
+            if let Some(s) = get("radius") {
+                match number_in(s, 1.0..=100.0) {
+                    Some(r) => p.radius_mm = r,
+                    None => bad(&mut problems, "radius", s, "a ray length of 1-100 mm"),
+                }
+            }
+            if let Some(s) = get("step") {
+                match number_in(s, 0.05..=5.0) {
+                    Some(r) => p.step_mm = r,
+                    None => bad(&mut problems, "step", s, "a step of 0.05-5 mm"),
+                }
+            }
+            if let Some(s) = get("tf") {
+                if s == "auto" {
+                    p.tf = None;
+                } else {
+                    match numbers(s, 2) {
+                        Some(n) if n[0] >= 0.0 && n[1] > n[0] => {
+                            p.tf = Some(TransferFunction {
+                                d_min: n[0],
+                                d_max: n[1],
+                            });
+                        }
+                        _ => bad(
+                            &mut problems,
+                            "tf",
+                            s,
+                            "auto, or d_min,d_max with d_max > d_min >= 0",
+                        ),
+                    }
+                }
+            }
+            if let Some(s) = get("map") {
+                match s {
+                    "li" => p.map = FeatureMap::Li,
+                    "eq1" => p.map = FeatureMap::Simple,
+                    _ => bad(&mut problems, "map", s, "li or eq1"),
+                }
+            }
+            v.params = Some(p);
+        }
+
+        // Channels and gains.
+        let display_keys = ["on", "gain", "overlay", "opacity"];
+        if display_keys.iter().any(|k| get(k).is_some()) {
+            let mut d = FeatureDisplay::default();
+            if let Some(s) = get("on") {
+                match bools(s, 3) {
+                    Some(b) => d.enabled = [b[0], b[1], b[2]],
+                    None => bad(
+                        &mut problems,
+                        "on",
+                        s,
+                        "three of 0 or 1 (vessels, airways, blobs)",
+                    ),
+                }
+            }
+            if let Some(s) = get("gain") {
+                match numbers32(s, 3) {
+                    Some(g) if g.iter().all(|&x| (0.01..=100.0).contains(&x)) => {
+                        d.gain = [g[0], g[1], g[2]];
+                    }
+                    _ => bad(&mut problems, "gain", s, "three gains of 0.01-100"),
+                }
+            }
+            if let Some(s) = get("overlay") {
+                match bools(s, 1) {
+                    Some(b) => d.overlay_on_slices = b[0],
+                    None => bad(&mut problems, "overlay", s, "0 or 1"),
+                }
+            }
+            if let Some(s) = get("opacity") {
+                match numbers32(s, 1) {
+                    Some(o) if (0.0..=1.0).contains(&o[0]) => d.opacity = o[0],
+                    _ => bad(&mut problems, "opacity", s, "an opacity of 0-1"),
+                }
+            }
+            v.display = Some(d);
+        }
+
+        // The camera: all four or none (a partial camera is not the view that was shared).
+        let camera_keys = ["rot", "zoom", "centre", "fov"];
+        if camera_keys.iter().any(|k| get(k).is_some()) {
+            let text = |k: &str| get(k).unwrap_or("");
+            let rotation = numbers(text("rot"), 4).and_then(|q| {
+                let q = DQuat::from_xyzw(q[0], q[1], q[2], q[3]);
+                let len = q.length();
+                if len.is_nan() || len <= 1e-6 {
+                    None
+                } else if (len - 1.0).abs() < 1e-9 {
+                    // Kept as written: the shared view bit for bit.
+                    Some(q)
+                } else {
+                    Some(q / len)
+                }
+            });
+            let zoom = number_in(text("zoom"), MIN_ZOOM..=MAX_ZOOM);
+            let centre = numbers(text("centre"), 3);
+            let fov = number_in(text("fov"), 1e-3..=1e7);
+            if rotation.is_none() {
+                bad(
+                    &mut problems,
+                    "rot",
+                    text("rot"),
+                    "a rotation quaternion x,y,z,w",
+                );
+            }
+            if zoom.is_none() {
+                bad(&mut problems, "zoom", text("zoom"), "a zoom of 0.05-200");
+            }
+            if centre.is_none() {
+                bad(&mut problems, "centre", text("centre"), "x,y,z in mm");
+            }
+            if fov.is_none() {
+                bad(&mut problems, "fov", text("fov"), "a field of view in mm");
+            }
+            if let (Some(rotation), Some(zoom), Some(c), Some(fov)) = (rotation, zoom, centre, fov)
+            {
+                v.camera = Some(Camera {
+                    centre_mm: DVec3::new(c[0], c[1], c[2]),
+                    rotation,
+                    fov_mm: fov,
+                    zoom,
+                });
+            }
+        }
+
+        if let Some(s) = get("slab") {
+            if s == "off" {
+                v.slab_mm = Some(None);
+            } else {
+                match number_in(s, 0.5..=2000.0) {
+                    Some(t) => v.slab_mm = Some(Some(t)),
+                    None => bad(
+                        &mut problems,
+                        "slab",
+                        s,
+                        "off, or a thickness of 0.5-2000 mm",
+                    ),
+                }
+            }
+        }
+        if let Some(s) = get("cross") {
+            match numbers(s, 3) {
+                Some(p) => v.crosshair_mm = Some([p[0], p[1], p[2]]),
+                None => bad(&mut problems, "cross", s, "x,y,z in mm (LPS)"),
+            }
+        }
+        if let Some(s) = get("mipwin") {
+            match numbers32(s, 2) {
+                Some(w) if w[1] > w[0] => v.mip_window = Some((w[0], w[1])),
+                _ => bad(&mut problems, "mipwin", s, "lo,hi with hi > lo"),
+            }
+        }
+        if let Some(s) = get("proj") {
+            match s {
+                "mip" => v.projection = Some(Projection::Mip),
+                "minip" => v.projection = Some(Projection::MinIp),
+                _ => bad(&mut problems, "proj", s, "mip or minip"),
+            }
+        }
+        if let Some(s) = get("grey") {
+            match bools(s, 1) {
+                Some(b) => v.grey = Some(b[0]),
+                None => bad(&mut problems, "grey", s, "0 or 1"),
+            }
+        }
+        if let Some(s) = get("wl") {
+            match numbers32(s, 2) {
+                Some(w) if (1.0..=1.0e6).contains(&w[0]) => {
+                    v.window = Some(Window::new(w[0], w[1]));
+                }
+                _ => bad(
+                    &mut problems,
+                    "wl",
+                    s,
+                    "width,level with a width of 1-1000000",
+                ),
+            }
+        }
+        if let Some(s) = get("layout") {
+            match Layout::from_name(s) {
+                Some(l) => v.layout = Some(l),
+                None => bad(
+                    &mut problems,
+                    "layout",
+                    s,
+                    "mip+slices, grid, mip, axial, coronal or sagittal",
+                ),
+            }
+        }
+        (v, problems)
+    }
+}
+
+fn bad(problems: &mut Vec<String>, key: &str, value: &str, expected: &str) {
+    problems.push(format!(
+        "link field {key}={value:?}: expected {expected}; ignored"
+    ));
+}
+
+/// `n` comma-separated finite numbers.
+fn numbers(s: &str, n: usize) -> Option<Vec<f64>> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
+        .collect::<Option<_>>()?;
+    (v.len() == n).then_some(v)
+}
+
+fn numbers32(s: &str, n: usize) -> Option<Vec<f32>> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>().ok().filter(|x| x.is_finite()))
+        .collect::<Option<_>>()?;
+    (v.len() == n).then_some(v)
+}
+
+fn number_in(s: &str, range: std::ops::RangeInclusive<f64>) -> Option<f64> {
+    numbers(s, 1).map(|v| v[0]).filter(|x| range.contains(x))
+}
+
+fn bools(s: &str, n: usize) -> Option<Vec<bool>> {
+    let v: Vec<bool> = s
+        .split(',')
+        .map(|x| match x.trim() {
+            "1" | "true" => Some(true),
+            "0" | "false" => Some(false),
+            _ => None,
+        })
+        .collect::<Option<_>>()?;
+    (v.len() == n).then_some(v)
+}
+
+fn json_string(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\r' => out.push_str("\\r"),
+            '\t' => out.push_str("\\t"),
+            c if (c as u32) < 0x20 => out.push_str(&format!("\\u{:04x}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+    use crate::cpu::pipeline::Method;
+
+    fn full() -> ViewState {
+        let mut params = FeatureParams::from_preset(Preset::Airways);
+        params.sigma_count = 3;
+        params.rays = 98;
+        params.tf = Some(TransferFunction {
+            d_min: 12.5,
+            d_max: 40.0,
+        });
+        params.map = FeatureMap::Simple;
+        ViewState {
+            source: Some(ViewSource::Urls(vec![
+                "https://example.org/a b/x.nhdr?token=1&y=2".to_owned(),
+                "https://example.org/a b/x.raw.gz".to_owned(),
+            ])),
+            mode: Some(DisplayMode::Features(Method::Li)),
+            params: Some(params),
+            display: Some(FeatureDisplay {
+                enabled: [true, false, true],
+                gain: [1.0, 0.1, 2.345_678_9],
+                overlay_on_slices: false,
+                opacity: 0.3,
+            }),
+            camera: Some(Camera {
+                centre_mm: DVec3::new(-12.25, 0.1 + 0.2, 1e-9),
+                rotation: DQuat::from_rotation_y(0.7) * DQuat::from_rotation_x(-0.3),
+                fov_mm: 231.123_456_789,
+                zoom: 1.7,
+            }),
+            slab_mm: Some(Some(12.5)),
+            crosshair_mm: Some([1.0 / 3.0, -250.0, 7.5]),
+            mip_window: Some((-100.0, 900.5)),
+            projection: Some(Projection::MinIp),
+            grey: Some(false),
+            window: Some(Window::new(1500.0, -600.0)),
+            layout: Some(Layout::Single(super::super::PaneId::Slice(
+                super::super::SliceKind::Coronal,
+            ))),
+        }
+    }
+
+    #[test]
+    fn a_view_reads_back_bit_for_bit() {
+        let v = full();
+        let fragment = v.fragment();
+        let (back, problems) = ViewState::from_fragment(&format!("#{fragment}"));
+        assert!(problems.is_empty(), "{problems:?}");
+        assert_eq!(back, v, "{fragment}");
+        assert_eq!(back.fragment(), fragment);
+        assert_eq!(back.json(), v.json());
+        // Every layout and source kind too.
+        for layout in [
+            Layout::MipAndSlices,
+            Layout::Grid,
+            Layout::Single(super::super::PaneId::Mip),
+        ] {
+            for source in [
+                ViewSource::Demo,
+                ViewSource::Phantom("fig8-sphere".into()),
+                ViewSource::Dropped {
+                    name: "ct-head (93 files)".into(),
+                    bytes: 1_234_567,
+                },
+            ] {
+                let v = ViewState {
+                    layout: Some(layout),
+                    source: Some(source),
+                    slab_mm: Some(None),
+                    ..full()
+                };
+                let (back, problems) = ViewState::from_fragment(&v.fragment());
+                assert!(problems.is_empty(), "{problems:?}");
+                assert_eq!(back, v);
+            }
+        }
+    }
+
+    #[test]
+    fn the_fragment_is_readable_and_the_json_valid() {
+        let v = full();
+        let f = v.fragment();
+        assert!(
+            f.starts_with("v=1&url=https://example.org/a%20b/x.nhdr%3Ftoken%3D1%26y%3D2&url="),
+            "{f}"
+        );
+        assert!(f.contains("&mode=li&preset=airways&sigma="), "{f}");
+        assert!(f.contains("&layout=coronal"), "{f}");
+        let json: serde_json::Value = serde_json::from_str(&v.json()).unwrap();
+        assert_eq!(json["v"], 1);
+        assert_eq!(json["url"][1], "https://example.org/a b/x.raw.gz");
+        assert_eq!(json["gain"][2].as_f64().unwrap() as f32, 2.345_678_9_f32);
+        assert_eq!(json["on"][1], false);
+        assert_eq!(json["tf"][0], 12.5);
+        assert_eq!(json["layout"], "coronal");
+        let mut mip = full();
+        mip.layout = Some(Layout::MipAndSlices);
+        assert!(mip.fragment().contains("layout=mip%2Bslices"));
+    }
+
+    #[test]
+    fn preset_defaults_are_left_out() {
+        let v = ViewState {
+            params: Some(FeatureParams::from_preset(Preset::Vessels)),
+            ..Default::default()
+        };
+        assert_eq!(v.fragment(), "v=1&preset=vessels");
+        let (back, _) = ViewState::from_fragment("preset=vessels");
+        assert_eq!(
+            back.params,
+            Some(FeatureParams::from_preset(Preset::Vessels))
+        );
+    }
+
+    #[test]
+    fn bad_fields_are_named_and_the_rest_applies() {
+        let (v, problems) = ViewState::from_fragment(
+            "#v=1&mode=li&gain=1,x,1&layout=grid&rays=7&future=42&rot=0,0,0,0&zoom=2&centre=1,2,3&fov=100&cross=1,2",
+        );
+        assert_eq!(v.mode, Some(DisplayMode::Features(Method::Li)));
+        assert_eq!(v.layout, Some(Layout::Grid));
+        assert_eq!(
+            v.display.unwrap().gain,
+            [1.0; 3],
+            "a bad gain keeps the default"
+        );
+        assert_eq!(v.params.unwrap().rays, 42);
+        assert_eq!(v.camera, None, "a bad rotation drops the whole camera");
+        assert_eq!(v.crosshair_mm, None);
+        let joined = problems.join("\n");
+        for field in ["gain=\"1,x,1\"", "rays=\"7\"", "rot=", "cross="] {
+            assert!(joined.contains(field), "{field} not named in {joined}");
+        }
+        assert!(
+            !joined.contains("future"),
+            "unknown fields are ignored: {joined}"
+        );
+        assert_eq!(problems.len(), 4, "{problems:?}");
+        // A newer version is said, and still read.
+        let (v, problems) = ViewState::from_fragment("v=9&mode=rst");
+        assert_eq!(v.mode, Some(DisplayMode::Features(Method::Rst)));
+        assert!(problems[0].contains("newer"), "{problems:?}");
+        // Garbage never panics.
+        for s in [
+            "",
+            "#",
+            "&&&",
+            "=",
+            "v",
+            "%",
+            "%zz&%4",
+            "url=",
+            "file=x",
+            "bytes=9&file=",
+        ] {
+            let _ = ViewState::from_fragment(s);
+        }
+    }
+}

@@ -1,0 +1,370 @@
+//! Volumes by URL in the browser (wasm only): `?url=` and shared links. Each URL is fetched
+//! and its body streamed into memory with progress (bytes of the total where the server gives a
+//! Content-Length), cancellable (an `AbortController`: the "Cancel" button, a drop or a file
+//! chosen meanwhile), and the files then take the same path as a drop (`WebEvent::Files`).
+//!
+//! Every failure is a message that names the URL and says what to do: an HTTP status (not found,
+//! a login needed), a refusal the browser gives no detail about (the server does not allow this
+//! site's origin, or does not answer; this page's Content-Security-Policy; plain http from an
+//! https page), a web page where a volume was expected (a login page), or a size this tab cannot
+//! hold. The volume on screen stays.
+
+use std::cell::RefCell;
+
+use wasm_bindgen::JsCast as _;
+use wasm_bindgen::JsValue;
+use wasm_bindgen::closure::Closure;
+use wasm_bindgen_futures::JsFuture;
+
+use super::view_link::{ViewSource, host_of};
+use super::web_files::{WebEvent, js_error, push};
+use crate::io::InputFile;
+
+thread_local! {
+    /// The running download's controller.
+    static ACTIVE: RefCell<Option<web_sys::AbortController>> = const { RefCell::new(None) };
+    /// Addresses this page's Content-Security-Policy blocked (to explain a failed fetch).
+    static BLOCKED: RefCell<Vec<String>> = const { RefCell::new(Vec::new()) };
+}
+
+/// The most a download may hold: what one volume may take in this tab (`io::Limits`).
+fn max_download_bytes() -> u64 {
+    crate::io::Limits::default().max_voxel_bytes
+}
+
+/// Records what the page's Content-Security-Policy blocks (once, at start).
+pub fn install() {
+    let Some(window) = web_sys::window() else {
+        return;
+    };
+    let on_violation = Closure::<dyn FnMut(web_sys::SecurityPolicyViolationEvent)>::new(
+        |e: web_sys::SecurityPolicyViolationEvent| {
+            let uri = e.blocked_uri();
+            log::warn!(
+                "Content-Security-Policy blocked {uri} ({})",
+                e.violated_directive()
+            );
+            BLOCKED.with(|b| b.borrow_mut().push(uri));
+        },
+    );
+    let _ = window.add_event_listener_with_callback(
+        "securitypolicyviolation",
+        on_violation.as_ref().unchecked_ref(),
+    );
+    on_violation.forget();
+}
+
+/// Whether a download is running.
+pub fn active() -> bool {
+    ACTIVE.with(|a| a.borrow().is_some())
+}
+
+/// Stops the running download, if any (it reports `WebEvent::Cancelled`).
+pub fn cancel() {
+    if let Some(c) = ACTIVE.with(|a| a.borrow_mut().take()) {
+        c.abort();
+    }
+}
+
+/// Downloads `urls` (absolute) one after the other, then queues them as one load.
+pub fn fetch_urls(urls: Vec<String>) {
+    cancel();
+    let controller = match web_sys::AbortController::new() {
+        Ok(c) => c,
+        Err(e) => {
+            push(WebEvent::Failed {
+                message: format!("cannot start a download: {}", js_error(&e)),
+            });
+            return;
+        }
+    };
+    ACTIVE.with(|a| *a.borrow_mut() = Some(controller.clone()));
+    wasm_bindgen_futures::spawn_local(async move {
+        let label = match urls.as_slice() {
+            [one] => file_name(one),
+            many => format!("{} files from {}", many.len(), host_of(&many[0])),
+        };
+        let result = download_all(&urls, &controller).await;
+        let mine = ACTIVE.with(|a| {
+            let mut a = a.borrow_mut();
+            let same = a.as_ref() == Some(&controller);
+            if same {
+                *a = None;
+            }
+            same
+        });
+        match result {
+            Ok(files) if mine => push(WebEvent::Files {
+                label,
+                files,
+                origin: ViewSource::Urls(urls),
+            }),
+            // Replaced by a newer download or drop: that one reports.
+            Ok(_) => {}
+            Err(Failure::Cancelled) => push(WebEvent::Cancelled { label }),
+            Err(Failure::Message(message)) => push(WebEvent::Failed { message }),
+        }
+    });
+}
+
+enum Failure {
+    Cancelled,
+    Message(String),
+}
+
+/// The file name a URL's path ends in (decoded), as loaders pair headers with data files.
+fn file_name(url: &str) -> String {
+    let path = url.split(['?', '#']).next().unwrap_or(url);
+    let last = path
+        .trim_end_matches('/')
+        .rsplit('/')
+        .next()
+        .filter(|s| !s.is_empty() && !s.contains(':'))
+        .unwrap_or("download");
+    super::url_params::decode(last)
+}
+
+async fn download_all(
+    urls: &[String],
+    controller: &web_sys::AbortController,
+) -> Result<Vec<InputFile>, Failure> {
+    let mut files: Vec<InputFile> = Vec::with_capacity(urls.len());
+    let mut total_bytes: u64 = 0;
+    for (n, url) in urls.iter().enumerate() {
+        let mut name = file_name(url);
+        if files.iter().any(|f| f.name == name) {
+            name = format!("{n}-{name}");
+        }
+        let label = if urls.len() > 1 {
+            format!("{name} ({} of {})", n + 1, urls.len())
+        } else {
+            name.clone()
+        };
+        let bytes = download(url, &label, controller, max_download_bytes() - total_bytes).await?;
+        total_bytes += bytes.len() as u64;
+        files.push(InputFile::new(name, bytes));
+    }
+    Ok(files)
+}
+
+fn origin_of_page() -> String {
+    web_sys::window()
+        .and_then(|w| w.location().origin().ok())
+        .unwrap_or_default()
+}
+
+/// The message for a fetch the browser refused without saying why.
+fn refusal_message(url: &str) -> String {
+    let page = origin_of_page();
+    let host = host_of(url);
+    let blocked = BLOCKED.with(|b| {
+        b.borrow()
+            .iter()
+            .any(|u| !u.is_empty() && (url.starts_with(u.as_str()) || u.contains(&host)))
+    });
+    if blocked {
+        return format!(
+            "{url}: this site's Content-Security-Policy does not allow downloads from {host}; whoever hosts Shapecast can add it to connect-src (see \"Deploy\" in Shapecast's README), or download the file and drop it here"
+        );
+    }
+    if url.starts_with("http:") && page.starts_with("https:") {
+        return format!(
+            "{url}: a page served over HTTPS may not download over plain http; use the https:// address of the file, or download it and drop it here"
+        );
+    }
+    let same_site = url.starts_with(&format!("{page}/"));
+    if same_site {
+        format!(
+            "{url}: no answer from the server (network error); check the address and the connection"
+        )
+    } else {
+        format!(
+            "{url}: the download was refused or got no answer. The server at {host} must allow this site ({page}) to read the file: it has to send the header Access-Control-Allow-Origin (see \"Deploy\" in Shapecast's README). Check the address, ask the server's administrator, or download the file and drop it here"
+        )
+    }
+}
+
+fn status_message(url: &str, status: u16, text: &str) -> String {
+    let host = host_of(url);
+    match status {
+        404 | 410 => format!("{url}: not found on the server (HTTP {status}); check the address"),
+        401 | 403 => format!(
+            "{url}: the server at {host} refused access (HTTP {status}): the file needs a login or a permission that a link cannot carry. Open the address in a tab, download the file and drop it here"
+        ),
+        _ => format!(
+            "{url}: the server at {host} answered HTTP {status}{}{text}; try again later or check the address",
+            if text.is_empty() { "" } else { " " }
+        ),
+    }
+}
+
+fn too_large(url: &str, bytes: u64) -> String {
+    format!(
+        "{url}: {:.0} MB is more than this browser tab can hold for one volume (at most {:.0} MB); open a smaller or downsampled series, or use the desktop app (shapecast view)",
+        bytes as f64 / 1e6,
+        max_download_bytes() as f64 / 1e6
+    )
+}
+
+fn html_message(url: &str) -> String {
+    format!(
+        "{url}: the server sent a web page, not a volume (perhaps a login or an error page). Open the address in a tab to see it; a direct link to the file is needed, or download it and drop it here"
+    )
+}
+
+/// Whether bytes look like an HTML page (after whitespace and a byte order mark).
+fn looks_like_html(bytes: &[u8]) -> bool {
+    let start = bytes
+        .strip_prefix(b"\xEF\xBB\xBF".as_slice())
+        .unwrap_or(bytes);
+    let head: Vec<u8> = start
+        .iter()
+        .skip_while(|b| b.is_ascii_whitespace())
+        .take(15)
+        .map(u8::to_ascii_lowercase)
+        .collect();
+    head.starts_with(b"<!doctype html") || head.starts_with(b"<html") || head.starts_with(b"<head")
+}
+
+async fn download(
+    url: &str,
+    label: &str,
+    controller: &web_sys::AbortController,
+    room: u64,
+) -> Result<Vec<u8>, Failure> {
+    let fail = |m: String| Failure::Message(m);
+    let signal = controller.signal();
+    let window = web_sys::window().ok_or_else(|| fail("no window object".to_owned()))?;
+    push(WebEvent::Progress {
+        verb: "downloading",
+        label: label.to_owned(),
+        done: 0.0,
+        total: 0.0,
+    });
+    let init = web_sys::RequestInit::new();
+    init.set_signal(Some(&signal));
+    let response = match JsFuture::from(window.fetch_with_str_and_init(url, &init)).await {
+        Ok(r) => r,
+        Err(_) if signal.aborted() => return Err(Failure::Cancelled),
+        Err(e) => {
+            log::warn!("fetch {url}: {}", js_error(&e));
+            // The policy's violation event comes as a task of its own, after the rejection.
+            sleep_ms(50).await;
+            return Err(fail(refusal_message(url)));
+        }
+    };
+    let response: web_sys::Response = response.unchecked_into();
+    if !response.ok() {
+        return Err(fail(status_message(
+            url,
+            response.status(),
+            &response.status_text(),
+        )));
+    }
+    let headers = response.headers();
+    let content_type = headers
+        .get("content-type")
+        .ok()
+        .flatten()
+        .unwrap_or_default()
+        .to_ascii_lowercase();
+    if content_type.starts_with("text/html") {
+        controller.abort();
+        return Err(fail(html_message(url)));
+    }
+    // The declared length; with a Content-Encoding it counts the compressed bytes, while the
+    // body arrives decoded, so it is only a progress hint there.
+    let encoded = headers
+        .get("content-encoding")
+        .ok()
+        .flatten()
+        .is_some_and(|e| !e.is_empty() && e != "identity");
+    let length: Option<u64> = headers
+        .get("content-length")
+        .ok()
+        .flatten()
+        .and_then(|l| l.trim().parse().ok());
+    if let Some(n) = length
+        && !encoded
+        && n > room
+    {
+        controller.abort();
+        return Err(fail(too_large(url, n)));
+    }
+    let mut bytes: Vec<u8> = Vec::new();
+    if let Some(n) = length.filter(|_| !encoded)
+        && bytes.try_reserve_exact(n as usize).is_err()
+    {
+        controller.abort();
+        return Err(fail(too_large(url, n)));
+    }
+    let Some(body) = response.body() else {
+        return Ok(bytes);
+    };
+    let reader: web_sys::ReadableStreamDefaultReader = body.get_reader().unchecked_into();
+    let total = length.map_or(0.0, |n| n as f64);
+    let mut last_report = 0usize;
+    loop {
+        let chunk = match JsFuture::from(reader.read()).await {
+            Ok(c) => c,
+            Err(_) if signal.aborted() => return Err(Failure::Cancelled),
+            Err(e) => {
+                return Err(fail(format!(
+                    "{url}: the download broke off after {:.1} MB ({}); try again",
+                    bytes.len() as f64 / 1e6,
+                    js_error(&e)
+                )));
+            }
+        };
+        let done = js_sys::Reflect::get(&chunk, &JsValue::from_str("done"))
+            .ok()
+            .and_then(|d| d.as_bool())
+            .unwrap_or(true);
+        if done {
+            break;
+        }
+        let Ok(value) = js_sys::Reflect::get(&chunk, &JsValue::from_str("value")) else {
+            continue;
+        };
+        let Ok(array) = value.dyn_into::<js_sys::Uint8Array>() else {
+            continue;
+        };
+        let n = array.length() as usize;
+        let new_len = bytes.len() + n;
+        if new_len as u64 > room {
+            controller.abort();
+            return Err(fail(too_large(url, new_len as u64)));
+        }
+        if bytes.try_reserve(n).is_err() {
+            controller.abort();
+            return Err(fail(too_large(url, new_len as u64)));
+        }
+        let start = bytes.len();
+        bytes.resize(new_len, 0);
+        array.copy_to(&mut bytes[start..]);
+        // A progress event per ~256 KB is plenty (chunks are often 16-64 KB).
+        if bytes.len() - last_report >= 256 << 10 {
+            last_report = bytes.len();
+            push(WebEvent::Progress {
+                verb: "downloading",
+                label: label.to_owned(),
+                done: bytes.len() as f64,
+                total: total.max(bytes.len() as f64),
+            });
+        }
+    }
+    if looks_like_html(&bytes) {
+        return Err(fail(html_message(url)));
+    }
+    Ok(bytes)
+}
+
+/// Waits `ms` milliseconds without blocking (a timer promise).
+async fn sleep_ms(ms: i32) {
+    let promise = js_sys::Promise::new(&mut |resolve, _reject| {
+        if let Some(w) = web_sys::window() {
+            let _ = w.set_timeout_with_callback_and_timeout_and_arguments_0(&resolve, ms);
+        }
+    });
+    let _ = JsFuture::from(promise).await;
+}
