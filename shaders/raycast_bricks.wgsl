@@ -11,8 +11,18 @@
 
 const BRICK: u32 = 8u;
 
+// A pass makes the brick slices z0 .. z0 + nz (the viewer spreads a large volume's table over
+// frames).
+struct Slices {
+    z0: u32,
+    nz: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
 @group(0) @binding(0) var source: texture_3d<f32>;
 @group(0) @binding(1) var bricks: texture_storage_3d<rgba16float, write>;
+@group(0) @binding(2) var<uniform> slices: Slices;
 
 fn voxel_range(b: vec3<u32>) -> array<vec3<u32>, 2> {
     let n = textureDimensions(source);
@@ -22,9 +32,10 @@ fn voxel_range(b: vec3<u32>) -> array<vec3<u32>, 2> {
 }
 
 @compute @workgroup_size(4, 4, 4)
-fn bricks_intensity(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn bricks_intensity(@builtin(global_invocation_id) id: vec3<u32>) {
     let nb = textureDimensions(bricks);
-    if any(gid >= nb) {
+    let gid = vec3<u32>(id.xy, id.z + slices.z0);
+    if any(gid >= nb) || id.z >= slices.nz {
         return;
     }
     let r = voxel_range(gid);
@@ -43,9 +54,10 @@ fn bricks_intensity(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 @compute @workgroup_size(4, 4, 4)
-fn bricks_features(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn bricks_features(@builtin(global_invocation_id) id: vec3<u32>) {
     let nb = textureDimensions(bricks);
-    if any(gid >= nb) {
+    let gid = vec3<u32>(id.xy, id.z + slices.z0);
+    if any(gid >= nb) || id.z >= slices.nz {
         return;
     }
     let r = voxel_range(gid);

@@ -8,8 +8,8 @@ use shapecast::gpu::context::test_context;
 use shapecast::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use shapecast::render::camera::{Camera, ViewPreset};
 use shapecast::render::raycast::{
-    Channel, ChannelDisplay, FrameCost, Projection, RaycastTarget, Raycaster, RenderSettings,
-    Scene, Slab, TwinScene, VolumeGeometry, cpu_twin, params,
+    BrickSource, Channel, ChannelDisplay, FrameCost, Projection, RaycastTarget, Raycaster,
+    RenderSettings, Scene, Slab, TwinScene, VolumeGeometry, cpu_twin, params,
 };
 use shapecast::volume::Volume;
 
@@ -682,6 +682,25 @@ fn skipping_is_exact_and_skips() {
         b.read_blocking(&g.ctx).expect("bricks"),
         fb.read_blocking(&g.ctx).expect("bricks"),
     );
+    // Made a brick slice at a time (as the viewer spreads a large table over frames): the
+    // same table, and skipping only once it is complete.
+    let mut stepped = g
+        .caster
+        .start_bricks(&g.ctx, BrickSource::Features(&g.features));
+    let mut steps = 0;
+    while !stepped.complete() {
+        let scene = Scene {
+            volume: &g.volume,
+            features: Some(&g.features),
+            bricks: Some(&b),
+            feature_bricks: Some(&stepped),
+        };
+        assert!(!scene.skipping(), "skipping with an incomplete table");
+        assert!(stepped.advance(&g.caster, &g.ctx, 1) > 0);
+        steps += 1;
+    }
+    assert_eq!(steps, 3);
+    assert_eq!(stepped.read_blocking(&g.ctx).expect("bricks"), gfb);
     let tb = twin.bricks.as_ref().expect("twin bricks");
     let tfb = twin.feature_bricks.as_ref().expect("twin feature bricks");
     for (n, (x, y)) in gb.iter().zip(tb).enumerate() {

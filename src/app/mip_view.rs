@@ -36,8 +36,8 @@ use crate::gpu::GpuContext;
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::render::camera::{Camera, ViewPreset};
 use crate::render::raycast::{
-    Bricks, CHANNEL_COLOURS, FrameCost, FramePacer, FramePlan, PendingPick, Pick, Projection,
-    RaycastTarget, Raycaster, RenderSettings, Scene, Slab, scale_within,
+    BrickSource, Bricks, CHANNEL_COLOURS, FrameCost, FramePacer, FramePlan, PendingPick, Pick,
+    Projection, RaycastTarget, Raycaster, RenderSettings, Scene, Slab, scale_within,
 };
 use crate::volume::orientation_label;
 
@@ -554,6 +554,17 @@ impl MipView {
                 ui.ctx().request_repaint();
             }
         }
+        // Brick tables of a new texture, a few slices a frame (half the budget when a frame was
+        // drawn too); skipping starts when a table is complete (the picture is the same).
+        if let Some(caster) = &self.caster {
+            let budget = self.pacer.budget_samples() * if rendered { 0.5 } else { 1.0 };
+            let tables = [self.bricks.as_mut(), self.feature_bricks.as_mut()];
+            if let Some(b) = tables.into_iter().flatten().find(|b| !b.complete()) {
+                let slices = (budget / b.voxels_per_slice() as f64).clamp(1.0, f64::from(u32::MAX));
+                b.advance(caster, gpu, slices as u32);
+                ui.ctx().request_repaint();
+            }
+        }
 
         // Draw.
         let painter = ui.painter_at(rect);
@@ -616,7 +627,7 @@ impl MipView {
             .as_ref()
             .is_some_and(|b| b.of(&volume.intensity))
         {
-            self.bricks = Some(caster.intensity_bricks(gpu, volume));
+            self.bricks = Some(caster.start_bricks(gpu, BrickSource::Intensity(volume)));
         }
         if let Some(f) = features
             && !self
@@ -624,7 +635,7 @@ impl MipView {
                 .as_ref()
                 .is_some_and(|b| b.of(&f.texture))
         {
-            self.feature_bricks = Some(caster.feature_bricks(gpu, f));
+            self.feature_bricks = Some(caster.start_bricks(gpu, BrickSource::Features(f)));
         }
         let scene = Scene {
             volume,

@@ -26,7 +26,8 @@ use crate::gpu::GpuContext;
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::render::camera::{Camera, ViewPreset};
 use crate::render::raycast::{
-    FrameCost, FramePacer, FramePlan, RaycastTarget, Raycaster, RenderSettings, Scene,
+    BrickSource, Bricks, FrameCost, FramePacer, FramePlan, RaycastTarget, Raycaster,
+    RenderSettings, Scene,
 };
 use crate::volume::Volume;
 
@@ -118,6 +119,37 @@ fn draw_like_the_viewer(
     Ok((timing, target))
 }
 
+/// Makes a brick table as the viewer does (a frame's budget of slices at a time), timing the
+/// largest step.
+fn bricks_like_the_viewer(
+    ctx: &GpuContext,
+    caster: &Raycaster,
+    source: BrickSource<'_>,
+    pacer: &FramePacer,
+) -> anyhow::Result<Bricks> {
+    let mut bricks = caster.start_bricks(ctx, source);
+    let slices = (pacer.budget_samples() / bricks.voxels_per_slice() as f64).clamp(1.0, 1e9) as u32;
+    let (mut steps, mut largest, started) = (0, 0.0f64, Instant::now());
+    while !bricks.complete() {
+        let t = Instant::now();
+        bricks.advance(caster, ctx, slices);
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .context("waiting for the GPU")?;
+        largest = largest.max(t.elapsed().as_secs_f64() * 1e3);
+        steps += 1;
+    }
+    println!(
+        "brick table ({}): {steps} step(s) of {slices} brick slice(s), largest {largest:.0} ms, {:.1} s in all",
+        match source {
+            BrickSource::Intensity(_) => "intensity",
+            BrickSource::Features(_) => "features",
+        },
+        started.elapsed().as_secs_f64()
+    );
+    Ok(bricks)
+}
+
 fn report_mip(what: &str, t: &MipTiming) {
     match t.coarse_ms {
         Some(ms) => println!(
@@ -169,15 +201,21 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
     let t = Instant::now();
     let render_volume = RenderVolume::upload(&ctx, &volume)?;
     let caster = Raycaster::new(&ctx)?;
-    let bricks = caster.intensity_bricks(&ctx, &render_volume);
     ctx.device
         .poll(wgpu::PollType::wait_indefinitely())
         .context("waiting for the GPU")?;
     println!(
-        "upload (R16Float texture) + brick table: {:.1} s; peak resident memory {:.0} MB",
+        "upload (R16Float texture): {:.1} s; peak resident memory {:.0} MB",
         t.elapsed().as_secs_f64(),
         peak_rss_mb()
     );
+    let mut pacer = FramePacer::new(Some(crate::app::mip_view::MipView::FRAME_BUDGET_S));
+    let bricks = bricks_like_the_viewer(
+        &ctx,
+        &caster,
+        BrickSource::Intensity(&render_volume),
+        &pacer,
+    )?;
 
     let camera = Camera::for_volume(
         &render_volume.world_from_voxel,
@@ -189,7 +227,6 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
         hardware_filtering: true,
         ..Default::default()
     };
-    let mut pacer = FramePacer::new(Some(crate::app::mip_view::MipView::FRAME_BUDGET_S));
     let scene = Scene {
         volume: &render_volume,
         features: None,
@@ -231,7 +268,8 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
         },
         peak_rss_mb()
     );
-    let feature_bricks = caster.feature_bricks(&ctx, &features);
+    let feature_bricks =
+        bricks_like_the_viewer(&ctx, &caster, BrickSource::Features(&features), &pacer)?;
     let scene = Scene {
         features: Some(&features),
         feature_bricks: Some(&feature_bricks),

@@ -2,7 +2,7 @@
 //! compute pass per texture) and its CPU twin [`cpu_bricks`].
 
 use crate::gpu::GpuContext;
-use crate::gpu::kernel::bind_group;
+use crate::gpu::kernel::{bind_group, uniform_buffer};
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::render::{output_texture, submit_dispatch};
 
@@ -21,14 +21,37 @@ pub fn brick_dims(dims: [u32; 3]) -> [u32; 3] {
 
 /// Brick extrema of one texture (the volume's intensity, or one method's features), for
 /// empty-space skipping: made once per texture with [`Raycaster::intensity_bricks`] or
-/// [`Raycaster::feature_bricks`], used every frame. Holds a handle of its source, so it is only
-/// ever used with that texture.
+/// [`Raycaster::feature_bricks`] (whole), or started with [`Raycaster::start_bricks`] and made
+/// a few brick slices at a time with [`Bricks::advance`] (the viewer keeps each frame's GPU work
+/// small); used every frame once [`Bricks::complete`]. Holds a handle of its source, so it is
+/// only ever used with that texture.
 pub struct Bricks {
     pub dims: [u32; 3],
     pub texture: wgpu::Texture,
     pub view: wgpu::TextureView,
     source: wgpu::Texture,
+    source_view: wgpu::TextureView,
+    features: bool,
+    /// Brick slices made so far.
+    done_z: u32,
 }
+
+/// Which texture a brick table is made of.
+#[derive(Clone, Copy)]
+pub enum BrickSource<'a> {
+    Intensity(&'a RenderVolume),
+    Features(&'a FeatureTexture),
+}
+
+/// Mirrors `Slices` in raycast_bricks.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Slices {
+    z0: u32,
+    nz: u32,
+    _pad: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<Slices>() == 16);
 
 impl Bricks {
     /// Native only: the brick values (tests), brick x fastest.
@@ -46,63 +69,98 @@ impl Bricks {
     pub fn of(&self, texture: &wgpu::Texture) -> bool {
         self.source == *texture
     }
-}
 
-impl Raycaster {
-    /// The brick extrema of the volume's intensity (one small compute pass).
-    pub fn intensity_bricks(&self, ctx: &GpuContext, volume: &RenderVolume) -> Bricks {
-        self.bricks(
-            ctx,
-            &self.bricks_intensity,
-            &volume.intensity,
-            &volume.intensity_view,
-            volume.dims,
-        )
+    /// Whether every brick is made (skipping uses only complete tables).
+    pub fn complete(&self) -> bool {
+        self.done_z >= self.dims[2]
     }
 
-    /// The brick extrema of one method's features.
-    pub fn feature_bricks(&self, ctx: &GpuContext, features: &FeatureTexture) -> Bricks {
-        self.bricks(
-            ctx,
-            &self.bricks_features,
-            &features.texture,
-            &features.view,
-            features.dims,
-        )
+    /// Source voxels one brick slice reads (the unit of [`Self::advance`]'s cost).
+    pub fn voxels_per_slice(&self) -> u64 {
+        u64::from(self.dims[0]) * u64::from(self.dims[1]) * u64::from(BRICK + 1).pow(3)
     }
 
-    fn bricks(
-        &self,
-        ctx: &GpuContext,
-        pipeline: &wgpu::ComputePipeline,
-        source: &wgpu::Texture,
-        source_view: &wgpu::TextureView,
-        dims: [u32; 3],
-    ) -> Bricks {
-        let nb = brick_dims(dims);
-        let (texture, view) = output_texture(
-            ctx,
-            "raycast bricks",
-            wgpu::TextureDimension::D3,
-            nb,
-            wgpu::TextureFormat::Rgba16Float,
+    /// Makes the next `slices` brick slices (at least one; submitted, not waited for). Returns
+    /// the source voxels read.
+    pub fn advance(&mut self, caster: &Raycaster, ctx: &GpuContext, slices: u32) -> u64 {
+        if self.complete() {
+            return 0;
+        }
+        let nz = slices.max(1).min(self.dims[2] - self.done_z);
+        let pipeline = if self.features {
+            &caster.bricks_features
+        } else {
+            &caster.bricks_intensity
+        };
+        let range = uniform_buffer(
+            &ctx.device,
+            "raycast brick slices",
+            &Slices {
+                z0: self.done_z,
+                nz,
+                _pad: [0; 2],
+            },
         );
         let bind_group = bind_group(
             &ctx.device,
             "raycast bricks",
             pipeline,
             [
-                wgpu::BindingResource::TextureView(source_view),
-                wgpu::BindingResource::TextureView(&view),
+                wgpu::BindingResource::TextureView(&self.source_view),
+                wgpu::BindingResource::TextureView(&self.view),
+                range.as_entire_binding(),
             ],
         );
-        let groups = nb.map(|n| n.div_ceil(4));
+        let groups = [
+            self.dims[0].div_ceil(4),
+            self.dims[1].div_ceil(4),
+            nz.div_ceil(4),
+        ];
         submit_dispatch(ctx, "raycast bricks", pipeline, &bind_group, groups);
+        self.done_z += nz;
+        u64::from(nz) * self.voxels_per_slice()
+    }
+}
+
+impl Raycaster {
+    /// The brick extrema of the volume's intensity, made whole (one pass).
+    pub fn intensity_bricks(&self, ctx: &GpuContext, volume: &RenderVolume) -> Bricks {
+        self.whole_bricks(ctx, BrickSource::Intensity(volume))
+    }
+
+    /// The brick extrema of one method's features, made whole (one pass).
+    pub fn feature_bricks(&self, ctx: &GpuContext, features: &FeatureTexture) -> Bricks {
+        self.whole_bricks(ctx, BrickSource::Features(features))
+    }
+
+    fn whole_bricks(&self, ctx: &GpuContext, source: BrickSource<'_>) -> Bricks {
+        let mut bricks = self.start_bricks(ctx, source);
+        bricks.advance(self, ctx, u32::MAX);
+        bricks
+    }
+
+    /// An empty brick table of `source`, to be made with [`Bricks::advance`].
+    pub fn start_bricks(&self, ctx: &GpuContext, source: BrickSource<'_>) -> Bricks {
+        let (texture, view, dims, features) = match source {
+            BrickSource::Intensity(v) => (&v.intensity, &v.intensity_view, v.dims, false),
+            BrickSource::Features(f) => (&f.texture, &f.view, f.dims, true),
+        };
+        let nb = brick_dims(dims);
+        let (out, out_view) = output_texture(
+            ctx,
+            "raycast bricks",
+            wgpu::TextureDimension::D3,
+            nb,
+            wgpu::TextureFormat::Rgba16Float,
+        );
         Bricks {
             dims: nb,
-            texture,
-            view,
-            source: source.clone(),
+            texture: out,
+            view: out_view,
+            source: texture.clone(),
+            source_view: view.clone(),
+            features,
+            done_z: 0,
         }
     }
 }

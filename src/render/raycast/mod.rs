@@ -46,7 +46,7 @@ mod settings;
 mod target;
 mod twin;
 
-pub use bricks::{BRICK, Bricks, brick_dims, cpu_bricks};
+pub use bricks::{BRICK, BrickSource, Bricks, brick_dims, cpu_bricks};
 pub use pace::{FramePacer, FramePlan, MIN_COARSE_SCALE, scale_within};
 pub use settings::{
     CHANNEL_COLOURS, ChannelDisplay, Params, Projection, RenderSettings, Slab, VolumeGeometry,
@@ -112,10 +112,14 @@ impl<'a> Scene<'a> {
 
     /// Whether the bricks given belong to the textures used, so that skipping is exact.
     pub fn skipping(&self) -> bool {
-        let volume_ok = self.bricks.is_some_and(|b| b.of(&self.volume.intensity));
+        let volume_ok = self
+            .bricks
+            .is_some_and(|b| b.of(&self.volume.intensity) && b.complete());
         let features_ok = match self.features {
             None => true,
-            Some(f) => self.feature_bricks.is_some_and(|b| b.of(&f.texture)),
+            Some(f) => self
+                .feature_bricks
+                .is_some_and(|b| b.of(&f.texture) && b.complete()),
         };
         volume_ok && features_ok
     }
