@@ -120,73 +120,65 @@ mod web {
         values.into_iter().map(JsValue::from_f64).collect()
     }
 
+    /// `null` for `None`, else a new object that `fill` fills from the value.
+    fn object<T>(value: Option<&T>, fill: impl FnOnce(&Object, &T)) -> JsValue {
+        match value {
+            Some(v) => {
+                let o = Object::new();
+                fill(&o, v);
+                o.into()
+            }
+            None => JsValue::NULL,
+        }
+    }
+
+    /// `null` for `None`, else the string.
+    fn string(value: Option<&String>) -> JsValue {
+        value.map_or(JsValue::NULL, |s| JsValue::from_str(s))
+    }
+
     pub fn publish(status: &AppStatus) {
         let Some(window) = web_sys::window() else {
             return;
         };
         let obj = Object::new();
         set(&obj, "phase", status.phase.as_str());
-        match &status.adapter {
-            Some(a) => {
-                let o = Object::new();
-                set(&o, "name", a.name.as_str());
-                set(&o, "backend", a.backend.as_str());
-                set(&obj, "adapter", o);
-            }
-            None => set(&obj, "adapter", JsValue::NULL),
-        }
-        match &status.volume {
-            Some(v) => {
-                let o = Object::new();
-                set(&o, "dims", array_f64(v.dims.iter().map(|&d| d as f64)));
-                set(&o, "spacing_mm", array_f64(v.spacing_mm));
-                set(&o, "origin_mm", array_f64(v.origin_mm));
-                set(&o, "direction", array_f64(v.direction));
-                set(&o, "source", v.source.as_str());
-                set(&o, "modality", v.modality.as_str());
-                set(&obj, "volume", o);
-            }
-            None => set(&obj, "volume", JsValue::NULL),
-        }
+        let adapter = object(status.adapter.as_ref(), |o, a| {
+            set(o, "name", a.name.as_str());
+            set(o, "backend", a.backend.as_str());
+        });
+        set(&obj, "adapter", adapter);
+        let volume = object(status.volume.as_ref(), |o, v| {
+            set(o, "dims", array_f64(v.dims.iter().map(|&d| d as f64)));
+            set(o, "spacing_mm", array_f64(v.spacing_mm));
+            set(o, "origin_mm", array_f64(v.origin_mm));
+            set(o, "direction", array_f64(v.direction));
+            set(o, "source", v.source.as_str());
+            set(o, "modality", v.modality.as_str());
+        });
+        set(&obj, "volume", volume);
         set(&obj, "progress", f64::from(status.progress));
-        match &status.error {
-            Some(e) => set(&obj, "error", e.as_str()),
-            None => set(&obj, "error", JsValue::NULL),
-        }
+        set(&obj, "error", string(status.error.as_ref()));
         set(&obj, "frames", status.frames as f64);
-        match &status.task {
-            Some(t) => set(&obj, "task", t.as_str()),
-            None => set(&obj, "task", JsValue::NULL),
-        }
-        match &status.features {
-            Some(f) => {
-                let o = Object::new();
-                set(&o, "method", f.method.as_str());
-                set(&o, "preset", f.preset.as_str());
-                set(&o, "state", f.state.as_str());
-                set(&o, "fraction", f64::from(f.fraction));
-                set(&o, "cached", f.cached as f64);
-                set(&obj, "features", o);
-            }
-            None => set(&obj, "features", JsValue::NULL),
-        }
-        match &status.crosshair {
-            Some(c) => {
-                let o = Object::new();
-                set(&o, "voxel", array_f64(c.voxel.iter().map(|&d| d as f64)));
-                set(&o, "lps_mm", array_f64(c.lps_mm));
-                set(&obj, "crosshair", o);
-            }
-            None => set(&obj, "crosshair", JsValue::NULL),
-        }
+        set(&obj, "task", string(status.task.as_ref()));
+        let features = object(status.features.as_ref(), |o, f| {
+            set(o, "method", f.method.as_str());
+            set(o, "preset", f.preset.as_str());
+            set(o, "state", f.state.as_str());
+            set(o, "fraction", f64::from(f.fraction));
+            set(o, "cached", f.cached as f64);
+        });
+        set(&obj, "features", features);
+        let crosshair = object(status.crosshair.as_ref(), |o, c| {
+            set(o, "voxel", array_f64(c.voxel.iter().map(|&d| d as f64)));
+            set(o, "lps_mm", array_f64(c.lps_mm));
+        });
+        set(&obj, "crosshair", crosshair);
         set(&obj, "layout", status.layout.as_str());
         set(&obj, "link", status.link.as_str());
         let view = js_sys::JSON::parse(&status.view_json).unwrap_or(JsValue::NULL);
         set(&obj, "view", view);
-        match &status.notice {
-            Some(n) => set(&obj, "notice", n.as_str()),
-            None => set(&obj, "notice", JsValue::NULL),
-        }
+        set(&obj, "notice", string(status.notice.as_ref()));
         let controls = Object::new();
         for (name, r) in &status.controls {
             set(&controls, name, array_f64(r.iter().map(|&x| f64::from(x))));

@@ -64,7 +64,8 @@ impl eframe::App for Host {
             features: &features,
         };
         egui::CentralPanel::default().show(ui, |ui| {
-            let out = self.view.ui(ui, &self.gpu, rs, &scene);
+            self.view.controls_ui(ui, &scene);
+            let out = self.view.image_ui(ui, &self.gpu, rs, &scene);
             if let Some(pick) = out.pick {
                 self.crosshair = Some(pick.voxel);
                 self.view.set_crosshair(Some(pick.world_mm));

@@ -9,7 +9,7 @@ mod gpu_common;
 
 use eigen_common::{Rng, hard_matrix, relative_error, sorted_by_magnitude};
 use gpu_common::*;
-use shapecast::compute::eigen_features::{EigenFeatures, TensorOutput};
+use shapecast::compute::eigen_features::{EigenFeatures, EigenPass, TensorOutput};
 use shapecast::compute::hessian::{Hessian, HessianKernels};
 use shapecast::cpu::Grid;
 use shapecast::cpu::Preset;
@@ -36,9 +36,11 @@ fn gpu_eigenvalues(ctx: &GpuContext, comps: &[Vec<f32>; 6], width: usize) -> Vec
         &sg,
         std::array::from_fn(|c| &bufs[c]),
         (0, 1),
-        TensorOutput::Eigen,
-        false,
-        &out,
+        EigenPass::Output {
+            what: TensorOutput::Eigen,
+            accumulate: false,
+            out: &out,
+        },
     )
     .expect("record");
     submit(ctx, enc);
@@ -199,9 +201,11 @@ fn multiscale_eigenvalues_on_real_ct_differ_only_at_ties() {
             &sg,
             std::array::from_fn(|c| &h[c]),
             (0, sg.dims[2]),
-            TensorOutput::Eigen,
-            s > 0,
-            &out,
+            EigenPass::Output {
+                what: TensorOutput::Eigen,
+                accumulate: s > 0,
+                out: &out,
+            },
         )
         .expect("record");
         submit(&ctx, enc);

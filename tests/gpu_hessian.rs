@@ -151,7 +151,7 @@ fn gaussian_multi_order_and_fallback_match_cpu() {
 }
 
 use shapecast::compute::eigen_features::{
-    EigenFeatures, Mapping, TensorOutput, frangi_c_from_norm_bits, norm_buffer,
+    EigenFeatures, EigenPass, Mapping, TensorOutput, frangi_c_from_norm_bits, norm_buffer,
 };
 use shapecast::compute::hessian::{Hessian, HessianKernels};
 use shapecast::cpu::eigen::{eigenvalues_sorted, frobenius};
@@ -274,9 +274,11 @@ fn hessian_and_eigenvalues_match_cpu() {
             &sg,
             refs(&gpu_bufs),
             (0, sg.dims[2]),
-            TensorOutput::Eigen,
-            false,
-            &out,
+            EigenPass::Output {
+                what: TensorOutput::Eigen,
+                accumulate: false,
+                out: &out,
+            },
         )
         .expect("record");
         submit(&ctx, enc);
@@ -389,9 +391,11 @@ fn eigen_solver_handles_degenerate_matrices() {
         &sg,
         refs(&bufs),
         (0, 1),
-        TensorOutput::Eigen,
-        false,
-        &out,
+        EigenPass::Output {
+            what: TensorOutput::Eigen,
+            accumulate: false,
+            out: &out,
+        },
     )
     .expect("record");
     submit(&ctx, enc);
@@ -459,9 +463,11 @@ fn gpu_multiscale(
             &sg,
             refs(&h),
             (0, sg.dims[2]),
-            what(s),
-            s > 0,
-            &out,
+            EigenPass::Output {
+                what: what(s),
+                accumulate: s > 0,
+                out: &out,
+            },
         )
         .expect("record");
         submit(ctx, enc);
@@ -610,8 +616,18 @@ fn frangi_default_c_matches_cpu() {
         let mut enc = encoder(&ctx);
         ef.record_clear_norm(&mut enc, &bits);
         for z in [(0, 4), (4, 3), (7, 4)] {
-            ef.record_max_norm(&ctx, &mut enc, &sg, refs(&h), z, None, &bits)
-                .expect("record");
+            ef.record(
+                &ctx,
+                &mut enc,
+                &sg,
+                refs(&h),
+                z,
+                EigenPass::MaxNorm {
+                    rows: None,
+                    norm_bits: &bits,
+                },
+            )
+            .expect("record");
         }
         submit(&ctx, enc);
         let raw = shapecast::gpu::readback::read_bytes_blocking(&ctx, &bits, 4).expect("read");
@@ -626,8 +642,18 @@ fn frangi_default_c_matches_cpu() {
         for z in [(0, 4), (4, 3), (7, 4)] {
             let one = norm_buffer(&ctx);
             let mut enc = encoder(&ctx);
-            ef.record_max_norm(&ctx, &mut enc, &sg, refs(&h), z, None, &one)
-                .expect("record");
+            ef.record(
+                &ctx,
+                &mut enc,
+                &sg,
+                refs(&h),
+                z,
+                EigenPass::MaxNorm {
+                    rows: None,
+                    norm_bits: &one,
+                },
+            )
+            .expect("record");
             submit(&ctx, enc);
             let raw = shapecast::gpu::readback::read_bytes_blocking(&ctx, &one, 4).expect("read");
             smallest = smallest.min(frangi_c_from_norm_bits(u32::from_le_bytes([
@@ -695,9 +721,11 @@ fn slab_with_halo_matches_whole_volume() {
             &sg,
             refs(&h),
             ((z0 - s0) as u32, nz as u32),
-            what,
-            false,
-            &out,
+            EigenPass::Output {
+                what,
+                accumulate: false,
+                out: &out,
+            },
         )
         .expect("record");
         submit(&ctx, enc);
@@ -745,9 +773,11 @@ fn slab_with_halo_matches_whole_volume() {
             &bare,
             refs(&h),
             (0, nz as u32),
-            what,
-            false,
-            &out2,
+            EigenPass::Output {
+                what,
+                accumulate: false,
+                out: &out2,
+            },
         )
         .expect("record");
         submit(&ctx, enc);
@@ -803,9 +833,11 @@ fn structure_tensor_matches_cpu() {
             &sg,
             refs(&t),
             all,
-            TensorOutput::Eigen,
-            false,
-            &eig_out,
+            EigenPass::Output {
+                what: TensorOutput::Eigen,
+                accumulate: false,
+                out: &eig_out,
+            },
         )
         .expect("record");
         for (m, map) in [FeatureMap::Simple, FeatureMap::Li].into_iter().enumerate() {
@@ -815,9 +847,11 @@ fn structure_tensor_matches_cpu() {
                 &sg,
                 refs(&t),
                 all,
-                TensorOutput::structure_tensor(map),
-                false,
-                &feats[m],
+                EigenPass::Output {
+                    what: TensorOutput::structure_tensor(map),
+                    accumulate: false,
+                    out: &feats[m],
+                },
             )
             .expect("record");
         }
@@ -894,7 +928,18 @@ fn record_refuses_wrong_buffers() {
     let out = buffer(&ctx, 3 * n);
     let what = TensorOutput::hessian(Mapping::Map(FeatureMap::Li));
     assert_eq!(
-        ef.record(&ctx, &mut enc, &sg, refs(&t), (8, 4), what, false, &out),
+        ef.record(
+            &ctx,
+            &mut enc,
+            &sg,
+            refs(&t),
+            (8, 4),
+            EigenPass::Output {
+                what,
+                accumulate: false,
+                out: &out
+            }
+        ),
         Err(RecordError::OutputRange {
             z0: 8,
             nz: 4,
@@ -909,9 +954,11 @@ fn record_refuses_wrong_buffers() {
             &sg,
             refs(&t),
             (0, 11),
-            TensorOutput::Eigen,
-            false,
-            &out
+            EigenPass::Output {
+                what: TensorOutput::Eigen,
+                accumulate: false,
+                out: &out
+            }
         ),
         Err(RecordError::BufferTooSmall { .. })
     ));

@@ -9,7 +9,7 @@
 //! looser bounds ([`filtered_bounds`]). Volumes are small (the CPU twin takes ~50-200 us per
 //! voxel): 21 x 19 x 15 voxels of 0.6 x 0.6 x 0.9 mm, R = 6 mm (3 mm for the halo test).
 
-use shapecast::compute::gradient::{Gradient, GradientBuffers, packed_texture};
+use shapecast::compute::gradient::{Gradient, GradientBuffers, GradientOutput, packed_texture};
 use shapecast::compute::rst::{Rst, RstDispatch, RstInputs, RstOptions, RstOutput, RstRays};
 use shapecast::cpu::rst::opacity_length_mm;
 use shapecast::cpu::{
@@ -310,10 +310,22 @@ fn gradient_matches_the_twin() {
             gz: &out[2],
         };
         kernel
-            .record(&ctx, &mut encoder, &slab, &intensity, &bufs)
+            .record(
+                &ctx,
+                &mut encoder,
+                &slab,
+                &intensity,
+                GradientOutput::Buffers(bufs),
+            )
             .expect("record");
         kernel
-            .record_packed(&ctx, &mut encoder, &slab, &intensity, &packed)
+            .record(
+                &ctx,
+                &mut encoder,
+                &slab,
+                &intensity,
+                GradientOutput::Packed(&packed),
+            )
             .expect("record packed");
         ctx.queue.submit([encoder.finish()]);
         let buffers: Vec<Vec<f32>> = out
@@ -555,7 +567,13 @@ fn slab_with_its_halo_matches_the_whole_volume() {
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         gradient
-            .record_packed(&ctx, &mut encoder, &slab, &intensity, &packed)
+            .record(
+                &ctx,
+                &mut encoder,
+                &slab,
+                &intensity,
+                GradientOutput::Packed(&packed),
+            )
             .expect("gradient");
         let inputs = RstInputs {
             volume: &packed,

@@ -419,6 +419,13 @@ fn texture_bytes(t: &FeatureTexture) -> u64 {
         * u64::from(crate::gpu::volume_texture::FEATURE_TEXEL_BYTES)
 }
 
+/// A grid row: `label`, then `widget` labelled by it (greyed out unless `enabled`).
+fn labelled_row(ui: &mut egui::Ui, label: &str, enabled: bool, widget: impl egui::Widget) {
+    let label = ui.label(label);
+    ui.add_enabled(enabled, widget).labelled_by(label.id);
+    ui.end_row();
+}
+
 /// The parameter panel. Returns true when the user asked to recompute.
 pub fn params_ui(ui: &mut egui::Ui, params: &mut FeatureParams, method: Option<Method>) -> bool {
     let mut recompute = false;
@@ -450,21 +457,17 @@ pub fn params_ui(ui: &mut egui::Ui, params: &mut FeatureParams, method: Option<M
             );
             ui.add_enabled_ui(uses_sigmas, |ui| {
                 ui.horizontal(|ui| {
-                    ui.add(
-                        egui::DragValue::new(&mut params.sigma_min_mm)
+                    // Both ends of the range alike.
+                    let sigma = |mm| {
+                        egui::DragValue::new(mm)
                             .range(0.3..=30.0)
                             .speed(0.05)
-                            .max_decimals(2),
-                    )
-                    .labelled_by(label.id);
+                            .max_decimals(2)
+                    };
+                    ui.add(sigma(&mut params.sigma_min_mm))
+                        .labelled_by(label.id);
                     let to = ui.label("to");
-                    ui.add(
-                        egui::DragValue::new(&mut params.sigma_max_mm)
-                            .range(0.3..=30.0)
-                            .speed(0.05)
-                            .max_decimals(2),
-                    )
-                    .labelled_by(to.id);
+                    ui.add(sigma(&mut params.sigma_max_mm)).labelled_by(to.id);
                     let count = ui.label("scales:");
                     ui.add(egui::DragValue::new(&mut params.sigma_count).range(1..=12))
                         .labelled_by(count.id);
@@ -486,26 +489,15 @@ pub fn params_ui(ui: &mut egui::Ui, params: &mut FeatureParams, method: Option<M
             });
             ui.end_row();
 
-            let label = ui.label("Ray length R (mm)");
-            ui.add_enabled(
-                uses_rays,
-                egui::DragValue::new(&mut params.radius_mm)
-                    .range(1.0..=100.0)
-                    .speed(0.2),
-            )
-            .labelled_by(label.id);
-            ui.end_row();
-
-            let label = ui.label("Step (mm)");
-            ui.add_enabled(
-                uses_rays,
-                egui::DragValue::new(&mut params.step_mm)
-                    .range(0.05..=5.0)
-                    .speed(0.01)
-                    .max_decimals(3),
-            )
-            .labelled_by(label.id);
-            ui.end_row();
+            let radius = egui::DragValue::new(&mut params.radius_mm)
+                .range(1.0..=100.0)
+                .speed(0.2);
+            labelled_row(ui, "Ray length R (mm)", uses_rays, radius);
+            let step = egui::DragValue::new(&mut params.step_mm)
+                .range(0.05..=5.0)
+                .speed(0.01)
+                .max_decimals(3);
+            labelled_row(ui, "Step (mm)", uses_rays, step);
 
             ui.label("Transfer function");
             ui.add_enabled_ui(uses_rays, |ui| {

@@ -307,16 +307,27 @@ mod tests {
         panic!("the job never finished");
     }
 
-    #[test]
-    fn decoding_is_announced_before_it_runs() {
+    /// A small sphere phantom and its NIfTI file.
+    fn sphere_nii() -> (crate::volume::Volume, Vec<u8>) {
         let volume = crate::phantom::Phantom::by_name("sphere", None)
             .unwrap()
             .render([2.0; 3]);
         let bytes = crate::io::nifti::write_volume("s.nii", &volume).unwrap();
-        let (said, r) = run(LoadJob::new(LoadSource::Files {
-            label: "s.nii".into(),
-            files: vec![InputFile::new("s.nii", bytes)],
-        }));
+        (volume, bytes)
+    }
+
+    /// Runs the load of one file `name`.
+    fn run_file(name: &str, bytes: Vec<u8>) -> (Vec<String>, Result<Box<Loaded>, String>) {
+        run(LoadJob::new(LoadSource::Files {
+            label: name.into(),
+            files: vec![InputFile::new(name, bytes)],
+        }))
+    }
+
+    #[test]
+    fn decoding_is_announced_before_it_runs() {
+        let (volume, bytes) = sphere_nii();
+        let (said, r) = run_file("s.nii", bytes);
         assert_eq!(said, vec!["decoding s.nii".to_owned()]);
         assert_eq!(r.unwrap().volume.dims, volume.dims);
     }
@@ -324,19 +335,13 @@ mod tests {
     #[test]
     fn a_zip_archive_is_unpacked_and_loaded() {
         use std::io::Write as _;
-        let volume = crate::phantom::Phantom::by_name("sphere", None)
-            .unwrap()
-            .render([2.0; 3]);
-        let nii = crate::io::nifti::write_volume("s.nii", &volume).unwrap();
+        let (volume, nii) = sphere_nii();
         let mut w = ::zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
         w.start_file("scan/s.nii", ::zip::write::SimpleFileOptions::default())
             .unwrap();
         w.write_all(&nii).unwrap();
         let zip = w.finish().unwrap().into_inner();
-        let (_, r) = run(LoadJob::new(LoadSource::Files {
-            label: "s.zip".into(),
-            files: vec![InputFile::new("s.zip", zip)],
-        }));
+        let (_, r) = run_file("s.zip", zip);
         let loaded = r.unwrap();
         assert_eq!(loaded.volume.dims, volume.dims);
         assert!(

@@ -588,18 +588,6 @@ impl MipView {
         }
     }
 
-    /// Toolbar above, image below: the whole viewport.
-    pub fn ui(
-        &mut self,
-        ui: &mut egui::Ui,
-        gpu: &GpuContext,
-        render_state: &eframe::egui_wgpu::RenderState,
-        scene: &MipScene<'_>,
-    ) -> MipViewOutput {
-        self.controls_ui(ui, scene);
-        self.image_ui(ui, gpu, render_state, scene)
-    }
-
     #[allow(clippy::too_many_arguments)]
     fn render(
         &mut self,

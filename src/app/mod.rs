@@ -1036,15 +1036,13 @@ impl ShapecastApp {
                                     glam::DVec3::new(i as f64, j as f64, k as f64),
                                 );
                                 self.mip_view.set_crosshair(Some(centre));
-                                let out = self.mip_view.ui(
-                                    ui,
-                                    gpu,
-                                    render_state,
-                                    &MipScene {
-                                        volume: &scene.render,
-                                        features: &feats,
-                                    },
-                                );
+                                // Toolbar above, image below.
+                                let mip_scene = MipScene {
+                                    volume: &scene.render,
+                                    features: &feats,
+                                };
+                                self.mip_view.controls_ui(ui, &mip_scene);
+                                let out = self.mip_view.image_ui(ui, gpu, render_state, &mip_scene);
                                 // The toolbar's channel toggles and gains are the display's.
                                 for c in 0..3 {
                                     self.display.enabled[c] = self.mip_view.settings.channels[c].on;

@@ -151,13 +151,8 @@ impl ShapecastApp {
                     }
                 }
                 if !self.notes.is_empty() {
-                    egui::CollapsingHeader::new(format!("Notes ({})", self.notes.len()))
-                        .id_salt("notes")
-                        .show(ui, |ui| {
-                            for n in &self.notes {
-                                ui.label(egui::RichText::new(n).small());
-                            }
-                        });
+                    let title = format!("Notes ({})", self.notes.len());
+                    notes_ui(ui, title, "notes", &self.notes);
                 }
             });
 
@@ -185,19 +180,9 @@ impl ShapecastApp {
                         "parameters changed: Recompute to apply",
                     );
                 }
-                if let Some((fraction, stage)) =
-                    self.features.progress().map(|(f, s)| (f, s.to_owned()))
-                {
-                    let name = self
-                        .features
-                        .running_request()
-                        .map_or("", |r| features::method_name(r.method));
+                if let Some(bar) = self.feature_progress_bar(180.0) {
                     ui.horizontal(|ui| {
-                        ui.add(
-                            egui::ProgressBar::new(fraction)
-                                .desired_width(180.0)
-                                .text(format!("{name}: {stage}")),
-                        );
+                        ui.add(bar);
                         if ui.button("Cancel").clicked() {
                             self.features.cancel();
                         }
@@ -216,13 +201,7 @@ impl ShapecastApp {
                 if let Some(e) = self.displayed_entry()
                     && !e.notes.is_empty()
                 {
-                    egui::CollapsingHeader::new("How they were computed")
-                        .id_salt("feature notes")
-                        .show(ui, |ui| {
-                            for n in &e.notes {
-                                ui.label(egui::RichText::new(n).small());
-                            }
-                        });
+                    notes_ui(ui, "How they were computed", "feature notes", &e.notes);
                 }
             });
 
@@ -360,18 +339,8 @@ impl ShapecastApp {
                         super::web_fetch::cancel();
                     }
                 }
-            } else if let Some((f, stage)) =
-                self.features.progress().map(|(f, s)| (f, s.to_owned()))
-            {
-                let name = self
-                    .features
-                    .running_request()
-                    .map_or("", |r| features::method_name(r.method));
-                ui.add(
-                    egui::ProgressBar::new(f)
-                        .desired_width(260.0)
-                        .text(format!("{name}: {stage}")),
-                );
+            } else if let Some(bar) = self.feature_progress_bar(260.0) {
+                ui.add(bar);
                 if ui.small_button("Cancel").clicked() {
                     self.features.cancel();
                 }
@@ -404,21 +373,11 @@ impl ShapecastApp {
     pub(super) fn errors_ui(&mut self, ui: &mut egui::Ui) {
         let mut dismiss = None;
         for (n, e) in self.errors.iter().enumerate() {
-            egui::Frame::new()
-                .fill(egui::Color32::from_rgb(70, 25, 25))
-                .inner_margin(6.0)
-                .corner_radius(4.0)
-                .show(ui, |ui| {
-                    ui.with_layout(egui::Layout::right_to_left(egui::Align::TOP), |ui| {
-                        if ui.button("Dismiss").clicked() {
-                            dismiss = Some(n);
-                        }
-                        ui.with_layout(egui::Layout::left_to_right(egui::Align::TOP), |ui| {
-                            ui.colored_label(egui::Color32::from_rgb(255, 170, 160), "Error:");
-                            ui.add(egui::Label::new(e).wrap());
-                        });
-                    });
-                });
+            let fill = egui::Color32::from_rgb(70, 25, 25);
+            let title = ("Error:", egui::Color32::from_rgb(255, 170, 160));
+            if notice_ui(ui, fill, title, e) {
+                dismiss = Some(n);
+            }
         }
         if let Some(n) = dismiss {
             self.errors.remove(n);
@@ -475,6 +434,20 @@ impl ShapecastApp {
         );
     }
 
+    /// The running feature computation's progress, `width` points wide: "method: stage".
+    fn feature_progress_bar(&self, width: f32) -> Option<egui::ProgressBar> {
+        let (fraction, stage) = self.features.progress()?;
+        let name = self
+            .features
+            .running_request()
+            .map_or("", |r| features::method_name(r.method));
+        Some(
+            egui::ProgressBar::new(fraction)
+                .desired_width(width)
+                .text(format!("{name}: {stage}")),
+        )
+    }
+
     /// Keeps the status bar's feature readback going.
     pub(super) fn update_probe(&mut self) {
         let Some(gpu) = &self.gpu else { return };
@@ -490,4 +463,45 @@ impl ShapecastApp {
         self.probe
             .update(gpu, entry.map(|e| (&e.texture, e.id)), voxels);
     }
+}
+
+/// A notice in a `fill` frame: a Dismiss button on the right, the title (text, colour), then
+/// `text`, wrapped. True when Dismiss was clicked.
+pub(super) fn notice_ui(
+    ui: &mut egui::Ui,
+    fill: egui::Color32,
+    title: (&str, egui::Color32),
+    text: impl Into<egui::WidgetText>,
+) -> bool {
+    let mut dismiss = false;
+    egui::Frame::new()
+        .fill(fill)
+        .inner_margin(6.0)
+        .corner_radius(4.0)
+        .show(ui, |ui| {
+            ui.with_layout(egui::Layout::right_to_left(egui::Align::TOP), |ui| {
+                dismiss = ui.button("Dismiss").clicked();
+                ui.with_layout(egui::Layout::left_to_right(egui::Align::TOP), |ui| {
+                    ui.colored_label(title.1, title.0);
+                    ui.add(egui::Label::new(text).wrap());
+                });
+            });
+        });
+    dismiss
+}
+
+/// A closed header `title` over `notes`, one small line each.
+fn notes_ui(
+    ui: &mut egui::Ui,
+    title: impl Into<egui::WidgetText>,
+    id_salt: &str,
+    notes: &[String],
+) {
+    egui::CollapsingHeader::new(title)
+        .id_salt(id_salt)
+        .show(ui, |ui| {
+            for n in notes {
+                ui.label(egui::RichText::new(n).small());
+            }
+        });
 }

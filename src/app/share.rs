@@ -191,21 +191,9 @@ impl ShapecastApp {
         let Some(notice) = self.link_notice() else {
             return;
         };
-        let mut dismiss = false;
-        egui::Frame::new()
-            .fill(egui::Color32::from_rgb(25, 45, 70))
-            .inner_margin(6.0)
-            .corner_radius(4.0)
-            .show(ui, |ui| {
-                ui.with_layout(egui::Layout::right_to_left(egui::Align::TOP), |ui| {
-                    dismiss = ui.button("Dismiss").clicked();
-                    ui.with_layout(egui::Layout::left_to_right(egui::Align::TOP), |ui| {
-                        ui.colored_label(egui::Color32::from_rgb(160, 200, 255), "Link:");
-                        ui.add(egui::Label::new(notice).wrap());
-                    });
-                });
-            });
-        if dismiss {
+        let fill = egui::Color32::from_rgb(25, 45, 70);
+        let title = ("Link:", egui::Color32::from_rgb(160, 200, 255));
+        if super::panels::notice_ui(ui, fill, title, notice) {
             self.pending_view = None;
         }
     }

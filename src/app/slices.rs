@@ -87,35 +87,27 @@ fn voxel_axis_of_patient_axes(volume: &Volume) -> [usize; 3] {
 
 /// The axes of a pane for a volume.
 pub fn pane_axes(volume: &Volume, kind: SliceKind) -> PaneAxes {
-    let [vx, vy, vz] = voxel_axis_of_patient_axes(volume);
+    let of_patient = voxel_axis_of_patient_axes(volume);
     let comp = |voxel_axis: usize, patient_axis: usize| -> f64 {
         volume.direction.col(voxel_axis)[patient_axis]
     };
-    match kind {
+    // The patient axes (x, y, z = 0, 1, 2) fixed, across (its + direction on the right) and
+    // vertical, and whether up is the vertical axis's + direction.
+    let (fixed, across, vertical, up_is_plus) = match kind {
         // Patient left (+x) on the right, anterior (-y) up.
-        SliceKind::Axial => PaneAxes {
-            fixed: vz,
-            across: vx,
-            right_positive: comp(vx, 0) >= 0.0,
-            vertical: vy,
-            up_positive: comp(vy, 1) < 0.0,
-        },
+        SliceKind::Axial => (2, 0, 1, false),
         // Patient left on the right, superior (+z) up.
-        SliceKind::Coronal => PaneAxes {
-            fixed: vy,
-            across: vx,
-            right_positive: comp(vx, 0) >= 0.0,
-            vertical: vz,
-            up_positive: comp(vz, 2) >= 0.0,
-        },
+        SliceKind::Coronal => (1, 0, 2, true),
         // Posterior (+y) on the right (the patient faces left), superior up.
-        SliceKind::Sagittal => PaneAxes {
-            fixed: vx,
-            across: vy,
-            right_positive: comp(vy, 1) >= 0.0,
-            vertical: vz,
-            up_positive: comp(vz, 2) >= 0.0,
-        },
+        SliceKind::Sagittal => (0, 1, 2, true),
+    };
+    let up = comp(of_patient[vertical], vertical);
+    PaneAxes {
+        fixed: of_patient[fixed],
+        across: of_patient[across],
+        right_positive: comp(of_patient[across], across) >= 0.0,
+        vertical: of_patient[vertical],
+        up_positive: if up_is_plus { up >= 0.0 } else { up < 0.0 },
     }
 }
 

@@ -299,27 +299,23 @@ impl ViewState {
     pub fn from_fragment(fragment: &str) -> (Self, Vec<String>) {
         let params = parse_params(fragment.trim_start_matches('#'));
         let mut v = Self::default();
-        let mut problems = Vec::new();
-        if params.is_empty() {
-            return (v, problems);
-        }
-        let get = |key: &str| {
-            params
-                .iter()
-                .rev()
-                .find(|(k, _)| k == key)
-                .map(|(_, v)| v.as_str())
+        let mut f = Fields {
+            params: &params,
+            problems: Vec::new(),
         };
+        if params.is_empty() {
+            return (v, f.problems);
+        }
 
-        match get("v") {
+        match f.get("v") {
             None => {}
             Some(s) => match s.parse::<u32>() {
                 Ok(VERSION) => {}
-                Ok(n) if n > VERSION => problems.push(format!(
+                Ok(n) if n > VERSION => f.problems.push(format!(
                     "this link was made by a newer Shapecast (link version {n}, this page reads {VERSION}): what this version knows is applied"
                 )),
                 Ok(_) => {}
-                Err(_) => bad(&mut problems, "v", s, "a version number"),
+                Err(_) => bad(&mut f.problems, "v", s, "a version number"),
             },
         }
 
@@ -332,179 +328,133 @@ impl ViewState {
             .collect();
         if !urls.is_empty() {
             v.source = Some(ViewSource::Urls(urls));
-        } else if let Some(name) = get("file") {
-            match get("bytes").map(|b| b.parse::<u64>()) {
+        } else if let Some(name) = f.get("file") {
+            match f.get("bytes").map(|b| b.parse::<u64>()) {
                 Some(Ok(bytes)) if !name.is_empty() => {
                     v.source = Some(ViewSource::Dropped {
                         name: name.to_owned(),
                         bytes,
                     });
                 }
-                Some(Ok(_)) => bad(&mut problems, "file", name, "a file name"),
-                Some(Err(_)) => bad(
-                    &mut problems,
-                    "bytes",
-                    get("bytes").unwrap_or(""),
-                    "a size in bytes",
-                ),
+                Some(Ok(_)) => bad(&mut f.problems, "file", name, "a file name"),
+                Some(Err(_)) => {
+                    let bytes = f.get("bytes").unwrap_or("");
+                    bad(&mut f.problems, "bytes", bytes, "a size in bytes");
+                }
                 None => bad(
-                    &mut problems,
+                    &mut f.problems,
                     "file",
                     name,
                     "a size in bytes beside it (bytes=...)",
                 ),
             }
-        } else if let Some(name) = get("phantom") {
+        } else if let Some(name) = f.get("phantom") {
             v.source = Some(ViewSource::Phantom(name.to_owned()));
-        } else if let Some(d) = get("demo") {
-            match d {
-                "1" | "true" | "ct" => v.source = Some(ViewSource::Demo),
-                _ => bad(&mut problems, "demo", d, "1"),
-            }
+        } else if f.get("demo").is_some() {
+            v.source = f.read("demo", "1", |d| {
+                matches!(d, "1" | "true" | "ct").then_some(ViewSource::Demo)
+            });
         }
 
-        if let Some(s) = get("mode") {
-            match DisplayMode::from_name(s) {
-                Some(m) => v.mode = Some(m),
-                None => bad(
-                    &mut problems,
-                    "mode",
-                    s,
-                    "intensity, hessian, rst, li, frangi or gst",
-                ),
-            }
-        }
+        v.mode = f.read(
+            "mode",
+            "intensity, hessian, rst, li, frangi or gst",
+            DisplayMode::from_name,
+        );
 
         // Parameters: the preset's, then each edited one.
-        let preset = match get("preset") {
-            None => None,
-            Some(s) => match Preset::from_name(s) {
-                Some(p) => Some(p),
-                None => {
-                    bad(
-                        &mut problems,
-                        "preset",
-                        s,
-                        "lymph-nodes, lung-nodules, airways or vessels",
-                    );
-                    None
-                }
-            },
-        };
+        let preset = f.read(
+            "preset",
+            "lymph-nodes, lung-nodules, airways or vessels",
+            Preset::from_name,
+        );
         let edits = ["sigma", "rays", "radius", "step", "tf", "map"];
-        if preset.is_some() || edits.iter().any(|k| get(k).is_some()) {
+        if preset.is_some() || edits.iter().any(|k| f.get(k).is_some()) {
             let mut p = FeatureParams::from_preset(preset.unwrap_or_default());
-            if let Some(s) = get("sigma") {
-                match numbers(s, 3) {
-                    Some(n)
-                        if (0.3..=30.0).contains(&n[0])
-                            && (0.3..=30.0).contains(&n[1])
-                            && n[1] >= n[0]
-                            && n[2].fract() == 0.0
-                            && (1.0..=12.0).contains(&n[2]) =>
-                    {
-                        p.sigma_min_mm = n[0];
-                        p.sigma_max_mm = n[1];
-                        p.sigma_count = n[2] as usize;
-                    }
-                    _ => bad(
-                        &mut problems,
-                        "sigma",
-                        s,
-                        "min,max,count in mm (0.3-30, count 1-12)",
-                    ),
-                }
+            let sigma = f.read("sigma", "min,max,count in mm (0.3-30, count 1-12)", |s| {
+                numbers::<f64>(s, 3).filter(|n| {
+                    (0.3..=30.0).contains(&n[0])
+                        && (0.3..=30.0).contains(&n[1])
+                        && n[1] >= n[0]
+                        && n[2].fract() == 0.0
+                        && (1.0..=12.0).contains(&n[2])
+                })
+            });
+            if let Some(n) = sigma {
+                p.sigma_min_mm = n[0];
+                p.sigma_max_mm = n[1];
+                p.sigma_count = n[2] as usize;
             }
-            if let Some(s) = get("rays") {
-                match s.parse::<usize>() {
-                    Ok(n) if RAY_COUNTS.contains(&n) => p.rays = n,
-                    _ => bad(&mut problems, "rays", s, "26, 42, 98, 218 or 386"),
-                }
+            if let Some(n) = f.read("rays", "26, 42, 98, 218 or 386", |s| {
+                s.parse::<usize>().ok().filter(|n| RAY_COUNTS.contains(n))
+            }) {
+                p.rays = n;
             }
-            if let Some(s) = get("radius") {
-                match number_in(s, 1.0..=100.0) {
-                    Some(r) => p.radius_mm = r,
-                    None => bad(&mut problems, "radius", s, "a ray length of 1-100 mm"),
-                }
+            if let Some(r) = f.read("radius", "a ray length of 1-100 mm", |s| {
+                number_in(s, 1.0..=100.0)
+            }) {
+                p.radius_mm = r;
             }
-            if let Some(s) = get("step") {
-                match number_in(s, 0.05..=5.0) {
-                    Some(r) => p.step_mm = r,
-                    None => bad(&mut problems, "step", s, "a step of 0.05-5 mm"),
-                }
+            if let Some(r) = f.read("step", "a step of 0.05-5 mm", |s| number_in(s, 0.05..=5.0)) {
+                p.step_mm = r;
             }
-            if let Some(s) = get("tf") {
-                if s == "auto" {
-                    p.tf = None;
-                } else {
-                    match numbers(s, 2) {
-                        Some(n) if n[0] >= 0.0 && n[1] > n[0] => {
-                            p.tf = Some(TransferFunction {
+            let tf = f.read(
+                "tf",
+                "auto, or d_min,d_max with d_max > d_min >= 0",
+                |s| match s {
+                    "auto" => Some(None),
+                    _ => numbers(s, 2)
+                        .filter(|n| n[0] >= 0.0 && n[1] > n[0])
+                        .map(|n| {
+                            Some(TransferFunction {
                                 d_min: n[0],
                                 d_max: n[1],
-                            });
-                        }
-                        _ => bad(
-                            &mut problems,
-                            "tf",
-                            s,
-                            "auto, or d_min,d_max with d_max > d_min >= 0",
-                        ),
-                    }
-                }
+                            })
+                        }),
+                },
+            );
+            if let Some(tf) = tf {
+                p.tf = tf;
             }
-            if let Some(s) = get("map") {
-                match s {
-                    "li" => p.map = FeatureMap::Li,
-                    "eq1" => p.map = FeatureMap::Simple,
-                    _ => bad(&mut problems, "map", s, "li or eq1"),
-                }
+            if let Some(m) = f.read("map", "li or eq1", |s| match s {
+                "li" => Some(FeatureMap::Li),
+                "eq1" => Some(FeatureMap::Simple),
+                _ => None,
+            }) {
+                p.map = m;
             }
             v.params = Some(p);
         }
 
         // Channels and gains.
         let display_keys = ["on", "gain", "overlay", "opacity"];
-        if display_keys.iter().any(|k| get(k).is_some()) {
+        if display_keys.iter().any(|k| f.get(k).is_some()) {
             let mut d = FeatureDisplay::default();
-            if let Some(s) = get("on") {
-                match bools(s, 3) {
-                    Some(b) => d.enabled = [b[0], b[1], b[2]],
-                    None => bad(
-                        &mut problems,
-                        "on",
-                        s,
-                        "three of 0 or 1 (vessels, airways, blobs)",
-                    ),
-                }
+            if let Some(b) = f.read("on", "three of 0 or 1 (vessels, airways, blobs)", |s| {
+                bools(s, 3)
+            }) {
+                d.enabled = [b[0], b[1], b[2]];
             }
-            if let Some(s) = get("gain") {
-                match numbers32(s, 3) {
-                    Some(g) if g.iter().all(|&x| (0.01..=100.0).contains(&x)) => {
-                        d.gain = [g[0], g[1], g[2]];
-                    }
-                    _ => bad(&mut problems, "gain", s, "three gains of 0.01-100"),
-                }
+            if let Some(g) = f.read("gain", "three gains of 0.01-100", |s| {
+                numbers::<f32>(s, 3).filter(|g| g.iter().all(|&x| (0.01..=100.0).contains(&x)))
+            }) {
+                d.gain = [g[0], g[1], g[2]];
             }
-            if let Some(s) = get("overlay") {
-                match bools(s, 1) {
-                    Some(b) => d.overlay_on_slices = b[0],
-                    None => bad(&mut problems, "overlay", s, "0 or 1"),
-                }
+            if let Some(b) = f.read("overlay", "0 or 1", |s| bools(s, 1)) {
+                d.overlay_on_slices = b[0];
             }
-            if let Some(s) = get("opacity") {
-                match numbers32(s, 1) {
-                    Some(o) if (0.0..=1.0).contains(&o[0]) => d.opacity = o[0],
-                    _ => bad(&mut problems, "opacity", s, "an opacity of 0-1"),
-                }
+            if let Some(o) = f.read("opacity", "an opacity of 0-1", |s| {
+                numbers::<f32>(s, 1).filter(|o| (0.0..=1.0).contains(&o[0]))
+            }) {
+                d.opacity = o[0];
             }
             v.display = Some(d);
         }
 
         // The camera: all four or none (a partial camera is not the view that was shared).
         let camera_keys = ["rot", "zoom", "centre", "fov"];
-        if camera_keys.iter().any(|k| get(k).is_some()) {
-            let text = |k: &str| get(k).unwrap_or("");
+        if camera_keys.iter().any(|k| f.get(k).is_some()) {
+            let text = |k: &str| f.get(k).unwrap_or("");
             let rotation = numbers(text("rot"), 4).and_then(|q| {
                 let q = DQuat::from_xyzw(q[0], q[1], q[2], q[3]);
                 let len = q.length();
@@ -520,22 +470,20 @@ impl ViewState {
             let zoom = number_in(text("zoom"), MIN_ZOOM..=MAX_ZOOM);
             let centre = numbers(text("centre"), 3);
             let fov = number_in(text("fov"), 1e-3..=1e7);
+            let (rot_text, zoom_text) = (text("rot"), text("zoom"));
+            let (centre_text, fov_text) = (text("centre"), text("fov"));
             if rotation.is_none() {
-                bad(
-                    &mut problems,
-                    "rot",
-                    text("rot"),
-                    "a rotation quaternion x,y,z,w",
-                );
+                let expected = "a rotation quaternion x,y,z,w";
+                bad(&mut f.problems, "rot", rot_text, expected);
             }
             if zoom.is_none() {
-                bad(&mut problems, "zoom", text("zoom"), "a zoom of 0.05-200");
+                bad(&mut f.problems, "zoom", zoom_text, "a zoom of 0.05-200");
             }
             if centre.is_none() {
-                bad(&mut problems, "centre", text("centre"), "x,y,z in mm");
+                bad(&mut f.problems, "centre", centre_text, "x,y,z in mm");
             }
             if fov.is_none() {
-                bad(&mut problems, "fov", text("fov"), "a field of view in mm");
+                bad(&mut f.problems, "fov", fov_text, "a field of view in mm");
             }
             if let (Some(rotation), Some(zoom), Some(c), Some(fov)) = (rotation, zoom, centre, fov)
             {
@@ -548,71 +496,68 @@ impl ViewState {
             }
         }
 
-        if let Some(s) = get("slab") {
-            if s == "off" {
-                v.slab_mm = Some(None);
-            } else {
-                match number_in(s, 0.5..=2000.0) {
-                    Some(t) => v.slab_mm = Some(Some(t)),
-                    None => bad(
-                        &mut problems,
-                        "slab",
-                        s,
-                        "off, or a thickness of 0.5-2000 mm",
-                    ),
-                }
-            }
+        v.slab_mm = f.read("slab", "off, or a thickness of 0.5-2000 mm", |s| match s {
+            "off" => Some(None),
+            _ => number_in(s, 0.5..=2000.0).map(Some),
+        });
+        v.crosshair_mm = f.read("cross", "x,y,z in mm (LPS)", |s| {
+            numbers(s, 3).map(|p| [p[0], p[1], p[2]])
+        });
+        v.mip_window = f.read("mipwin", "lo,hi with hi > lo", |s| {
+            numbers::<f32>(s, 2)
+                .filter(|w| w[1] > w[0])
+                .map(|w| (w[0], w[1]))
+        });
+        v.projection = f.read("proj", "mip or minip", |s| match s {
+            "mip" => Some(Projection::Mip),
+            "minip" => Some(Projection::MinIp),
+            _ => None,
+        });
+        v.grey = f.read("grey", "0 or 1", |s| bools(s, 1).map(|b| b[0]));
+        v.window = f.read("wl", "width,level with a width of 1-1000000", |s| {
+            numbers::<f32>(s, 2)
+                .filter(|w| (1.0..=1.0e6).contains(&w[0]))
+                .map(|w| Window::new(w[0], w[1]))
+        });
+        v.layout = f.read(
+            "layout",
+            "mip+slices, grid, mip, axial, coronal or sagittal",
+            Layout::from_name,
+        );
+        (v, f.problems)
+    }
+}
+
+/// The fields of a fragment (the last of a repeated key counts) and a message per field that
+/// could not be read.
+struct Fields<'a> {
+    params: &'a [(String, String)],
+    problems: Vec<String>,
+}
+
+impl<'a> Fields<'a> {
+    fn get(&self, key: &str) -> Option<&'a str> {
+        self.params
+            .iter()
+            .rev()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// The field `key` as `parse` reads it; a field that is there but `parse` refuses is named
+    /// in the problems with what was `expected`.
+    fn read<T>(
+        &mut self,
+        key: &str,
+        expected: &str,
+        parse: impl FnOnce(&str) -> Option<T>,
+    ) -> Option<T> {
+        let s = self.get(key)?;
+        let value = parse(s);
+        if value.is_none() {
+            bad(&mut self.problems, key, s, expected);
         }
-        if let Some(s) = get("cross") {
-            match numbers(s, 3) {
-                Some(p) => v.crosshair_mm = Some([p[0], p[1], p[2]]),
-                None => bad(&mut problems, "cross", s, "x,y,z in mm (LPS)"),
-            }
-        }
-        if let Some(s) = get("mipwin") {
-            match numbers32(s, 2) {
-                Some(w) if w[1] > w[0] => v.mip_window = Some((w[0], w[1])),
-                _ => bad(&mut problems, "mipwin", s, "lo,hi with hi > lo"),
-            }
-        }
-        if let Some(s) = get("proj") {
-            match s {
-                "mip" => v.projection = Some(Projection::Mip),
-                "minip" => v.projection = Some(Projection::MinIp),
-                _ => bad(&mut problems, "proj", s, "mip or minip"),
-            }
-        }
-        if let Some(s) = get("grey") {
-            match bools(s, 1) {
-                Some(b) => v.grey = Some(b[0]),
-                None => bad(&mut problems, "grey", s, "0 or 1"),
-            }
-        }
-        if let Some(s) = get("wl") {
-            match numbers32(s, 2) {
-                Some(w) if (1.0..=1.0e6).contains(&w[0]) => {
-                    v.window = Some(Window::new(w[0], w[1]));
-                }
-                _ => bad(
-                    &mut problems,
-                    "wl",
-                    s,
-                    "width,level with a width of 1-1000000",
-                ),
-            }
-        }
-        if let Some(s) = get("layout") {
-            match Layout::from_name(s) {
-                Some(l) => v.layout = Some(l),
-                None => bad(
-                    &mut problems,
-                    "layout",
-                    s,
-                    "mip+slices, grid, mip, axial, coronal or sagittal",
-                ),
-            }
-        }
-        (v, problems)
+        value
     }
 }
 
@@ -622,19 +567,11 @@ fn bad(problems: &mut Vec<String>, key: &str, value: &str, expected: &str) {
     ));
 }
 
-/// `n` comma-separated finite numbers.
-fn numbers(s: &str, n: usize) -> Option<Vec<f64>> {
-    let v: Vec<f64> = s
+/// `n` comma-separated finite numbers (f64 or f32).
+fn numbers<T: std::str::FromStr + Copy + Into<f64>>(s: &str, n: usize) -> Option<Vec<T>> {
+    let v: Vec<T> = s
         .split(',')
-        .map(|x| x.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
-        .collect::<Option<_>>()?;
-    (v.len() == n).then_some(v)
-}
-
-fn numbers32(s: &str, n: usize) -> Option<Vec<f32>> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f32>().ok().filter(|x| x.is_finite()))
+        .map(|x| x.trim().parse::<T>().ok().filter(|&x| x.into().is_finite()))
         .collect::<Option<_>>()?;
     (v.len() == n).then_some(v)
 }

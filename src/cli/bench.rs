@@ -7,9 +7,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 
-use crate::compute::eigen_features::{EigenFeatures, Mapping, TensorOutput};
+use crate::compute::eigen_features::{EigenFeatures, EigenPass, Mapping, TensorOutput};
 use crate::compute::gaussian::{Gaussian, SeparableKernel};
-use crate::compute::gradient::{Gradient, GradientBuffers};
+use crate::compute::gradient::{Gradient, GradientBuffers, GradientOutput};
 use crate::compute::hessian::{Hessian, HessianKernels};
 use crate::compute::rst::{Rst, RstDispatch, RstInputs, RstOutput, RstRays};
 use crate::cpu::features::{FeatureMap, HessianMethod, hessian_features_multiscale};
@@ -400,9 +400,11 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                         &slab,
                         c,
                         (*z0, *nz),
-                        TensorOutput::hessian(Mapping::Map(FeatureMap::Simple)),
-                        i > 0,
-                        out,
+                        EigenPass::Output {
+                            what: TensorOutput::hessian(Mapping::Map(FeatureMap::Simple)),
+                            accumulate: i > 0,
+                            out,
+                        },
                     )?;
                 }
             }
@@ -456,8 +458,9 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         let packed = crate::compute::gradient::packed_texture(&ctx, &slab, "bench (I, g)")?;
         let g = timed(&ctx, |e| {
             gaussian.record_separable(&ctx, e, &slab, &kernel, &input, &tmp, &smooth_out)?;
-            gradient.record(&ctx, e, &slab, &smooth_out, &gb)?;
-            gradient.record_packed(&ctx, e, &slab, &smooth_out, &packed)?;
+            gradient.record(&ctx, e, &slab, &smooth_out, GradientOutput::Buffers(gb))?;
+            let packed = GradientOutput::Packed(&packed);
+            gradient.record(&ctx, e, &slab, &smooth_out, packed)?;
             Ok(())
         })?;
         let mut gv = None;

@@ -14,7 +14,7 @@
 //!
 //! Frangi's default c (half the largest Frobenius norm of the normalised Hessian over the whole
 //! volume, never a slab): clear a 4-byte buffer with [`EigenFeatures::record_clear_norm`],
-//! record [`EigenFeatures::record_max_norm`] on every slab's output slices, read the `u32` back
+//! record [`EigenPass::MaxNorm`] on every slab's output slices, read the `u32` back
 //! and convert with [`frangi_c_from_norm_bits`].
 
 use crate::cpu::features::FeatureMap;
@@ -107,7 +107,7 @@ pub fn frangi_c_from_norm_bits(bits: u32) -> f64 {
     0.5 * f64::from(f32::from_bits(bits))
 }
 
-/// A 4-byte buffer for [`EigenFeatures::record_max_norm`] (starts at 0 = norm 0.0).
+/// A 4-byte buffer for [`EigenPass::MaxNorm`] (starts at 0 = norm 0.0).
 pub fn norm_buffer(ctx: &GpuContext) -> wgpu::Buffer {
     crate::gpu::kernel::f32_buffer(&ctx.device, "largest tensor norm", 1)
 }
@@ -168,11 +168,8 @@ impl EigenFeatures {
         }
     }
 
-    /// Records `what` of the tensor `[xx, yy, zz, xy, xz, yz]` (each `grid.len()` f32) for the
-    /// slab's slices `out_z = (out_z0, out_nz)` into `out`, which holds
-    /// `what.components() * nx * ny * out_nz` f32, component-major. `accumulate`: see the
-    /// module documentation (false for the first scale).
-    #[allow(clippy::too_many_arguments)]
+    /// Records `pass` on the tensor `[xx, yy, zz, xy, xz, yz]` (each `grid.len()` f32) for the
+    /// slab's slices `out_z = (out_z0, out_nz)`.
     pub fn record(
         &self,
         ctx: &GpuContext,
@@ -180,81 +177,62 @@ impl EigenFeatures {
         grid: &SlabGrid,
         tensor: [&wgpu::Buffer; 6],
         out_z: (u32, u32),
-        what: TensorOutput,
-        accumulate: bool,
-        out: &wgpu::Buffer,
+        pass: EigenPass<'_>,
     ) -> Result<(), RecordError> {
         let groups = Self::check(ctx, grid, &tensor, out_z)?;
         if grid.is_empty() || out_z.1 == 0 {
             return Ok(());
         }
-        let n_out = u64::from(grid.dims[0]) * u64::from(grid.dims[1]) * u64::from(out_z.1);
-        let out_bytes = checks::f32_bytes(n_out, u64::from(what.components()));
-        checks::buffer(ctx, "eigen_features output", out, out_bytes)?;
-        if tensor.contains(&out) {
-            return Err(RecordError::Invalid(
-                "eigen_features: the output cannot be a tensor component",
-            ));
-        }
-        let params = Self::params(grid, out_z, what, accumulate);
-        let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "eigen params", &params);
+        let (label, pipeline, params, last) = match pass {
+            EigenPass::Output {
+                what,
+                accumulate,
+                out,
+            } => {
+                let n_out = u64::from(grid.dims[0]) * u64::from(grid.dims[1]) * u64::from(out_z.1);
+                let out_bytes = checks::f32_bytes(n_out, u64::from(what.components()));
+                checks::buffer(ctx, "eigen_features output", out, out_bytes)?;
+                if tensor.contains(&out) {
+                    return Err(RecordError::Invalid(
+                        "eigen_features: the output cannot be a tensor component",
+                    ));
+                }
+                let params = Self::params(grid, out_z, what, accumulate);
+                let params =
+                    crate::gpu::kernel::uniform_buffer(&ctx.device, "eigen params", &params);
+                (
+                    "eigen_features",
+                    &self.features,
+                    params,
+                    checks::entry(7, out),
+                )
+            }
+            EigenPass::MaxNorm { rows, norm_bits } => {
+                checks::buffer(ctx, "largest norm", norm_bits, 4)?;
+                let mut params = Self::params(grid, out_z, TensorOutput::Eigen, false);
+                params.rows = rows.unwrap_or([0, 0]);
+                let params =
+                    crate::gpu::kernel::uniform_buffer(&ctx.device, "norm params", &params);
+                let norm = wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: norm_bits,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(4),
+                    }),
+                };
+                ("max_norm", &self.max_norm, params, norm)
+            }
+        };
         let mut entries = vec![checks::entry(0, &params)];
         entries.extend((0..6).map(|c| checks::entry(c as u32 + 1, tensor[c])));
-        entries.push(checks::entry(7, out));
+        entries.push(last);
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("eigen_features"),
-            layout: &self.features.get_bind_group_layout(0),
+            label: Some(label),
+            layout: &pipeline.get_bind_group_layout(0),
             entries: &entries,
         });
-        checks::dispatch(
-            encoder,
-            "eigen_features",
-            &self.features,
-            &bind_group,
-            groups,
-        );
-        Ok(())
-    }
-
-    /// Records `norm_bits = max(norm_bits, bits of the largest Frobenius norm over the output
-    /// slices)`, only over the rows `rows = [row0, n_rows]` when given (a brick's core);
-    /// `norm_bits` is a 4-byte buffer (e.g. [`norm_buffer`]), cleared once before the first
-    /// brick.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_max_norm(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        tensor: [&wgpu::Buffer; 6],
-        out_z: (u32, u32),
-        rows: Option<[u32; 2]>,
-        norm_bits: &wgpu::Buffer,
-    ) -> Result<(), RecordError> {
-        let groups = Self::check(ctx, grid, &tensor, out_z)?;
-        if grid.is_empty() || out_z.1 == 0 {
-            return Ok(());
-        }
-        checks::buffer(ctx, "largest norm", norm_bits, 4)?;
-        let mut params = Self::params(grid, out_z, TensorOutput::Eigen, false);
-        params.rows = rows.unwrap_or([0, 0]);
-        let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "norm params", &params);
-        let mut entries = vec![checks::entry(0, &params)];
-        entries.extend((0..6).map(|c| checks::entry(c as u32 + 1, tensor[c])));
-        entries.push(wgpu::BindGroupEntry {
-            binding: 8,
-            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: norm_bits,
-                offset: 0,
-                size: wgpu::BufferSize::new(4),
-            }),
-        });
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("max_norm"),
-            layout: &self.max_norm.get_bind_group_layout(0),
-            entries: &entries,
-        });
-        checks::dispatch(encoder, "max_norm", &self.max_norm, &bind_group, groups);
+        checks::dispatch(encoder, label, pipeline, &bind_group, groups);
         Ok(())
     }
 
@@ -262,4 +240,23 @@ impl EigenFeatures {
     pub fn record_clear_norm(&self, encoder: &mut wgpu::CommandEncoder, norm_bits: &wgpu::Buffer) {
         encoder.clear_buffer(norm_bits, 0, Some(4));
     }
+}
+
+/// What [`EigenFeatures::record`] records.
+#[derive(Clone, Copy, Debug)]
+pub enum EigenPass<'a> {
+    /// `what` of the tensor into `out`, which holds `what.components() * nx * ny * out_nz` f32,
+    /// component-major. `accumulate`: see the module documentation (false for the first scale).
+    Output {
+        what: TensorOutput,
+        accumulate: bool,
+        out: &'a wgpu::Buffer,
+    },
+    /// `norm_bits = max(norm_bits, bits of the largest Frobenius norm over the output slices)`,
+    /// only over the rows `rows = [row0, n_rows]` when given (a brick's core); `norm_bits` is a
+    /// 4-byte buffer (e.g. [`norm_buffer`]), cleared once before the first brick.
+    MaxNorm {
+        rows: Option<[u32; 2]>,
+        norm_bits: &'a wgpu::Buffer,
+    },
 }

@@ -2,7 +2,7 @@
 //! already smoothed slab, borders replicated. It is the second half of
 //! [`crate::cpu::GradientVolume::new`] (the Gaussian smoothing before it is another kernel's).
 //! Two outputs: three f32 buffers gx, gy, gz ([`Gradient::record`]), or (I, gx, gy, gz) packed
-//! in one rgba32float 3D texture ([`Gradient::record_packed`]), the input of the RST kernel.
+//! in one rgba32float 3D texture ([`Gradient::record`]), the input of the RST kernel.
 //!
 //! Also holds what the RST and gradient kernels share: [`RecordError`] and the checks that make
 //! a bad size an error instead of a wgpu validation panic.
@@ -124,7 +124,7 @@ const _: () = assert!(std::mem::size_of::<Params>() == 32);
 /// The format of the packed (I, gx, gy, gz) texture.
 pub const PACKED_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
-/// A texture for [`Gradient::record_packed`] and [`crate::compute::rst::Rst::record`]: 3D,
+/// A texture for [`Gradient::record`] and [`crate::compute::rst::Rst::record`]: 3D,
 /// rgba32float, the slab's dims, usable as a storage texture (written) and a sampled texture
 /// (read with `textureLoad`, or with a linear sampler by the RST's hardware-filtered path where
 /// the device has FLOAT32_FILTERABLE), and as a copy source (readback in tests).
@@ -200,78 +200,71 @@ impl Gradient {
         uniform_buffer(&ctx.device, "gradient params", &params)
     }
 
-    /// Records (I, gx, gy, gz) of the smoothed `intensity` of `grid` into `out`, a texture from
-    /// [`packed_texture`] of the slab's size (the RST kernel's input). Nothing is submitted.
-    pub fn record_packed(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        intensity: &wgpu::Buffer,
-        out: &wgpu::Texture,
-    ) -> Result<(), RecordError> {
-        let bytes = voxel_count(grid)? * 4;
-        check_packed(out, grid, wgpu::TextureUsages::STORAGE_BINDING)?;
-        let groups = workgroups(ctx, grid.dims)?;
-        let params_buf = Self::params_buffer(ctx, grid);
-        let view = out.create_view(&wgpu::TextureViewDescriptor::default());
-        let entries = [
-            entry(0, params_buf.as_entire_binding()),
-            entry(1, storage_binding(ctx, "intensity", intensity, bytes)?),
-            entry(5, wgpu::BindingResource::TextureView(&view)),
-        ];
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("gradient packed"),
-            layout: &self.packed.get_bind_group_layout(0),
-            entries: &entries,
-        });
-        crate::gpu::checks::dispatch(
-            encoder,
-            "gradient packed",
-            &self.packed,
-            &bind_group,
-            groups,
-        );
-        Ok(())
-    }
-
-    /// Records the gradient of the smoothed `intensity` of `grid` into `out` (every voxel of the
-    /// slab; the slab's edge slices replicate the border, as the CPU twin does at the volume's).
-    /// Nothing is submitted.
+    /// Records the gradient of the smoothed `intensity` of `grid` (every voxel of the slab; the
+    /// slab's edge slices replicate the border, as the CPU twin does at the volume's) into `out`:
+    /// three buffers, or (I, gx, gy, gz) texels. Nothing is submitted.
     pub fn record(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         grid: &SlabGrid,
         intensity: &wgpu::Buffer,
-        out: &GradientBuffers<'_>,
+        out: GradientOutput<'_>,
     ) -> Result<(), RecordError> {
         let bytes = voxel_count(grid)? * 4;
-        for (name, b) in [("gx", out.gx), ("gy", out.gy), ("gz", out.gz)] {
-            if b == intensity {
-                return Err(RecordError::Aliased(name));
+        match out {
+            GradientOutput::Packed(texture) => {
+                check_packed(texture, grid, wgpu::TextureUsages::STORAGE_BINDING)?;
             }
-        }
-        if out.gx == out.gy || out.gx == out.gz || out.gy == out.gz {
-            return Err(RecordError::Aliased("gradient output"));
+            GradientOutput::Buffers(out) => {
+                for (name, b) in [("gx", out.gx), ("gy", out.gy), ("gz", out.gz)] {
+                    if b == intensity {
+                        return Err(RecordError::Aliased(name));
+                    }
+                }
+                if out.gx == out.gy || out.gx == out.gz || out.gy == out.gz {
+                    return Err(RecordError::Aliased("gradient output"));
+                }
+            }
         }
         let groups = workgroups(ctx, grid.dims)?;
         let params_buf = Self::params_buffer(ctx, grid);
-        let entries = [
+        let view;
+        let mut entries = vec![
             entry(0, params_buf.as_entire_binding()),
             entry(1, storage_binding(ctx, "intensity", intensity, bytes)?),
-            entry(2, storage_binding(ctx, "gx", out.gx, bytes)?),
-            entry(3, storage_binding(ctx, "gy", out.gy, bytes)?),
-            entry(4, storage_binding(ctx, "gz", out.gz, bytes)?),
         ];
+        let (label, pipeline) = match out {
+            GradientOutput::Packed(texture) => {
+                view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+                entries.push(entry(5, wgpu::BindingResource::TextureView(&view)));
+                ("gradient packed", &self.packed)
+            }
+            GradientOutput::Buffers(out) => {
+                entries.push(entry(2, storage_binding(ctx, "gx", out.gx, bytes)?));
+                entries.push(entry(3, storage_binding(ctx, "gy", out.gy, bytes)?));
+                entries.push(entry(4, storage_binding(ctx, "gz", out.gz, bytes)?));
+                ("gradient", &self.pipeline)
+            }
+        };
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("gradient"),
-            layout: &self.pipeline.get_bind_group_layout(0),
+            label: Some(label),
+            layout: &pipeline.get_bind_group_layout(0),
             entries: &entries,
         });
-        crate::gpu::checks::dispatch(encoder, "gradient", &self.pipeline, &bind_group, groups);
+        crate::gpu::checks::dispatch(encoder, label, pipeline, &bind_group, groups);
         Ok(())
     }
+}
+
+/// Where [`Gradient::record`] writes.
+#[derive(Clone, Copy, Debug)]
+pub enum GradientOutput<'a> {
+    /// The three components, one buffer each (the structure tensor's input).
+    Buffers(GradientBuffers<'a>),
+    /// A texture from [`packed_texture`] of the slab's size, (I, gx, gy, gz) per texel (the RST
+    /// kernel's input).
+    Packed(&'a wgpu::Texture),
 }
 
 pub(crate) fn entry(binding: u32, resource: wgpu::BindingResource<'_>) -> wgpu::BindGroupEntry<'_> {

@@ -6,7 +6,7 @@
 //! [`Rst::record`] per dispatch into the caller's command encoder, over the output slices
 //! `out_z0 .. out_z0 + out_nz` of a slab whose smoothed intensity and gradient are packed as
 //! (I, gx, gy, gz) in one rgba32float 3D texture ([`crate::compute::gradient::packed_texture`],
-//! written by [`Gradient::record_packed`] from the smoothed intensity).
+//! written by [`Gradient::record`] from the smoothed intensity).
 //!
 //! Why a texture and not four storage buffers: the kernel reads 8 corners x 4 values per ray
 //! sample; on lavapipe one `textureLoad` of four channels costs about as much as one scalar
@@ -285,7 +285,7 @@ impl RstRays {
 pub struct RstInputs<'a> {
     /// Smoothed intensity I and gradient g (HU/mm) of the slab as (I, gx, gy, gz): a 3D
     /// rgba32float texture of the slab's dims with TEXTURE_BINDING usage
-    /// ([`crate::compute::gradient::packed_texture`], filled by [`Gradient::record_packed`]).
+    /// ([`crate::compute::gradient::packed_texture`], filled by [`Gradient::record`]).
     pub volume: &'a wgpu::Texture,
     pub rays: &'a RstRays,
 }

@@ -91,6 +91,28 @@ impl LoadError {
         }
     }
 
+    /// The header `field`'s `value` parsed as a `T`, or an invalid header saying `problem`.
+    pub(crate) fn parse_field<T: std::str::FromStr>(
+        file: &str,
+        field: &str,
+        value: &str,
+        problem: &str,
+    ) -> Result<T, Self> {
+        value
+            .parse()
+            .map_err(|_| Self::header(file, field, problem))
+    }
+
+    /// A header line that is not of the form `expected` (its first 80 characters quoted).
+    pub(crate) fn header_line(file: &str, line: &str, expected: &str) -> Self {
+        let line: String = line.chars().take(80).collect();
+        Self::header(
+            file,
+            "header line",
+            format!("\"{line}\" is not \"{expected}\""),
+        )
+    }
+
     pub(crate) fn unsupported(file: &str, what: &str, detail: impl Into<String>) -> Self {
         Self::Unsupported {
             file: file.to_owned(),

@@ -6,7 +6,7 @@ use glam::DVec3;
 
 use super::geometry::checked_grid;
 use super::raw::{self, Endian, SampleLayout, SampleType};
-use super::{Companions, InputFile, Limits, LoadError};
+use super::{HeaderInput, LoadError};
 use crate::volume::{Modality, Volume};
 
 /// Keys that may open a MetaImage header (ITK writes ObjectType first; others are seen too).
@@ -50,14 +50,7 @@ fn parse_header(file: &str, bytes: &[u8]) -> Result<(Vec<(String, String)>, usiz
             continue;
         }
         let Some((k, v)) = line.split_once('=') else {
-            return Err(LoadError::header(
-                file,
-                "header line",
-                format!(
-                    "\"{}\" is not \"Key = value\"",
-                    line.chars().take(80).collect::<String>()
-                ),
-            ));
+            return Err(LoadError::header_line(file, line, "Key = value"));
         };
         let key = k.trim().to_owned();
         let last = key.eq_ignore_ascii_case("ElementDataFile");
@@ -117,22 +110,16 @@ fn is_true(v: Option<&str>) -> bool {
 }
 
 /// Reads a .mha, or a .mhd whose data file is looked up among `companions`.
-pub(crate) fn read(
-    file: &InputFile,
-    companions: Companions<'_>,
-    limits: &Limits,
-) -> Result<Volume, LoadError> {
-    let name = file.name.as_str();
-    let (fields, data_start) = parse_header(name, &file.bytes)?;
+pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
+    let name = input.file.name.as_str();
+    let (fields, data_start) = parse_header(name, &input.file.bytes)?;
     let mut warnings = Vec::new();
     let need = |key: &str| {
         get(&fields, key)
             .ok_or_else(|| LoadError::header(name, key, "missing (a required MetaImage field)"))
     };
 
-    let ndims: usize = need("NDims")?
-        .parse()
-        .map_err(|_| LoadError::header(name, "NDims", "not an integer"))?;
+    let ndims: usize = LoadError::parse_field(name, "NDims", need("NDims")?, "not an integer")?;
     if !(1..=4).contains(&ndims) {
         return Err(LoadError::unsupported(
             name,
@@ -155,9 +142,7 @@ pub(crate) fn read(
     let sizes: Vec<u64> = dim_size.iter().map(|&d| d as u64).collect();
     let ty = sample_type(name, need("ElementType")?)?;
     let channels: u64 = match get(&fields, "ElementNumberOfChannels") {
-        Some(c) => c
-            .parse()
-            .map_err(|_| LoadError::header(name, "ElementNumberOfChannels", "not an integer"))?,
+        Some(c) => LoadError::parse_field(name, "ElementNumberOfChannels", c, "not an integer")?,
         None => 1,
     };
     if channels == 0 {
@@ -179,8 +164,7 @@ pub(crate) fn read(
         dims[a] = usize::try_from(sizes[a])
             .map_err(|_| LoadError::header(name, "DimSize", "too large"))?;
     }
-    let count = raw::checked_product(&dims.map(|d| d as u64)).unwrap_or(u64::MAX);
-    raw::check_voxel_budget(name, count, ty.output_size() as u64, limits)?;
+    let count = input.voxel_count(dims, ty)?;
     let total_samples = raw::checked_product(&sizes)
         .and_then(|n| n.checked_mul(channels))
         .unwrap_or(u64::MAX);
@@ -267,9 +251,9 @@ pub(crate) fn read(
     }
     let data_file = need("ElementDataFile")?;
     let (data_name, data): (String, &[u8]) = if data_file.eq_ignore_ascii_case("LOCAL") {
-        (name.to_owned(), &file.bytes[data_start..])
+        (name.to_owned(), &input.file.bytes[data_start..])
     } else {
-        let f = companions.data_file(
+        let f = input.companions.data_file(
             name,
             "ElementDataFile",
             data_file,
@@ -298,7 +282,7 @@ pub(crate) fn read(
             0,
             layout,
             total_bytes,
-            limits,
+            input.limits,
         )?
         .0
     } else {
@@ -315,7 +299,7 @@ pub(crate) fn read(
             &data[skip..],
             total_bytes,
             layout,
-            limits,
+            input.limits,
         )?
     };
     let grid = checked_grid(
@@ -340,6 +324,7 @@ pub(crate) fn read(
 #[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 mod tests {
     use super::*;
+    use crate::io::{InputFile, read_header};
 
     #[test]
     fn detached_big_endian_with_matrix() {
@@ -349,13 +334,13 @@ mod tests {
         );
         assert!(looks_like_header(&hdr.bytes));
         let raw_file = [InputFile::new("a.raw", vec![0xff, 0xfe, 0x00, 0x05])];
-        let v = read(&hdr, Companions::new(&raw_file), &Limits::default()).unwrap();
+        let v = read_header(read, &hdr, &raw_file).unwrap();
         assert_eq!(v.to_f32(), vec![-2.0, 5.0]);
         assert_eq!(v.direction.x_axis, DVec3::Y);
         assert_eq!(v.direction.y_axis, -DVec3::X);
         assert_eq!(v.spacing_mm, [0.5, 2.0, 3.0]);
         assert_eq!(v.origin_mm, [1.0, 2.0, 3.0]);
-        let r = read(&hdr, Companions::new(&[]), &Limits::default());
+        let r = read_header(read, &hdr, &[]);
         assert!(matches!(r, Err(LoadError::MissingDataFile { .. })));
     }
 }

@@ -191,6 +191,51 @@ impl<'a> Companions<'a> {
     }
 }
 
+/// What a header format's reader reads: the header file, the other files given with it (where
+/// a detached data file is looked up) and the limits.
+#[derive(Clone, Copy)]
+pub(crate) struct HeaderInput<'a> {
+    pub(crate) file: &'a InputFile,
+    pub(crate) companions: Companions<'a>,
+    pub(crate) limits: &'a Limits,
+}
+
+impl<'a> HeaderInput<'a> {
+    pub(crate) fn new(file: &'a InputFile, companions: Companions<'a>, limits: &'a Limits) -> Self {
+        Self {
+            file,
+            companions,
+            limits,
+        }
+    }
+
+    /// The voxel count of a grid of `dims` (`u64::MAX` on overflow), refused when its voxels as
+    /// `ty` are stored would be more than the limits allow.
+    pub(crate) fn voxel_count(
+        &self,
+        dims: [usize; 3],
+        ty: raw::SampleType,
+    ) -> Result<u64, LoadError> {
+        let count = raw::checked_product(&dims.map(|d| d as u64)).unwrap_or(u64::MAX);
+        raw::check_voxel_budget(&self.file.name, count, ty.output_size() as u64, self.limits)?;
+        Ok(count)
+    }
+}
+
+/// Runs a header format's `read` on `file` given with `companions`, under the default limits.
+#[cfg(test)]
+pub(crate) fn read_header(
+    read: fn(HeaderInput<'_>) -> Result<Volume, LoadError>,
+    file: &InputFile,
+    companions: &[InputFile],
+) -> Result<Volume, LoadError> {
+    read(HeaderInput::new(
+        file,
+        Companions::new(companions),
+        &Limits::default(),
+    ))
+}
+
 /// Loads one volume from the given files with the default [`Limits`].
 pub fn load(files: &[InputFile]) -> Result<Loaded, LoadError> {
     load_with(files, &Limits::default())
@@ -212,10 +257,11 @@ pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadErr
     let mut notes = Vec::new();
     let mut loaded = if let (Some(p), true) = (primary, dicom_count <= 1) {
         let file = &files[p];
+        let input = HeaderInput::new(file, companions, limits);
         let volume = match formats[p] {
-            Format::Nifti | Format::NiftiGz => nifti::read(file, companions, limits)?,
-            Format::Nrrd => nrrd::read(file, companions, limits)?,
-            Format::MetaImage => metaimage::read(file, companions, limits)?,
+            Format::Nifti | Format::NiftiGz => nifti::read(input)?,
+            Format::Nrrd => nrrd::read(input)?,
+            Format::MetaImage => metaimage::read(input)?,
             _ => unreachable_format(file)?,
         };
         let used = used_companions(&volume);

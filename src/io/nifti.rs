@@ -13,7 +13,7 @@ use glam::{DMat3, DVec3};
 
 use super::geometry::{checked_grid, ras_to_lps};
 use super::raw::{self, Endian, FieldReader, SampleLayout, SampleType};
-use super::{Companions, InputFile, Limits, LoadError, base_name};
+use super::{Companions, HeaderInput, InputFile, LoadError, base_name};
 use crate::volume::Volume;
 
 const NIFTI1_HEADER_BYTES: usize = 348;
@@ -348,27 +348,22 @@ fn qform_geometry(h: &Header, warnings: &mut Vec<String>) -> ([DVec3; 3], DVec3)
 }
 
 /// Reads a .nii, .nii.gz or the .hdr of a pair (whose .img is looked up among `companions`).
-pub(crate) fn read(
-    file: &InputFile,
-    companions: Companions<'_>,
-    limits: &Limits,
-) -> Result<Volume, LoadError> {
-    let name = file.name.as_str();
-    let gz = raw::is_gzip(&file.bytes);
+pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
+    let name = input.file.name.as_str();
+    let gz = raw::is_gzip(&input.file.bytes);
     // The header first: from a gzip stream only its first bytes are inflated at this point.
     let header_bytes;
     let head: &[u8] = if gz {
-        header_bytes = raw::gunzip_prefix(name, &file.bytes, NIFTI2_HEADER_BYTES as u64)?.0;
+        header_bytes = raw::gunzip_prefix(name, &input.file.bytes, NIFTI2_HEADER_BYTES as u64)?.0;
         &header_bytes
     } else {
-        &file.bytes
+        &input.file.bytes
     };
     let h = parse_header(name, head)?;
     let mut warnings = Vec::new();
     let ty = sample_type(name, h.datatype)?;
     let (dims, volumes) = grid(name, &h, &mut warnings)?;
-    let count = raw::checked_product(&dims.map(|d| d as u64)).unwrap_or(u64::MAX);
-    raw::check_voxel_budget(name, count, ty.output_size() as u64, limits)?;
+    let count = input.voxel_count(dims, ty)?;
     let data_bytes = count.saturating_mul(ty.size() as u64);
     let header_size = if h.version == 1 {
         NIFTI1_HEADER_BYTES
@@ -396,8 +391,8 @@ pub(crate) fn read(
 
     // Where the voxels are: in this file after the header, or in the .img beside the .hdr.
     let data_file: &InputFile = match h.kind {
-        Kind::Single => file,
-        Kind::Pair | Kind::Analyze => pair_data_file(name, companions)?,
+        Kind::Single => input.file,
+        Kind::Pair | Kind::Analyze => pair_data_file(name, input.companions)?,
     };
     let data_name = data_file.name.clone();
     let layout = SampleLayout {
@@ -418,7 +413,7 @@ pub(crate) fn read(
             vox_offset,
             layout,
             declared,
-            limits,
+            input.limits,
         )?
     } else {
         let needed = vox_offset.saturating_add(data_bytes);
@@ -435,7 +430,7 @@ pub(crate) fn read(
             ..layout
         };
         (
-            raw::decode_samples(&data_name, &data_file.bytes, layout, limits)?,
+            raw::decode_samples(&data_name, &data_file.bytes, layout, input.limits)?,
             data_file.bytes.len() as u64,
         )
     };
@@ -509,6 +504,7 @@ fn pair_data_file<'a>(
 #[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 mod tests {
     use super::*;
+    use crate::io::{Limits, read_header};
 
     /// A minimal single-file NIfTI-1 header + data, for unit tests.
     pub(crate) fn tiny_nifti(datatype: i16, dims: [i16; 3], data: &[u8]) -> Vec<u8> {
@@ -533,7 +529,7 @@ mod tests {
         let bytes = tiny_nifti(2, [2, 2, 1], &[1, 2, 3, 4]);
         assert!(looks_like_header(&bytes));
         let f = InputFile::new("t.nii", bytes.clone());
-        let v = read(&f, Companions::new(&[]), &Limits::default()).unwrap();
+        let v = read_header(read, &f, &[]).unwrap();
         assert_eq!(v.dims, [2, 2, 1]);
         assert_eq!(v.value_at(1, 1, 0), 4.0);
         // Method 1 (no qform/sform): RAS axes, which are -x, -y in LPS.
@@ -544,18 +540,12 @@ mod tests {
             max_voxel_bytes: 1 << 20,
             ..Limits::default()
         };
-        let r = read(
-            &InputFile::new("h.nii", huge),
-            Companions::new(&[]),
-            &limits,
-        );
+        let file = InputFile::new("h.nii", huge);
+        let r = read(HeaderInput::new(&file, Companions::new(&[]), &limits));
         assert!(matches!(r, Err(LoadError::TooLarge { .. })), "{r:?}");
         let short = tiny_nifti(4, [4, 4, 4], &[0; 10]);
-        let r = read(
-            &InputFile::new("s.nii", short),
-            Companions::new(&[]),
-            &Limits::default(),
-        );
+        let file = InputFile::new("s.nii", short);
+        let r = read_header(read, &file, &[]);
         assert!(matches!(r, Err(LoadError::Truncated { .. })), "{r:?}");
     }
 }

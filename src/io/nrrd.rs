@@ -9,7 +9,7 @@ use glam::DVec3;
 
 use super::geometry::checked_grid;
 use super::raw::{self, Endian, SampleLayout, SampleType};
-use super::{Companions, InputFile, Limits, LoadError};
+use super::{HeaderInput, Limits, LoadError};
 use crate::volume::Volume;
 
 /// Largest header we parse; real ones are a few kilobytes (a 451-direction DWI is 40 KB).
@@ -66,14 +66,7 @@ fn split_header(
                 fields.insert(k.trim().to_ascii_lowercase(), v.trim().to_owned());
             }
             None => {
-                return Err(LoadError::header(
-                    file,
-                    "header line",
-                    format!(
-                        "\"{}\" is not \"field: value\"",
-                        text.chars().take(80).collect::<String>()
-                    ),
-                ));
+                return Err(LoadError::header_line(file, &text, "field: value"));
             }
         }
         if end.is_none() {
@@ -187,13 +180,9 @@ fn space_to_lps(space: &str) -> Option<DVec3> {
 }
 
 /// Reads an attached .nrrd or a detached .nhdr (its data file is looked up among `companions`).
-pub(crate) fn read(
-    file: &InputFile,
-    companions: Companions<'_>,
-    limits: &Limits,
-) -> Result<Volume, LoadError> {
-    let name = file.name.as_str();
-    let (fields, data_start) = split_header(name, &file.bytes)?;
+pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
+    let name = input.file.name.as_str();
+    let (fields, data_start) = split_header(name, &input.file.bytes)?;
     let mut warnings = Vec::new();
     let need = |names: &[&str]| {
         get(&fields, names)
@@ -201,9 +190,12 @@ pub(crate) fn read(
     };
 
     let ty = sample_type(name, need(&["type"])?)?;
-    let dimension: usize = need(&["dimension"])?
-        .parse()
-        .map_err(|_| LoadError::header(name, "dimension", "not a positive integer"))?;
+    let dimension: usize = LoadError::parse_field(
+        name,
+        "dimension",
+        need(&["dimension"])?,
+        "not a positive integer",
+    )?;
     if !(1..=16).contains(&dimension) {
         return Err(LoadError::header(
             name,
@@ -358,8 +350,7 @@ pub(crate) fn read(
         }
         steps[2] = n;
     }
-    let count = raw::checked_product(&dims.map(|d| d as u64)).unwrap_or(u64::MAX);
-    raw::check_voxel_budget(name, count, ty.output_size() as u64, limits)?;
+    let count = input.voxel_count(dims, ty)?;
     let data_bytes_total = total.saturating_mul(ty.size() as u64);
 
     let mut origin = match get(&fields, &["space origin"]) {
@@ -387,7 +378,7 @@ pub(crate) fn read(
     // The data bytes: attached after the blank line, or in the named data file.
     let (data_name, data_file): (String, &[u8]) = match get(&fields, &["data file", "datafile"]) {
         Some(df) => {
-            let f = companions.data_file(
+            let f = input.companions.data_file(
                 name,
                 "data file",
                 df.trim(),
@@ -401,11 +392,11 @@ pub(crate) fn read(
                 LoadError::truncated(
                     name,
                     "NRRD header (no blank line before the data)",
-                    file.bytes.len() as u64 + 1,
-                    file.bytes.len() as u64,
+                    input.file.bytes.len() as u64 + 1,
+                    input.file.bytes.len() as u64,
                 )
             })?;
-            (name.to_owned(), &file.bytes[start..])
+            (name.to_owned(), &input.file.bytes[start..])
         }
     };
     let line_skip: usize = get(&fields, &["line skip", "lineskip"])
@@ -491,12 +482,12 @@ pub(crate) fn read(
                 skip,
                 layout,
                 skip.saturating_add(data_bytes_total),
-                limits,
+                input.limits,
             )?;
             return finish(name, &data_name, dims, steps, origin, voxels, warnings);
         }
         "ascii" | "text" | "txt" => {
-            std::borrow::Cow::Owned(ascii_to_f64_bytes(&data_name, data, total, limits)?)
+            std::borrow::Cow::Owned(ascii_to_f64_bytes(&data_name, data, total, input.limits)?)
         }
         other => {
             return Err(LoadError::unsupported(
@@ -510,7 +501,14 @@ pub(crate) fn read(
         (layout.ty, layout.endian) = (SampleType::F64, Endian::Little);
     }
     let needed = total.saturating_mul(layout.ty.size() as u64);
-    let voxels = raw::decode_present(&data_name, "NRRD data", &decoded, needed, layout, limits)?;
+    let voxels = raw::decode_present(
+        &data_name,
+        "NRRD data",
+        &decoded,
+        needed,
+        layout,
+        input.limits,
+    )?;
     finish(name, &data_name, dims, steps, origin, voxels, warnings)
 }
 
@@ -569,6 +567,7 @@ fn ascii_to_f64_bytes(
 #[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 mod tests {
     use super::*;
+    use crate::io::{InputFile, read_header};
 
     fn nrrd(header: &str, data: &[u8]) -> InputFile {
         let mut b = header.as_bytes().to_vec();
@@ -583,7 +582,7 @@ mod tests {
             "NRRD0004\ntype: short\ndimension: 4\nspace: right-anterior-superior\nsizes: 2 2 1 1\nspace directions: none (2,0,0) (0,3,0) (0,0,4)\nendian: big\nencoding: raw\nspace origin: (1,2,3)\n\n",
             &[0, 1, 0, 9, 0, 2, 0, 9],
         );
-        let v = read(&f, Companions::new(&[]), &Limits::default()).unwrap();
+        let v = read_header(read, &f, &[]).unwrap();
         assert_eq!(v.dims, [2, 1, 1]);
         assert_eq!(v.to_f32(), vec![1.0, 2.0]);
         assert_eq!(v.spacing_mm, [2.0, 3.0, 4.0]);
@@ -598,10 +597,10 @@ mod tests {
             "dir/a.nhdr",
             b"NRRD0004\ntype: float\ndimension: 3\nsizes: 2 1 1\nspacings: 0.5 1 1\nencoding: ascii\ndata file: a.txt\n".to_vec(),
         );
-        let r = read(&hdr, Companions::new(&[]), &Limits::default());
+        let r = read_header(read, &hdr, &[]);
         assert!(matches!(r, Err(LoadError::MissingDataFile { .. })), "{r:?}");
         let data = [InputFile::new("other/a.txt", b"1.5 -2\n".to_vec())];
-        let v = read(&hdr, Companions::new(&data), &Limits::default()).unwrap();
+        let v = read_header(read, &hdr, &data).unwrap();
         assert_eq!(v.to_f32(), vec![1.5, -2.0]);
         assert_eq!(v.spacing_mm[0], 0.5);
     }

@@ -28,8 +28,8 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::compute::eigen_features::{Mapping, TensorOutput};
-use crate::compute::gradient::GradientBuffers;
+use crate::compute::eigen_features::{EigenPass, Mapping, TensorOutput};
+use crate::compute::gradient::{GradientBuffers, GradientOutput};
 use crate::compute::pack::PackBox;
 use crate::compute::resample::ResampleGeometry;
 use crate::compute::rst::{RstDispatch, RstInputs, RstOutput, RstRays};
@@ -644,7 +644,13 @@ impl FeatureJob {
             return self
                 .kernels
                 .gradient
-                .record_packed(ctx, encoder, grid, &self.buffers.work[0], tex)
+                .record(
+                    ctx,
+                    encoder,
+                    grid,
+                    &self.buffers.work[0],
+                    GradientOutput::Packed(tex),
+                )
                 .map_err(PipelineError::from);
         }
         let b = &self.buffers;
@@ -655,11 +661,11 @@ impl FeatureJob {
                 encoder,
                 grid,
                 &b.work[0],
-                &GradientBuffers {
+                GradientOutput::Buffers(GradientBuffers {
                     gx: &b.work[1],
                     gy: &b.work[2],
                     gz: &b.work[3],
-                },
+                }),
             )
             .map_err(PipelineError::from)
     }
@@ -764,14 +770,16 @@ impl FeatureJob {
                 let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
                 self.kernels.eigen.record_clear_norm(encoder, &b.norm);
                 let (z, y) = core_in_slab(&slab);
-                self.kernels.eigen.record_max_norm(
+                self.kernels.eigen.record(
                     ctx,
                     encoder,
                     &grid,
                     tensor,
                     z,
-                    Some([y.0, y.1]),
-                    &b.norm,
+                    EigenPass::MaxNorm {
+                        rows: Some([y.0, y.1]),
+                        norm_bits: &b.norm,
+                    },
                 )?;
                 Ok(Some((b.norm.clone(), 4, ReadFor::FrangiC(scale))))
             }
@@ -839,9 +847,11 @@ impl FeatureJob {
                 grid,
                 tensor,
                 core,
-                self.tensor_output(part),
-                part > 0,
-                &b.out_core,
+                EigenPass::Output {
+                    what: self.tensor_output(part),
+                    accumulate: part > 0,
+                    out: &b.out_core,
+                },
             )
             .map_err(PipelineError::from)
     }

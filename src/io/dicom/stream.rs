@@ -429,27 +429,21 @@ fn rescaled(
         let (a, b) = (f.info.slope, f.info.intercept);
         let dst = &mut out[slot * frame_len..(slot + 1) * frame_len];
         let src = o * frame_len..(o + 1) * frame_len;
-        let conv = |x: f64| (x * a + b) as f32;
         match voxels {
-            Voxels::U8(v) => dst
-                .iter_mut()
-                .zip(&v[src])
-                .for_each(|(d, s)| *d = conv(f64::from(*s))),
-            Voxels::I16(v) => dst
-                .iter_mut()
-                .zip(&v[src])
-                .for_each(|(d, s)| *d = conv(f64::from(*s))),
-            Voxels::U16(v) => dst
-                .iter_mut()
-                .zip(&v[src])
-                .for_each(|(d, s)| *d = conv(f64::from(*s))),
-            Voxels::F32(v) => dst
-                .iter_mut()
-                .zip(&v[src])
-                .for_each(|(d, s)| *d = conv(f64::from(*s))),
+            Voxels::U8(v) => rescale_into(dst, &v[src], a, b),
+            Voxels::I16(v) => rescale_into(dst, &v[src], a, b),
+            Voxels::U16(v) => rescale_into(dst, &v[src], a, b),
+            Voxels::F32(v) => rescale_into(dst, &v[src], a, b),
         }
     }
     Ok(Voxels::F32(out))
+}
+
+/// `dst[i] = src[i] * slope + intercept`, computed in f64 and stored as f32.
+fn rescale_into<T: Copy + Into<f64>>(dst: &mut [f32], src: &[T], slope: f64, intercept: f64) {
+    for (d, &s) in dst.iter_mut().zip(src) {
+        *d = (s.into() * slope + intercept) as f32;
+    }
 }
 
 #[cfg(test)]

@@ -41,84 +41,51 @@ impl Slice {
     }
 
     pub(crate) fn bytes(&self) -> Vec<u8> {
-        let mut d = Vec::new();
         let ds = |v: &[f64]| {
             v.iter()
                 .map(|x| format!("{x}"))
                 .collect::<Vec<_>>()
                 .join("\\")
+                .into_bytes()
         };
-        element(
-            &mut d,
-            (0x0008, 0x0016),
-            b"UI",
-            b"1.2.840.10008.5.1.4.1.1.2",
-        );
-        element(&mut d, (0x0008, 0x0018), b"UI", self.sop_uid.as_bytes());
-        element(&mut d, (0x0008, 0x0060), b"CS", b"CT");
-        element(&mut d, (0x0020, 0x000E), b"UI", self.series_uid.as_bytes());
-        element(
-            &mut d,
-            (0x0020, 0x0013),
-            b"IS",
-            self.instance_number.to_string().as_bytes(),
-        );
-        element(
-            &mut d,
-            (0x0020, 0x0032),
-            b"DS",
-            ds(&self.position).as_bytes(),
-        );
-        element(
-            &mut d,
-            (0x0020, 0x0037),
-            b"DS",
-            ds(&self.orientation).as_bytes(),
-        );
-        element(&mut d, (0x0028, 0x0002), b"US", &1u16.to_le_bytes());
-        element(&mut d, (0x0028, 0x0004), b"CS", b"MONOCHROME2");
-        element(&mut d, (0x0028, 0x0010), b"US", &self.rows.to_le_bytes());
-        element(&mut d, (0x0028, 0x0011), b"US", &self.cols.to_le_bytes());
-        element(
-            &mut d,
-            (0x0028, 0x0030),
-            b"DS",
-            ds(&self.pixel_spacing).as_bytes(),
-        );
-        element(&mut d, (0x0028, 0x0100), b"US", &16u16.to_le_bytes());
-        element(&mut d, (0x0028, 0x0101), b"US", &16u16.to_le_bytes());
-        element(&mut d, (0x0028, 0x0102), b"US", &15u16.to_le_bytes());
-        element(&mut d, (0x0028, 0x0103), b"US", &1u16.to_le_bytes());
-        element(
-            &mut d,
-            (0x0028, 0x1052),
-            b"DS",
-            ds(&[self.intercept]).as_bytes(),
-        );
-        element(
-            &mut d,
-            (0x0028, 0x1053),
-            b"DS",
-            ds(&[self.slope]).as_bytes(),
-        );
-        let pixels: Vec<u8> = self.pixels.iter().flat_map(|p| p.to_le_bytes()).collect();
-        element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels);
-
-        let mut group = Vec::new();
-        element(&mut group, (0x0002, 0x0001), b"OB", &[0, 1]);
-        element(
-            &mut group,
-            (0x0002, 0x0002),
-            b"UI",
-            b"1.2.840.10008.5.1.4.1.1.2",
-        );
-        element(&mut group, (0x0002, 0x0003), b"UI", self.sop_uid.as_bytes());
-        element(
-            &mut group,
-            (0x0002, 0x0010),
-            b"UI",
-            self.transfer_syntax.as_bytes(),
-        );
+        let us = |v: u16| v.to_le_bytes().to_vec();
+        let text = |s: &str| s.as_bytes().to_vec();
+        let ct_image_storage = "1.2.840.10008.5.1.4.1.1.2";
+        let d = elements(&[
+            ((0x0008, 0x0016), b"UI", text(ct_image_storage)),
+            ((0x0008, 0x0018), b"UI", text(&self.sop_uid)),
+            ((0x0008, 0x0060), b"CS", text("CT")),
+            ((0x0020, 0x000E), b"UI", text(&self.series_uid)),
+            (
+                (0x0020, 0x0013),
+                b"IS",
+                self.instance_number.to_string().into_bytes(),
+            ),
+            ((0x0020, 0x0032), b"DS", ds(&self.position)),
+            ((0x0020, 0x0037), b"DS", ds(&self.orientation)),
+            ((0x0028, 0x0002), b"US", us(1)),
+            ((0x0028, 0x0004), b"CS", text("MONOCHROME2")),
+            ((0x0028, 0x0010), b"US", us(self.rows)),
+            ((0x0028, 0x0011), b"US", us(self.cols)),
+            ((0x0028, 0x0030), b"DS", ds(&self.pixel_spacing)),
+            ((0x0028, 0x0100), b"US", us(16)),
+            ((0x0028, 0x0101), b"US", us(16)),
+            ((0x0028, 0x0102), b"US", us(15)),
+            ((0x0028, 0x0103), b"US", us(1)),
+            ((0x0028, 0x1052), b"DS", ds(&[self.intercept])),
+            ((0x0028, 0x1053), b"DS", ds(&[self.slope])),
+            (
+                (0x7FE0, 0x0010),
+                b"OW",
+                self.pixels.iter().flat_map(|p| p.to_le_bytes()).collect(),
+            ),
+        ]);
+        let group = elements(&[
+            ((0x0002, 0x0001), b"OB", vec![0, 1]),
+            ((0x0002, 0x0002), b"UI", text(ct_image_storage)),
+            ((0x0002, 0x0003), b"UI", text(&self.sop_uid)),
+            ((0x0002, 0x0010), b"UI", text(&self.transfer_syntax)),
+        ]);
         let mut out = vec![0u8; 128];
         out.extend_from_slice(b"DICM");
         element(
@@ -131,6 +98,18 @@ impl Slice {
         out.extend_from_slice(&d);
         out
     }
+}
+
+/// A data element: tag (group, element), VR and value.
+type Element<'a> = ((u16, u16), &'a [u8; 2], Vec<u8>);
+
+/// The elements, encoded one after another.
+fn elements(list: &[Element<'_>]) -> Vec<u8> {
+    let mut out = Vec::new();
+    for (tag, vr, value) in list {
+        element(&mut out, *tag, vr, value);
+    }
+    out
 }
 
 fn element(out: &mut Vec<u8>, tag: (u16, u16), vr: &[u8; 2], value: &[u8]) {
