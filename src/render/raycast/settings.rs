@@ -11,20 +11,31 @@ use crate::render::camera::Camera;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Params {
+    /// Voxel coordinates of the centre of pixel (0, 0) at depth 0.
     pub origin_v: [f32; 3],
+    /// Sample spacing along the ray, mm.
     pub step_mm: f32,
+    /// Voxel offset per pixel to the right.
     pub du_v: [f32; 3],
+    /// Depth range (mm) of the slab the samples must lie in.
     pub slab_lo: f32,
+    /// Voxel offset per pixel down.
     pub dv_v: [f32; 3],
     pub slab_hi: f32,
+    /// Voxel offset per mm along the ray.
     pub dir_v: [f32; 3],
+    /// 0 = MIP, 1 = MinIP (intensity only).
     pub mode: u32,
     pub dims: [u32; 3],
+    /// `FLAG_*` bits: features, intensity, hardware filtering, brick skipping.
     pub flags: u32,
+    /// Opacity per unit feature value (gain / reference; 0 = channel off).
     pub feature_scale: [f32; 3],
+    /// Grey window, physical units.
     pub window_lo: f32,
     pub out_size: [u32; 2],
     pub window_hi: f32,
+    /// Samples of the longest chord through the volume.
     pub max_steps: u32,
     /// First image row of the dispatch (a frame drawn in bands of rows; 0 for a whole frame).
     pub row0: u32,
