@@ -353,3 +353,45 @@ fn a_frame_over_budget_is_drawn_coarse_first_then_in_bands() {
     h.run_steps(3);
     assert_eq!(h.state().view.frames_rendered(), frames);
 }
+
+/// One window/level convention in every pane (issue "reading like a radiologist", deliver 4):
+/// a right-drag down over the MIP darkens it (raises the level), right widens it, as over the
+/// slice panes (`Window::dragged`).
+#[test]
+fn right_drag_down_darkens_the_mip_as_in_the_slice_panes() {
+    let Some(mut h) = harness() else { return };
+    let before = h.state().view.settings.window;
+    let centre = h
+        .state()
+        .view
+        .screen_pos_of(h.state().view.camera.centre_mm)
+        .expect("centre");
+    let press = |pos: egui::Pos2, pressed: bool| egui::Event::PointerButton {
+        pos,
+        button: egui::PointerButton::Secondary,
+        pressed,
+        modifiers: egui::Modifiers::NONE,
+    };
+    h.hover_at(centre);
+    h.event(press(centre, true));
+    h.step();
+    for d in [10.0, 25.0, 40.0] {
+        h.hover_at(centre + egui::vec2(0.5 * d, d));
+        h.step();
+    }
+    let end = centre + egui::vec2(20.0, 40.0);
+    h.event(press(end, false));
+    h.run_steps(2);
+    let after = h.state().view.settings.window;
+    let level = |w: (f32, f32)| 0.5 * (w.0 + w.1);
+    let width = |w: (f32, f32)| w.1 - w.0;
+    eprintln!("window {before:?} -> {after:?}");
+    assert!(
+        level(after) > level(before) + 1.0,
+        "down did not darken: {before:?} -> {after:?}"
+    );
+    assert!(
+        width(after) > width(before),
+        "right did not widen: {before:?} -> {after:?}"
+    );
+}

@@ -3,7 +3,7 @@
 //! moves and picks. It re-renders only when something that changes the picture changed (camera,
 //! settings, size, the textures), so an idle viewer costs nothing.
 //!
-//! No frame waits on more than [`MipView::frame_budget_s`] of GPU work (~100 ms on any device,
+//! No frame waits on more than [`MipView::FRAME_BUDGET_S`] of GPU work (~100 ms on any device,
 //! lavapipe included): a frame that would cost more is drawn first at a coarse resolution that
 //! fits, then at full resolution in bands of rows over the following frames, shown when
 //! complete; while the mouse moves the view only the reduced preview is drawn, small enough to
@@ -11,8 +11,8 @@
 //! measured on its own frames ([`FramePacer`]).
 //!
 //! Mouse: left drag turns the volume (arcball), middle drag or shift + left drag pans, the
-//! wheel zooms towards the pointer, right drag sets the grey window (horizontal: width,
-//! vertical: level). A left click (press and release without moving: egui's click, not a drag)
+//! wheel zooms towards the pointer, right drag sets the grey window as in the slice panes
+//! (right = wider, down = darker). A left click (press and release without moving: egui's click, not a drag)
 //! asks where that pixel's maximum came from; the answer arrives a frame or two later in
 //! [`MipViewOutput::pick`] (GPU readback with `map_async`, never blocking).
 //!
@@ -401,10 +401,11 @@ impl MipView {
                 } else if response.dragged_by(egui::PointerButton::Primary) {
                     self.camera.arcball(from, to, full);
                 } else if response.dragged_by(egui::PointerButton::Secondary) {
-                    let (lo, hi) = self.settings.window;
-                    let width = (hi - lo + 2.0 * delta.x).max(1.0);
-                    let level = 0.5 * (lo + hi) - 2.0 * delta.y;
-                    self.settings.window = (level - 0.5 * width, level + 0.5 * width);
+                    // The slice panes' convention (down = darker, right = wider).
+                    self.settings.window =
+                        super::window_level::Window::from_bounds(self.settings.window)
+                            .dragged(delta)
+                            .bounds();
                 }
             }
         }

@@ -256,7 +256,9 @@ impl ShapecastApp {
                             .on_hover_text(format!("W {} L {}", w.width, w.level))
                             .clicked()
                         {
+                            // The CT presets set the MIP's grey window too.
                             self.window = w;
+                            self.mip_view.settings.window = w.bounds();
                         }
                     }
                     if ui

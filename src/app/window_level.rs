@@ -30,6 +30,19 @@ impl Window {
         }
     }
 
+    /// The window of the grey range `(lo, hi)`.
+    pub fn from_bounds((lo, hi): (f32, f32)) -> Self {
+        Self {
+            width: (hi - lo).max(MIN_WIDTH),
+            level: 0.5 * (lo + hi),
+        }
+    }
+
+    /// The grey range `(lo, hi)` of this window.
+    pub fn bounds(self) -> (f32, f32) {
+        (self.level - 0.5 * self.width, self.level + 0.5 * self.width)
+    }
+
     /// The window after a drag of `delta` screen points: right widens, left narrows (by a factor,
     /// so it is as fine for brain as for bone); down raises the level (darker), up lowers it, by
     /// a fraction of the width.
@@ -132,6 +145,16 @@ fn percentiles(volume: &Volume, p_lo: f64, p_hi: f64) -> Option<(f32, f32)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bounds_round_trip() {
+        let w = WindowPreset::Lung.window();
+        let (lo, hi) = w.bounds();
+        assert_eq!(hi - lo, w.width);
+        assert_eq!(Window::from_bounds((lo, hi)), w);
+        // An inverted or empty range is the narrowest window at its centre.
+        assert_eq!(Window::from_bounds((10.0, 10.0)).width, MIN_WIDTH);
+    }
 
     #[test]
     fn drag_changes_width_and_level() {
