@@ -357,3 +357,90 @@ fn a_512_wide_volume_runs_in_bricks_within_webgpu_default_limits() {
         );
     }
 }
+
+/// Runs `req` step by step as the viewer does and counts the steps that cast rays.
+fn run_counting_rst_steps(
+    ctx: &GpuContext,
+    volume: &Volume,
+    req: &Request,
+    options: JobOptions,
+) -> (FeatureResult, usize) {
+    use shapecast::compute::pipeline::JobState;
+    let options = JobOptions {
+        export: true,
+        ..options
+    };
+    let mut job = FeatureJob::with_options(ctx, volume, req, options).expect("job");
+    let mut rst_steps = 0;
+    let mut last_fraction = 0.0f32;
+    loop {
+        match job.step(ctx).expect("step") {
+            JobState::Done => break,
+            JobState::Running { fraction, stage } => {
+                assert!(
+                    fraction >= last_fraction,
+                    "progress went back: {fraction} after {last_fraction} ({stage})"
+                );
+                last_fraction = fraction;
+                if stage.contains("RST, slices") {
+                    rst_steps += 1;
+                }
+            }
+        }
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .expect("poll");
+    }
+    (job.finish_result().expect("result"), rst_steps)
+}
+
+#[test]
+fn rst_steps_paced_to_the_device_give_the_same_features() {
+    let Some(ctx) = test_context() else { return };
+    let volume = scene([0.9, 0.9, 1.5], 5.0);
+    let mut req = Request::new(Method::Rst);
+    req.rays = Some(26);
+    req.radius_mm = Some(4.0);
+    req.step_mm = Some(0.5);
+    // Whole slices per step (the CLI's way).
+    let (fixed, fixed_steps) = run_counting_rst_steps(&ctx, &volume, &req, JobOptions::default());
+    assert_eq!(fixed.slabs, 1);
+    let core = &fixed.bricks[0].core_c;
+    let rows = core[1].len() * core[2].len();
+    // Paced to nothing: every step is one row of one slice.
+    let (rows_only, row_steps) = run_counting_rst_steps(
+        &ctx,
+        &volume,
+        &req,
+        JobOptions {
+            step_seconds: Some(1e-12),
+            ..JobOptions::default()
+        },
+    );
+    // Paced to a long step: from one row, growing at most twofold per step up to whole slices.
+    let (growing, growing_steps) = run_counting_rst_steps(
+        &ctx,
+        &volume,
+        &req,
+        JobOptions {
+            step_seconds: Some(10.0),
+            ..JobOptions::default()
+        },
+    );
+    eprintln!(
+        "RST steps: fixed {fixed_steps}, one row each {row_steps} ({rows} core rows), growing {growing_steps}"
+    );
+    assert_eq!(row_steps, rows, "one row per step");
+    assert!(fixed_steps < growing_steps && growing_steps < rows / 2);
+    for (what, paced) in [("one row", &rows_only), ("growing", &growing)] {
+        let (worst, _) = compare(
+            paced.components.as_ref().expect("exported"),
+            fixed.components.as_ref().expect("exported"),
+            0.0,
+        );
+        assert_eq!(
+            worst, 0.0,
+            "{what} steps differ from whole slices by {worst:.2e}"
+        );
+    }
+}

@@ -14,6 +14,9 @@ use crate::gpu::volume_texture::FeatureTexture;
 use crate::volume::Volume;
 use std::sync::Arc;
 
+/// GPU seconds of RST work per feature-job step while the viewer runs (issue "full-size scans",
+/// deliver 5: no frame waits on more than ~100 ms of GPU work; a frame's own budget is 60 ms).
+const STEP_SECONDS: f64 = 0.05;
 /// What the MIP and the slice overlay show.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DisplayMode {
@@ -312,7 +315,13 @@ impl FeatureManager {
     ) -> Result<(), String> {
         self.cancel();
         // The job reads its slices from the loaded volume itself (no copy per computation).
-        let job = FeatureJob::shared(ctx, Arc::clone(volume), &request, JobOptions::default());
+        // Its RST steps follow the device's speed, so that a frame of the viewer never waits
+        // behind more than `STEP_SECONDS` of feature work.
+        let options = JobOptions {
+            step_seconds: Some(STEP_SECONDS),
+            ..JobOptions::default()
+        };
+        let job = FeatureJob::shared(ctx, Arc::clone(volume), &request, options);
         match job {
             Ok(job) => {
                 let (fraction, stage) = match job.state() {

@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use web_time::Instant;
 
-use crate::compute::pipeline::{FeatureJob, JobOptions};
+use crate::compute::pipeline::{FeatureJob, JobOptions, JobState};
 use crate::cpu::Preset;
 use crate::cpu::pipeline::{Method, Request};
 use crate::gpu::GpuContext;
@@ -252,7 +252,35 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
     };
     let t = Instant::now();
     let mut job = FeatureJob::with_options(&ctx, &volume, &request, options)?;
-    job.run_blocking(&ctx)?;
+    // Step by step as the viewer does, each step waited for: a step is what a frame of the
+    // viewer may wait behind while the job runs (issue "full-size scans", deliver 5).
+    let mut steps_ms = Vec::new();
+    let mut largest = (0.0f64, String::new());
+    loop {
+        let t = Instant::now();
+        let state = job.step(&ctx)?;
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .context("waiting for the GPU")?;
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        match state {
+            JobState::Done => break,
+            JobState::Running { stage, .. } => {
+                if ms > largest.0 {
+                    largest = (ms, stage);
+                }
+                steps_ms.push(ms);
+            }
+        }
+    }
+    steps_ms.sort_by(f64::total_cmp);
+    let median = steps_ms.get(steps_ms.len() / 2).copied().unwrap_or(0.0);
+    println!(
+        "feature job: {} step(s), median {median:.0} ms, largest {:.0} ms ({})",
+        steps_ms.len(),
+        largest.0,
+        largest.1
+    );
     let (bricks_n, overhead) = (job.slab_count(), job.overhead());
     let features: FeatureTexture = job.finish().context("the feature job did not finish")?;
     let secs = t.elapsed().as_secs_f64();

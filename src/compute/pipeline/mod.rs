@@ -95,8 +95,13 @@ pub struct JobOptions {
     pub limits: Option<wgpu::Limits>,
     /// Also read the features back to the CPU (export, tests).
     pub export: bool,
-    /// Output voxels per RST dispatch (a step); `None` picks from the adapter type.
+    /// Output voxels per RST dispatch (a step); `None` picks from the adapter type. With
+    /// [`Self::step_seconds`] this is the most a step may hold.
     pub rst_voxels_per_step: Option<u64>,
+    /// GPU seconds one step of the RST should take (the viewer's frame rule: a frame never
+    /// waits behind more than this): steps start at one row of voxels and follow the device's
+    /// measured speed. `None` (the CLI) gives fixed steps of [`Self::rst_voxels_per_step`].
+    pub step_seconds: Option<f64>,
     /// The RST reads (I, g) with eight `textureLoad`s per step, bit for bit the CPU twin's
     /// trilinear interpolation, instead of one hardware-filtered fetch (the default where the
     /// device filters f32 textures: ~1.9x faster on lavapipe, within a tolerance of the twin).
@@ -111,8 +116,67 @@ impl Default for JobOptions {
             limits: None,
             export: false,
             rst_voxels_per_step: None,
+            step_seconds: None,
             exact_rst: false,
         }
+    }
+}
+
+/// Paces the RST's steps to [`JobOptions::step_seconds`] of GPU time: the first step is one
+/// row of voxels; each finished step measures the device's voxels per second (from the
+/// submission to the job seeing it done, so waiting behind the viewer's frames counts too);
+/// the step follows a slower rate at once and a faster one at most doubling per step.
+struct RstPace {
+    seconds: Option<f64>,
+    /// Voxels per second, once measured.
+    rate: Option<f64>,
+    /// The step in flight: when it was submitted and how many voxels it holds.
+    in_flight: Option<(web_time::Instant, u64)>,
+    /// The last step's size.
+    last: u64,
+}
+
+impl RstPace {
+    fn new(seconds: Option<f64>) -> Self {
+        Self {
+            seconds,
+            rate: None,
+            in_flight: None,
+            last: 0,
+        }
+    }
+
+    /// Voxels for the next step: `max` without pacing; with it, what the measured rate does in
+    /// the step's seconds, between one row (`row` voxels) and `max`.
+    fn voxels(&self, row: u64, max: u64) -> u64 {
+        let Some(seconds) = self.seconds else {
+            return max;
+        };
+        let want = match self.rate {
+            None => row,
+            Some(rate) => ((rate * seconds) as u64).min(self.last.saturating_mul(2)),
+        };
+        want.clamp(row.min(max), max)
+    }
+
+    fn submitted(&mut self, voxels: u64) {
+        self.last = voxels;
+        if self.seconds.is_some() {
+            self.in_flight = Some((web_time::Instant::now(), voxels));
+        }
+    }
+
+    /// The step in flight is done.
+    fn finished(&mut self) {
+        let Some((at, voxels)) = self.in_flight.take() else {
+            return;
+        };
+        let secs = at.elapsed().as_secs_f64().max(1e-4);
+        let rate = voxels as f64 / secs;
+        self.rate = Some(match self.rate {
+            Some(old) if rate > old => old + 0.5 * (rate - old),
+            _ => rate,
+        });
     }
 }
 
@@ -145,8 +209,11 @@ enum Task {
     FrangiC { scale: usize, slab: usize },
     /// Upload a slab and resample it; smoothing and gradient for the RST and the GST.
     Prepare(usize),
-    /// One scale (Hessian, GST) or one z-chunk of core slices (RST) of a slab.
+    /// One scale (Hessian, GST) of a slab.
     Compute { slab: usize, part: usize },
+    /// The next rows or slices of a slab's core (RST): the task stays at the front of the
+    /// queue until [`FeatureJob::rst_cursor`] has passed the core's last row.
+    Rst(usize),
     /// Resample back onto the input grid, pack into the texture, read back if exporting.
     Deliver(usize),
     /// Read the features' maxima (for default gains).
@@ -189,9 +256,15 @@ pub struct FeatureJob {
     noise_sigmas: Vec<f64>,
     noise_sigma: Option<f64>,
     frangi_c: Vec<f64>,
+    /// Whole core slices one RST dispatch may hold (the output chunk buffer's size).
     rst_slices_per_step: usize,
-    /// Rows per RST dispatch when one slice is more than a step (slow devices).
-    rst_rows_per_step: Option<usize>,
+    /// Output voxels per RST step without pacing, and the most a paced step holds.
+    rst_max_step: u64,
+    /// Where the next RST step starts: core slice and row within it (brick-local offsets
+    /// from the core's first slice and row).
+    rst_cursor: (usize, usize),
+    /// RST pacing (with [`JobOptions::step_seconds`]).
+    rst_pace: RstPace,
     /// The slab's (I, gx, gy, gz) texture the rays read, with its dims.
     packed: Option<([u32; 3], wgpu::Texture)>,
     // GPU sync.
@@ -313,7 +386,6 @@ impl FeatureJob {
             .map(|b| (b.core_c[0].len() * b.core_c[1].len()) as u64)
             .max()
             .unwrap_or(1);
-        let max_core_rows = slabs.iter().map(|b| b.core_c[1].len()).max().unwrap_or(1);
         let per_step = options.rst_voxels_per_step.unwrap_or(
             if ctx.adapter_info.device_type == wgpu::DeviceType::Cpu {
                 1 << 15
@@ -322,8 +394,7 @@ impl FeatureJob {
             },
         );
         let rst_slices_per_step = ((per_step / core_plane.max(1)) as usize).max(1);
-        let rst_rows_per_step = (per_step < core_plane)
-            .then(|| ((per_step / compute.dims[0].max(1) as u64) as usize).clamp(1, max_core_rows));
+        let step_seconds = options.step_seconds;
         let buffers = Buffers::new(
             ctx,
             &slabs,
@@ -332,17 +403,17 @@ impl FeatureJob {
             &req,
             rst_slices_per_step,
         );
-        for (s, slab) in slabs.iter().enumerate() {
+        for s in 0..slabs.len() {
             tasks.push_back(Task::Prepare(s));
-            let parts = match req.method {
-                Method::Rst => match rst_rows_per_step {
-                    Some(rows) => slab.core_c[2].len() * slab.core_c[1].len().div_ceil(rows),
-                    None => slab.core_c[2].len().div_ceil(rst_slices_per_step),
-                },
-                Method::Gst if req.eigen => 1,
-                _ => sigmas_mm.len(),
-            };
-            tasks.extend((0..parts).map(|part| Task::Compute { slab: s, part }));
+            if req.method == Method::Rst {
+                tasks.push_back(Task::Rst(s));
+            } else {
+                let parts = match req.method {
+                    Method::Gst if req.eigen => 1,
+                    _ => sigmas_mm.len(),
+                };
+                tasks.extend((0..parts).map(|part| Task::Compute { slab: s, part }));
+            }
             tasks.push_back(Task::Deliver(s));
         }
         tasks.push_back(Task::Maxima);
@@ -380,7 +451,9 @@ impl FeatureJob {
             noise_sigmas: Vec::new(),
             noise_sigma: None,
             rst_slices_per_step,
-            rst_rows_per_step,
+            rst_max_step: per_step.max(1),
+            rst_cursor: (0, 0),
+            rst_pace: RstPace::new(step_seconds),
             packed: None,
             busy: None,
             pending: None,
@@ -407,8 +480,33 @@ impl FeatureJob {
             JobState::Done
         } else {
             let left = self.tasks.len() + usize::from(self.pending.is_some());
+            let fraction = if self.request.method == Method::Rst {
+                // The rays are nearly all the work: the fraction of core rows cast.
+                let rows = |s: usize| self.slabs[s].core_c[1].len() * self.slabs[s].core_c[2].len();
+                let total: usize = (0..self.slabs.len()).map(rows).sum();
+                let ahead: usize = self
+                    .tasks
+                    .iter()
+                    .filter_map(|t| match *t {
+                        Task::Rst(s) => Some(rows(s)),
+                        _ => None,
+                    })
+                    .sum();
+                let in_current = match self.tasks.front() {
+                    Some(&Task::Rst(s)) => {
+                        let (z, j) = self.rst_cursor;
+                        z * self.slabs[s].core_c[1].len() + j
+                    }
+                    _ => 0,
+                };
+                let done = total.saturating_sub(ahead) + in_current;
+                // The last few tasks (storing, maxima) after the rays keep it below 1.
+                (done as f32 / total.max(1) as f32).min(0.99)
+            } else {
+                1.0 - left as f32 / self.total_tasks.max(1) as f32
+            };
             JobState::Running {
-                fraction: 1.0 - left as f32 / self.total_tasks.max(1) as f32,
+                fraction: fraction.clamp(0.0, 1.0),
                 stage: self.stage.clone(),
             }
         }
@@ -430,6 +528,7 @@ impl FeatureJob {
                 return Ok(self.state());
             }
             self.busy = None;
+            self.rst_pace.finished();
         }
         if let Some((read, what)) = &mut self.pending {
             match read.poll(ctx) {
@@ -797,6 +896,16 @@ impl FeatureJob {
                 self.record_compute(ctx, encoder, s, part)?;
                 Ok(None)
             }
+            Task::Rst(s) => {
+                let slab = &self.slabs[s];
+                let grid = box_grid(&self.compute, &slab.slab_c);
+                if self.record_rst(ctx, encoder, s, grid)? {
+                    self.rst_cursor = (0, 0);
+                } else {
+                    self.tasks.push_front(Task::Rst(s));
+                }
+                Ok(None)
+            }
             Task::Deliver(s) => {
                 self.stage = format!("brick {}/{n_slabs}: storing", s + 1);
                 self.record_deliver(ctx, encoder, s)
@@ -901,19 +1010,20 @@ impl FeatureJob {
                 )?;
                 self.record_features_of_tensor(ctx, encoder, &grid, 4, core, part)?;
             }
-            Method::Rst => self.record_rst(ctx, encoder, s, part, grid)?,
+            Method::Rst => return Err(PipelineError::Missing("RST steps (Task::Rst)")),
         }
         Ok(())
     }
 
+    /// The next step of the RST over brick `s`'s core, from [`Self::rst_cursor`]: whole core
+    /// slices while a step holds at least one, else rows of one slice. True when the core is done.
     fn record_rst(
         &mut self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         s: usize,
-        part: usize,
         grid: SlabGrid,
-    ) -> Result<(), PipelineError> {
+    ) -> Result<bool, PipelineError> {
         let slab = self.slabs[s].clone();
         let tf = self
             .tf
@@ -939,26 +1049,27 @@ impl FeatureJob {
             self.kernels.rays = Some(rays);
             self.tf = Some(tf);
         }
-        // Slices `first..last` of the compute grid, rows of the brick's core (brick-local).
+        // Slices `first..last` of the compute grid, rows `j0..j0 + nj` of the brick's core.
         let (zc, yc) = (&slab.core_c[2], &slab.core_c[1]);
-        let y_local = to_u32(yc.start - slab.slab_c[1].start);
-        let (first, last, rows) = match self.rst_rows_per_step {
-            Some(per) => {
-                let blocks = yc.len().div_ceil(per);
-                let z = zc.start + part / blocks;
-                let j0 = (part % blocks) * per;
-                let nj = per.min(yc.len() - j0);
-                (z, z + 1, [y_local + to_u32(j0), to_u32(nj)])
-            }
-            None => {
-                let first = zc.start + part * self.rst_slices_per_step;
-                (
-                    first,
-                    (first + self.rst_slices_per_step).min(zc.end),
-                    [y_local, to_u32(yc.len())],
-                )
-            }
+        if zc.is_empty() || yc.is_empty() {
+            return Ok(true);
+        }
+        let nx = self.compute.dims[0].max(1) as u64;
+        let core_plane = nx * yc.len() as u64;
+        let voxels = self.rst_pace.voxels(nx, self.rst_max_step);
+        let (dz, j0) = self.rst_cursor;
+        let first = zc.start + dz;
+        let (last, nj) = if j0 == 0 && voxels >= core_plane {
+            let slices = ((voxels / core_plane.max(1)) as usize)
+                .clamp(1, self.rst_slices_per_step)
+                .min(zc.end - first);
+            (first + slices, yc.len())
+        } else {
+            let rows = ((voxels / nx) as usize).clamp(1, yc.len() - j0);
+            (first + 1, rows)
         };
+        let y_local = to_u32(yc.start - slab.slab_c[1].start);
+        let rows = [y_local + to_u32(j0), to_u32(nj)];
         self.stage = format!(
             "brick {}/{}: RST, slices {}-{} of {}",
             s + 1,
@@ -993,21 +1104,34 @@ impl FeatureJob {
             .ok_or(PipelineError::Missing("RST output buffer"))?;
         rst.record(ctx, encoder, &inputs, &dispatch, chunk)?;
         // Into the core's component-major block (whole brick planes; rows outside the core are
-        // never read).
-        let plane = u64::from(grid.dims[0]) * u64::from(grid.dims[1]);
+        // never read): the slices computed, or within one slice only the rows computed.
+        let row = u64::from(grid.dims[0]);
+        let plane = row * u64::from(grid.dims[1]);
         let n_chunk = plane * (last - first) as u64;
         let n_core = plane * zc.len() as u64;
         let at = plane * (first - zc.start) as u64;
+        let (skip, len) = if last - first == 1 {
+            (u64::from(rows[0]) * row, u64::from(rows[1]) * row)
+        } else {
+            (0, n_chunk)
+        };
         for c in 0..3u64 {
             encoder.copy_buffer_to_buffer(
                 chunk,
-                c * n_chunk * 4,
+                (c * n_chunk + skip) * 4,
                 &b.out_core,
-                (c * n_core + at) * 4,
-                n_chunk * 4,
+                (c * n_core + at + skip) * 4,
+                len * 4,
             );
         }
-        Ok(())
+        self.rst_pace
+            .submitted(nj as u64 * nx * (last - first) as u64);
+        self.rst_cursor = if j0 + nj < yc.len() {
+            (dz, j0 + nj)
+        } else {
+            (last - zc.start, 0)
+        };
+        Ok(self.rst_cursor.0 >= zc.len())
     }
 
     /// Where brick `s`'s features lie in the buffer [`Self::record_deliver`] packs from, and
