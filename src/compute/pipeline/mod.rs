@@ -26,7 +26,7 @@ mod kernels;
 
 use std::collections::VecDeque;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::compute::eigen_features::{EigenPass, Mapping, TensorOutput};
 use crate::compute::gradient::{GradientBuffers, GradientOutput};
@@ -123,15 +123,16 @@ impl Default for JobOptions {
 }
 
 /// Paces the RST's steps to [`JobOptions::step_seconds`] of GPU time: the first step is one
-/// row of voxels; each finished step measures the device's voxels per second (from the
-/// submission to the job seeing it done, so waiting behind the viewer's frames counts too);
-/// the step follows a slower rate at once and a faster one at most doubling per step.
+/// row of voxels; each finished step measures the device's voxels per second, from the
+/// submission to the queue's completion callback (work of the viewer's frames queued before it
+/// counts too, which errs towards smaller steps); the step follows a slower rate at once and a
+/// faster one at most doubling per step.
 struct RstPace {
     seconds: Option<f64>,
     /// Voxels per second, once measured.
     rate: Option<f64>,
-    /// The step in flight: when it was submitted and how many voxels it holds.
-    in_flight: Option<(web_time::Instant, u64)>,
+    /// Voxels of the step in flight.
+    in_flight: Option<u64>,
     /// The last step's size.
     last: u64,
 }
@@ -161,18 +162,15 @@ impl RstPace {
 
     fn submitted(&mut self, voxels: u64) {
         self.last = voxels;
-        if self.seconds.is_some() {
-            self.in_flight = Some((web_time::Instant::now(), voxels));
-        }
+        self.in_flight = self.seconds.map(|_| voxels);
     }
 
-    /// The step in flight is done.
-    fn finished(&mut self) {
-        let Some((at, voxels)) = self.in_flight.take() else {
+    /// The step in flight took `secs` from its submission to the queue's completion callback.
+    fn finished(&mut self, secs: f64) {
+        let Some(voxels) = self.in_flight.take() else {
             return;
         };
-        let secs = at.elapsed().as_secs_f64().max(1e-4);
-        let rate = voxels as f64 / secs;
+        let rate = voxels as f64 / secs.max(1e-4);
         self.rate = Some(match self.rate {
             Some(old) if rate > old => old + 0.5 * (rate - old),
             _ => rate,
@@ -268,7 +266,9 @@ pub struct FeatureJob {
     /// The slab's (I, gx, gy, gz) texture the rays read, with its dims.
     packed: Option<([u32; 3], wgpu::Texture)>,
     // GPU sync.
-    busy: Option<Arc<AtomicBool>>,
+    /// The last submission's GPU time in microseconds once it is done (`u64::MAX` before),
+    /// stored by the queue's completion callback.
+    busy: Option<Arc<AtomicU64>>,
     pending: Option<(PendingRead, ReadFor)>,
     components: Option<Components3>,
     notes: Vec<String>,
@@ -524,11 +524,12 @@ impl FeatureJob {
             .poll(wgpu::PollType::Poll)
             .map_err(ReadbackError::from)?;
         if let Some(flag) = &self.busy {
-            if !flag.load(Ordering::Acquire) {
+            let micros = flag.load(Ordering::Acquire);
+            if micros == u64::MAX {
                 return Ok(self.state());
             }
             self.busy = None;
-            self.rst_pace.finished();
+            self.rst_pace.finished(micros as f64 * 1e-6);
         }
         if let Some((read, what)) = &mut self.pending {
             match read.poll(ctx) {
@@ -560,10 +561,15 @@ impl FeatureJob {
         if let Some((buffer, size, what)) = read {
             self.pending = Some((PendingRead::start(ctx, &buffer, size), what));
         } else {
-            let flag = Arc::new(AtomicBool::new(false));
+            let flag = Arc::new(AtomicU64::new(u64::MAX));
             let f = Arc::clone(&flag);
-            ctx.queue
-                .on_submitted_work_done(move || f.store(true, Ordering::Release));
+            let submitted = web_time::Instant::now();
+            // Timed when the queue says the work is done, not when the job next looks (a
+            // frame later in the viewer).
+            ctx.queue.on_submitted_work_done(move || {
+                let micros = u64::try_from(submitted.elapsed().as_micros()).unwrap_or(u64::MAX - 1);
+                f.store(micros.min(u64::MAX - 1), Ordering::Release);
+            });
             self.busy = Some(flag);
         }
         Ok(self.state())
