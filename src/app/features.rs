@@ -15,8 +15,8 @@ use crate::volume::Volume;
 use std::sync::Arc;
 
 /// GPU seconds of RST work per feature-job step while the viewer runs (issue "full-size scans",
-/// deliver 5: no frame waits on more than ~100 ms of GPU work; a frame's own budget is 60 ms).
-const STEP_SECONDS: f64 = 0.05;
+/// deliver 5: no frame waits on more than ~100 ms of GPU work).
+const STEP_SECONDS: f64 = 0.1;
 /// What the MIP and the slice overlay show.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DisplayMode {

@@ -1,0 +1,270 @@
+// Browser benchmark of a full-size scan (issue 11): a real 512 x 512 chest CT (../shared/data's
+// lung2, 61 slices) repeated back and forth along z to DEPTH slices at 0.8 mm (a whole-body
+// PET/CT's spacing), written as a raw NRRD, served on 127.0.0.1 and opened by link
+// (`?url=/gen/wholebody.nrrd`) in Debian's headless Chromium with WebGPU on SwiftShader. It
+// reports what a user waits for and what the tab holds:
+//   download + read, time to the first MIP frame, the feature job (method, time), the frames
+//   after it, and the memory of the browser's processes together (PSS, so shared pages count
+//   once; also the largest process), sampled every 250 ms, peak and at the end.
+// It is a benchmark, not a test: it fails only when the page errors or never becomes ready.
+//
+//   node tests/browser/bench.mjs [DEPTH] [--method li|hessian|rst|...] [--timeout-s N] [--json out.json]
+//
+// Default DEPTH 256, method li (the Hessian family: the RST of a 512-wide volume takes hours on
+// SwiftShader). Results: target/browser/bench-DEPTH.json and a screenshot beside it.
+import { chromium } from 'playwright-core';
+import fs from 'node:fs';
+import http from 'node:http';
+import os from 'node:os';
+import path from 'node:path';
+import zlib from 'node:zlib';
+import { fileURLToPath } from 'node:url';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const root = path.resolve(here, '..', '..');
+const dist = path.join(root, 'dist');
+const data = path.resolve(root, '..', 'shared', 'data');
+const outDir = path.join(root, 'target', 'browser');
+const chromiumPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
+
+const args = process.argv.slice(2);
+let depth = 256;
+let timeoutS = 3600;
+let jsonOut = null;
+let method = 'li';
+for (let i = 0; i < args.length; i += 1) {
+  if (args[i] === '--timeout-s') timeoutS = Number(args[++i]);
+  else if (args[i] === '--method') method = args[++i];
+  else if (args[i] === '--json') jsonOut = args[++i];
+  else depth = Number(args[i]);
+}
+if (!Number.isInteger(depth) || depth < 1 || depth > 4000) {
+  console.error(`bench: DEPTH must be a whole number of slices (1..4000), not ${depth}`);
+  process.exit(2);
+}
+for (const [what, p, hint] of [
+  ['the built site', path.join(dist, 'index.html'), 'run `cargo xtask build` (or trunk build --release) first'],
+  ['the browser', chromiumPath, 'apt-get install chromium'],
+  ['the chest CT', path.join(data, 'ct', 'lung2_image.nrrd'), 'this benchmark needs ../shared/data'],
+]) {
+  if (!fs.existsSync(p)) {
+    console.error(`bench: ${what} is missing at ${p}: ${hint}`);
+    process.exit(1);
+  }
+}
+fs.mkdirSync(outDir, { recursive: true });
+
+// ---- The volume -----------------------------------------------------------------------------
+
+function readNrrd(file) {
+  const bytes = fs.readFileSync(file);
+  const end = bytes.indexOf('\n\n');
+  const header = bytes.subarray(0, end).toString('latin1');
+  const field = (name) => header.match(new RegExp(`^${name}:\\s*(.*)$`, 'm'))?.[1];
+  const sizes = field('sizes').split(/\s+/).map(Number);
+  if (field('type') !== 'short' || field('encoding') !== 'gzip') throw new Error(`${file}: expected gzip shorts`);
+  const voxels = zlib.gunzipSync(bytes.subarray(end + 2));
+  return { sizes, voxels, origin: field('space origin') };
+}
+
+const src = readNrrd(path.join(data, 'ct', 'lung2_image.nrrd'));
+const [nx, ny, nz] = src.sizes;
+const slice = nx * ny * 2;
+const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'shapecast-bench-'));
+const volumeFile = path.join(tmp, 'wholebody.nrrd');
+{
+  const fd = fs.openSync(volumeFile, 'w');
+  fs.writeSync(fd, [
+    'NRRD0004',
+    'type: short',
+    'dimension: 3',
+    'space: left-posterior-superior',
+    `sizes: ${nx} ${ny} ${depth}`,
+    'space directions: (0.626953,0,0) (0,0.626953,0) (0,0,0.8)',
+    'kinds: domain domain domain',
+    'endian: little',
+    'encoding: raw',
+    `space origin: ${src.origin}`,
+    '',
+    '',
+  ].join('\n'));
+  for (let k = 0; k < depth; k += 1) {
+    // back and forth: 0..nz-1, nz-1..0, ... so that neighbouring slices stay neighbours
+    const period = 2 * nz;
+    const m = k % period;
+    const s = m < nz ? m : period - 1 - m;
+    fs.writeSync(fd, src.voxels, s * slice, slice);
+  }
+  fs.closeSync(fd);
+}
+const fileBytes = fs.statSync(volumeFile).size;
+console.log(`volume: ${nx} x ${ny} x ${depth} (lung2's ${nz} slices back and forth, 0.8 mm), ${(fileBytes / 2 ** 20).toFixed(0)} MiB raw NRRD`);
+
+// ---- Server ---------------------------------------------------------------------------------
+
+const mime = { '.html': 'text/html; charset=utf-8', '.js': 'text/javascript', '.wasm': 'application/wasm', '.css': 'text/css' };
+const server = http.createServer((req, res) => {
+  const p = decodeURIComponent(new URL(req.url, 'http://127.0.0.1').pathname);
+  if (p === '/gen/wholebody.nrrd') {
+    res.writeHead(200, { 'content-type': 'application/octet-stream', 'content-length': fileBytes });
+    fs.createReadStream(volumeFile).pipe(res);
+    return;
+  }
+  const rel = p === '/' ? 'index.html' : p.slice(1);
+  const file = path.normalize(path.join(dist, rel));
+  if (!file.startsWith(dist) || !fs.existsSync(file) || !fs.statSync(file).isFile()) {
+    res.writeHead(404).end('not found');
+    return;
+  }
+  const bytes = fs.readFileSync(file);
+  res.writeHead(200, { 'content-type': mime[path.extname(file)] ?? 'application/octet-stream', 'content-length': bytes.length });
+  res.end(bytes);
+});
+await new Promise((r) => server.listen(0, '127.0.0.1', r));
+const origin = `http://127.0.0.1:${server.address().port}`;
+
+// ---- Memory of the browser's processes --------------------------------------------------------
+
+function children() {
+  const kids = new Map();
+  for (const name of fs.readdirSync('/proc')) {
+    if (!/^\d+$/.test(name)) continue;
+    try {
+      const stat = fs.readFileSync(`/proc/${name}/stat`, 'latin1');
+      const ppid = Number(stat.slice(stat.lastIndexOf(')') + 2).split(' ')[1]);
+      if (!kids.has(ppid)) kids.set(ppid, []);
+      kids.get(ppid).push(Number(name));
+    } catch { /* gone */ }
+  }
+  return kids;
+}
+function kbField(text, name) {
+  const m = text.match(new RegExp(`^${name}:\\s+(\\d+) kB`, 'm'));
+  return m ? Number(m[1]) * 1024 : 0;
+}
+function memoryOf(rootPid) {
+  const kids = children();
+  const todo = [rootPid];
+  let pss = 0;
+  let largest = { pss: 0, type: '' };
+  while (todo.length) {
+    const pid = todo.pop();
+    todo.push(...(kids.get(pid) ?? []));
+    try {
+      const p = kbField(fs.readFileSync(`/proc/${pid}/smaps_rollup`, 'latin1'), 'Pss');
+      pss += p;
+      if (p > largest.pss) {
+        const cmd = fs.readFileSync(`/proc/${pid}/cmdline`, 'latin1');
+        largest = { pss: p, type: cmd.match(/--type=([a-z-]+)/)?.[1] ?? 'browser' };
+      }
+    } catch { /* gone */ }
+  }
+  return { pss, largest };
+}
+
+// ---- The run -------------------------------------------------------------------------------
+
+// A non-persistent launch: playwright gives the browser a fresh temporary profile.
+const server2 = await chromium.launchServer({
+  executablePath: chromiumPath,
+  headless: true,
+  args: [
+    '--no-sandbox', '--disable-background-networking', '--disable-component-update', '--disable-sync',
+    '--no-first-run', '--disable-quic',
+    '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader', '--use-angle=swiftshader',
+  ],
+});
+const browserPid = server2.process().pid;
+const browser = await chromium.connect(server2.wsEndpoint());
+const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
+page.on('console', (msg) => { if (msg.type() === 'error') console.log(`  [page error] ${msg.text().slice(0, 300)}`); });
+page.on('pageerror', (err) => console.log(`  [page exception] ${err}`));
+
+const t0 = Date.now();
+const at = () => (Date.now() - t0) / 1000;
+let peak = { pss: 0, at: 0, largest: null };
+const samples = [];
+const sampler = setInterval(() => {
+  const m = memoryOf(browserPid);
+  samples.push([at(), m.pss]);
+  if (m.pss > peak.pss) peak = { pss: m.pss, at: at(), largest: m.largest };
+}, 250);
+
+await page.goto(`${origin}/?url=${encodeURIComponent('/gen/wholebody.nrrd')}&method=${encodeURIComponent(method)}`, { waitUntil: 'commit' });
+console.log(`  ${at().toFixed(1)} s: page requested`);
+const events = {};
+let last = null;
+let error = null;
+let lastPrint = 0;
+const deadline = t0 + timeoutS * 1000;
+for (;;) {
+  const s = await page.evaluate(() => window.shapecastStatus).catch(() => null);
+  if (Date.now() - lastPrint > 10000) {
+    lastPrint = Date.now();
+    const f = s?.features;
+    console.log(`  ${at().toFixed(0)} s: ${s?.phase ?? 'no status'}${s?.task ? ` (${s.task})` : ''}, frames ${s?.frames ?? 0}`
+      + `${f ? `, features ${f.method} ${f.state} ${(f.fraction * 100).toFixed(0)}%` : ''}, PSS ${(memoryOf(browserPid).pss / 1e9).toFixed(2)} GB`);
+  }
+  if (s) {
+    last = s;
+    if (s.volume && events.loaded === undefined) events.loaded = at();
+    if (s.volume && s.frames > 0 && events.first_frame === undefined) events.first_frame = at();
+    const f = s.features;
+    if (f && f.state === 'running' && events.features_started === undefined) events.features_started = at();
+    if (f && f.state === 'done' && events.features_done === undefined) {
+      events.features_done = at();
+      events.frames_at_features_done = s.frames;
+    }
+    if (s.phase === 'error') {
+      error = s.error;
+      break;
+    }
+    if (events.features_done !== undefined && s.frames >= events.frames_at_features_done + 30) break;
+    if (f && (f.state === 'failed' || f.state === 'none') && events.first_frame !== undefined && at() > events.first_frame + 20) {
+      error = `features ${f.state}: ${s.error ?? s.notice ?? ''}`;
+      break;
+    }
+  }
+  if (Date.now() > deadline) {
+    error = `timed out after ${timeoutS} s (features ${last?.features?.state} ${((last?.features?.fraction ?? 0) * 100).toFixed(1)}%)`;
+    break;
+  }
+  await new Promise((r) => setTimeout(r, 200));
+}
+const end = memoryOf(browserPid);
+clearInterval(sampler);
+const shot = path.join(outDir, `bench-${depth}.png`);
+await page.screenshot({ path: shot }).catch(() => {});
+await browser.close();
+await server2.close();
+server.close();
+fs.rmSync(tmp, { recursive: true, force: true });
+
+const gb = (b) => (b / 1e9).toFixed(2);
+const result = {
+  dims: [nx, ny, depth],
+  voxel_bytes: nx * ny * depth * 2,
+  adapter: last?.adapter?.name ?? null,
+  method: last?.features?.method ?? null,
+  preset: last?.features?.preset ?? null,
+  events_s: events,
+  peak_pss_bytes: peak.pss,
+  peak_at_s: peak.at,
+  peak_largest_process: peak.largest,
+  end_pss_bytes: end.pss,
+  notice: last?.notice ?? null,
+  error,
+  memory_samples: samples.filter((_, i) => i % 4 === 0),
+};
+fs.writeFileSync(jsonOut ?? path.join(outDir, `bench-${depth}.json`), JSON.stringify(result, null, 1));
+console.log(`adapter: ${result.adapter}`);
+console.log(`loaded (download + read): ${events.loaded?.toFixed(1)} s`);
+console.log(`first MIP frame: ${events.first_frame?.toFixed(1)} s`);
+console.log(`features (${result.method}, ${result.preset}): started ${events.features_started?.toFixed(1)} s, done ${events.features_done?.toFixed(1)} s`);
+console.log(`memory of the browser's processes (PSS): peak ${gb(peak.pss)} GB at ${peak.at.toFixed(0)} s (largest: ${peak.largest?.type} ${gb(peak.largest?.pss ?? 0)} GB), at the end ${gb(end.pss)} GB; voxels ${gb(result.voxel_bytes)} GB`);
+if (result.notice) console.log(`notice: ${result.notice}`);
+console.log(`screenshot: ${shot}`);
+if (error) {
+  console.log(`FAIL: ${error}`);
+  process.exit(1);
+}
