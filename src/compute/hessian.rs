@@ -91,6 +91,26 @@ impl Hessian {
         tmp: &wgpu::Buffer,
         out: [&wgpu::Buffer; 6],
     ) -> Result<(), RecordError> {
+        (0..PASSES).try_for_each(|pass| {
+            self.record_pass(ctx, encoder, grid, kernels, input, tmp, out, pass)
+        })
+    }
+
+    /// Records pass `pass` (of [`PASSES`], in order) of [`Self::record`]: the passes may go in
+    /// separate submissions (the feature job's steps), since every intermediate lives in `tmp`
+    /// and `out`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_pass(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        kernels: &HessianKernels,
+        input: &wgpu::Buffer,
+        tmp: &wgpu::Buffer,
+        out: [&wgpu::Buffer; 6],
+        pass: usize,
+    ) -> Result<(), RecordError> {
         let all: [&wgpu::Buffer; 8] = [input, tmp, out[0], out[1], out[2], out[3], out[4], out[5]];
         for (n, a) in all.iter().enumerate() {
             if all[n + 1..].contains(a) {
@@ -105,26 +125,36 @@ impl Hessian {
         // xx = x2 y0 z0, yy = x0 y2 z0, zz = x0 y0 z2, xy = x1 y1 z0, xz = x1 y0 z1,
         // yz = x0 y1 z1. Every pass reads a buffer no output of the same pass aliases, and
         // overwrites only results already consumed.
-        let mut multi = |axis: usize, src: &wgpu::Buffer, dst: &[&wgpu::Buffer]| {
+        let multi = |encoder: &mut wgpu::CommandEncoder,
+                     axis: usize,
+                     src: &wgpu::Buffer,
+                     dst: &[&wgpu::Buffer]| {
             let taps = [x, y, z][axis];
             g.record_axis_multi(ctx, encoder, grid, axis, taps, src, dst)
         };
         // z orders 0, 1, 2 of the input, parked in outputs written last.
-        multi(2, input, &[yz, xz, xy])?;
         let (z0, z1, z2) = (yz, xz, xy);
-        // zz = x0 y0 z2.
-        multi(1, z2, &[tmp])?;
-        multi(0, tmp, &[zz])?;
-        // y orders 0, 1, 2 of z0 (z2, in xy, is consumed): xx, xy, yy.
-        multi(1, z0, &[yy, tmp, xy])?;
+        // y orders 0, 1, 2 of z0 (pass 3), then y orders 0, 1 of z1 (pass 7).
         let (z0y0, z0y1, z0y2) = (yy, tmp, xy);
-        g.record_axis(ctx, encoder, grid, 0, x.order(2), z0y0, xx)?;
-        g.record_axis(ctx, encoder, grid, 0, x.order(0), z0y2, yy)?;
-        g.record_axis(ctx, encoder, grid, 0, x.order(1), z0y1, xy)?;
-        // y orders 0, 1 of z1 (z0, in yz, is consumed): xz, yz.
-        g.record_axis_multi(ctx, encoder, grid, 1, y, z1, &[yz, tmp])?;
         let (z1y0, z1y1) = (yz, tmp);
-        g.record_axis(ctx, encoder, grid, 0, x.order(1), z1y0, xz)?;
-        g.record_axis(ctx, encoder, grid, 0, x.order(0), z1y1, yz)
+        match pass {
+            0 => multi(encoder, 2, input, &[z0, z1, z2]),
+            // zz = x0 y0 z2.
+            1 => multi(encoder, 1, z2, &[tmp]),
+            2 => multi(encoder, 0, tmp, &[zz]),
+            // xx, xy, yy from z0 (z2, in xy, is consumed).
+            3 => multi(encoder, 1, z0, &[z0y0, z0y1, z0y2]),
+            4 => g.record_axis(ctx, encoder, grid, 0, x.order(2), z0y0, xx),
+            5 => g.record_axis(ctx, encoder, grid, 0, x.order(0), z0y2, yy),
+            6 => g.record_axis(ctx, encoder, grid, 0, x.order(1), z0y1, xy),
+            // xz, yz from z1 (z0, in yz, is consumed).
+            7 => g.record_axis_multi(ctx, encoder, grid, 1, y, z1, &[z1y0, z1y1]),
+            8 => g.record_axis(ctx, encoder, grid, 0, x.order(1), z1y0, xz),
+            9 => g.record_axis(ctx, encoder, grid, 0, x.order(0), z1y1, yz),
+            _ => Err(RecordError::Invalid("Hessian: no such pass")),
+        }
     }
 }
+
+/// Passes of [`Hessian::record`] (dispatches: 15 convolutions, the z and y ones shared).
+pub const PASSES: usize = 10;

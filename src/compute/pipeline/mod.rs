@@ -34,7 +34,7 @@ use crate::compute::pack::PackBox;
 use crate::compute::resample::ResampleGeometry;
 use crate::compute::rst::{RstDispatch, RstInputs, RstOutput, RstRays};
 use crate::compute::slab::{Brick, BrickLimits, PlanError, plan};
-use crate::compute::{noise, pack};
+use crate::compute::{hessian, noise, pack};
 use crate::cpu::features::FeatureMap;
 use crate::cpu::gaussian::kernel_radius_vox;
 use crate::cpu::pipeline::{Method, Request, RequestError, Resolved};
@@ -207,8 +207,16 @@ enum Task {
     FrangiC { scale: usize, slab: usize },
     /// Upload a slab and resample it; smoothing and gradient for the RST and the GST.
     Prepare(usize),
-    /// One scale (Hessian, GST) of a slab.
+    /// One scale (GST) of a slab.
     Compute { slab: usize, part: usize },
+    /// One pass of the Hessian at scale `part` of a slab (`pass < hessian::PASSES`), or its
+    /// features from the six components (`pass == hessian::PASSES`): a step per dispatch, so
+    /// that a frame of the viewer waits behind one pass, not a whole scale.
+    HessianPass {
+        slab: usize,
+        part: usize,
+        pass: usize,
+    },
     /// The next rows or slices of a slab's core (RST): the task stays at the front of the
     /// queue until [`FeatureJob::rst_cursor`] has passed the core's last row.
     Rst(usize),
@@ -405,14 +413,21 @@ impl FeatureJob {
         );
         for s in 0..slabs.len() {
             tasks.push_back(Task::Prepare(s));
-            if req.method == Method::Rst {
-                tasks.push_back(Task::Rst(s));
-            } else {
-                let parts = match req.method {
-                    Method::Gst if req.eigen => 1,
-                    _ => sigmas_mm.len(),
-                };
-                tasks.extend((0..parts).map(|part| Task::Compute { slab: s, part }));
+            match req.method {
+                Method::Rst => tasks.push_back(Task::Rst(s)),
+                Method::Hessian | Method::Li | Method::Frangi => {
+                    for part in 0..sigmas_mm.len() {
+                        tasks.extend((0..=hessian::PASSES).map(|pass| Task::HessianPass {
+                            slab: s,
+                            part,
+                            pass,
+                        }));
+                    }
+                }
+                Method::Gst => {
+                    let parts = if req.eigen { 1 } else { sigmas_mm.len() };
+                    tasks.extend((0..parts).map(|part| Task::Compute { slab: s, part }));
+                }
             }
             tasks.push_back(Task::Deliver(s));
         }
@@ -902,6 +917,37 @@ impl FeatureJob {
                 self.record_compute(ctx, encoder, s, part)?;
                 Ok(None)
             }
+            Task::HessianPass {
+                slab: s,
+                part,
+                pass,
+            } => {
+                let slab = &self.slabs[s];
+                let grid = box_grid(&self.compute, &slab.slab_c);
+                let (core, _) = core_in_slab(slab);
+                self.stage = format!(
+                    "brick {}/{n_slabs}: Hessian, sigma {} mm",
+                    s + 1,
+                    self.sigmas_mm[part]
+                );
+                if pass < hessian::PASSES {
+                    let b = &self.buffers;
+                    let out: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
+                    self.kernels.hessian.record_pass(
+                        ctx,
+                        encoder,
+                        &grid,
+                        &self.kernels.hessian_kernels[part],
+                        self.vol(),
+                        &b.tmp[0],
+                        out,
+                        pass,
+                    )?;
+                } else {
+                    self.record_features_of_tensor(ctx, encoder, &grid, 0, core, part)?;
+                }
+                Ok(None)
+            }
             Task::Rst(s) => {
                 let slab = &self.slabs[s];
                 let grid = box_grid(&self.compute, &slab.slab_c);
@@ -983,15 +1029,6 @@ impl FeatureJob {
         let (core, _) = core_in_slab(&slab);
         let n_slabs = self.slabs.len();
         match self.request.method {
-            Method::Hessian | Method::Li | Method::Frangi => {
-                self.stage = format!(
-                    "brick {}/{n_slabs}: Hessian, sigma {} mm",
-                    s + 1,
-                    self.sigmas_mm[part]
-                );
-                self.record_hessian(ctx, encoder, &grid, part)?;
-                self.record_features_of_tensor(ctx, encoder, &grid, 0, core, part)?;
-            }
             Method::Gst => {
                 self.stage = format!(
                     "brick {}/{n_slabs}: structure tensor, rho {} mm",
@@ -1016,7 +1053,10 @@ impl FeatureJob {
                 )?;
                 self.record_features_of_tensor(ctx, encoder, &grid, 4, core, part)?;
             }
-            Method::Rst => return Err(PipelineError::Missing("RST steps (Task::Rst)")),
+            // Their steps are `Task::HessianPass` and `Task::Rst`.
+            Method::Hessian | Method::Li | Method::Frangi | Method::Rst => {
+                return Err(PipelineError::Missing("a step of this method"));
+            }
         }
         Ok(())
     }
