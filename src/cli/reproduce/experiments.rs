@@ -341,3 +341,52 @@ pub fn slice_maps(s: &Scene, axis: usize, p_mm: [f64; 3]) -> (usize, usize, [Vec
     maps[3] = (0..w * h).map(|n| gst[2][voxel(n)].abs()).collect();
     (w, h, maps)
 }
+
+/// How far the rays of the noise study run (consistent rule, 42 rays, R = 15 mm), per noise
+/// level, as mean lengths (mm) over rays and `draws` draws: from the centre of the 10 mm sphere
+/// with the paper's protocol (d_min 0, d_max 2 sigma) and the fraction of those rays that stop
+/// before 4 mm (inside the sphere, before its blurred edge); from a voxel of noise alone (the same
+/// box without the sphere) with the paper's protocol and the fraction that never become opaque
+/// within R; and from noise alone with the 10/30 function.
+pub fn noise_ray_lengths(levels_hu: &[f64], draws: usize) -> Vec<[f64; 5]> {
+    let box_of = |contrast: f32| {
+        let mut p = phantom::sphere(5.0, contrast);
+        p.min_mm = [-10.0; 3];
+        p.max_mm = [10.0; 3];
+        p
+    };
+    let base = consistent();
+    levels_hu
+        .iter()
+        .map(|&noise_hu| {
+            let paper = RstParams {
+                tf: TransferFunction::new(0.0, 2.0 * noise_hu),
+                ..base.clone()
+            };
+            let per_draw: Vec<[f64; 5]> = parallel::map_indices(draws, |d| {
+                let seed = 20_000 + d as u64;
+                let sphere = Scene::noisy(box_of(phantom::CONTRAST_HU), [0.5; 3], noise_hu, seed);
+                let alone = Scene::noisy(box_of(0.0), [0.5; 3], noise_hu, seed);
+                let at = |s: &Scene, q: &RstParams| {
+                    cpu::ray_lengths_mm(&s.gv, s.phantom.grid_mm([0.0; 3]), q)
+                };
+                let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+                let share = |v: &[f64], f: &dyn Fn(f64) -> bool| {
+                    v.iter().filter(|x| f(**x)).count() as f64 / v.len().max(1) as f64
+                };
+                let in_sphere = at(&sphere, &paper);
+                let noise_paper = at(&alone, &paper);
+                let noise_10_30 = at(&alone, &base);
+                let reach = base.steps() as f64 * base.step_mm;
+                [
+                    mean(&in_sphere),
+                    share(&in_sphere, &|x| x < 4.0),
+                    mean(&noise_paper),
+                    share(&noise_paper, &|x| x >= reach - 1e-9),
+                    mean(&noise_10_30),
+                ]
+            });
+            std::array::from_fn(|c| mean_sd(&per_draw.iter().map(|v| v[c]).collect::<Vec<_>>()).0)
+        })
+        .collect()
+}

@@ -120,7 +120,7 @@ pub fn section_timing(md: &mut String) {
     let _ = writeln!(md, "## Cost (section 4.3)\n");
     let _ = writeln!(
         md,
-        "CPU reference on this machine ({} threads), {n} voxels: RST features {rst_s:.2} s ({:.1} us/voxel), one-scale Hessian features at sigma 2 mm {hes_s:.2} s. Extrapolated to the paper's 512 x 512 x 541 CT: RST {:.0} s, Hessian {:.0} s per scale (the paper: 20 s and 5 s in CUDA on a 2010 GPU). The CPU reference is the definition, not the fast path: the GPU kernels run the same features (`shapecast bench`, docs/performance.md).\n",
+        "CPU reference on this machine ({} threads), {n} voxels: RST features {rst_s:.2} s ({:.1} us/voxel), one-scale Hessian features at sigma 2 mm {hes_s:.2} s. Extrapolated to the paper's 512 x 512 x 541 CT: RST {:.0} s, Hessian {:.0} s per scale (the paper: 20 s and 5 s in CUDA on a 2010 GPU). The CPU reference is the definition, not the fast path. The WGSL kernels compute the same features; on this machine they run on lavapipe, Vulkan on the same 2 CPU cores, so their timings measure the kernels' efficiency, not a GPU's speed: `shapecast bench` measured 2.5e7 RST ray samples/s there against the CPU reference's 1.5e7, and the 5-scale Hessian features at 1.6 M voxels/s (4.9x the CPU reference); docs/performance.md has the runs and an estimate for a current desktop GPU (RST about 5-15 s for the paper's CT with the exact fetch, 1-3 s with hardware filtering).\n",
         std::thread::available_parallelism().map_or(1, |n| n.get()),
         rst_s / n as f64 * 1e6,
         rst_s / n as f64 * big,
