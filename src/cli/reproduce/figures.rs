@@ -151,11 +151,11 @@ pub fn fig7c(md: &mut String, dir: &Path) -> anyhow::Result<()> {
         .collect();
     plot::rgb_png(
         &dir.join("fig7c.png"),
-        "RST: grey intensity, red l1 (V), yellow l2 (B); MIP along y",
+        "RST MIP along y: red V, yellow B",
         nx,
         nz,
         &pixels,
-        6,
+        8,
     )?;
     // The strongest blobness within 4 mm of the branch point (in 3D: in the projection the
     // front nodule lies over it) relative to the strongest anywhere (a nodule's centre).
