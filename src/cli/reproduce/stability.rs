@@ -276,12 +276,13 @@ fn thick_slice_rays(md: &mut String) {
         .collect();
     let _ = writeln!(
         md,
-        "In-plane rays lose nothing; the loss grows with the ray's z component. The data hold less: the smoothed intensity along z from the centre, every 2 mm, is {} HU at 0.5 mm iso and {} HU at 5 mm slices (the sphere, 9.4 mm across, is one slice and two partial-volume neighbours, so trilinear sampling sees a 10 mm ramp), and the largest z gradient is {:.1} against {:.1} HU/mm in-plane (thin: {:.1}). The consistent rule weights a ray by L_i times the gradient where its opacity builds up; the longer L_i of a z ray (from the spacing term of rho) keeps it at about three quarters of the thin value, but an oblique ray becomes opaque at the sharp in-plane edge, whose gradient has little z component, and Ts_zz, the blobness (the smallest eigenvalue), is the sum of those z components. Longer rays do not help (relative blobness at R = 15 and 25 mm: {}); neither does refining z (above), nor would a larger sigma_g along z (it only blurs the ramp). Making 5 mm slices match would mean sharpening the data along z beyond what they hold, so the RST stays on the input grid and the thick-slice value is reported, not corrected.\n",
+        "In-plane rays keep their contribution; rays with a z component lose part of it (table). The data hold less: the smoothed intensity along z from the centre, every 2 mm, is {} HU at 0.5 mm iso and {} HU at 5 mm slices (the sphere, 9.4 mm across, is one slice and two partial-volume neighbours, so trilinear sampling sees a 10 mm ramp), and the largest z gradient is {:.1} against {:.1} HU/mm in-plane (thin: {:.1}). The consistent rule weights a ray by L_i times the gradient where its opacity builds up: along z that gradient is {:.2} of the in-plane one, and the longer L_i of a z ray (from the spacing term of rho) makes up only part of it; an oblique ray meets the sharp in-plane edge, whose gradient has little z component; and Ts_zz, which the blobness (the smallest eigenvalue) is here, sums the rays' z components. Longer rays do not help (relative blobness at R = 15 and 25 mm: {}); neither does refining z (above), nor would a larger sigma_g along z (it only blurs the ramp). Making 5 mm slices match would mean sharpening the data along z beyond what they hold, so the RST stays on the input grid and the thick-slice value is reported, not corrected.\n",
         profile(&thin, x_thin),
         profile(&thick, x_thick),
         g_max(&thick, x_thick, 2),
         g_max(&thick, x_thick, 0),
         g_max(&thin, x_thin, 2),
+        g_max(&thick, x_thick, 2) / g_max(&thick, x_thick, 0),
         longer.join(", ")
     );
 }
