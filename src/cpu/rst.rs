@@ -184,15 +184,15 @@ pub fn rst_tensor_at(gv: &GradientVolume, x_mm: [f64; 3], p: &RstParams) -> Sym3
 
 /// One ray of the consistent rule (docs/science.md RST items 4 and 5) from `x_mm`, whose
 /// smoothed intensity and gradient are `centre`, along the unit direction `r`: the ray's weighted
-/// gradient sum `L_i sum_k (alpha_k - alpha_{k-1}) 0.5 (g_{k-1} + g_k)`, and the number of steps
-/// taken (the ray stops after the step where alpha_k >= 0.99, or at K).
+/// gradient sum `L_i sum_k (alpha_k - alpha_{k-1}) 0.5 (g_{k-1} + g_k)`, the number of steps
+/// taken (the ray stops after the step where alpha_k >= 0.99, or at K) and the opacity reached.
 pub fn consistent_ray(
     gv: &GradientVolume,
     x_mm: [f64; 3],
     centre: (f64, [f64; 3]),
     r: [f64; 3],
     p: &RstParams,
-) -> ([f64; 3], usize) {
+) -> ([f64; 3], usize, f64) {
     let (i_centre, g_centre) = centre;
     let dr = p.step_mm;
     let k_max = p.steps();
@@ -212,15 +212,15 @@ pub fn consistent_ray(
         for a in 0..3 {
             acc[a] += w * 0.5 * (g_prev[a] + gk[a]);
         }
+        alpha_prev = alpha;
         if alpha >= ALPHA_STOP {
             taken = k;
             break;
         }
-        alpha_prev = alpha;
         f_prev = fk;
         g_prev = gk;
     }
-    (acc.map(|v| v * l_mm), taken)
+    (acc.map(|v| v * l_mm), taken, alpha_prev)
 }
 
 /// The length (mm) each ray of the consistent rule runs from `x_mm` before it stops, in the

@@ -215,7 +215,7 @@ fn thick_slice_rays(md: &mut String) {
         ("z (across slices)", [0.0, 0.0, 1.0]),
     ] {
         let ray = |gv: &cpu::GradientVolume, x: [f64; 3]| {
-            let (acc, steps) = cpu::consistent_ray(gv, x, gv.sample(x), r, &params);
+            let (acc, steps, _) = cpu::consistent_ray(gv, x, gv.sample(x), r, &params);
             (
                 -(0..3).map(|a| acc[a] * r[a]).sum::<f64>(),
                 steps as f64 * params.step_mm,
