@@ -88,7 +88,7 @@ pub fn fig6f(
     plot::panels_png(&dir.join("fig6f.png"), &panels, 3)?;
     let _ = writeln!(
         md,
-        "The subtraction keeps every nodule in the RST and removes the branch point; in the Hessian at sigma = r the bifurcation responds more than the near nodules, so the same subtraction removes them too (the Hessian at sigma = r/sqrt3 behaves like the RST on this phantom, at the cost of the adjacency distortion above). Slice y = 0 of the near phantom, each subtracted panel on the scale of the panel to its left:\n\n![fig. 6f](reproduction/fig6f.png)\n"
+        "The subtraction keeps every nodule in the RST and removes the branch point; in the Hessian at sigma = r the bifurcation responds more than the nodules, so the same subtraction removes them too (the Hessian at sigma = r/sqrt3 keeps them, but less of the near ones, and suffers the adjacency distortion above). Slice y = 0 of the near phantom, each subtracted panel on the scale of the panel to its left:\n\n![fig. 6f](reproduction/fig6f.png)\n"
     );
     Ok(())
 }

@@ -121,7 +121,7 @@ fn study(md: &mut String, image: &Path, label: &Path) -> anyhow::Result<()> {
     );
     let _ = writeln!(
         md,
-        "The rank counts the blobs (26-connected groups of lung voxels outside the zone) above the lesion's peak. {} {}\n\nThe study took {elapsed:.0} s (tests/cpu_real_ct_conspicuity.rs runs it and bounds both ratios and ranks).\n",
+        "The rank counts the blobs (26-connected groups of lung voxels outside the zone) above the lesion's peak. {} {}\n\nThe study took {elapsed:.0} s (tests/cpu_real_ct_conspicuity.rs runs it and bounds both ratios and ranks). The other chest CT with a tumour, series/ct-chest-lung-kernel (LUNG-PET-CT-Dx, 30 slices 8 mm apart), shows an irregular mass of several centimetres in the right lung beside the hilum (files 1-14 to 1-18), but comes without a label, so it is not measured here: a label (or a seed and a rule to grow it) would be needed first.\n",
         verdict("The RST", &s.rst_li, size_mm),
         verdict("The Hessian", &s.hessian_li, size_mm),
     );
