@@ -118,6 +118,12 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `lo to hi` with `decimals` digits, or one number where both print alike.
+fn span(lo: f64, hi: f64, decimals: usize) -> String {
+    let (a, b) = (format!("{lo:.decimals$}"), format!("{hi:.decimals$}"));
+    if a == b { a } else { format!("{a} to {b}") }
+}
+
 fn fmt_l(l: [f64; 3]) -> String {
     format!("{:.2}, {:.2}, {:.2}", l[0], l[1], l[2])
 }
@@ -532,9 +538,9 @@ fn section_noise(md: &mut String, dir: &Path, quick: bool, draws: usize) -> anyh
     // Each statement is made only where the numbers above bear it out.
     let opaque = if never_lo >= 0.5 {
         format!(
-            "Noise alone is not opaque: from a voxel of noise alone {:.0} to {:.0}% of the rays run the whole R = 15 mm without becoming opaque, since the smoothed intensity the rays read carries only {sm_lo:.2} to {sm_hi:.2} of the added noise, so d = |I(x_k) - I(x)| mostly stays far below d_max = 2 sigma.",
-            100.0 * never_lo,
-            100.0 * never_hi
+            "Noise alone is not opaque: from a voxel of noise alone {}% of the rays run the whole R = 15 mm without becoming opaque, since the smoothed intensity the rays read carries only {} of the added noise, so d = |I(x_k) - I(x)| mostly stays far below d_max = 2 sigma.",
+            span(100.0 * never_lo, 100.0 * never_hi, 0),
+            span(sm_lo, sm_hi, 2)
         )
     } else {
         format!(
