@@ -12,6 +12,7 @@
 //! - Feature outputs are three components `[V, A, B]` (vesselness, airwayness, blobness) or three
 //!   eigenvalues sorted by magnitude `[l0, l1, l2]`, `|l0| >= |l1| >= |l2|`.
 
+pub mod conspicuity;
 pub mod eigen;
 pub mod features;
 pub mod gaussian;
@@ -36,7 +37,8 @@ pub use hessian::{hessian_at, hessian_volume};
 pub use rays::ray_set;
 pub use resample::{refine_linear, refined_grid, refinement_factors, resample_linear, subsample};
 pub use rst::{
-    GradientVolume, OpacityRule, RstParams, rst_eigen, rst_eigen_at, rst_features, rst_tensor_at,
+    GradientVolume, OpacityRule, RstParams, consistent_ray, ray_lengths_mm, rst_eigen,
+    rst_eigen_at, rst_features, rst_tensor_at,
 };
 pub use structure_tensor::{structure_tensor_eigen, structure_tensor_features};
 pub use tf::{Preset, TransferFunction, auto_transfer_function, estimate_noise_sigma};

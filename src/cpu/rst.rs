@@ -149,34 +149,12 @@ pub fn rst_tensor_at(gv: &GradientVolume, x_mm: [f64; 3], p: &RstParams) -> Sym3
     let dr = p.step_mm;
     let dr_vox = dr / gv.grid.min_spacing_mm();
     for r in &p.rays {
-        // acc is the ray's weighted gradient sum, later multiplied by r^T.
-        let mut acc = [0.0f64; 3];
-        let mut alpha_prev = 0.0f64;
-        match p.rule {
-            OpacityRule::Consistent => {
-                let l_mm = opacity_length_mm(&gv.grid, gv.sigma_g_mm, *r);
-                let mut f_prev = 0.0f64;
-                let mut g_prev = g_centre;
-                for k in 1..=k_max {
-                    let s = k as f64 * dr;
-                    let (ik, gk) = gv.sample(std::array::from_fn(|a| x_mm[a] + s * r[a]));
-                    let fk = p.tf.eval((ik - i_centre).abs());
-                    let tau = 0.5 * (f_prev + fk) * dr / l_mm;
-                    let alpha = 1.0 - (1.0 - alpha_prev) * (-tau).exp();
-                    let w = alpha - alpha_prev;
-                    for a in 0..3 {
-                        acc[a] += w * 0.5 * (g_prev[a] + gk[a]);
-                    }
-                    if alpha >= ALPHA_STOP {
-                        break;
-                    }
-                    alpha_prev = alpha;
-                    f_prev = fk;
-                    g_prev = gk;
-                }
-                acc.iter_mut().for_each(|v| *v *= l_mm);
-            }
+        // The ray's weighted gradient sum, later multiplied by r^T.
+        let acc = match p.rule {
+            OpacityRule::Consistent => consistent_ray(gv, x_mm, (i_centre, g_centre), *r, p).0,
             OpacityRule::Paper => {
+                let mut acc = [0.0f64; 3];
+                let mut alpha_prev = 0.0f64;
                 for k in 1..=k_max {
                     let s = k as f64 * dr;
                     let (ik, gk) = gv.sample(std::array::from_fn(|a| x_mm[a] + s * r[a]));
@@ -190,9 +168,9 @@ pub fn rst_tensor_at(gv: &GradientVolume, x_mm: [f64; 3], p: &RstParams) -> Sym3
                     }
                     alpha_prev = alpha;
                 }
-                acc.iter_mut().for_each(|v| *v *= dr);
+                acc.map(|v| v * dr)
             }
-        }
+        };
         for (a, row) in t.iter_mut().enumerate() {
             for (b, v) in row.iter_mut().enumerate() {
                 *v += acc[a] * r[b];
@@ -202,6 +180,57 @@ pub fn rst_tensor_at(gv: &GradientVolume, x_mm: [f64; 3], p: &RstParams) -> Sym3
     let n = p.rays.len().max(1) as f64;
     let ts = |a: usize, b: usize| (t[a][b] + t[b][a]) / n;
     [ts(0, 0), ts(1, 1), ts(2, 2), ts(0, 1), ts(0, 2), ts(1, 2)]
+}
+
+/// One ray of the consistent rule (docs/science.md RST items 4 and 5) from `x_mm`, whose
+/// smoothed intensity and gradient are `centre`, along the unit direction `r`: the ray's weighted
+/// gradient sum `L_i sum_k (alpha_k - alpha_{k-1}) 0.5 (g_{k-1} + g_k)`, the number of steps
+/// taken (the ray stops after the step where alpha_k >= 0.99, or at K) and the opacity reached.
+pub fn consistent_ray(
+    gv: &GradientVolume,
+    x_mm: [f64; 3],
+    centre: (f64, [f64; 3]),
+    r: [f64; 3],
+    p: &RstParams,
+) -> ([f64; 3], usize, f64) {
+    let (i_centre, g_centre) = centre;
+    let dr = p.step_mm;
+    let k_max = p.steps();
+    let l_mm = opacity_length_mm(&gv.grid, gv.sigma_g_mm, r);
+    let mut acc = [0.0f64; 3];
+    let mut alpha_prev = 0.0f64;
+    let mut f_prev = 0.0f64;
+    let mut g_prev = g_centre;
+    let mut taken = k_max;
+    for k in 1..=k_max {
+        let s = k as f64 * dr;
+        let (ik, gk) = gv.sample(std::array::from_fn(|a| x_mm[a] + s * r[a]));
+        let fk = p.tf.eval((ik - i_centre).abs());
+        let tau = 0.5 * (f_prev + fk) * dr / l_mm;
+        let alpha = 1.0 - (1.0 - alpha_prev) * (-tau).exp();
+        let w = alpha - alpha_prev;
+        for a in 0..3 {
+            acc[a] += w * 0.5 * (g_prev[a] + gk[a]);
+        }
+        alpha_prev = alpha;
+        if alpha >= ALPHA_STOP {
+            taken = k;
+            break;
+        }
+        f_prev = fk;
+        g_prev = gk;
+    }
+    (acc.map(|v| v * l_mm), taken, alpha_prev)
+}
+
+/// The length (mm) each ray of the consistent rule runs from `x_mm` before it stops, in the
+/// order of `p.rays`: `dr` times the steps taken (R's K steps when it never becomes opaque).
+pub fn ray_lengths_mm(gv: &GradientVolume, x_mm: [f64; 3], p: &RstParams) -> Vec<f64> {
+    let centre = gv.sample(x_mm);
+    p.rays
+        .iter()
+        .map(|r| consistent_ray(gv, x_mm, centre, *r, p).1 as f64 * p.step_mm)
+        .collect()
 }
 
 /// Eigenvalues of the RST at `x_mm`, sorted by magnitude.

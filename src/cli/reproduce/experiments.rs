@@ -341,3 +341,69 @@ pub fn slice_maps(s: &Scene, axis: usize, p_mm: [f64; 3]) -> (usize, usize, [Vec
     maps[3] = (0..w * h).map(|n| gst[2][voxel(n)].abs()).collect();
     (w, h, maps)
 }
+
+/// How the rays of the noise study run (consistent rule, 42 rays, R = 15 mm), per noise level,
+/// as means over rays and `draws` draws: from the centre of the 10 mm sphere with the paper's
+/// protocol (d_min 0, d_max 2 sigma), the length a ray runs before it stops (mm) and the opacity
+/// it has gathered by 4 mm (inside the sphere, before its blurred edge), that opacity with the
+/// 10/30 function; from a voxel of noise alone (the same box without the sphere) with the paper's
+/// protocol, the share of rays that never become opaque within R; and the standard deviation of
+/// the smoothed intensity the rays read in noise alone, relative to the added noise.
+pub fn noise_ray_lengths(levels_hu: &[f64], draws: usize) -> Vec<[f64; 5]> {
+    let box_of = |contrast: f32| {
+        let mut p = phantom::sphere(5.0, contrast);
+        p.min_mm = [-10.0; 3];
+        p.max_mm = [10.0; 3];
+        p
+    };
+    let base = consistent();
+    levels_hu
+        .iter()
+        .map(|&noise_hu| {
+            let paper = RstParams {
+                tf: TransferFunction::new(0.0, 2.0 * noise_hu),
+                ..base.clone()
+            };
+            let per_draw: Vec<[f64; 5]> = parallel::map_indices(draws, |d| {
+                let seed = 20_000 + d as u64;
+                let sphere = Scene::noisy(box_of(phantom::CONTRAST_HU), [0.5; 3], noise_hu, seed);
+                let alone = Scene::noisy(box_of(0.0), [0.5; 3], noise_hu, seed);
+                let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+                let x = sphere.phantom.grid_mm([0.0; 3]);
+                let centre = sphere.gv.sample(x);
+                let opacity_at_4mm = |q: &RstParams| {
+                    let q = RstParams {
+                        radius_mm: 4.0,
+                        ..q.clone()
+                    };
+                    let a: Vec<f64> = q
+                        .rays
+                        .iter()
+                        .map(|r| cpu::consistent_ray(&sphere.gv, x, centre, *r, &q).2)
+                        .collect();
+                    mean(&a)
+                };
+                let reach = base.steps() as f64 * base.step_mm;
+                let alone_lengths =
+                    cpu::ray_lengths_mm(&alone.gv, alone.phantom.grid_mm([0.0; 3]), &paper);
+                let (_, sd) = mean_sd(
+                    &alone
+                        .gv
+                        .intensity
+                        .iter()
+                        .map(|v| f64::from(*v))
+                        .collect::<Vec<_>>(),
+                );
+                [
+                    mean(&cpu::ray_lengths_mm(&sphere.gv, x, &paper)),
+                    opacity_at_4mm(&paper),
+                    opacity_at_4mm(&base),
+                    alone_lengths.iter().filter(|l| **l >= reach - 1e-9).count() as f64
+                        / alone_lengths.len().max(1) as f64,
+                    sd / noise_hu,
+                ]
+            });
+            std::array::from_fn(|c| mean_sd(&per_draw.iter().map(|v| v[c]).collect::<Vec<_>>()).0)
+        })
+        .collect()
+}

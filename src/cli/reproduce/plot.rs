@@ -124,9 +124,11 @@ pub struct Panel {
     pub width: usize,
     pub height: usize,
     pub values: Vec<f32>,
+    /// The value shown white; `None`: the panel's own maximum.
+    pub full_scale: Option<f32>,
 }
 
-/// Panels side by side, each scaled from 0 (black) to its own maximum (white), enlarged by an
+/// Panels side by side, each scaled from 0 (black) to its full scale (white), enlarged by an
 /// integer factor so that a 0.5 mm voxel stays visible.
 pub fn panels_png(path: &Path, panels: &[Panel], zoom: usize) -> anyhow::Result<()> {
     register_font();
@@ -139,7 +141,10 @@ pub fn panels_png(path: &Path, panels: &[Panel], zoom: usize) -> anyhow::Result<
     root.fill(&WHITE).map_err(err)?;
     let mut x0 = gap;
     for p in panels {
-        let max = p.values.iter().copied().fold(0.0f32, f32::max).max(1e-12);
+        let max = p
+            .full_scale
+            .unwrap_or_else(|| p.values.iter().copied().fold(0.0f32, f32::max))
+            .max(1e-12);
         root.draw(&Text::new(
             p.title.clone(),
             (x0 as i32, 4),
@@ -162,6 +167,43 @@ pub fn panels_png(path: &Path, panels: &[Panel], zoom: usize) -> anyhow::Result<
             }
         }
         x0 += p.width * zoom + gap;
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+/// An RGB image (`width x height` pixels, row-major, first row at the top) under a title,
+/// enlarged by an integer factor.
+pub fn rgb_png(
+    path: &Path,
+    title: &str,
+    width: usize,
+    height: usize,
+    pixels: &[[u8; 3]],
+    zoom: usize,
+) -> anyhow::Result<()> {
+    register_font();
+    let (title_h, gap) = (26, 8);
+    let (w, h) = (width * zoom + 2 * gap, height * zoom + title_h + gap);
+    let root = BitMapBackend::new(path, (w as u32, h as u32)).into_drawing_area();
+    let err = |e: DrawingAreaErrorKind<_>| anyhow!("image {}: {e:?}", path.display());
+    root.fill(&WHITE).map_err(err)?;
+    root.draw(&Text::new(
+        title.to_owned(),
+        (gap as i32, 4),
+        ("sans-serif", 15).into_font(),
+    ))
+    .map_err(err)?;
+    for (n, [r, g, b]) in pixels.iter().enumerate().take(width * height) {
+        let (px, py) = (gap + (n % width) * zoom, title_h + (n / width) * zoom);
+        root.draw(&Rectangle::new(
+            [
+                (px as i32, py as i32),
+                ((px + zoom) as i32, (py + zoom) as i32),
+            ],
+            RGBColor(*r, *g, *b).filled(),
+        ))
+        .map_err(err)?;
     }
     root.present().map_err(err)?;
     Ok(())

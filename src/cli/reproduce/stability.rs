@@ -120,7 +120,7 @@ pub fn section_timing(md: &mut String) {
     let _ = writeln!(md, "## Cost (section 4.3)\n");
     let _ = writeln!(
         md,
-        "CPU reference on this machine ({} threads), {n} voxels: RST features {rst_s:.2} s ({:.1} us/voxel), one-scale Hessian features at sigma 2 mm {hes_s:.2} s. Extrapolated to the paper's 512 x 512 x 541 CT: RST {:.0} s, Hessian {:.0} s per scale (the paper: 20 s and 5 s in CUDA on a 2010 GPU). The CPU reference is the definition, not the fast path: the GPU kernels run the same features (`shapecast bench`, docs/performance.md).\n",
+        "CPU reference on this machine ({} threads), {n} voxels: RST features {rst_s:.2} s ({:.1} us/voxel), one-scale Hessian features at sigma 2 mm {hes_s:.2} s. Extrapolated to the paper's 512 x 512 x 541 CT: RST {:.0} s, Hessian {:.0} s per scale (the paper: 20 s and 5 s in CUDA on a 2010 GPU). The CPU reference is the definition, not the fast path. The WGSL kernels compute the same features; on this machine they run on lavapipe, Vulkan on the same 2 CPU cores, so their timings measure the kernels' efficiency, not a GPU's speed: `shapecast bench` measured 2.5e7 RST ray samples/s there against the CPU reference's 1.5e7, and the 5-scale Hessian features at 1.6 M voxels/s (4.9x the CPU reference); docs/performance.md has the runs and an estimate for a current desktop GPU (RST about 5-15 s for the paper's CT with the exact fetch, 1-3 s with hardware filtering).\n",
         std::thread::available_parallelism().map_or(1, |n| n.get()),
         rst_s / n as f64 * 1e6,
         rst_s / n as f64 * big,
@@ -184,6 +184,107 @@ pub fn section_thick_slices(md: &mut String) {
             b[3] / b[0]
         );
     }
+    thick_slice_rays(md);
+}
+
+/// Why the 5 mm slices halve the sphere's blobness: each ray's radial contribution
+/// `r . L_i sum (alpha_k - alpha_{k-1}) g` (the consistent rule's ray, `cpu::consistent_ray`) and
+/// where it stops, at 0.5 mm iso and 0.6 x 0.6 x 5 mm; the z profile of the smoothed intensity;
+/// and the blobness for longer rays.
+fn thick_slice_rays(md: &mut String) {
+    let scene = |spacing: [f64; 3]| {
+        let mut p = phantom::sphere(4.7, 100.0);
+        p.min_mm = [-9.0, -9.0, -15.0];
+        p.max_mm = [9.0, 9.0, 15.0];
+        let volume = p.render(spacing);
+        let grid = cpu::Grid::of(&volume);
+        let x = grid.position_mm(grid.nearest_voxel([9.0, 9.0, 15.0]));
+        (cpu::GradientVolume::new(&grid, &volume.to_f32(), 0.7), x)
+    };
+    let mut params = ex::consistent();
+    params.radius_mm = 8.0;
+    let (thin, x_thin) = scene([0.5; 3]);
+    let (thick, x_thick) = scene([0.6, 0.6, 5.0]);
+    let s3 = 1.0 / 3f64.sqrt();
+    let s2 = 1.0 / 2f64.sqrt();
+    let mut rows = Vec::new();
+    for (name, r) in [
+        ("x (in-plane)", [1.0, 0.0, 0.0]),
+        ("45 degrees from z", [s2, 0.0, s2]),
+        ("diagonal (1,1,1)", [s3, s3, s3]),
+        ("z (across slices)", [0.0, 0.0, 1.0]),
+    ] {
+        let ray = |gv: &cpu::GradientVolume, x: [f64; 3]| {
+            let (acc, steps, _) = cpu::consistent_ray(gv, x, gv.sample(x), r, &params);
+            (
+                -(0..3).map(|a| acc[a] * r[a]).sum::<f64>(),
+                steps as f64 * params.step_mm,
+                cpu::rst::opacity_length_mm(&gv.grid, gv.sigma_g_mm, r),
+            )
+        };
+        let (c0, l0, o0) = ray(&thin, x_thin);
+        let (c1, l1, o1) = ray(&thick, x_thick);
+        rows.push(vec![
+            name.to_owned(),
+            format!("{c0:.2} ({o0:.2} mm, stops at {l0:.2} mm)"),
+            format!("{c1:.2} ({o1:.2} mm, stops at {l1:.2} mm)"),
+            format!("{:.2}", c1 / c0),
+        ]);
+    }
+    let _ = writeln!(
+        md,
+        "Where the 5 mm loss comes from: the radial contribution of single rays from the sphere's centre (R = 8 mm, TF 10/30 HU), with the ray's opacity length L_i and where it stops:\n"
+    );
+    table(
+        md,
+        &[
+            "ray",
+            "0.5 mm iso: contribution (L_i)",
+            "0.6 x 0.6 x 5 mm",
+            "ratio",
+        ],
+        &rows,
+    );
+    let profile = |gv: &cpu::GradientVolume, x: [f64; 3]| {
+        (0..=5)
+            .map(|k| format!("{:.0}", gv.sample([x[0], x[1], x[2] + 2.0 * k as f64]).0))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let g_max = |gv: &cpu::GradientVolume, x: [f64; 3], a: usize| {
+        (0..=40)
+            .map(|k| {
+                let mut p = x;
+                p[a] += 0.25 * k as f64;
+                -gv.sample(p).1[a]
+            })
+            .fold(0.0, f64::max)
+    };
+    let longer: Vec<String> = [15.0, 25.0]
+        .iter()
+        .map(|&radius| {
+            let q = cpu::RstParams {
+                radius_mm: radius,
+                ..params.clone()
+            };
+            format!(
+                "{:.3}",
+                ex::blob(cpu::rst_eigen_at(&thick, x_thick, &q))
+                    / ex::blob(cpu::rst_eigen_at(&thin, x_thin, &q))
+            )
+        })
+        .collect();
+    let _ = writeln!(
+        md,
+        "In-plane rays keep their contribution; rays with a z component lose part of it (table). The data hold less: the smoothed intensity along z from the centre, every 2 mm, is {} HU at 0.5 mm iso and {} HU at 5 mm slices (the sphere, 9.4 mm across, is one slice and two partial-volume neighbours, so trilinear sampling sees a 10 mm ramp), and the largest z gradient is {:.1} against {:.1} HU/mm in-plane (thin: {:.1}). The consistent rule weights a ray by L_i times the gradient where its opacity builds up: along z that gradient is {:.2} of the in-plane one, and the longer L_i of a z ray (from the spacing term of rho) makes up only part of it; an oblique ray meets the sharp in-plane edge, whose gradient has little z component; and Ts_zz, which the blobness (the smallest eigenvalue) is here, sums the rays' z components. Longer rays do not help (relative blobness at R = 15 and 25 mm: {}); neither does refining z (above), nor would a larger sigma_g along z (it only blurs the ramp). Making 5 mm slices match would mean sharpening the data along z beyond what they hold, so the RST stays on the input grid and the thick-slice value is reported, not corrected.\n",
+        profile(&thin, x_thin),
+        profile(&thick, x_thick),
+        g_max(&thick, x_thick, 2),
+        g_max(&thick, x_thick, 0),
+        g_max(&thin, x_thin, 2),
+        g_max(&thick, x_thick, 2) / g_max(&thick, x_thick, 0),
+        longer.join(", ")
+    );
 }
 
 /// `values` with `decimals` digits after the point, comma-separated.
