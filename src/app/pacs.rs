@@ -222,6 +222,16 @@ impl ShapecastApp {
         self.pacs_open_study(target, true);
     }
 
+    /// The patient line shown above the panes, if the loaded study has one.
+    pub fn patient_line(&self) -> Option<String> {
+        self.pacs.patient.as_ref().and_then(patient_line)
+    }
+
+    /// Whether the "Open from PACS" dialog is shown, and the message it shows.
+    pub fn pacs_dialog(&self) -> (bool, Option<&str>) {
+        (self.pacs.dialog, self.pacs.message.as_deref())
+    }
+
     /// Reads the token from the page's address (`#token=`), then removes it there.
     pub(super) fn pacs_start(&mut self, ctx: &egui::Context) {
         if let Ok(mut c) = self.pacs.inbox.ctx.lock() {
@@ -520,21 +530,25 @@ impl ShapecastApp {
         egui::Grid::new("pacs-server")
             .num_columns(2)
             .show(ui, |ui| {
-                ui.label("DICOMweb server");
-                let r = ui.add(
-                    egui::TextEdit::singleline(&mut self.pacs.server)
-                        .hint_text("/dicom-web, or https://pacs.example.org/dicom-web")
-                        .desired_width(420.0),
-                );
+                let l = ui.label("DICOMweb server");
+                let r = ui
+                    .add(
+                        egui::TextEdit::singleline(&mut self.pacs.server)
+                            .hint_text("/dicom-web, or https://pacs.example.org/dicom-web")
+                            .desired_width(420.0),
+                    )
+                    .labelled_by(l.id);
                 self.control("pacs-server", r.rect);
                 ui.end_row();
-                ui.label("Bearer token");
-                let r = ui.add(
-                    egui::TextEdit::singleline(&mut self.pacs.token)
-                        .password(true)
-                        .hint_text("optional; never put into a link")
-                        .desired_width(420.0),
-                );
+                let l = ui.label("Bearer token");
+                let r = ui
+                    .add(
+                        egui::TextEdit::singleline(&mut self.pacs.token)
+                            .password(true)
+                            .hint_text("optional; never put into a link")
+                            .desired_width(420.0),
+                    )
+                    .labelled_by(l.id);
                 self.control("pacs-token", r.rect);
                 ui.end_row();
             });
@@ -572,12 +586,14 @@ impl ShapecastApp {
                         "pacs-date",
                     ),
                 ] {
-                    ui.label(label);
-                    let r = ui.add(
-                        egui::TextEdit::singleline(value)
-                            .hint_text(hint)
-                            .desired_width(260.0),
-                    );
+                    let l = ui.label(label);
+                    let r = ui
+                        .add(
+                            egui::TextEdit::singleline(value)
+                                .hint_text(hint)
+                                .desired_width(260.0),
+                        )
+                        .labelled_by(l.id);
                     go |= r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
                     self.controls.push((name.to_owned(), r.rect));
                     ui.end_row();
