@@ -813,6 +813,22 @@ fn the_viewer_opens_a_study_and_shows_its_patient() {
     }
     let link = app.link();
     assert!(link.contains("dicomweb=http://127.0.0.1:"), "{link}");
+    // The dialog's study search (QIDO-RS by patient ID, with a wildcard, and by date).
+    let client = Client::new(orthanc.base(), Auth::None).expect("client");
+    if let Some(id) = &patient.id {
+        let prefix: String = id.chars().take(3).collect();
+        let search = shapecast::io::dicomweb::StudySearch {
+            patient_id: format!("{prefix}*"),
+            ..Default::default()
+        };
+        let found = client.search_studies(&search).expect("search");
+        assert!(found.iter().any(|s| s.study_uid == study), "{found:?}");
+    }
+    let nobody = shapecast::io::dicomweb::StudySearch {
+        study_date: "19000101-19000102".to_owned(),
+        ..Default::default()
+    };
+    assert!(client.search_studies(&nobody).expect("search").is_empty());
     for secret in [&patient.id, &patient.name].into_iter().flatten() {
         assert!(!link.contains(secret.as_str()), "{link}");
         assert!(!app.status().view_json.contains(secret.as_str()));
