@@ -15,7 +15,9 @@
 //  4. an archive with authentication on (a second Orthanc, behind a small proxy on the page's
 //     origin that takes a bearer token, as a hospital's gateway would): without a token the page
 //     says a token is needed; with `#token=` the study opens;
-//  5. every request the pages made went to 127.0.0.1.
+//  5. progress in instances and MB, Cancel stops the requests and keeps the page usable, and an
+//     instance whose answer is cut short is asked for again (a gateway that delays or cuts);
+//  6. every request the pages made went to 127.0.0.1.
 // Orthanc is stopped by its pid at the end. Orthanc, its plugins or ../shared/data missing: the
 // suite says so and skips, except under CI=true, where that is a failure.
 import { chromium } from 'playwright-core';
@@ -160,22 +162,46 @@ async function upload(o, rel) {
 
 // The page's origin for the archive with authentication: dist/ at /, and /dicom-web/ passed
 // to Orthanc with the bearer token exchanged for Orthanc's own credentials (a gateway).
+// Two more roots for the retrieval's own behaviour: /slow/dicom-web/ answers each instance
+// after 500 ms (time to see progress and cancel), /flaky/dicom-web/ cuts the first answer for
+// one instance short (the page must ask for it again).
+const gatewayLog = { instances: [], cut: null };
 function gateway(o) {
   return http.createServer((req, res) => {
     const url = new URL(req.url, 'http://127.0.0.1');
-    if (url.pathname.startsWith('/dicom-web/')) {
+    const mode = /^\/(slow|flaky)\/dicom-web\//.exec(url.pathname)?.[1] ?? null;
+    if (mode || url.pathname.startsWith('/dicom-web/')) {
+      const upstreamPath = mode ? req.url.slice(mode.length + 1) : req.url;
       const headers = { accept: req.headers.accept ?? '*/*' };
       if (req.headers.authorization !== `Bearer ${TOKEN}`) {
         res.writeHead(401, { 'www-authenticate': 'Bearer realm="pacs"', 'content-type': 'text/plain' }).end('unauthorized');
         return;
       }
       headers.authorization = `Basic ${Buffer.from(`${USER}:${PASSWORD}`).toString('base64')}`;
-      const up = http.request({ host: '127.0.0.1', port: o.port, path: req.url, headers }, (r) => {
-        res.writeHead(r.statusCode, r.headers);
-        r.pipe(res);
-      });
-      up.on('error', () => res.writeHead(502).end());
-      up.end();
+      const instance = /\/instances\/[0-9.]+$/.test(url.pathname);
+      if (instance) gatewayLog.instances.push(`${mode ?? ''}${url.pathname}`);
+      const cut = mode === 'flaky' && instance && gatewayLog.cut === null;
+      if (cut) gatewayLog.cut = url.pathname;
+      const forward = () => {
+        const up = http.request({ host: '127.0.0.1', port: o.port, path: upstreamPath, headers }, (r) => {
+          res.writeHead(r.statusCode, r.headers);
+          if (!cut) {
+            r.pipe(res);
+            return;
+          }
+          let sent = 0;
+          r.on('data', (chunk) => {
+            if (sent > 4096) return;
+            res.write(chunk.subarray(0, 4096));
+            sent += chunk.length;
+            if (sent > 4096) setTimeout(() => res.destroy(), 100);
+          });
+        });
+        up.on('error', () => res.writeHead(502).end());
+        up.end();
+      };
+      if (mode === 'slow' && instance) setTimeout(forward, 500);
+      else forward();
       return;
     }
     let rel = decodeURIComponent(url.pathname).slice(1) || 'index.html';
@@ -297,6 +323,16 @@ try {
     const folderSeconds = (Date.now() - t2) / 1000;
     console.log(`  page load + DICOMweb retrieval ${seconds.toFixed(1)} s; the same files by the folder input ${folderSeconds.toFixed(1)} s`);
     check('CT: DICOMweb gives the geometry the folder gives', byPacs === byFolder && byPacs !== 'null', `${byPacs} vs ${byFolder}`);
+    // The link (its fragment pasted into the open page) retrieves the series again: the
+    // retrieval alone, timed against the folder input's load of the same files.
+    const t3 = Date.now();
+    await page.evaluate((f) => { window.location.hash = f; }, (s?.link ?? '').split('#')[1] ?? '');
+    const again = await waitStatus(page, () => /^DICOMweb/.test(window.shapecastStatus?.volume?.source ?? '')
+      && window.shapecastStatus.phase === 'ready', 'the link in the open page');
+    const linkSeconds = (Date.now() - t3) / 1000;
+    console.log(`  DICOMweb retrieval in the open page ${linkSeconds.toFixed(1)} s; folder input ${folderSeconds.toFixed(1)} s`);
+    check('the link reopens the series from the archive, in at most twice the folder input\'s time',
+      geometry(again) === byPacs && linkSeconds <= 2 * folderSeconds, `${linkSeconds.toFixed(1)} s vs ${folderSeconds.toFixed(1)} s`);
   });
 
   // ---- 1b. Features on a retrieved series --------------------------------------------------
@@ -349,6 +385,29 @@ try {
     await page.goto(`${G}/?dicomweb=/dicom-web&study=${lockedMr.study}&method=intensity#token=${TOKEN}`);
     s = await waitReady(page, 'the study with the token');
     check('401: with #token= the study opens', s?.phase === 'ready' && s?.volume?.dims?.[2] === 20, s?.error ?? '');
+  });
+
+  // ---- 5. Progress and Cancel; a body cut short is asked for again -------------------------
+  await withBrowser(async (page) => {
+    await page.goto(`${G}/?dicomweb=/slow/dicom-web&study=${lockedMr.study}&method=intensity#token=${TOKEN}`);
+    let s = await waitStatus(page, () => /retrieving [1-9]\d* of 20 instances \(.* MB\)/.test(window.shapecastStatus?.task ?? ''), 'progress');
+    check('progress in instances and MB', /retrieving [1-9]\d* of 20 instances \(\d+\.\d of ~\d+\.\d MB\)/.test(s?.task ?? ''), s?.task);
+    const r = s?.controls?.['cancel-pacs'];
+    if (r) await page.mouse.click(r[0] + r[2] / 2, r[1] + r[3] / 2);
+    s = await waitStatus(page, () => window.shapecastStatus?.phase !== 'loading', 'the cancel');
+    const asked = gatewayLog.instances.filter((p) => p.startsWith('slow')).length;
+    await new Promise((res) => setTimeout(res, 1500));
+    const later = gatewayLog.instances.filter((p) => p.startsWith('slow')).length;
+    check('Cancel stops the retrieval: no volume, no error, no more requests', r && s?.phase === 'ready' && !s?.volume && !s?.error
+      && later === asked && asked < 20, `phase ${s?.phase}, ${asked} then ${later} instance requests, error ${s?.error}`);
+
+    await page.goto('about:blank');
+    await page.goto(`${G}/?dicomweb=/flaky/dicom-web&study=${lockedMr.study}&method=intensity#token=${TOKEN}`);
+    s = await waitReady(page, 'the study with one answer cut short');
+    const cut = gatewayLog.cut;
+    const times = gatewayLog.instances.filter((p) => p === `flaky${cut}`).length;
+    check('an instance cut short is asked for again and the study opens', s?.phase === 'ready' && s?.volume?.dims?.[2] === 20
+      && cut !== null && times === 2, `${cut} asked ${times} times; error ${s?.error}`);
   });
 
   check('every request went to 127.0.0.1', offending.length === 0 && requests.length > 0,
