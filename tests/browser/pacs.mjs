@@ -10,11 +10,13 @@
 //     times printed); the status bar's link carries dicomweb/study/series; the head CT's
 //     study opens the same way and its features are computed;
 //  2. `&series=UID` of the oblique MR: its geometry (direction included) equals the folder's;
+//     "Open from PACS…" driven as a person would: patient ID typed, Search, the study, its
+//     preselected series opened;
 //  3. `#token=...`: sent as a header only: the address bar drops it, no request URL and no
 //     link holds it;
 //  4. an archive with authentication on (a second Orthanc, behind a small proxy on the page's
 //     origin that takes a bearer token, as a hospital's gateway would): without a token the page
-//     says a token is needed; with `#token=` the study opens;
+//     says a token is needed and the dialog asks for one; the token typed there opens it;
 //  5. progress in instances and MB, Cancel stops the requests and keeps the page usable, and an
 //     instance whose answer is cut short is asked for again (a gateway that delays or cuts);
 //  6. every request the pages made went to 127.0.0.1.
@@ -280,6 +282,13 @@ async function waitReady(page, what) {
       || (s?.phase === 'ready' && s.volume && s.frames > 3 && (f === 'done' || f === 'none' || f === 'failed'));
   }, what);
 }
+// Clicks a control the app published (window.shapecastStatus.controls), waiting for it.
+async function clickControl(page, name) {
+  const s = await waitStatus(page, (n) => window.shapecastStatus?.controls?.[n], `the control ${name}`, name, 60000);
+  const r = s?.controls?.[name];
+  if (!r) throw new Error(`no control ${name} in ${JSON.stringify(Object.keys(s?.controls ?? {}))}`);
+  await page.mouse.click(r[0] + r[2] / 2, r[1] + r[3] / 2);
+}
 const geometry = (s) => JSON.stringify(s?.volume
   ? { dims: s.volume.dims, spacing: s.volume.spacing_mm, origin: s.volume.origin_mm, direction: s.volume.direction }
   : null);
@@ -356,6 +365,24 @@ try {
     check('MR: DICOMweb gives the geometry (direction too) the folder gives', byPacs === byFolder && byPacs !== 'null', `${byPacs} vs ${byFolder}`);
   });
 
+  // ---- 2b. Open from PACS…: search by patient ID, pick the study, open the series -------------
+  await withBrowser(async (page) => {
+    await page.goto(`${site}?dicomweb=/dicom-web&method=intensity`);
+    await clickControl(page, 'pacs-patient-id');
+    await page.waitForTimeout(300);
+    await page.keyboard.type('Lung*');
+    await page.waitForTimeout(300);
+    await clickControl(page, 'pacs-search');
+    await clickControl(page, 'pacs-study:0');
+    await waitStatus(page, () => window.shapecastStatus?.controls?.['pacs-series:0'], 'the series list');
+    await page.screenshot({ path: path.join(outDir, 'pacs-dialog.png') }).catch(() => {});
+    await clickControl(page, 'pacs-open-series');
+    const s = await waitReady(page, 'the series opened from the dialog');
+    check('Open from PACS…: a study found by patient ID, its preselected series opened', s?.phase === 'ready'
+      && JSON.stringify(s?.volume?.dims) === '[512,512,30]' && (s?.link ?? '').includes(`series=${ct.series}`),
+    `${JSON.stringify(s?.volume?.dims)}; error ${s?.error}`);
+  });
+
   // ---- 3. A token in the fragment stays out of URLs and links ------------------------------
   await withBrowser(async (page) => {
     const first = requests.length;
@@ -379,12 +406,15 @@ try {
     let s = await waitStatus(page, () => window.shapecastStatus?.phase === 'error' || window.shapecastStatus?.volume, 'the 401');
     check('401: the page asks for a token', s?.phase === 'error' && /401/.test(s?.error ?? '') && /token/.test(s?.error ?? '') && !s?.volume,
       s?.error);
-    await page.screenshot({ path: path.join(outDir, 'pacs-401.png') });
-    // A fresh load (not a change of fragment in the open page).
-    await page.goto('about:blank');
-    await page.goto(`${G}/?dicomweb=/dicom-web&study=${lockedMr.study}&method=intensity#token=${TOKEN}`);
-    s = await waitReady(page, 'the study with the token');
-    check('401: with #token= the study opens', s?.phase === 'ready' && s?.volume?.dims?.[2] === 20, s?.error ?? '');
+    await page.screenshot({ path: path.join(outDir, 'pacs-401.png') }).catch(() => {});
+    // The dialog opened asking for a token: typed there, the study opens.
+    await clickControl(page, 'pacs-token');
+    await page.waitForTimeout(300);
+    await page.keyboard.type(TOKEN);
+    await page.waitForTimeout(300);
+    await clickControl(page, 'pacs-retry');
+    s = await waitStatus(page, () => window.shapecastStatus?.volume && window.shapecastStatus.phase === 'ready', 'the study with the typed token');
+    check('401: with the token typed into the dialog the study opens (and the 401 message goes)', s?.phase === 'ready' && s?.volume?.dims?.[2] === 20 && !s?.error, s?.error ?? '');
   });
 
   // ---- 5. Progress and Cancel; a body cut short is asked for again -------------------------

@@ -18,6 +18,9 @@
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
+mod backend;
+mod ui;
+
 use super::{ShapecastApp, ViewSource};
 use crate::io::dicomweb::{
     self, Auth, Base, DicomWebError, SeriesInfo, StudyInfo, StudySearch, pick_series,
@@ -99,6 +102,11 @@ pub(super) struct Pacs {
     /// A problem to show in the dialog (e.g. that a token is needed).
     message: Option<String>,
     needs_token: bool,
+    /// The study last asked for and whether it was to be opened, for "Open again" once a token
+    /// is given.
+    last: Option<(PacsTarget, bool)>,
+    /// The error this dialog last put in the app's list (taken away once a study opens).
+    error_shown: Option<String>,
     /// What the running task does, if one runs.
     busy: Option<String>,
     retrieving: bool,
@@ -268,6 +276,7 @@ impl ShapecastApp {
         } else {
             self.pacs.message = Some(e.to_string());
         }
+        self.pacs.error_shown = Some(e.to_string());
         self.error(e.to_string());
     }
 
@@ -308,6 +317,7 @@ impl ShapecastApp {
             Ok(x) => x,
             Err(e) => return self.pacs_fail(e),
         };
+        self.pacs.last = Some((target.clone(), auto_open));
         let task = self.pacs.next_task();
         self.pacs.message = None;
         self.pacs.series.clear();
@@ -336,6 +346,7 @@ impl ShapecastApp {
             Ok(x) => x,
             Err(e) => return self.pacs_fail(e),
         };
+        self.pacs.last = Some((target.clone(), true));
         let task = self.pacs.next_task();
         let what = format!("retrieving series {series} from {}", base.as_str());
         self.pacs.busy = Some(what.clone());
@@ -452,6 +463,11 @@ impl ShapecastApp {
                             }
                             self.pacs.dialog = false;
                             self.pacs.needs_token = false;
+                            self.pacs.message = None;
+                            // What the last attempt failed with is past now.
+                            if let Some(old) = self.pacs.error_shown.take() {
+                                self.errors.retain(|e| *e != old);
+                            }
                             self.loading_origin = Some(ViewSource::DicomWeb {
                                 base: target.base,
                                 study: target.study,
@@ -482,431 +498,6 @@ impl ShapecastApp {
             }
         }
         let _ = ctx;
-    }
-
-    /// The bar above the panes: "Open from PACS…", the retrieval's Cancel, the patient line.
-    pub(super) fn pacs_bar_ui(&mut self, ui: &mut egui::Ui) {
-        ui.horizontal(|ui| {
-            let r = ui
-                .button("Open from PACS…")
-                .on_hover_text("find a study in an archive over DICOMweb (QIDO-RS) and open one of its series (WADO-RS)");
-            self.control("open-pacs", r.rect);
-            if r.clicked() {
-                self.pacs.dialog = true;
-            }
-            if self.pacs.busy.is_some() {
-                let r = ui
-                    .small_button("Cancel")
-                    .on_hover_text("stop the archive's requests; the volume shown stays");
-                self.control("cancel-pacs", r.rect);
-                if r.clicked() {
-                    self.cancel_dicomweb();
-                }
-            }
-            if let Some(line) = self.pacs.patient.as_ref().and_then(patient_line) {
-                ui.separator();
-                ui.label(egui::RichText::new(line).strong())
-                    .on_hover_text("from the study's DICOM header; shown on this screen only, never put into a link or sent anywhere");
-            }
-        });
-    }
-
-    /// The "Open from PACS" dialog.
-    pub(super) fn pacs_window_ui(&mut self, ctx: &egui::Context) {
-        if !self.pacs.dialog {
-            return;
-        }
-        let mut open = true;
-        egui::Window::new("Open from PACS")
-            .open(&mut open)
-            .default_width(640.0)
-            .show(ctx, |ui| self.pacs_dialog_ui(ui));
-        if !open {
-            self.pacs.dialog = false;
-        }
-    }
-
-    fn pacs_dialog_ui(&mut self, ui: &mut egui::Ui) {
-        egui::Grid::new("pacs-server")
-            .num_columns(2)
-            .show(ui, |ui| {
-                let l = ui.label("DICOMweb server");
-                let r = ui
-                    .add(
-                        egui::TextEdit::singleline(&mut self.pacs.server)
-                            .hint_text("/dicom-web, or https://pacs.example.org/dicom-web")
-                            .desired_width(420.0),
-                    )
-                    .labelled_by(l.id);
-                self.control("pacs-server", r.rect);
-                ui.end_row();
-                let l = ui.label("Bearer token");
-                let r = ui
-                    .add(
-                        egui::TextEdit::singleline(&mut self.pacs.token)
-                            .password(true)
-                            .hint_text("optional; never put into a link")
-                            .desired_width(420.0),
-                    )
-                    .labelled_by(l.id);
-                self.control("pacs-token", r.rect);
-                ui.end_row();
-            });
-        if let Some(m) = &self.pacs.message {
-            let colour = if self.pacs.needs_token {
-                egui::Color32::from_rgb(255, 190, 90)
-            } else {
-                egui::Color32::from_rgb(255, 140, 140)
-            };
-            ui.colored_label(colour, m);
-        }
-        ui.separator();
-        ui.label(egui::RichText::new("Find a study").strong());
-        let mut go = false;
-        egui::Grid::new("pacs-search")
-            .num_columns(2)
-            .show(ui, |ui| {
-                for (label, value, hint, name) in [
-                    (
-                        "Patient ID",
-                        &mut self.pacs.search.patient_id,
-                        "e.g. 12345 or 123*",
-                        "pacs-patient-id",
-                    ),
-                    (
-                        "Accession number",
-                        &mut self.pacs.search.accession_number,
-                        "",
-                        "pacs-accession",
-                    ),
-                    (
-                        "Study date",
-                        &mut self.pacs.search.study_date,
-                        "YYYYMMDD or YYYYMMDD-YYYYMMDD",
-                        "pacs-date",
-                    ),
-                ] {
-                    let l = ui.label(label);
-                    let r = ui
-                        .add(
-                            egui::TextEdit::singleline(value)
-                                .hint_text(hint)
-                                .desired_width(260.0),
-                        )
-                        .labelled_by(l.id);
-                    go |= r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-                    self.controls.push((name.to_owned(), r.rect));
-                    ui.end_row();
-                }
-            });
-        ui.horizontal(|ui| {
-            let r = ui.button("Search");
-            self.control("pacs-search", r.rect);
-            go |= r.clicked();
-            if let Some(b) = &self.pacs.busy {
-                ui.spinner();
-                ui.label(b.as_str());
-                if ui.small_button("Cancel").clicked() {
-                    self.cancel_dicomweb();
-                }
-            }
-        });
-        if go {
-            self.pacs_search();
-        }
-        let mut open_study = None;
-        if !self.pacs.studies.is_empty() {
-            ui.separator();
-            ui.label(egui::RichText::new("Studies").strong());
-            egui::ScrollArea::vertical()
-                .id_salt("pacs-studies")
-                .max_height(160.0)
-                .show(ui, |ui| {
-                    for s in &self.pacs.studies {
-                        let current = self
-                            .pacs
-                            .study
-                            .as_ref()
-                            .is_some_and(|(_, c)| c.study_uid == s.study_uid);
-                        if ui.selectable_label(current, study_summary(s)).clicked() {
-                            open_study = Some(s.study_uid.clone());
-                        }
-                    }
-                });
-        }
-        if let Some(study) = open_study {
-            let target = PacsTarget {
-                base: self.pacs.server.clone(),
-                study,
-                series: None,
-            };
-            self.pacs_open_study(target, false);
-        }
-        let mut retrieve = None;
-        if let Some((base, study)) = &self.pacs.study
-            && !self.pacs.series.is_empty()
-        {
-            ui.separator();
-            ui.label(egui::RichText::new(format!("Series of study {}", study.study_uid)).strong());
-            egui::ScrollArea::vertical()
-                .id_salt("pacs-series")
-                .max_height(200.0)
-                .show(ui, |ui| {
-                    for (i, s) in self.pacs.series.iter().enumerate() {
-                        let mut text = s.summary();
-                        if self.pacs.preselected == Some(i) {
-                            text.push_str("  (preselected)");
-                        }
-                        let r = ui.selectable_label(self.pacs.selected == Some(i), text);
-                        self.controls.push((format!("pacs-series:{i}"), r.rect));
-                        if r.clicked() {
-                            self.pacs.selected = Some(i);
-                        }
-                        if r.double_clicked() {
-                            retrieve = Some(i);
-                        }
-                    }
-                });
-            let r = ui.add_enabled(
-                self.pacs.selected.is_some(),
-                egui::Button::new("Open series"),
-            );
-            self.controls.push(("pacs-open-series".to_owned(), r.rect));
-            if r.clicked() {
-                retrieve = self.pacs.selected;
-            }
-            if let Some(i) = retrieve
-                && let Some(s) = self.pacs.series.get(i)
-            {
-                let target = PacsTarget {
-                    base: base.clone(),
-                    study: study.study_uid.clone(),
-                    series: Some(s.series_uid.clone()),
-                };
-                self.pacs_retrieve(target);
-            }
-        }
-    }
-}
-
-/// The page's transport: `fetch` tasks (wasm).
-#[cfg(target_arch = "wasm32")]
-mod backend {
-    use std::rc::Rc;
-
-    use super::{Event, Inbox, PacsTarget};
-    use crate::io::dicomweb::web::WebClient;
-    use crate::io::dicomweb::{Auth, Base, DicomWebError, StudySearch};
-
-    /// A running task: cancelling aborts its requests.
-    pub struct Task(Option<Rc<WebClient>>);
-
-    impl Task {
-        pub fn cancel(&self) {
-            if let Some(c) = &self.0 {
-                c.cancel();
-            }
-        }
-    }
-
-    fn client(
-        base: Base,
-        auth: Auth,
-        task: u64,
-        inbox: &Inbox,
-        fail: impl FnOnce(DicomWebError) -> Event,
-    ) -> Option<Rc<WebClient>> {
-        match WebClient::new(base, auth) {
-            Ok(c) => Some(Rc::new(c)),
-            Err(e) => {
-                inbox.push(task, fail(e));
-                None
-            }
-        }
-    }
-
-    pub fn search(base: Base, auth: Auth, search: StudySearch, task: u64, inbox: Inbox) -> Task {
-        let Some(c) = client(base, auth, task, &inbox, |e| Event::Studies(Err(e))) else {
-            return Task(None);
-        };
-        let client = c.clone();
-        wasm_bindgen_futures::spawn_local(async move {
-            let r = client.search_studies(&search).await;
-            inbox.push(task, Event::Studies(r));
-        });
-        Task(Some(c))
-    }
-
-    pub fn study(base: Base, auth: Auth, target: PacsTarget, task: u64, inbox: Inbox) -> Task {
-        let t = target.clone();
-        let Some(c) = client(base, auth, task, &inbox, |e| Event::Study {
-            target: t,
-            result: Err(e),
-        }) else {
-            return Task(None);
-        };
-        let client = c.clone();
-        wasm_bindgen_futures::spawn_local(async move {
-            let result = async {
-                let info = client.find_study(&target.study).await?;
-                let series = client.list_series(&target.study).await?;
-                Ok((info, series))
-            }
-            .await;
-            inbox.push(task, Event::Study { target, result });
-        });
-        Task(Some(c))
-    }
-
-    pub fn retrieve(base: Base, auth: Auth, target: PacsTarget, task: u64, inbox: Inbox) -> Task {
-        let t = target.clone();
-        let Some(c) = client(base, auth, task, &inbox, |e| Event::Retrieved {
-            target: t,
-            result: Box::new(Err(e)),
-        }) else {
-            return Task(None);
-        };
-        let client = c.clone();
-        wasm_bindgen_futures::spawn_local(async move {
-            let series = target.series.clone().unwrap_or_default();
-            let progress_inbox = inbox.clone();
-            let result = client
-                .retrieve(&target.study, &series, &mut |p| {
-                    progress_inbox.push(
-                        task,
-                        Event::Progress {
-                            done: p.retrieval.instances_done,
-                            total: p.retrieval.instances_total,
-                            bytes: p.streamed_bytes.max(p.retrieval.bytes),
-                            estimate: p.retrieval.bytes_estimate,
-                        },
-                    );
-                })
-                .await;
-            inbox.push(
-                task,
-                Event::Retrieved {
-                    target,
-                    result: Box::new(result),
-                },
-            );
-        });
-        Task(Some(c))
-    }
-
-    /// `#token=...` of the page's address, removed from the address bar (the rest of the
-    /// fragment stays).
-    pub fn take_fragment_token() -> Option<String> {
-        let window = web_sys::window()?;
-        let hash = window.location().hash().ok()?;
-        let fragment = hash.trim_start_matches('#');
-        let params = crate::app::url_params::parse_params(fragment);
-        let token = params
-            .iter()
-            .rev()
-            .find(|(k, _)| k == "token")
-            .map(|(_, v)| v.clone())?;
-        let rest: Vec<&str> = fragment
-            .split('&')
-            .filter(|kv| kv.split('=').next() != Some("token"))
-            .collect();
-        let location = window.location();
-        let url = format!(
-            "{}{}{}",
-            location.pathname().unwrap_or_default(),
-            location.search().unwrap_or_default(),
-            if rest.is_empty() {
-                String::new()
-            } else {
-                format!("#{}", rest.join("&"))
-            }
-        );
-        if let Ok(history) = window.history() {
-            let _ = history.replace_state_with_url(&wasm_bindgen::JsValue::NULL, "", Some(&url));
-        }
-        Some(token)
-    }
-
-    /// Whether the page's query names a token (refused).
-    pub fn query_has_token() -> bool {
-        super::super::web_files::query_params()
-            .iter()
-            .any(|(k, _)| k == "token")
-    }
-}
-
-/// The native transport: a thread per task over the blocking client.
-#[cfg(not(target_arch = "wasm32"))]
-mod backend {
-    use std::sync::Arc;
-    use std::sync::atomic::{AtomicBool, Ordering};
-
-    use super::{Event, Inbox, PacsTarget};
-    use crate::io::dicomweb::client::Client;
-    use crate::io::dicomweb::{Auth, Base, StudySearch};
-
-    /// A running task: cancelling drops its answers (a blocking request in flight ends on its
-    /// own).
-    pub struct Task(Arc<AtomicBool>);
-
-    impl Task {
-        pub fn cancel(&self) {
-            self.0.store(true, Ordering::Relaxed);
-        }
-    }
-
-    fn spawn(task: u64, inbox: Inbox, work: impl FnOnce(&dyn Fn(Event)) + Send + 'static) -> Task {
-        let cancelled = Arc::new(AtomicBool::new(false));
-        let flag = cancelled.clone();
-        let spawned = std::thread::Builder::new()
-            .name("dicomweb".to_owned())
-            .spawn(move || {
-                let send = |e: Event| {
-                    if !flag.load(Ordering::Relaxed) {
-                        inbox.push(task, e);
-                    }
-                };
-                work(&send);
-            });
-        if let Err(e) = spawned {
-            log::error!("cannot start a DICOMweb thread: {e}");
-        }
-        Task(cancelled)
-    }
-
-    pub fn search(base: Base, auth: Auth, search: StudySearch, task: u64, inbox: Inbox) -> Task {
-        spawn(task, inbox, move |send| {
-            let r = Client::new(base, auth).and_then(|c| c.search_studies(&search));
-            send(Event::Studies(r));
-        })
-    }
-
-    pub fn study(base: Base, auth: Auth, target: PacsTarget, task: u64, inbox: Inbox) -> Task {
-        spawn(task, inbox, move |send| {
-            let result = Client::new(base, auth)
-                .and_then(|c| Ok((c.find_study(&target.study)?, c.list_series(&target.study)?)));
-            send(Event::Study { target, result });
-        })
-    }
-
-    pub fn retrieve(base: Base, auth: Auth, target: PacsTarget, task: u64, inbox: Inbox) -> Task {
-        spawn(task, inbox, move |send| {
-            let series = target.series.clone().unwrap_or_default();
-            let result = Client::new(base, auth).and_then(|c| {
-                c.retrieve(&target.study, &series, &mut |p| {
-                    send(Event::Progress {
-                        done: p.instances_done,
-                        total: p.instances_total,
-                        bytes: p.bytes,
-                        estimate: p.bytes_estimate,
-                    });
-                })
-            });
-            send(Event::Retrieved {
-                target,
-                result: Box::new(result),
-            });
-        })
     }
 }
 
