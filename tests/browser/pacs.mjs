@@ -289,6 +289,14 @@ async function clickControl(page, name) {
   if (!r) throw new Error(`no control ${name} in ${JSON.stringify(Object.keys(s?.controls ?? {}))}`);
   await page.mouse.click(r[0] + r[2] / 2, r[1] + r[3] / 2);
 }
+// Types into the egui text field just clicked, once the page's text input has the focus (keys
+// sent before that are lost on a slow machine), then lets a few frames pass.
+async function typeIntoFocusedField(page, text) {
+  await page.waitForFunction(() => document.activeElement?.tagName === 'INPUT' && document.activeElement.type !== 'file',
+    null, { timeout: 30000, polling: 100 }).catch(() => console.log('  the text field did not take the focus'));
+  await page.keyboard.type(text, { delay: 40 });
+  await page.waitForTimeout(500);
+}
 const geometry = (s) => JSON.stringify(s?.volume
   ? { dims: s.volume.dims, spacing: s.volume.spacing_mm, origin: s.volume.origin_mm, direction: s.volume.direction }
   : null);
@@ -369,9 +377,7 @@ try {
   await withBrowser(async (page) => {
     await page.goto(`${site}?dicomweb=/dicom-web&method=intensity`);
     await clickControl(page, 'pacs-patient-id');
-    await page.waitForTimeout(300);
-    await page.keyboard.type('Lung*');
-    await page.waitForTimeout(300);
+    await typeIntoFocusedField(page, 'Lung*');
     await clickControl(page, 'pacs-search');
     await clickControl(page, 'pacs-study:0');
     await waitStatus(page, () => window.shapecastStatus?.controls?.['pacs-series:0'], 'the series list');
@@ -409,9 +415,8 @@ try {
     await page.screenshot({ path: path.join(outDir, 'pacs-401.png') }).catch(() => {});
     // The dialog opened asking for a token: typed there, the study opens.
     await clickControl(page, 'pacs-token');
-    await page.waitForTimeout(300);
-    await page.keyboard.type(TOKEN);
-    await page.waitForTimeout(300);
+    await typeIntoFocusedField(page, TOKEN);
+    // Published once the field holds a token.
     await clickControl(page, 'pacs-retry');
     s = await waitStatus(page, () => window.shapecastStatus?.volume && window.shapecastStatus.phase === 'ready', 'the study with the typed token');
     check('401: with the token typed into the dialog the study opens (and the 401 message goes)', s?.phase === 'ready' && s?.volume?.dims?.[2] === 20 && !s?.error, s?.error ?? '');

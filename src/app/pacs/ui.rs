@@ -84,11 +84,12 @@ impl ShapecastApp {
         if self.pacs.needs_token
             && let Some((target, auto_open)) = self.pacs.last.clone()
         {
-            let r = ui.add_enabled(
-                !self.pacs.token.trim().is_empty() && self.pacs.busy.is_none(),
-                egui::Button::new("Open again with the token"),
-            );
-            self.control("pacs-retry", r.rect);
+            let enabled = !self.pacs.token.trim().is_empty() && self.pacs.busy.is_none();
+            let r = ui.add_enabled(enabled, egui::Button::new("Open again with the token"));
+            // Published only when it can be clicked (a token typed), for automation.
+            if enabled {
+                self.control("pacs-retry", r.rect);
+            }
             if r.clicked() {
                 self.pacs.needs_token = false;
                 match target.series {
