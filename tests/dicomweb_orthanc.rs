@@ -738,3 +738,112 @@ fn an_instance_cut_short_is_asked_for_again_then_named() {
         assert_eq!(server.hits.load(Ordering::SeqCst), 2, "asked for twice");
     }
 }
+
+/// The viewer (egui_kittest on the test adapter) opening a study from Orthanc as the page's
+/// `?dicomweb=` does: the chooser's series, the geometry the file loader gives, the patient line
+/// from the header, a link that names the archive and no patient data; with authentication on,
+/// the error asks for a token and the dialog opens.
+#[test]
+fn the_viewer_opens_a_study_and_shows_its_patient() {
+    use egui_kittest::Harness;
+    use shapecast::app::{AppOptions, DisplayMode, PacsTarget, ShapecastApp, StartWith};
+    use shapecast::status::Phase;
+
+    let Some(dir) = common::shared_data("series/mr-prostate-adc-oblique") else {
+        return;
+    };
+    if shapecast::gpu::context::test_context().is_none() {
+        return;
+    }
+    let run = |orthanc: &Orthanc, study: &str, until: &dyn Fn(&ShapecastApp) -> bool| {
+        let options = AppOptions {
+            start: StartWith::DicomWeb(PacsTarget {
+                base: orthanc.url("/dicom-web"),
+                study: study.to_owned(),
+                series: None,
+            }),
+            mode: DisplayMode::Intensity,
+            compute_on_load: false,
+            ..AppOptions::default()
+        };
+        let mut setup = egui_kittest::wgpu::default_wgpu_setup();
+        if let eframe::egui_wgpu::WgpuSetup::CreateNew(create) = &mut setup {
+            create.device_descriptor = Arc::new(shapecast::gpu::context::device_descriptor);
+        }
+        let mut harness = Harness::builder()
+            .with_size(egui::vec2(1280.0, 800.0))
+            .wgpu_setup(setup)
+            .build_eframe(move |cc| ShapecastApp::with_options(cc, options));
+        let started = Instant::now();
+        while !until(harness.state()) {
+            assert!(
+                started.elapsed() < Duration::from_secs(120),
+                "{:?}",
+                harness.state().status()
+            );
+            harness.step();
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        harness.run_steps(2);
+        harness
+    };
+
+    let files = series_files(&dir);
+    let (study, _) = uids(&files[0]);
+    let by_files = shapecast::io::load(&files.iter().map(|f| common::input(f)).collect::<Vec<_>>())
+        .expect("the file loader");
+    let Some(orthanc) = Orthanc::start(false) else {
+        return;
+    };
+    orthanc.upload(&files);
+    let harness = run(&orthanc, &study, &|app| {
+        app.volume().is_some() || app.status().phase == Phase::Error
+    });
+    let app = harness.state();
+    let v = app.volume().expect("a volume");
+    let f = &by_files.volume;
+    assert_eq!(
+        (v.dims, v.spacing_mm, v.origin_mm, v.direction),
+        (f.dims, f.spacing_mm, f.origin_mm, f.direction)
+    );
+    let patient = by_files.patient.clone().expect("the header's patient");
+    let line = app.patient_line().expect("a patient line");
+    if let Some(id) = &patient.id {
+        assert!(line.contains(&format!("ID {id}")), "{line}");
+    }
+    let link = app.link();
+    assert!(link.contains("dicomweb=http://127.0.0.1:"), "{link}");
+    // The dialog's study search (QIDO-RS by patient ID, with a wildcard, and by date).
+    let client = Client::new(orthanc.base(), Auth::None).expect("client");
+    if let Some(id) = &patient.id {
+        let prefix: String = id.chars().take(3).collect();
+        let search = shapecast::io::dicomweb::StudySearch {
+            patient_id: format!("{prefix}*"),
+            ..Default::default()
+        };
+        let found = client.search_studies(&search).expect("search");
+        assert!(found.iter().any(|s| s.study_uid == study), "{found:?}");
+    }
+    let nobody = shapecast::io::dicomweb::StudySearch {
+        study_date: "19000101-19000102".to_owned(),
+        ..Default::default()
+    };
+    assert!(client.search_studies(&nobody).expect("search").is_empty());
+    for secret in [&patient.id, &patient.name].into_iter().flatten() {
+        assert!(!link.contains(secret.as_str()), "{link}");
+        assert!(!app.status().view_json.contains(secret.as_str()));
+    }
+    drop(harness);
+
+    let Some(locked) = Orthanc::start(true) else {
+        return;
+    };
+    locked.upload(&files);
+    let harness = run(&locked, &study, &|app| app.status().phase == Phase::Error);
+    let app = harness.state();
+    let error = app.errors().last().cloned().unwrap_or_default();
+    assert!(error.contains("401") && error.contains("token"), "{error}");
+    let (dialog, message) = app.pacs_dialog();
+    assert!(dialog && message.is_some_and(|m| m.contains("Paste a bearer token")));
+    assert!(app.volume().is_none());
+}

@@ -221,6 +221,7 @@ impl LoadJob {
                     Some(volume) => LoadStep::Done(Box::new(Loaded {
                         volume,
                         notes: Vec::new(),
+                        patient: None,
                     })),
                     None => LoadStep::Failed(format!(
                         "unknown phantom {name:?}; known: {}, {}",

@@ -10,6 +10,7 @@ pub mod demo;
 pub mod features;
 pub mod load;
 pub mod mip_view;
+mod pacs;
 mod panels;
 mod probe;
 mod share;
@@ -38,6 +39,7 @@ use crate::volume::Volume;
 
 pub use features::{DisplayMode, FeatureDisplay, FeatureEntry, FeatureParams, JobOutcome};
 pub use load::LoadSource;
+pub use pacs::PacsTarget;
 pub use slices::SliceKind;
 pub use view_link::{ViewSource, ViewState};
 pub use window_level::{Window, WindowPreset};
@@ -100,6 +102,8 @@ pub enum StartWith {
     Paths(Vec<std::path::PathBuf>),
     /// Files downloaded from these URLs (the page's `?url=`, a link; web only).
     Urls(Vec<String>),
+    /// A study in a DICOMweb archive (the page's `?dicomweb=BASE&study=UID[&series=UID]`).
+    DicomWeb(PacsTarget),
     /// Nothing: an empty app that asks for files.
     Nothing,
 }
@@ -163,6 +167,15 @@ impl AppOptions {
             if !urls.is_empty() {
                 o.start = StartWith::Urls(urls);
             }
+            if let Some(base) = param("dicomweb").filter(|b| !b.trim().is_empty()) {
+                o.start = StartWith::DicomWeb(PacsTarget {
+                    base: base.trim().to_owned(),
+                    study: param("study").unwrap_or_default().trim().to_owned(),
+                    series: param("series")
+                        .map(|s| s.trim().to_owned())
+                        .filter(|s| !s.is_empty()),
+                });
+            }
             if let Some(m) = param("method").and_then(|m| DisplayMode::from_name(&m)) {
                 o.mode = m;
             }
@@ -187,6 +200,17 @@ impl AppOptions {
             Some(ViewSource::Demo) => self.start = StartWith::DemoCt,
             Some(ViewSource::Phantom(name)) => self.start = StartWith::Phantom(name.clone()),
             Some(ViewSource::Urls(urls)) => self.start = StartWith::Urls(urls.clone()),
+            Some(ViewSource::DicomWeb {
+                base,
+                study,
+                series,
+            }) => {
+                self.start = StartWith::DicomWeb(PacsTarget {
+                    base: base.clone(),
+                    study: study.clone(),
+                    series: Some(series.clone()).filter(|s| !s.is_empty()),
+                });
+            }
             // The user has the file; the app waits for it to be dropped.
             Some(ViewSource::Dropped { .. }) => self.start = StartWith::Nothing,
             None => {}
@@ -304,6 +328,8 @@ pub struct ShapecastApp {
     controls: Vec<(String, egui::Rect)>,
     /// When "Copy link" was last clicked (egui time), for its "copied" feedback.
     link_copied_at: Option<f64>,
+    /// "Open from PACS…", DICOMweb retrievals and the patient line.
+    pacs: pacs::Pacs,
 }
 
 impl ShapecastApp {
@@ -389,6 +415,7 @@ impl ShapecastApp {
             pending_camera: None,
             controls: Vec::new(),
             link_copied_at: None,
+            pacs: pacs::Pacs::default(),
         }
     }
 
@@ -577,7 +604,7 @@ impl ShapecastApp {
         if let Err(e) = web_files::install(ctx) {
             self.error(format!("drag and drop is unavailable: {e}"));
         }
-        let _ = ctx;
+        self.pacs_start(ctx);
         match self.options.start.clone() {
             StartWith::DemoCt => {
                 #[cfg(target_arch = "wasm32")]
@@ -592,6 +619,7 @@ impl ShapecastApp {
             #[cfg(not(target_arch = "wasm32"))]
             StartWith::Paths(paths) => self.open(LoadSource::Paths(paths)),
             StartWith::Urls(urls) => self.open_urls(urls),
+            StartWith::DicomWeb(target) => self.open_dicomweb(target),
             StartWith::Nothing => {}
         }
     }
@@ -730,6 +758,7 @@ impl ShapecastApp {
     /// Makes a loaded volume the displayed one (or says why it cannot be shown).
     fn install(&mut self, loaded: crate::io::Loaded) {
         let Some(gpu) = &self.gpu else { return };
+        let patient = loaded.patient;
         let mut volume = loaded.volume;
         let mut notes = loaded.notes;
         // Larger than one 3D texture of this device: a reduced copy, said so (the file is
@@ -781,6 +810,7 @@ impl ShapecastApp {
             generation: self.generation,
             origin: self.loading_origin.take(),
         });
+        self.pacs.patient = patient;
         self.pending_camera = None;
         // A link's view for this volume replaces the defaults it just got.
         self.apply_pending_view();
@@ -1093,10 +1123,12 @@ impl eframe::App for ShapecastApp {
         self.controls.clear();
         self.start_once(&ctx);
         self.take_external_files(&ctx);
+        self.pacs_frame(&ctx);
         self.advance();
         self.status.frames += 1;
 
         egui::Panel::top("top").show(ui, |ui| self.top_bar_ui(ui));
+        egui::Panel::top("pacs").show(ui, |ui| self.pacs_bar_ui(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status_bar_ui(ui));
         egui::Panel::left("controls")
             .resizable(true)
@@ -1110,6 +1142,7 @@ impl eframe::App for ShapecastApp {
             self.panes_ui(ui, frame);
         });
         self.about_ui(&ctx);
+        self.pacs_window_ui(&ctx);
         self.drop_overlay(&ctx);
 
         self.update_probe();

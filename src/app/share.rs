@@ -77,6 +77,15 @@ impl ShapecastApp {
                     ViewSource::Urls(urls) => self.open_urls(urls),
                     ViewSource::Phantom(name) => self.open(super::LoadSource::Phantom(name)),
                     ViewSource::Demo => self.open_demo_ct(),
+                    ViewSource::DicomWeb {
+                        base,
+                        study,
+                        series,
+                    } => self.open_dicomweb(super::PacsTarget {
+                        base,
+                        study,
+                        series: Some(series).filter(|s| !s.is_empty()),
+                    }),
                     // The link's file is on its author's computer: wait for the user's drop.
                     ViewSource::Dropped { .. } => {}
                 }

@@ -36,6 +36,13 @@ pub enum ViewSource {
     /// Files from the author's own computer (dropped or opened): what to drop to see the view
     /// (a file's name, or a folder's as the app labels it) and its size in bytes.
     Dropped { name: String, bytes: u64 },
+    /// A series in a DICOMweb archive: its root (absolute, or relative to the page's origin),
+    /// study and series UIDs. Credentials never go into a link.
+    DicomWeb {
+        base: String,
+        study: String,
+        series: String,
+    },
 }
 
 impl ViewSource {
@@ -49,6 +56,7 @@ impl ViewSource {
                 many => format!("{} files from {}", many.len(), host_of(&many[0])),
             },
             Self::Dropped { name, bytes } => format!("{name} ({})", human_bytes(*bytes)),
+            Self::DicomWeb { base, series, .. } => format!("series {series} from {base}"),
         }
     }
 }
@@ -142,6 +150,15 @@ impl ViewState {
             Some(ViewSource::Dropped { name, bytes }) => {
                 f.push(("file", Value::Text(name.clone())));
                 f.push(("bytes", Value::Num(bytes.to_string())));
+            }
+            Some(ViewSource::DicomWeb {
+                base,
+                study,
+                series,
+            }) => {
+                f.push(("dicomweb", Value::Text(base.clone())));
+                f.push(("study", Value::Text(study.clone())));
+                f.push(("series", Value::Text(series.clone())));
             }
             None => {}
         }
@@ -328,6 +345,22 @@ impl ViewState {
             .collect();
         if !urls.is_empty() {
             v.source = Some(ViewSource::Urls(urls));
+        } else if let Some(base) = f.get("dicomweb") {
+            match (f.get("study"), f.get("series")) {
+                (Some(study), Some(series)) if !base.trim().is_empty() => {
+                    v.source = Some(ViewSource::DicomWeb {
+                        base: base.trim().to_owned(),
+                        study: study.trim().to_owned(),
+                        series: series.trim().to_owned(),
+                    });
+                }
+                _ => bad(
+                    &mut f.problems,
+                    "dicomweb",
+                    base,
+                    "an archive's DICOMweb root with study=UID and series=UID beside it",
+                ),
+            }
         } else if let Some(name) = f.get("file") {
             match f.get("bytes").map(|b| b.parse::<u64>()) {
                 Some(Ok(bytes)) if !name.is_empty() => {
@@ -677,6 +710,11 @@ mod tests {
                 ViewSource::Dropped {
                     name: "ct-head (93 files)".into(),
                     bytes: 1_234_567,
+                },
+                ViewSource::DicomWeb {
+                    base: "/dicom-web".into(),
+                    study: "1.2.3".into(),
+                    series: "1.2.3.4".into(),
                 },
             ] {
                 let v = ViewState {

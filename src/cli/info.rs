@@ -177,6 +177,7 @@ mod tests {
         let loaded = Loaded {
             volume: Volume::from_f32([2, 1, 1], [0.5, 1.0, 2.0], vec![-3.0, 4.0]),
             notes: Vec::new(),
+            patient: None,
         };
         let j = to_json(&loaded);
         for key in [

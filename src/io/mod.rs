@@ -45,6 +45,29 @@ impl InputFile {
 pub struct Loaded {
     pub volume: Volume,
     pub notes: Vec<String>,
+    /// Who and what a DICOM series is (its first image's header); `None` for other formats.
+    pub patient: Option<Patient>,
+}
+
+/// The patient and study of a DICOM series, as its header (or an archive's QIDO-RS answer)
+/// says: for the user's own screen only, never written into a link, a log line or a request.
+/// `Debug` shows none of it.
+#[derive(Clone, Default, PartialEq, Eq)]
+pub struct Patient {
+    /// PatientName as written (`Family^Given`).
+    pub name: Option<String>,
+    pub id: Option<String>,
+    /// PatientBirthDate, `YYYYMMDD`.
+    pub birth_date: Option<String>,
+    /// StudyDate, `YYYYMMDD`.
+    pub study_date: Option<String>,
+    pub series_description: Option<String>,
+}
+
+impl std::fmt::Debug for Patient {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Patient(..)")
+    }
 }
 
 /// Memory caps applied before allocating. The defaults let a 512x512x2000 i16 CT (1 GiB) through.
@@ -279,6 +302,7 @@ pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadErr
         Loaded {
             volume,
             notes: Vec::new(),
+            patient: None,
         }
     } else if dicom_count > 0 {
         let dicom_files: Vec<&InputFile> = files

@@ -9,8 +9,9 @@ use std::time::Instant;
 
 const TRUNK_VERSION: &str = "0.21.14";
 /// Debian packages the checks need: lavapipe (Vulkan on the CPU) for the GPU tests, Chromium for
-/// the browser test, and Orthanc with its DICOMweb plugin, the real archive that
-/// tests/dicomweb_orthanc.rs starts on a free 127.0.0.1 port.
+/// the browser test, and Orthanc with its DICOMweb plugin (ServeFolders comes with orthanc), the
+/// real archive that tests/dicomweb_orthanc.rs and tests/browser/pacs.mjs start on a free
+/// 127.0.0.1 port.
 const APT_PACKAGES: &[&str] = &[
     "mesa-vulkan-drivers",
     "chromium",
@@ -329,6 +330,11 @@ const STEPS: &[Step] = &[
     Step {
         name: "browser-links",
         run: || run(Command::new("node").arg("tests/browser/links.mjs")),
+    },
+    Step {
+        name: "browser-pacs",
+        // Orthanc (installed by setup) serves the built site and the series of ../shared/data.
+        run: || run(Command::new("node").arg("tests/browser/pacs.mjs")),
     },
 ];
 

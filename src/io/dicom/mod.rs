@@ -223,6 +223,7 @@ pub(super) struct FileHeader {
     pub photometric: String,
     pub frames: Vec<FrameInfo>,
     pub warnings: Vec<String>,
+    pub patient: crate::io::Patient,
 }
 
 fn frame_info(levels: &[Option<&InMemDicomObject>]) -> FrameInfo {
@@ -427,6 +428,13 @@ pub(super) fn read_header(
             .unwrap_or_else(|| "MONOCHROME2".to_owned()),
         frames,
         warnings,
+        patient: crate::io::Patient {
+            name: elem_str(&obj, tags::PATIENT_NAME),
+            id: elem_str(&obj, tags::PATIENT_ID),
+            birth_date: elem_str(&obj, tags::PATIENT_BIRTH_DATE),
+            study_date: elem_str(&obj, tags::STUDY_DATE),
+            series_description: elem_str(&obj, tags::SERIES_DESCRIPTION),
+        },
     }))
 }
 

@@ -57,7 +57,12 @@ pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loade
     volume
         .warnings
         .extend(header_warnings(chosen.iter().map(|(_, h)| *h)));
-    Ok(Loaded { volume, notes })
+    let patient = Some(chosen[0].1.patient.clone());
+    Ok(Loaded {
+        volume,
+        notes,
+        patient,
+    })
 }
 
 /// What the headers of a series' images say for the user, sorted so that the volume does not

@@ -306,7 +306,12 @@ impl SeriesBuilder {
         if let Some(w) = volume.non_finite_warning() {
             volume.warnings.push(w);
         }
-        Ok(Loaded { volume, notes })
+        let patient = Some(chosen[0].header.patient.clone());
+        Ok(Loaded {
+            volume,
+            notes,
+            patient,
+        })
     }
 }
 

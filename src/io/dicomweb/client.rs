@@ -11,14 +11,12 @@ use std::time::Duration;
 use super::multipart::{MultipartLimits, Part};
 use super::qido::{self, InstanceInfo, SeriesInfo, StudyInfo};
 use super::retrieve::{Fetch, InstanceResponse, Progress, Retrieval};
-use super::{Auth, Base, DicomWebError, Request, check_status};
+use super::{Auth, Base, DicomWebError, Request, StudySearch, check_status};
 use crate::io::{Limits, Loaded};
 
-/// Largest QIDO-RS answer read, bytes.
-pub const MAX_JSON_BYTES: u64 = 64 << 20;
+pub use super::MAX_JSON_BYTES;
 
-/// Instance requests in flight by default.
-pub const DEFAULT_PARALLEL: usize = 4;
+pub use super::DEFAULT_PARALLEL;
 
 /// An answer: status, Content-Type and the body, read as it arrives.
 pub struct HttpResponse {
@@ -203,6 +201,13 @@ impl<T: Transport> Client<T> {
         Ok(body)
     }
 
+    /// The studies matching a search.
+    pub fn search_studies(&self, search: &StudySearch) -> Result<Vec<StudyInfo>, DicomWebError> {
+        let url = self.base.study_search(search)?;
+        let body = self.get_json(url.clone(), "the study search")?;
+        qido::parse_studies(&url, &body)
+    }
+
     /// The study's patient, date and description; `NotFound` when the archive lacks it.
     pub fn find_study(&self, study: &str) -> Result<StudyInfo, DicomWebError> {
         let url = self.base.study_query(study)?;
@@ -234,31 +239,7 @@ impl<T: Transport> Client<T> {
     pub fn resolve(&self, study: &str, series: Option<&str>) -> Result<Resolved, DicomWebError> {
         let info = self.find_study(study)?;
         let list = self.list_series(study)?;
-        let (chosen, by_chooser) = match series {
-            Some(uid) => {
-                let uid = super::check_uid("SeriesInstanceUID", uid)?;
-                let i = list
-                    .iter()
-                    .position(|s| s.series_uid == uid)
-                    .ok_or_else(|| DicomWebError::SeriesNotInStudy {
-                        study: study.to_owned(),
-                        series: uid.to_owned(),
-                        available: list
-                            .iter()
-                            .map(|s| s.series_uid.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", "),
-                    })?;
-                (i, false)
-            }
-            None => (
-                qido::choose_series(&list).ok_or_else(|| DicomWebError::NotFound {
-                    what: format!("a series of study {study}"),
-                    url: self.base.series_query(study).unwrap_or_default(),
-                })?,
-                true,
-            ),
-        };
+        let (chosen, by_chooser) = super::pick_series(&self.base, study, &list, series)?;
         Ok(Resolved {
             study: info,
             series: list,

@@ -11,19 +11,29 @@
 //!   one retry of a failed instance, progress), decoding each instance as it arrives into
 //!   [`crate::io::SeriesBuilder`], the file loader's own series code;
 //! - `client` (native only): the blocking HTTP transport (ureq) behind the [`client::Transport`]
-//!   trait and the driver that keeps several instance requests in flight.
+//!   trait and the driver that keeps several instance requests in flight;
+//! - `web` (wasm only): the page's transport, the browser's `fetch` with streamed bodies,
+//!   driving the same `Retrieval` from one async task.
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod client;
 pub mod multipart;
 pub mod qido;
 pub mod retrieve;
+#[cfg(target_arch = "wasm32")]
+pub mod web;
 
 pub use multipart::{MultipartParser, Part};
 pub use qido::{InstanceInfo, SeriesInfo, StudyInfo, choose_series};
 pub use retrieve::{Fetch, InstanceResponse, Progress, Retrieval};
 
 use crate::io::LoadError;
+
+/// Largest QIDO-RS answer read, bytes.
+pub const MAX_JSON_BYTES: u64 = 64 << 20;
+
+/// Instance requests in flight at once by default (both transports).
+pub const DEFAULT_PARALLEL: usize = 4;
 
 /// Why a DICOMweb request or retrieval failed; each message names the URL, host or instance.
 #[derive(Debug, thiserror::Error)]
@@ -37,6 +47,13 @@ pub enum DicomWebError {
 
     #[error("credentials: {0}")]
     InvalidAuth(String),
+
+    #[error("study search: {field} {value:?}: {reason}")]
+    InvalidSearch {
+        field: &'static str,
+        value: String,
+        reason: &'static str,
+    },
 
     #[error("{}", unauthorized_message(*status, url, *credentials))]
     Unauthorized {
@@ -212,6 +229,20 @@ impl Base {
         Ok(format!("{}/studies?StudyInstanceUID={study}", self.url))
     }
 
+    /// `{base}/studies?PatientID=..&AccessionNumber=..&StudyDate=..&limit=N`: the studies
+    /// that match every criterion given (none given: the archive's first studies).
+    pub fn study_search(&self, search: &StudySearch) -> Result<String, DicomWebError> {
+        let mut url = format!("{}/studies?", self.url);
+        for (key, value) in search.criteria()? {
+            url.push_str(key);
+            url.push('=');
+            url.push_str(&query_encode(&value));
+            url.push('&');
+        }
+        url.push_str(&format!("limit={}", StudySearch::LIMIT));
+        Ok(url)
+    }
+
     /// `{base}/studies/{study}/series`, asking for SliceThickness too where the archive has it.
     pub fn series_query(&self, study: &str) -> Result<String, DicomWebError> {
         let study = check_uid("StudyInstanceUID", study)?;
@@ -246,6 +277,117 @@ impl Base {
             self.url
         ))
     }
+}
+
+/// The series of `list` to open: the one named, else the chooser's (`qido::choose_series`);
+/// and whether the chooser picked it.
+pub fn pick_series(
+    base: &Base,
+    study: &str,
+    list: &[SeriesInfo],
+    series: Option<&str>,
+) -> Result<(usize, bool), DicomWebError> {
+    match series {
+        Some(uid) => {
+            let uid = check_uid("SeriesInstanceUID", uid)?;
+            let i = list
+                .iter()
+                .position(|s| s.series_uid == uid)
+                .ok_or_else(|| DicomWebError::SeriesNotInStudy {
+                    study: study.to_owned(),
+                    series: uid.to_owned(),
+                    available: list
+                        .iter()
+                        .map(|s| s.series_uid.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                })?;
+            Ok((i, false))
+        }
+        None => Ok((
+            choose_series(list).ok_or_else(|| DicomWebError::NotFound {
+                what: format!("a series of study {study}"),
+                url: base.series_query(study).unwrap_or_default(),
+            })?,
+            true,
+        )),
+    }
+}
+
+/// What a study search asks for: a patient ID, an accession number and a study date (or a date
+/// range), each optional. `*` and `?` are wildcards, as QIDO-RS matches strings.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct StudySearch {
+    pub patient_id: String,
+    pub accession_number: String,
+    /// `YYYYMMDD`, or a range `YYYYMMDD-YYYYMMDD` (either end may be left open).
+    pub study_date: String,
+}
+
+impl StudySearch {
+    /// Most studies one search lists.
+    pub const LIMIT: usize = 100;
+
+    /// The query's (key, value) pairs, each checked.
+    fn criteria(&self) -> Result<Vec<(&'static str, String)>, DicomWebError> {
+        let mut out = Vec::new();
+        for (field, key, value) in [
+            ("patient ID", "PatientID", &self.patient_id),
+            (
+                "accession number",
+                "AccessionNumber",
+                &self.accession_number,
+            ),
+        ] {
+            let v = value.trim();
+            if v.is_empty() {
+                continue;
+            }
+            let bad = |reason| DicomWebError::InvalidSearch {
+                field,
+                value: v.chars().take(80).collect(),
+                reason,
+            };
+            if v.chars().count() > 64 {
+                return Err(bad("longer than 64 characters"));
+            }
+            if v.chars().any(|c| c.is_control() || c == '\\') {
+                return Err(bad("holds a control character or a backslash"));
+            }
+            out.push((key, v.to_owned()));
+        }
+        let d = self.study_date.trim();
+        if !d.is_empty() {
+            let date =
+                |s: &str| s.is_empty() || (s.len() == 8 && s.bytes().all(|b| b.is_ascii_digit()));
+            let ok = match d.split_once('-') {
+                Some((a, b)) => date(a) && date(b) && !(a.is_empty() && b.is_empty()),
+                None => d.len() == 8 && date(d),
+            };
+            if !ok {
+                return Err(DicomWebError::InvalidSearch {
+                    field: "study date",
+                    value: d.chars().take(80).collect(),
+                    reason: "expected YYYYMMDD or a range YYYYMMDD-YYYYMMDD (an end may be left open)",
+                });
+            }
+            out.push(("StudyDate", d.to_owned()));
+        }
+        Ok(out)
+    }
+}
+
+/// Percent-encodes a query value (everything but unreserved characters and the wildcards).
+fn query_encode(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for b in s.bytes() {
+        if b.is_ascii_alphanumeric() || b"-._~*".contains(&b) {
+            out.push(char::from(b));
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
 }
 
 /// Checks that a UID is digits and dots (1 to 64 characters), so that it can go into a URL
@@ -518,6 +660,57 @@ mod tests {
             let e = Base::parse(bad).unwrap_err();
             assert!(matches!(e, DicomWebError::InvalidBase { .. }), "{bad}: {e}");
         }
+    }
+
+    #[test]
+    fn study_searches_are_checked_and_encoded() {
+        let b = Base::parse("/dicom-web").unwrap();
+        assert_eq!(
+            b.study_search(&StudySearch::default()).unwrap(),
+            "/dicom-web/studies?limit=100"
+        );
+        let s = StudySearch {
+            patient_id: " Lung_Dx A0002* ".to_owned(),
+            accession_number: "a&b=c?".to_owned(),
+            study_date: "20070101-".to_owned(),
+        };
+        assert_eq!(
+            b.study_search(&s).unwrap(),
+            "/dicom-web/studies?PatientID=Lung_Dx%20A0002*&AccessionNumber=a%26b%3Dc%3F&StudyDate=20070101-&limit=100"
+        );
+        for (date, ok) in [
+            ("20070425", true),
+            ("-20070425", true),
+            ("20070101-20071231", true),
+            ("2007-04-25", false),
+            ("-", false),
+            ("2007042", false),
+            ("yesterday", false),
+        ] {
+            let s = StudySearch {
+                study_date: date.to_owned(),
+                ..StudySearch::default()
+            };
+            assert_eq!(b.study_search(&s).is_ok(), ok, "{date}");
+        }
+        let e = b
+            .study_search(&StudySearch {
+                patient_id: "a\nb".to_owned(),
+                ..StudySearch::default()
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("patient ID") && e.contains("control"), "{e}");
+        let long = StudySearch {
+            accession_number: "x".repeat(65),
+            ..StudySearch::default()
+        };
+        assert!(
+            b.study_search(&long)
+                .unwrap_err()
+                .to_string()
+                .contains("accession number")
+        );
     }
 
     #[test]

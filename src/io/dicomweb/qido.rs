@@ -17,6 +17,8 @@ pub struct StudyInfo {
     pub study_uid: String,
     pub patient_name: Option<String>,
     pub patient_id: Option<String>,
+    /// PatientBirthDate as written (YYYYMMDD).
+    pub patient_birth_date: Option<String>,
     /// StudyDate as written (YYYYMMDD).
     pub study_date: Option<String>,
     pub description: Option<String>,
@@ -78,6 +80,7 @@ pub fn parse_studies(url: &str, body: &[u8]) -> Result<Vec<StudyInfo>, DicomWebE
                 study_uid: uid(url, o, "0020000D", "StudyInstanceUID")?,
                 patient_name: string(o, "00100010"),
                 patient_id: string(o, "00100020"),
+                patient_birth_date: string(o, "00100030"),
                 study_date: string(o, "00080020"),
                 description: string(o, "00081030"),
                 accession_number: string(o, "00080050"),
@@ -286,12 +289,14 @@ mod tests {
         let body = r#"[{"0020000D":{"vr":"UI","Value":["1.2.3"]},
             "00100010":{"vr":"PN","Value":[{"Alphabetic":"Doe^Jane"}]},
             "00100020":{"vr":"LO","Value":["P-7"]},"00080020":{"vr":"DA","Value":["20240102"]},
+            "00100030":{"vr":"DA","Value":["19700101"]},
             "00080061":{"vr":"CS","Value":["CT","SR"]},"00201206":{"vr":"IS","Value":[3]},
             "00080050":{"vr":"SH"}}]"#;
         let s = parse_studies("u", body.as_bytes()).unwrap();
         assert_eq!(s[0].patient_name.as_deref(), Some("Doe^Jane"));
         assert_eq!(s[0].patient_id.as_deref(), Some("P-7"));
         assert_eq!(s[0].study_date.as_deref(), Some("20240102"));
+        assert_eq!(s[0].patient_birth_date.as_deref(), Some("19700101"));
         assert_eq!(s[0].modalities, ["CT", "SR"]);
         assert_eq!(s[0].series_count, Some(3));
         assert_eq!(s[0].accession_number, None);
