@@ -8,7 +8,9 @@
 
 pub mod demo;
 pub mod features;
+mod keys;
 pub mod load;
+pub mod measure;
 pub mod mip_view;
 mod panels;
 mod probe;
@@ -285,11 +287,15 @@ pub struct ShapecastApp {
     panes: [SlicePane; 3],
     slice_renderer: Option<SliceRenderer>,
     mip_view: MipView,
+    /// The measuring tool and the measurements on the volume shown.
+    measure: measure::Measurements,
     /// The volume generation the MIP window was set for.
     mip_window_for: Option<u64>,
     probe: probe::ProbeState,
 
     show_about: bool,
+    /// The keyboard help ("?").
+    show_keys: bool,
     drop_hover: bool,
     #[cfg(not(target_arch = "wasm32"))]
     open_path: String,
@@ -378,9 +384,11 @@ impl ShapecastApp {
             panes: SliceKind::ALL.map(SlicePane::new),
             slice_renderer,
             mip_view: MipView::new(),
+            measure: measure::Measurements::default(),
             mip_window_for: None,
             probe: probe::ProbeState::default(),
             show_about: false,
+            show_keys: false,
             drop_hover: false,
             #[cfg(not(target_arch = "wasm32"))]
             open_path: String::new(),
@@ -756,6 +764,7 @@ impl ShapecastApp {
         self.crosshair = volume.dims.map(|d| d / 2);
         self.hover = None;
         self.features.clear();
+        self.measure.list.clear();
         self.probe = probe::ProbeState::default();
         self.notes = notes;
         self.notes.extend(volume.warnings.iter().cloned());
@@ -963,11 +972,15 @@ impl ShapecastApp {
             features: entry.map(|e| (&e.texture, e.id)),
             overlay,
             window: self.window.range(),
+            tool: self.measure.tool,
+            measurements: &self.measure.list,
+            unit: if scene.is_ct { "HU" } else { "" },
         };
         let mut hover = None;
         let mut toggle = None;
         let mut window_drag = egui::Vec2::ZERO;
         let mut errors = Vec::new();
+        let mut measured = Vec::new();
         let mut mip_drawn = false;
         for (id, rect) in &rects {
             let kind = match id {
@@ -995,6 +1008,7 @@ impl ShapecastApp {
                                         toggle = Some(id);
                                     }
                                     errors.extend(r.error);
+                                    measured.extend(r.measured);
                                 }
                             }
                             PaneId::Mip => {
@@ -1061,6 +1075,11 @@ impl ShapecastApp {
             });
         }
         self.hover = hover;
+        if let Some(s) = &self.scene {
+            for m in measured {
+                self.measure.add(&s.volume, m);
+            }
+        }
         if mip_drawn {
             self.restore_camera(ui.ctx());
         }
@@ -1110,6 +1129,8 @@ impl eframe::App for ShapecastApp {
             self.panes_ui(ui, frame);
         });
         self.about_ui(&ctx);
+        self.keys(&ctx);
+        self.keys_help_ui(&ctx);
         self.drop_overlay(&ctx);
 
         self.update_probe();
