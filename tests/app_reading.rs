@@ -530,6 +530,7 @@ fn number_keys_set_the_window_presets_and_question_mark_shows_the_keys() {
     assert!(h.state().keys_help_shown());
     h.get_by_label("Keys and mouse");
     h.get_by_label_contains("window presets");
+    h.run_steps(3);
     let image = h.render().expect("render");
     save(&image, "reading_keys_help.png");
     h.event(egui::Event::Text("?".into()));
@@ -542,4 +543,42 @@ fn number_keys_set_the_window_presets_and_question_mark_shows_the_keys() {
     h.key_press(egui::Key::Escape);
     h.run_steps(1);
     assert_eq!(h.state().tool(), Tool::Navigate);
+}
+
+#[test]
+fn the_mip_hover_shows_the_value_under_the_pointer() {
+    let Some(mut h) = harness(intensity_only(StartWith::Phantom("sphere".into()))) else {
+        return;
+    };
+    let mip = h
+        .state()
+        .status()
+        .controls
+        .iter()
+        .find(|(n, _)| n == "pane:mip")
+        .map(|(_, r)| egui::Rect::from_min_size(egui::pos2(r[0], r[1]), egui::vec2(r[2], r[3])))
+        .expect("the MIP pane");
+    // The sphere (140 against 40) sits in the middle of the anterior view.
+    let at = mip.center() + egui::vec2(0.0, 30.0);
+    h.hover_at(at);
+    run_until(&mut h, "a hover value", 40, |app| {
+        app.mip_hover_text().is_some()
+    });
+    let voxel = h.state().hovered_voxel().expect("hovered voxel");
+    let v = h.state().volume().expect("volume");
+    let value = v.value_at(voxel[0], voxel[1], voxel[2]);
+    let text = h.state().mip_hover_text().expect("text").to_owned();
+    eprintln!("MIP hover: {text}");
+    assert!((value - 140.0).abs() < 1.0, "{value} at {voxel:?}");
+    assert!(text.starts_with("140 at voxel ("), "{text}");
+    let status = h.state().status().clone();
+    assert!(status.error.is_none(), "{status:?}");
+    h.run_steps(2);
+    let image = h.render().expect("render");
+    save(&image, "reading_mip_hover.png");
+    // Off the volume (the pane's corner): no value.
+    h.hover_at(mip.left_bottom() + egui::vec2(8.0, -8.0));
+    run_until(&mut h, "no hover value", 20, |app| {
+        app.mip_hover_text().is_none()
+    });
 }

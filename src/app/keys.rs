@@ -102,7 +102,7 @@ impl ShapecastApp {
         egui::Window::new("Keys and mouse")
             .open(&mut open)
             .collapsible(false)
-            .resizable(false)
+            .default_width(660.0)
             .show(ctx, |ui| {
                 egui::Grid::new("keys help")
                     .num_columns(2)

@@ -1063,6 +1063,22 @@ impl ShapecastApp {
                                     self.display.gain[c] = self.mip_view.settings.channels[c].gain;
                                 }
                                 mip_drawn = true;
+                                // The value where the pointer's pixel has its maximum, in the
+                                // image's corner and the status bar's mouse line.
+                                hover = hover.or(out.hover.map(|p| p.voxel));
+                                self.mip_view.hover_text = out.hover.map(|p| {
+                                    let [i, j, k] = p.voxel;
+                                    let value = scene.volume.value_at(i, j, k);
+                                    let unit = if scene.is_ct { " HU" } else { "" };
+                                    let mut t =
+                                        format!("{value:.0}{unit} at voxel ({i}, {j}, {k})");
+                                    if let Some(e) = entry
+                                        && let Some([a, b, c]) = self.probe.value_at(e.id, p.voxel)
+                                    {
+                                        t.push_str(&format!("   V {a:.1}  A {b:.1}  B {c:.1}"));
+                                    }
+                                    t
+                                });
                                 if let Some(pick) = out.pick {
                                     self.crosshair = pick.voxel;
                                 }

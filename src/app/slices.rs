@@ -953,6 +953,17 @@ fn draw_measurement(
 }
 
 impl super::ShapecastApp {
+    /// The voxel under the pointer: in a slice pane, or where the MIP pixel under it has its
+    /// maximum.
+    pub fn hovered_voxel(&self) -> Option<[usize; 3]> {
+        self.hover
+    }
+
+    /// What the MIP shows in its corner about the pixel under the pointer.
+    pub fn mip_hover_text(&self) -> Option<&str> {
+        self.mip_view.hover_text.as_deref()
+    }
+
     /// A pane's zoom and pan.
     pub fn pane_view(&self, kind: SliceKind) -> Option<PaneView> {
         Some(self.panes.iter().find(|p| p.kind == kind)?.view)
