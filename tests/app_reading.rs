@@ -582,3 +582,64 @@ fn the_mip_hover_shows_the_value_under_the_pointer() {
         app.mip_hover_text().is_none()
     });
 }
+
+/// Opened as a user opens it (default options): the Hessian is computed, the RST is not until
+/// its button is clicked; while it runs the status says what runs and how long it will take.
+#[test]
+fn the_hessian_starts_by_default_and_the_rst_when_asked_with_a_time_estimate() {
+    let Some(mut h) = harness(AppOptions {
+        start: StartWith::Phantom("sphere-cylinder".into()),
+        ..AppOptions::default()
+    }) else {
+        return;
+    };
+    let f = h.state().status().features.clone().expect("features");
+    assert_eq!(
+        (f.method.as_str(), f.state.as_str(), f.cached),
+        ("hessian", "done", 1),
+        "{f:?}"
+    );
+    h.run_steps(3);
+    assert!(!h.state().computing(), "nothing else starts on its own");
+    let rst = h
+        .state()
+        .status()
+        .controls
+        .iter()
+        .find(|(n, _)| n == "mode:rst")
+        .map(|(_, r)| egui::pos2(r[0] + 0.5 * r[2], r[1] + 0.5 * r[3]))
+        .expect("the RST button");
+    h.hover_at(rst);
+    h.event(egui::Event::PointerButton {
+        pos: rst,
+        button: egui::PointerButton::Primary,
+        pressed: true,
+        modifiers: egui::Modifiers::NONE,
+    });
+    h.event(egui::Event::PointerButton {
+        pos: rst,
+        button: egui::PointerButton::Primary,
+        pressed: false,
+        modifiers: egui::Modifiers::NONE,
+    });
+    h.run_steps(1);
+    assert!(h.state().computing(), "one click starts the RST");
+    let mut tasks = Vec::new();
+    run_until(&mut h, "an estimate of the time left", 400, |app| {
+        app.status()
+            .task
+            .as_deref()
+            .is_some_and(|t| t.contains("s left") || t.contains("min left"))
+            || !app.computing()
+    });
+    tasks.extend(h.state().status().task.clone());
+    eprintln!("status while computing: {tasks:?}");
+    let task = tasks.first().expect("a task while computing");
+    assert!(
+        task.starts_with("computing rst features: ") && task.contains(" left"),
+        "{task}"
+    );
+    h.state_mut().cancel_features();
+    h.run_steps(1);
+    assert!(!h.state().computing());
+}

@@ -872,10 +872,11 @@ impl ShapecastApp {
             let (f, stage) = self.features.progress().unwrap_or((0.0, ""));
             s.progress = f;
             s.task = Some(format!(
-                "computing {} features: {stage}",
+                "computing {} features: {stage}{}",
                 self.features
                     .running_request()
-                    .map_or("", |r| features::method_name(r.method))
+                    .map_or("", |r| features::method_name(r.method)),
+                panels::time_left(self.features.timing())
             ));
         } else {
             s.task = None;

@@ -40,6 +40,8 @@ impl ShapecastApp {
                         let cached = self.features.find(&self.applied.request(method)).is_some();
                         r.on_hover_text(if cached {
                             "computed: switches at once"
+                        } else if method == crate::cpu::pipeline::Method::Rst {
+                            "computes the RST features with the current parameters: rays from every voxel, several times the Hessian's time (the status says how long)"
                         } else {
                             "computes the features with the current parameters"
                         })
@@ -513,7 +515,10 @@ impl ShapecastApp {
         Some(
             egui::ProgressBar::new(fraction)
                 .desired_width(width)
-                .text(format!("{name}: {stage}")),
+                .text(format!(
+                    "{name}: {stage}{}",
+                    time_left(self.features.timing())
+                )),
         )
     }
 
@@ -531,6 +536,17 @@ impl ShapecastApp {
         }
         self.probe
             .update(gpu, entry.map(|e| (&e.texture, e.id)), voxels);
+    }
+}
+
+/// ", about 12 s left" from a job's (elapsed, left) seconds; ", estimating the time" before it
+/// has progress to go by.
+pub(super) fn time_left(timing: Option<(f64, Option<f64>)>) -> String {
+    match timing {
+        None => String::new(),
+        Some((_, None)) => ", estimating the time".to_owned(),
+        Some((_, Some(left))) if left < 60.0 => format!(", about {:.0} s left", left.ceil()),
+        Some((_, Some(left))) => format!(", about {:.0} min left", (left / 60.0).ceil()),
     }
 }
 
