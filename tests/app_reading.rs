@@ -643,3 +643,62 @@ fn the_hessian_starts_by_default_and_the_rst_when_asked_with_a_time_estimate() {
     h.run_steps(1);
     assert!(!h.state().computing());
 }
+
+/// "Save picture" of the axial pane: a PNG of the pane as shown, with its orientation letters
+/// and scale bar, written to the folder asked for.
+#[test]
+fn save_picture_writes_the_pane_with_letters_and_a_scale_bar() {
+    let Some(mut h) = harness(intensity_only(StartWith::Phantom("sphere".into()))) else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("shapecast-pictures-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    h.state_mut().set_picture_dir(dir.clone());
+    h.get_by_label("Save picture").click();
+    h.run_steps(2);
+    h.get_by_label("Axial pane").click();
+    run_until(&mut h, "the picture", 20, |app| {
+        app.last_picture().is_some()
+    });
+    let picture = h.state().last_picture().expect("picture").clone();
+    eprintln!("picture {} {:?}", picture.name, picture.size);
+    assert_eq!(picture.name, "phantom-sphere-axial.png");
+    let file = dir.join(&picture.name);
+    let bytes = std::fs::read(&file).expect("the file written");
+    assert_eq!(bytes, picture.png);
+    let image = image::load_from_memory(&bytes).expect("a PNG").to_rgba8();
+    let frame = h
+        .state()
+        .status()
+        .controls
+        .iter()
+        .find(|(n, _)| n == "pane:axial")
+        .map(|(_, r)| egui::vec2(r[2], r[3]))
+        .expect("axial pane");
+    let ppp = h.ctx.pixels_per_point();
+    assert_eq!(picture.size, [image.width(), image.height()]);
+    // The image part of the pane: its width, its height less the header.
+    let (w, h_) = (image.width() as f32 / ppp, image.height() as f32 / ppp);
+    assert!(
+        w <= frame.x && w >= frame.x - 10.0 && h_ <= frame.y - 18.0 && h_ >= frame.y - 40.0,
+        "{:?} vs the pane's {frame:?}",
+        image.dimensions()
+    );
+    save(&image, "reading_picture_axial.png");
+    // The orientation letters (yellow) and the scale bar (light grey in its bottom-right
+    // corner) are in the picture.
+    let letters = image
+        .pixels()
+        .filter(|p| p[0] > 200 && p[1] > 160 && p[2] < 120)
+        .count();
+    let (w, h_) = (image.width(), image.height());
+    let bar = (w - 120..w - 5)
+        .flat_map(|x| (h_ - 16..h_ - 5).map(move |y| (x, y)))
+        .filter(|&(x, y)| image.get_pixel(x, y)[0] > 220 && image.get_pixel(x, y)[2] > 220)
+        .count();
+    assert!(
+        letters > 20 && bar > 20,
+        "{letters} letter pixels, {bar} scale bar pixels"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -184,6 +184,11 @@ impl MipView {
             Camera::for_volume(&volume.world_from_voxel, volume.dims, ViewPreset::Anterior);
     }
 
+    /// Where the image was drawn last frame (screen points).
+    pub fn image_area(&self) -> egui::Rect {
+        self.image_rect
+    }
+
     /// How many frames the ray caster has rendered (tests: nothing re-renders when idle).
     pub fn frames_rendered(&self) -> u64 {
         self.frames
@@ -593,6 +598,9 @@ impl MipView {
             );
         }
         self.draw_overlay(&painter, rect);
+        // Orthographic: one scale for the whole image (mm per full-resolution pixel).
+        let mm_per_point = self.camera.mm_per_pixel(full) * f64::from(ppp);
+        super::picture::draw_scale_bar(&painter, rect, (1.0 / mm_per_point) as f32);
 
         let hover_pixel = response.hover_pos().and_then(|p| self.pixel_at(p));
         self.update_hover(gpu, ui.ctx(), hover_pixel, response.dragged() || wheeled);

@@ -13,6 +13,7 @@ pub mod load;
 pub mod measure;
 pub mod mip_view;
 mod panels;
+pub mod picture;
 mod probe;
 mod share;
 pub mod slices;
@@ -296,6 +297,8 @@ pub struct ShapecastApp {
     show_about: bool,
     /// The keyboard help ("?").
     show_keys: bool,
+    /// "Save picture": the picture being made and the last one.
+    picture: picture::PictureState,
     drop_hover: bool,
     #[cfg(not(target_arch = "wasm32"))]
     open_path: String,
@@ -389,6 +392,7 @@ impl ShapecastApp {
             probe: probe::ProbeState::default(),
             show_about: false,
             show_keys: false,
+            picture: picture::PictureState::default(),
             drop_hover: false,
             #[cfg(not(target_arch = "wasm32"))]
             open_path: String::new(),
@@ -957,6 +961,7 @@ impl ShapecastApp {
         // Panes not shown keep no stale rectangle.
         for pane in &mut self.panes {
             pane.image_rect = None;
+            pane.area_rect = None;
         }
         let maximised = matches!(self.layout, Layout::Single(_));
         let entry = self
@@ -1150,6 +1155,7 @@ impl eframe::App for ShapecastApp {
         self.keys_help_ui(&ctx);
         self.drop_overlay(&ctx);
 
+        self.poll_picture(&ctx);
         self.update_probe();
         self.update_status();
         if self.published.as_ref() != Some(&self.status) {

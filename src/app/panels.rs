@@ -76,6 +76,7 @@ impl ShapecastApp {
             }
             ui.separator();
             self.copy_link_ui(ui);
+            self.save_picture_ui(ui);
             ui.separator();
             if ui.button("About & data").clicked() {
                 self.show_about = !self.show_about;

@@ -376,6 +376,8 @@ pub struct SlicePane {
     wheel_points: f32,
     /// Where the image was drawn last frame (tests and automation click there).
     pub image_rect: Option<egui::Rect>,
+    /// The image's part of the pane (below the header) last frame: what "Save picture" keeps.
+    pub area_rect: Option<egui::Rect>,
     /// Zoom and pan.
     pub view: PaneView,
     /// Cine rate, slices per second.
@@ -406,6 +408,7 @@ impl SlicePane {
             drawn: None,
             wheel_points: 0.0,
             image_rect: None,
+            area_rect: None,
             view: PaneView::default(),
             cine_fps: 10.0,
             cine: None,
@@ -502,6 +505,7 @@ impl SlicePane {
         // The image at its true size in mm, zoomed and panned in the space left.
         let area = ui.available_rect_before_wrap();
         let response = ui.allocate_rect(area, egui::Sense::click_and_drag());
+        self.area_rect = Some(area);
         if fit || response.double_clicked() {
             self.view = PaneView::default();
         }
@@ -623,6 +627,7 @@ impl SlicePane {
             painter.image(id, rect, axes.uv(), egui::Color32::WHITE);
         }
         self.draw_overlay(&painter, area, rect, axes, crosshair, w, h, volume);
+        super::picture::draw_scale_bar(&painter, area, rect.width() / size_mm.x.max(1e-6));
         // Corner annotation: the slice index in the file, and the zoom when not fitted.
         let mut corner = format!("{} / {}", slice + 1, n_slices);
         if (self.view.zoom - 1.0).abs() > 1e-3 {
