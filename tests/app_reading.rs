@@ -700,5 +700,14 @@ fn save_picture_writes_the_pane_with_letters_and_a_scale_bar() {
         letters > 20 && bar > 20,
         "{letters} letter pixels, {bar} scale bar pixels"
     );
+    // P over the coronal pane saves that pane.
+    let coronal = pane(&h, SliceKind::Coronal);
+    h.hover_at(coronal.center());
+    h.key_press(egui::Key::P);
+    run_until(&mut h, "the coronal picture", 20, |app| {
+        app.last_picture()
+            .is_some_and(|p| p.name.ends_with("-coronal.png"))
+    });
+    assert!(dir.join("phantom-sphere-coronal.png").exists());
     std::fs::remove_dir_all(&dir).ok();
 }

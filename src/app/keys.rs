@@ -34,6 +34,10 @@ pub const HELP: &[(&str, &str)] = &[
         "D, E, Esc",
         "draw a ruler, an ellipse; back to the crosshair",
     ),
+    (
+        "P",
+        "save a picture (PNG) of the pane under the pointer, or of the MIP",
+    ),
     ("?", "show or hide this help"),
 ];
 
@@ -54,7 +58,12 @@ impl ShapecastApp {
                     modifiers,
                     ..
                 } if !(modifiers.ctrl || modifiers.command || modifiers.alt) => {
-                    self.key(key);
+                    if key == egui::Key::P {
+                        let pane = self.pane_under_pointer(ctx);
+                        self.save_picture(ctx, pane);
+                    } else {
+                        self.key(key);
+                    }
                 }
                 _ => {}
             }
@@ -94,6 +103,22 @@ impl ShapecastApp {
             }
             _ => {}
         }
+    }
+
+    /// The pane under the pointer (the MIP when there is none).
+    fn pane_under_pointer(&self, ctx: &egui::Context) -> super::PaneId {
+        use super::{PaneId, SliceKind};
+        let Some(pos) = ctx.pointer_latest_pos() else {
+            return PaneId::Mip;
+        };
+        SliceKind::ALL
+            .into_iter()
+            .find(|&k| {
+                self.panes
+                    .iter()
+                    .any(|p| p.kind == k && p.area_rect.is_some_and(|r| r.contains(pos)))
+            })
+            .map_or(PaneId::Mip, PaneId::Slice)
     }
 
     /// The keyboard help window ("?").

@@ -291,8 +291,19 @@ fn download(picture: &Picture) -> Result<(), wasm_bindgen::JsValue> {
     a.set_href(&url);
     a.set_download(&picture.name);
     a.click();
-    web_sys::Url::revoke_object_url(&url)?;
+    // The URL is kept until the next picture: revoked at once, a browser may not have started
+    // reading it yet.
+    LAST_URL.with(|last| {
+        if let Some(old) = last.replace(Some(url)) {
+            let _ = web_sys::Url::revoke_object_url(&old);
+        }
+    });
     Ok(())
+}
+
+#[cfg(target_arch = "wasm32")]
+thread_local! {
+    static LAST_URL: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
 }
 
 #[cfg(test)]
