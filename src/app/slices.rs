@@ -579,8 +579,7 @@ impl SlicePane {
         }
         if window_drag {
             out.window_drag = response.drag_delta();
-        } else if pan {
-        } else if let Some(kind) = measuring {
+        } else if let Some(kind) = measuring.filter(|_| !pan) {
             if response.drag_started_by(egui::PointerButton::Primary)
                 && let Some(origin) = ui.input(|i| i.pointer.press_origin())
             {
@@ -602,6 +601,7 @@ impl SlicePane {
                 }
             }
         } else if primary
+            && !pan
             && !ctrl
             && !modifiers.shift
             && (response.is_pointer_button_down_on() || response.clicked())
