@@ -76,8 +76,10 @@ pub fn method_name(m: Method) -> &'static str {
     }
 }
 
-/// The mode the app opens on: RST (the paper's method), with blobness on the Li map.
-pub const DEFAULT_MODE: DisplayMode = DisplayMode::Features(Method::Rst);
+/// The mode the app opens on: the Hessian (blobness on the Li map), the lighter family,
+/// computed in seconds; the RST (the paper's method, rays from every voxel: several times
+/// longer) is one click away and never starts on its own.
+pub const DEFAULT_MODE: DisplayMode = DisplayMode::Features(Method::Hessian);
 
 /// The parameters the panel edits; a [`Request`] per method is made from them.
 #[derive(Clone, Debug, PartialEq)]
@@ -212,6 +214,7 @@ struct Running {
     job: FeatureJob,
     fraction: f32,
     stage: String,
+    started: web_time::Instant,
 }
 
 /// How the last job ended.
@@ -298,6 +301,16 @@ impl FeatureManager {
             .map(|r| (r.fraction, r.stage.as_str()))
     }
 
+    /// Seconds the running job has run, and an estimate of the seconds left from its progress
+    /// so far (`None` until it has made some).
+    pub fn timing(&self) -> Option<(f64, Option<f64>)> {
+        let r = self.running.as_ref()?;
+        let elapsed = r.started.elapsed().as_secs_f64();
+        let f = f64::from(r.fraction);
+        let left = (f > 0.01 && f < 1.0).then(|| elapsed * (1.0 - f) / f);
+        Some((elapsed, left))
+    }
+
     /// How the last job for `request` ended, if it was the last one.
     pub fn outcome(&self, request: &Request) -> Option<&JobOutcome> {
         self.last
@@ -333,6 +346,7 @@ impl FeatureManager {
                     job,
                     fraction,
                     stage,
+                    started: web_time::Instant::now(),
                 });
                 Ok(())
             }

@@ -56,6 +56,9 @@ pub struct MipViewOutput {
     pub pick: Option<Pick>,
     /// The image pixel under the pointer.
     pub hover_pixel: Option<[u32; 2]>,
+    /// Where the maximum of the pixel under the pointer lies (as a click's pick, read back
+    /// without blocking a frame or two after the pointer stops; `None` off the volume).
+    pub hover: Option<Pick>,
     /// Whether a new frame was rendered this frame.
     pub rendered: bool,
 }
@@ -113,6 +116,13 @@ pub struct MipView {
     shown: usize,
     last: Option<FrameKey>,
     pending: Option<PendingPick>,
+    /// The hover pick in flight, and for which pixel of which frame.
+    hover_pending: Option<PendingPick>,
+    /// The pixel (and frame count) the hover pick is or was for, and its result.
+    hover_for: Option<([u32; 2], u64)>,
+    hover: Option<Pick>,
+    /// A line the app shows in the image's corner (the value under the pointer).
+    pub hover_text: Option<String>,
     error: Option<String>,
     frames: u64,
     image_rect: egui::Rect,
@@ -153,6 +163,10 @@ impl MipView {
             shown: 0,
             last: None,
             pending: None,
+            hover_pending: None,
+            hover_for: None,
+            hover: None,
+            hover_text: None,
             error: None,
             frames: 0,
             image_rect: egui::Rect::NOTHING,
@@ -168,6 +182,11 @@ impl MipView {
     pub fn reset_view(&mut self, volume: &RenderVolume) {
         self.camera =
             Camera::for_volume(&volume.world_from_voxel, volume.dims, ViewPreset::Anterior);
+    }
+
+    /// Where the image was drawn last frame (screen points).
+    pub fn image_area(&self) -> egui::Rect {
+        self.image_rect
     }
 
     /// How many frames the ray caster has rendered (tests: nothing re-renders when idle).
@@ -579,13 +598,58 @@ impl MipView {
             );
         }
         self.draw_overlay(&painter, rect);
+        // Orthographic: one scale for the whole image (mm per full-resolution pixel).
+        let mm_per_point = self.camera.mm_per_pixel(full) * f64::from(ppp);
+        super::picture::draw_scale_bar(&painter, rect, (1.0 / mm_per_point) as f32);
 
         let hover_pixel = response.hover_pos().and_then(|p| self.pixel_at(p));
+        self.update_hover(gpu, ui.ctx(), hover_pixel, response.dragged() || wheeled);
         MipViewOutput {
             response,
             pick,
             hover_pixel,
+            hover: self.hover.filter(|_| hover_pixel.is_some()),
             rendered,
+        }
+    }
+
+    /// Keeps a pick of the pixel under the pointer (one readback in flight; a new one when the
+    /// pointer reaches another pixel or a new frame is shown).
+    fn update_hover(
+        &mut self,
+        gpu: &GpuContext,
+        ctx: &egui::Context,
+        pixel: Option<[u32; 2]>,
+        moving_view: bool,
+    ) {
+        if let Some(pending) = &mut self.hover_pending {
+            match pending.poll() {
+                None => ctx.request_repaint(),
+                Some(Ok(p)) => {
+                    self.hover = p;
+                    self.hover_pending = None;
+                }
+                Some(Err(_)) => {
+                    // A failed hover readback only loses the hover value; a click reports.
+                    self.hover = None;
+                    self.hover_pending = None;
+                }
+            }
+        }
+        let Some(px) = pixel.filter(|_| !moving_view) else {
+            self.hover = None;
+            self.hover_for = None;
+            return;
+        };
+        let wanted = (px, self.frames);
+        if self.hover_for != Some(wanted)
+            && self.hover_pending.is_none()
+            && self.refining.is_none()
+            && let Some(target) = self.shown_target()
+        {
+            self.hover_pending = target.start_pick(gpu, px);
+            self.hover_for = Some(wanted);
+            ctx.request_repaint();
         }
     }
 
@@ -698,6 +762,15 @@ impl MipView {
             ] {
                 painter.line_segment([p + a, p + b], stroke);
             }
+        }
+        if let Some(t) = &self.hover_text {
+            painter.text(
+                rect.left_top() + egui::vec2(edge, edge),
+                egui::Align2::LEFT_TOP,
+                t,
+                egui::FontId::proportional(13.0),
+                egui::Color32::from_gray(200),
+            );
         }
         if let Some(e) = &self.error {
             painter.text(

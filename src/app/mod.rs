@@ -8,10 +8,13 @@
 
 pub mod demo;
 pub mod features;
+mod keys;
 pub mod load;
+pub mod measure;
 pub mod mip_view;
 mod pacs;
 mod panels;
+pub mod picture;
 mod probe;
 mod share;
 pub mod slices;
@@ -309,11 +312,17 @@ pub struct ShapecastApp {
     panes: [SlicePane; 3],
     slice_renderer: Option<SliceRenderer>,
     mip_view: MipView,
+    /// The measuring tool and the measurements on the volume shown.
+    measure: measure::Measurements,
     /// The volume generation the MIP window was set for.
     mip_window_for: Option<u64>,
     probe: probe::ProbeState,
 
     show_about: bool,
+    /// The keyboard help ("?").
+    show_keys: bool,
+    /// "Save picture": the picture being made and the last one.
+    picture: picture::PictureState,
     drop_hover: bool,
     #[cfg(not(target_arch = "wasm32"))]
     open_path: String,
@@ -404,9 +413,12 @@ impl ShapecastApp {
             panes: SliceKind::ALL.map(SlicePane::new),
             slice_renderer,
             mip_view: MipView::new(),
+            measure: measure::Measurements::default(),
             mip_window_for: None,
             probe: probe::ProbeState::default(),
             show_about: false,
+            show_keys: false,
+            picture: picture::PictureState::default(),
             drop_hover: false,
             #[cfg(not(target_arch = "wasm32"))]
             open_path: String::new(),
@@ -785,6 +797,7 @@ impl ShapecastApp {
         self.crosshair = volume.dims.map(|d| d / 2);
         self.hover = None;
         self.features.clear();
+        self.measure.list.clear();
         self.probe = probe::ProbeState::default();
         self.notes = notes;
         self.notes.extend(volume.warnings.iter().cloned());
@@ -893,10 +906,11 @@ impl ShapecastApp {
             let (f, stage) = self.features.progress().unwrap_or((0.0, ""));
             s.progress = f;
             s.task = Some(format!(
-                "computing {} features: {stage}",
+                "computing {} features: {stage}{}",
                 self.features
                     .running_request()
-                    .map_or("", |r| features::method_name(r.method))
+                    .map_or("", |r| features::method_name(r.method)),
+                panels::time_left(self.features.timing())
             ));
         } else {
             s.task = None;
@@ -977,6 +991,7 @@ impl ShapecastApp {
         // Panes not shown keep no stale rectangle.
         for pane in &mut self.panes {
             pane.image_rect = None;
+            pane.area_rect = None;
         }
         let maximised = matches!(self.layout, Layout::Single(_));
         let entry = self
@@ -993,11 +1008,15 @@ impl ShapecastApp {
             features: entry.map(|e| (&e.texture, e.id)),
             overlay,
             window: self.window.range(),
+            tool: self.measure.tool,
+            measurements: &self.measure.list,
+            unit: if scene.is_ct { "HU" } else { "" },
         };
         let mut hover = None;
         let mut toggle = None;
         let mut window_drag = egui::Vec2::ZERO;
         let mut errors = Vec::new();
+        let mut measured = Vec::new();
         let mut mip_drawn = false;
         for (id, rect) in &rects {
             let kind = match id {
@@ -1025,6 +1044,7 @@ impl ShapecastApp {
                                         toggle = Some(id);
                                     }
                                     errors.extend(r.error);
+                                    measured.extend(r.measured);
                                 }
                             }
                             PaneId::Mip => {
@@ -1079,6 +1099,22 @@ impl ShapecastApp {
                                     self.display.gain[c] = self.mip_view.settings.channels[c].gain;
                                 }
                                 mip_drawn = true;
+                                // The value where the pointer's pixel has its maximum, in the
+                                // image's corner and the status bar's mouse line.
+                                hover = hover.or(out.hover.map(|p| p.voxel));
+                                self.mip_view.hover_text = out.hover.map(|p| {
+                                    let [i, j, k] = p.voxel;
+                                    let value = scene.volume.value_at(i, j, k);
+                                    let unit = if scene.is_ct { " HU" } else { "" };
+                                    let mut t =
+                                        format!("{value:.0}{unit} at voxel ({i}, {j}, {k})");
+                                    if let Some(e) = entry
+                                        && let Some([a, b, c]) = self.probe.value_at(e.id, p.voxel)
+                                    {
+                                        t.push_str(&format!("   V {a:.1}  A {b:.1}  B {c:.1}"));
+                                    }
+                                    t
+                                });
                                 if let Some(pick) = out.pick {
                                     self.crosshair = pick.voxel;
                                 }
@@ -1091,6 +1127,11 @@ impl ShapecastApp {
             });
         }
         self.hover = hover;
+        if let Some(s) = &self.scene {
+            for m in measured {
+                self.measure.add(&s.volume, m);
+            }
+        }
         if mip_drawn {
             self.restore_camera(ui.ctx());
         }
@@ -1143,8 +1184,11 @@ impl eframe::App for ShapecastApp {
         });
         self.about_ui(&ctx);
         self.pacs_window_ui(&ctx);
+        self.keys(&ctx);
+        self.keys_help_ui(&ctx);
         self.drop_overlay(&ctx);
 
+        self.poll_picture(&ctx);
         self.update_probe();
         self.update_status();
         if self.published.as_ref() != Some(&self.status) {

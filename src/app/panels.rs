@@ -40,6 +40,8 @@ impl ShapecastApp {
                         let cached = self.features.find(&self.applied.request(method)).is_some();
                         r.on_hover_text(if cached {
                             "computed: switches at once"
+                        } else if method == crate::cpu::pipeline::Method::Rst {
+                            "computes the RST features with the current parameters: rays from every voxel, several times the Hessian's time (the status says how long)"
                         } else {
                             "computes the features with the current parameters"
                         })
@@ -74,6 +76,7 @@ impl ShapecastApp {
             }
             ui.separator();
             self.copy_link_ui(ui);
+            self.save_picture_ui(ui);
             ui.separator();
             if ui.button("About & data").clicked() {
                 self.show_about = !self.show_about;
@@ -289,6 +292,73 @@ impl ShapecastApp {
                     .small(),
                 );
             });
+
+        egui::CollapsingHeader::new("Measure")
+            .default_open(true)
+            .show(ui, |ui| self.measure_ui(ui));
+    }
+
+    /// The measuring tool and the list of measurements with their positions.
+    fn measure_ui(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            for tool in super::measure::Tool::ALL {
+                let r = ui
+                    .selectable_label(self.measure.tool == tool, tool.label())
+                    .on_hover_text(match tool {
+                        super::measure::Tool::Navigate => "a left drag on a slice moves the crosshair (Esc)",
+                        super::measure::Tool::Ruler => "a left drag on a slice draws a distance ruler (D)",
+                        super::measure::Tool::Ellipse => "a left drag on a slice draws an ellipse, corner to corner: mean, SD, min, max and area (E)",
+                    });
+                self.control(&format!("tool:{}", tool.label()), r.rect);
+                if r.clicked() {
+                    self.measure.tool = tool;
+                }
+            }
+        });
+        let Some(scene) = &self.scene else { return };
+        let unit = if scene.is_ct { "HU" } else { "" };
+        let mut remove = None;
+        let mut go_to = None;
+        for (n, e) in self.measure.list.iter().enumerate() {
+            let m = &e.measurement;
+            let centre = 0.5 * (m.a_mm + m.b_mm);
+            ui.horizontal_wrapped(|ui| {
+                if ui.small_button("×").on_hover_text("delete").clicked() {
+                    remove = Some(n);
+                }
+                let r = ui
+                    .link(format!("{} {}", n + 1, m.kind.name()))
+                    .on_hover_text("show its slice");
+                if r.clicked() {
+                    go_to = Some(n);
+                }
+                ui.label(egui::RichText::new(e.reading(unit)).small());
+                ui.label(
+                    egui::RichText::new(format!(
+                        "{} at LPS ({:.1}, {:.1}, {:.1}) mm",
+                        m.pane.name(),
+                        centre.x,
+                        centre.y,
+                        centre.z
+                    ))
+                    .small()
+                    .weak(),
+                );
+            });
+        }
+        if let Some(n) = go_to
+            && let Some(p) = self.measure.list[n].measurement.in_pane(&scene.volume)
+        {
+            let axes =
+                super::slices::pane_axes(&scene.volume, self.measure.list[n].measurement.pane);
+            self.crosshair[axes.fixed] = p.slice;
+        }
+        if let Some(n) = remove {
+            self.measure.list.remove(n);
+        }
+        if !self.measure.list.is_empty() && ui.small_button("delete all").clicked() {
+            self.measure.list.clear();
+        }
     }
 
     /// One line of the status bar: voxel, LPS position, value, features.
@@ -446,7 +516,10 @@ impl ShapecastApp {
         Some(
             egui::ProgressBar::new(fraction)
                 .desired_width(width)
-                .text(format!("{name}: {stage}")),
+                .text(format!(
+                    "{name}: {stage}{}",
+                    time_left(self.features.timing())
+                )),
         )
     }
 
@@ -464,6 +537,17 @@ impl ShapecastApp {
         }
         self.probe
             .update(gpu, entry.map(|e| (&e.texture, e.id)), voxels);
+    }
+}
+
+/// ", about 12 s left" from a job's (elapsed, left) seconds; ", estimating the time" before it
+/// has progress to go by.
+pub(super) fn time_left(timing: Option<(f64, Option<f64>)>) -> String {
+    match timing {
+        None => String::new(),
+        Some((_, None)) => ", estimating the time".to_owned(),
+        Some((_, Some(left))) if left < 60.0 => format!(", about {:.0} s left", left.ceil()),
+        Some((_, Some(left))) => format!(", about {:.0} min left", (left / 60.0).ceil()),
     }
 }
 

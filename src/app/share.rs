@@ -35,6 +35,9 @@ impl ShapecastApp {
             grey: Some(self.mip_view.settings.show_intensity),
             window: scene.map(|_| self.window),
             layout: Some(self.layout),
+            measurements: scene
+                .filter(|_| !self.measure.list.is_empty())
+                .map(|_| self.measure.measurements()),
         }
     }
 
@@ -168,6 +171,9 @@ impl ShapecastApp {
         }
         if let Some(l) = view.layout {
             self.set_layout(l);
+        }
+        if let Some(m) = &view.measurements {
+            self.measure.set(&volume, m);
         }
     }
 

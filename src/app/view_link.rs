@@ -13,6 +13,7 @@ use glam::{DQuat, DVec3};
 
 use super::Layout;
 use super::features::{DisplayMode, FeatureDisplay, FeatureParams};
+use super::measure::Measurement;
 use super::url_params::{encode, parse_params};
 use super::window_level::Window;
 use crate::cpu::features::FeatureMap;
@@ -100,6 +101,8 @@ pub struct ViewState {
     /// The slice panes' window.
     pub window: Option<Window>,
     pub layout: Option<Layout>,
+    /// The measurements on the slices (rulers and ellipses, points in LPS mm).
+    pub measurements: Option<Vec<Measurement>>,
 }
 
 /// One field's value, written the same way into the fragment and the JSON.
@@ -249,6 +252,12 @@ impl ViewState {
         }
         if let Some(l) = self.layout {
             f.push(("layout", Value::Text(l.name().to_owned())));
+        }
+        if let Some(m) = &self.measurements {
+            f.push((
+                "m",
+                Value::Texts(m.iter().map(Measurement::to_text).collect()),
+            ));
         }
         f
     }
@@ -557,6 +566,22 @@ impl ViewState {
             "mip+slices, grid, mip, axial, coronal or sagittal",
             Layout::from_name,
         );
+        // Measurements: one `m` field each; a bad one is named and the others kept.
+        let mut measurements = Vec::new();
+        for (_, text) in params.iter().filter(|(k, _)| k == "m") {
+            match Measurement::from_text(text) {
+                Some(m) => measurements.push(m),
+                None => bad(
+                    &mut f.problems,
+                    "m",
+                    text,
+                    "ruler|ellipse,axial|coronal|sagittal and two points x,y,z in mm",
+                ),
+            }
+        }
+        if !measurements.is_empty() {
+            v.measurements = Some(measurements);
+        }
         (v, f.problems)
     }
 }
@@ -647,6 +672,7 @@ fn json_string(s: &str) -> String {
 #[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 mod tests {
     use super::*;
+    use crate::app::measure::MeasureKind;
     use crate::cpu::pipeline::Method;
 
     fn full() -> ViewState {
@@ -686,6 +712,20 @@ mod tests {
             layout: Some(Layout::Single(super::super::PaneId::Slice(
                 super::super::SliceKind::Coronal,
             ))),
+            measurements: Some(vec![
+                Measurement {
+                    kind: MeasureKind::Ruler,
+                    pane: super::super::SliceKind::Axial,
+                    a_mm: DVec3::new(-12.25, 1.0 / 3.0, 40.0),
+                    b_mm: DVec3::new(3.5, 0.1, 40.0),
+                },
+                Measurement {
+                    kind: MeasureKind::Ellipse,
+                    pane: super::super::SliceKind::Sagittal,
+                    a_mm: DVec3::new(7.0, -20.0, 1e-3),
+                    b_mm: DVec3::new(7.0, -5.5, 18.0),
+                },
+            ]),
         }
     }
 
@@ -790,6 +830,15 @@ mod tests {
             "unknown fields are ignored: {joined}"
         );
         assert_eq!(problems.len(), 4, "{problems:?}");
+        // A bad measurement is named; the good ones are kept.
+        let (v, problems) = ViewState::from_fragment(
+            "m=ruler,axial,1,2,3,4,5,6&m=ruler,axial,1,2&m=ellipse,coronal,0,0,0,1,1,1",
+        );
+        assert_eq!(v.measurements.map(|m| m.len()), Some(2));
+        assert!(
+            problems.len() == 1 && problems[0].contains("m=\"ruler,axial,1,2\""),
+            "{problems:?}"
+        );
         // A newer version is said, and still read.
         let (v, problems) = ViewState::from_fragment("v=9&mode=rst");
         assert_eq!(v.mode, Some(DisplayMode::Features(Method::Rst)));

@@ -1,7 +1,8 @@
 //! `shapecast render INPUT --out MIP.png`: the viewer's ray caster headless. Features come from
 //! [`FeatureJob`] (the same job the app runs), the picture from [`Raycaster`]; `--pick PX,PY`
 //! prints as JSON where that pixel's maximum came from (click-to-navigate without a browser),
-//! `--bench N` times N frames.
+//! `--bench N` times N frames, `--turntable N --out DIR/` writes N frames of a full turn about
+//! the view's vertical axis (DIR/frame_0000.png, ...: a movie's frames).
 
 use std::path::PathBuf;
 
@@ -104,9 +105,13 @@ pub struct RenderArgs {
     /// Voxel spacing of a `phantom:` input, mm: one value or X,Y,Z.
     #[arg(long, value_delimiter = ',', default_value = "0.5")]
     pub spacing_mm: Vec<f64>,
-    /// Output PNG.
+    /// Output PNG (with --turntable: the folder the frames are written into).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Write N frames of a 360° turn about the view's vertical axis, 360/N degrees apart
+    /// (the first is the view asked for), as DIR/frame_0000.png ... into the --out folder.
+    #[arg(long)]
+    pub turntable: Option<u32>,
     /// Print, as JSON, where pixel PX,PY's maximum came from.
     #[arg(long, value_delimiter = ',')]
     pub pick: Option<Vec<u32>>,
@@ -228,6 +233,20 @@ pub fn compute_features(
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     if args.out.is_none() && args.pick.is_none() && args.bench.is_none() {
         bail!("nothing to do: give --out MIP.png, --pick PX,PY or --bench N");
+    }
+    if let Some(n) = args.turntable {
+        if !(1..=3600).contains(&n) {
+            bail!("--turntable {n}: give 1 to 3600 frames");
+        }
+        let Some(dir) = &args.out else {
+            bail!("--turntable needs --out DIR/ for its frames");
+        };
+        if dir.exists() && !dir.is_dir() {
+            bail!(
+                "--turntable writes frames into a folder; {} is a file",
+                dir.display()
+            );
+        }
     }
     let size = parse_size(&args.size)?;
     let preset = crate::cli::preset(&args.preset)?;
@@ -354,7 +373,18 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             frames,
         )?;
     }
-    if let Some(out) = &args.out {
+    if let (Some(n), Some(dir)) = (args.turntable, &args.out) {
+        turntable(
+            &ctx,
+            &caster,
+            &scene,
+            &camera,
+            &settings,
+            &mut target,
+            n,
+            dir,
+        )?;
+    } else if let Some(out) = &args.out {
         let rgba = target.read_image_blocking(&ctx)?;
         image::save_buffer(
             out,
@@ -378,6 +408,46 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         let json = pick_json(&ctx, &volume, features.as_ref(), args.method, pixel, pick)?;
         println!("{}", serde_json::to_string_pretty(&json)?);
     }
+    Ok(())
+}
+
+/// Frames `0..n` of a full turn: frame `f` is the view turned by `360 f / n` degrees about its
+/// vertical axis, written as `dir/frame_FFFF.png`.
+#[allow(clippy::too_many_arguments)]
+fn turntable(
+    ctx: &GpuContext,
+    caster: &Raycaster,
+    scene: &Scene<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    target: &mut RaycastTarget,
+    n: u32,
+    dir: &std::path::Path,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let started = web_time::Instant::now();
+    for f in 0..n {
+        let mut cam = *camera;
+        cam.orbit(360.0 * f64::from(f) / f64::from(n), 0.0);
+        caster.render(ctx, scene, &cam, settings, target, ..)?;
+        let rgba = target.read_image_blocking(ctx)?;
+        let out = dir.join(format!("frame_{f:04}.png"));
+        image::save_buffer(
+            &out,
+            &rgba,
+            target.size[0],
+            target.size[1],
+            image::ExtendedColorType::Rgba8,
+        )
+        .with_context(|| format!("writing {}", out.display()))?;
+    }
+    eprintln!(
+        "turntable: {n} frames of {}x{} in {:.1} s -> {}/frame_0000.png ...",
+        target.size[0],
+        target.size[1],
+        started.elapsed().as_secs_f64(),
+        dir.display()
+    );
     Ok(())
 }
 

@@ -5,11 +5,13 @@
 //  2. the screenshot is not blank,
 //  3. the page's file inputs and drag and drop load volumes: a corrupt file gives an error that
 //     names it and keeps the volume; a DICOM folder (the "Open folder" input); a detached-header
-//     NRRD with its data file dropped together,
+//     NRRD with its data file dropped together; "Save picture" (key P over a pane) downloads a
+//     PNG of that pane,
 //  4. a browser without WebGPU gets a plain-words message instead of a blank canvas.
 //
 // The page is opened with ?method=li: the Hessian (Li map) features finish in seconds even where
-// the feature pipeline runs on the CPU; the default mode (RST) is the heavier one.
+// the feature pipeline runs on the CPU (the default mode, the Hessian, would do too; the RST only
+// runs when asked for).
 // It never downloads a browser. Under CI=true a missing browser or dist/ is a failure (it always
 // is here: there is no skip path).
 import { chromium } from 'playwright-core';
@@ -228,6 +230,33 @@ try {
       `${JSON.stringify(status?.volume?.dims)} at ${JSON.stringify(status?.volume?.spacing_mm)} from ${status?.volume?.source}; error ${status?.error}`);
     await page.waitForTimeout(500);
     await page.screenshot({ path: path.join(outDir, 'dropped.png') });
+
+    // 3d: "Save picture": P over the axial pane downloads a PNG of it (a blob: URL, no request).
+    const axial = status?.controls?.['pane:axial'];
+    if (axial) {
+      await page.mouse.move(axial[0] + axial[2] / 2, axial[1] + axial[3] / 2);
+      await page.waitForTimeout(300);
+      let detail = '';
+      let ok = false;
+      try {
+        const [download] = await Promise.all([
+          page.waitForEvent('download', { timeout: 60000 }),
+          page.keyboard.press('p'),
+        ]);
+        const file = path.join(outDir, download.suggestedFilename());
+        await download.saveAs(file);
+        const png = PNG.sync.read(fs.readFileSync(file));
+        const stats = screenshotStats(fs.readFileSync(file));
+        ok = /-axial\.png$/.test(download.suggestedFilename()) && png.width > 50 && png.height > 50
+          && png.width <= axial[2] && png.height < axial[3] && stats.colours > 8;
+        detail = `${download.suggestedFilename()} ${png.width}x${png.height}, ${stats.colours} colours (${file})`;
+      } catch (e) {
+        detail = e.message.split('\n')[0];
+      }
+      check('save picture: the axial pane as a PNG download', ok, detail);
+    } else {
+      check('save picture: the axial pane as a PNG download', false, `no pane:axial in ${JSON.stringify(status?.controls)}`);
+    }
   });
 
   // 4: a browser without WebGPU.

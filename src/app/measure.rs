@@ -1,0 +1,384 @@
+//! Measurements on the slice panes: a distance ruler (mm) and an ellipse region (mean, SD, min
+//! and max of the values, HU for CT, and its area in mm²). A measurement keeps its two points in
+//! patient space (LPS mm), so it does not depend on the file's voxel order and travels in a link
+//! (`ViewState::measurements`, one `m=` field each).
+//!
+//! Which pixels an ellipse holds: those of the slice whose centres lie inside or on the ellipse
+//! (centre-in-ellipse), in the pane's voxel plane: pixel `(u, v)` (index across, index up the
+//! pane's vertical voxel axis) is inside when `((u - cu) / ru)² + ((v - cv) / rv)² <= 1`, with
+//! `(cu, cv)` the centre and `(ru, rv)` the half-axes of the drawn box in continuous voxel
+//! coordinates (a voxel's centre at its integer index). The SD is the population one (divided by
+//! n, as numpy's default). The area is the ellipse's own, `π ru rv` times the pixel's area in mm²,
+//! not the pixel count (which the readout gives beside it).
+
+use glam::DVec3;
+
+use super::slices::{SliceKind, pane_axes};
+use crate::volume::Volume;
+
+/// What a left drag in a slice pane does.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Tool {
+    /// Moves the crosshair.
+    #[default]
+    Navigate,
+    /// Draws a distance ruler.
+    Ruler,
+    /// Draws an ellipse region (its bounding box, corner to corner).
+    Ellipse,
+}
+
+impl Tool {
+    pub const ALL: [Self; 3] = [Self::Navigate, Self::Ruler, Self::Ellipse];
+
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Navigate => "crosshair",
+            Self::Ruler => "ruler",
+            Self::Ellipse => "ellipse",
+        }
+    }
+
+    /// The measurement this tool draws.
+    pub fn kind(self) -> Option<MeasureKind> {
+        match self {
+            Self::Navigate => None,
+            Self::Ruler => Some(MeasureKind::Ruler),
+            Self::Ellipse => Some(MeasureKind::Ellipse),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MeasureKind {
+    Ruler,
+    Ellipse,
+}
+
+impl MeasureKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ruler => "ruler",
+            Self::Ellipse => "ellipse",
+        }
+    }
+}
+
+/// One measurement: a ruler from `a_mm` to `b_mm`, or the ellipse inscribed in the box with
+/// opposite corners `a_mm` and `b_mm` in the plane of a `pane`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measurement {
+    pub kind: MeasureKind,
+    pub pane: SliceKind,
+    pub a_mm: DVec3,
+    pub b_mm: DVec3,
+}
+
+/// Where a measurement lies in its pane, in continuous voxel coordinates of the volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InPane {
+    /// The slice (index along the pane's fixed axis), rounded and clamped to the volume.
+    pub slice: usize,
+    /// The two points as (across, vertical) voxel coordinates.
+    pub a: [f64; 2],
+    pub b: [f64; 2],
+}
+
+impl Measurement {
+    /// The ruler's length (for an ellipse, its box's diagonal), mm.
+    pub fn length_mm(&self) -> f64 {
+        (self.b_mm - self.a_mm).length()
+    }
+
+    /// Its place in its pane for `volume`; `None` for an empty volume or non-finite points.
+    pub fn in_pane(&self, volume: &Volume) -> Option<InPane> {
+        let axes = pane_axes(volume, self.pane);
+        let n = volume.dims[axes.fixed];
+        if n == 0 || !self.a_mm.is_finite() || !self.b_mm.is_finite() {
+            return None;
+        }
+        let to_voxel = volume.voxel_from_world();
+        let (a, b) = (
+            to_voxel.transform_point3(self.a_mm),
+            to_voxel.transform_point3(self.b_mm),
+        );
+        let mid = 0.5 * (a[axes.fixed] + b[axes.fixed]);
+        Some(InPane {
+            slice: mid.round().clamp(0.0, (n - 1) as f64) as usize,
+            a: [a[axes.across], a[axes.vertical]],
+            b: [b[axes.across], b[axes.vertical]],
+        })
+    }
+
+    /// The link's text form: `kind,pane,ax,ay,az,bx,by,bz` (LPS mm, shortest exact decimals).
+    pub fn to_text(&self) -> String {
+        let n = |x: f64| format!("{}", if x.is_finite() { x } else { 0.0 });
+        format!(
+            "{},{},{},{},{},{},{},{}",
+            self.kind.name(),
+            self.pane.name(),
+            n(self.a_mm.x),
+            n(self.a_mm.y),
+            n(self.a_mm.z),
+            n(self.b_mm.x),
+            n(self.b_mm.y),
+            n(self.b_mm.z)
+        )
+    }
+
+    /// Reads [`Self::to_text`]'s form; `None` when anything in it is not as written there.
+    pub fn from_text(s: &str) -> Option<Self> {
+        let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+        if parts.len() != 8 {
+            return None;
+        }
+        let kind = match parts[0] {
+            "ruler" => MeasureKind::Ruler,
+            "ellipse" => MeasureKind::Ellipse,
+            _ => return None,
+        };
+        let pane = SliceKind::ALL.into_iter().find(|k| k.name() == parts[1])?;
+        let mut x = [0.0f64; 6];
+        for (slot, p) in x.iter_mut().zip(&parts[2..]) {
+            *slot = p.parse::<f64>().ok().filter(|v| v.is_finite())?;
+        }
+        Some(Self {
+            kind,
+            pane,
+            a_mm: DVec3::new(x[0], x[1], x[2]),
+            b_mm: DVec3::new(x[3], x[4], x[5]),
+        })
+    }
+}
+
+/// Statistics of the pixels of an ellipse region.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RegionStats {
+    /// Pixels whose centres are inside.
+    pub pixels: usize,
+    pub mean: f64,
+    /// Population standard deviation (divided by n).
+    pub sd: f64,
+    pub min: f32,
+    pub max: f32,
+    /// The ellipse's area, mm².
+    pub area_mm2: f64,
+}
+
+/// Whether pixel `(u, v)`'s centre lies inside or on the ellipse of `centre` and half-axes
+/// `radii` (voxel coordinates; a zero half-axis holds only the pixels on that line).
+pub fn inside_ellipse(u: usize, v: usize, centre: [f64; 2], radii: [f64; 2]) -> bool {
+    let term = |x: f64, c: f64, r: f64| {
+        let d = x - c;
+        if r > 0.0 {
+            (d / r) * (d / r)
+        } else if d == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        }
+    };
+    term(u as f64, centre[0], radii[0]) + term(v as f64, centre[1], radii[1]) <= 1.0
+}
+
+/// The statistics of an ellipse measurement on `volume` (values as [`Volume::value_at`] gives
+/// them: HU for CT); `None` for a ruler, or when no pixel centre is inside.
+pub fn region_stats(volume: &Volume, m: &Measurement) -> Option<RegionStats> {
+    if m.kind != MeasureKind::Ellipse {
+        return None;
+    }
+    let p = m.in_pane(volume)?;
+    let axes = pane_axes(volume, m.pane);
+    let (w, h) = (volume.dims[axes.across], volume.dims[axes.vertical]);
+    let centre = [0.5 * (p.a[0] + p.b[0]), 0.5 * (p.a[1] + p.b[1])];
+    let radii = [0.5 * (p.a[0] - p.b[0]).abs(), 0.5 * (p.a[1] - p.b[1]).abs()];
+    // Only the box's pixels can be inside.
+    let range = |c: f64, r: f64, n: usize| {
+        let lo = (c - r).ceil().max(0.0);
+        let hi = (c + r).floor().min(n as f64 - 1.0);
+        (lo <= hi).then_some(lo as usize..=hi as usize)
+    };
+    let (us, vs) = (
+        range(centre[0], radii[0], w)?,
+        range(centre[1], radii[1], h)?,
+    );
+    let (mut n, mut sum, mut sum2) = (0usize, 0.0f64, 0.0f64);
+    let (mut min, mut max) = (f32::INFINITY, f32::NEG_INFINITY);
+    for v in vs {
+        for u in us.clone() {
+            if !inside_ellipse(u, v, centre, radii) {
+                continue;
+            }
+            let mut ijk = [0usize; 3];
+            ijk[axes.fixed] = p.slice;
+            ijk[axes.across] = u;
+            ijk[axes.vertical] = v;
+            let x = volume.value_at(ijk[0], ijk[1], ijk[2]);
+            if !x.is_finite() {
+                continue;
+            }
+            n += 1;
+            sum += f64::from(x);
+            sum2 += f64::from(x) * f64::from(x);
+            min = min.min(x);
+            max = max.max(x);
+        }
+    }
+    if n == 0 {
+        return None;
+    }
+    let mean = sum / n as f64;
+    let var = (sum2 / n as f64 - mean * mean).max(0.0);
+    let pixel_mm2 = volume.spacing_mm[axes.across] * volume.spacing_mm[axes.vertical];
+    Some(RegionStats {
+        pixels: n,
+        mean,
+        sd: var.sqrt(),
+        min,
+        max,
+        area_mm2: std::f64::consts::PI * radii[0] * radii[1] * pixel_mm2,
+    })
+}
+
+/// A measurement with what it reads on the volume it was made on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Entry {
+    pub measurement: Measurement,
+    pub stats: Option<RegionStats>,
+}
+
+impl Entry {
+    pub fn new(volume: &Volume, measurement: Measurement) -> Self {
+        Self {
+            stats: region_stats(volume, &measurement),
+            measurement,
+        }
+    }
+
+    /// What it reads, e.g. "12.3 mm" or "mean 40.2 SD 3.1 HU (20..61), 78.5 mm², 310 px".
+    pub fn reading(&self, unit: &str) -> String {
+        let unit = if unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {unit}")
+        };
+        match self.measurement.kind {
+            MeasureKind::Ruler => format!("{:.1} mm", self.measurement.length_mm()),
+            MeasureKind::Ellipse => match &self.stats {
+                Some(s) => format!(
+                    "mean {:.1} SD {:.1}{unit} ({:.0}..{:.0}), {:.1} mm², {} px",
+                    s.mean, s.sd, s.min, s.max, s.area_mm2, s.pixels
+                ),
+                None => "no pixel centre inside".to_owned(),
+            },
+        }
+    }
+}
+
+/// The measuring state of the app: the tool and the measurements made on the volume shown.
+#[derive(Clone, Debug, Default)]
+pub struct Measurements {
+    pub tool: Tool,
+    pub list: Vec<Entry>,
+}
+
+impl Measurements {
+    /// Replaces the list (a link's, or none for a new volume), read on `volume`.
+    pub fn set(&mut self, volume: &Volume, list: &[Measurement]) {
+        self.list = list.iter().map(|m| Entry::new(volume, *m)).collect();
+    }
+
+    pub fn add(&mut self, volume: &Volume, m: Measurement) {
+        self.list.push(Entry::new(volume, m));
+    }
+
+    pub fn measurements(&self) -> Vec<Measurement> {
+        self.list.iter().map(|e| e.measurement).collect()
+    }
+}
+
+impl super::ShapecastApp {
+    /// The measurements on the volume shown, oldest first.
+    pub fn measurements(&self) -> &[Entry] {
+        &self.measure.list
+    }
+
+    /// What a left drag on a slice does.
+    pub fn set_tool(&mut self, tool: Tool) {
+        self.measure.tool = tool;
+    }
+
+    pub fn tool(&self) -> Tool {
+        self.measure.tool
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_round_trips_and_garbage_is_refused() {
+        let m = Measurement {
+            kind: MeasureKind::Ellipse,
+            pane: SliceKind::Coronal,
+            a_mm: DVec3::new(-1.25, 0.1, 1e-7),
+            b_mm: DVec3::new(300.0, -2.5, 17.333_333_333_333_332),
+        };
+        assert_eq!(Measurement::from_text(&m.to_text()), Some(m));
+        for bad in [
+            "",
+            "ruler",
+            "ruler,axial,1,2,3,4,5",
+            "ruler,axial,1,2,3,4,5,x",
+            "ruler,oblique,1,2,3,4,5,6",
+            "box,axial,1,2,3,4,5,6",
+            "ruler,axial,1,2,3,4,5,inf",
+        ] {
+            assert_eq!(Measurement::from_text(bad), None, "{bad}");
+        }
+    }
+
+    #[test]
+    fn ellipse_statistics_count_centres_inside() {
+        // Values = 10 i + j on a 1 x 2 mm grid: the ellipse of half-axes 3 x 1 voxels centred on
+        // voxel (5, 5) of slice 1 holds row 5 from i = 2 to 8, and (5, 4), (5, 6).
+        let dims = [12, 10, 3];
+        let values: Vec<f32> = (0..dims[0] * dims[1] * dims[2])
+            .map(|n| {
+                let (i, j) = (n % dims[0], (n / dims[0]) % dims[1]);
+                (10 * i + j) as f32
+            })
+            .collect();
+        let v = Volume::from_f32(dims, [1.0, 2.0, 3.0], values);
+        let world = v.world_from_voxel();
+        let m = Measurement {
+            kind: MeasureKind::Ellipse,
+            pane: SliceKind::Axial,
+            a_mm: world.transform_point3(DVec3::new(2.0, 4.0, 1.0)),
+            b_mm: world.transform_point3(DVec3::new(8.0, 6.0, 1.0)),
+        };
+        let s = region_stats(&v, &m).expect("stats");
+        let mut inside = Vec::new();
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let (du, dv) = ((i as f64 - 5.0) / 3.0, (j as f64 - 5.0) / 1.0);
+                if du * du + dv * dv <= 1.0 {
+                    inside.push(v.value_at(i, j, 1) as f64);
+                }
+            }
+        }
+        assert_eq!(s.pixels, inside.len());
+        let mean = inside.iter().sum::<f64>() / inside.len() as f64;
+        assert!((s.mean - mean).abs() < 1e-9);
+        assert_eq!(s.min, 25.0);
+        assert_eq!(s.max, 85.0);
+        assert!((s.area_mm2 - std::f64::consts::PI * 3.0 * 2.0).abs() < 1e-9);
+        let ruler = Measurement {
+            kind: MeasureKind::Ruler,
+            ..m
+        };
+        assert!((ruler.length_mm() - (36.0f64 + 16.0).sqrt()).abs() < 1e-9);
+        assert_eq!(region_stats(&v, &ruler), None);
+    }
+}

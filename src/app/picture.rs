@@ -1,0 +1,346 @@
+//! "Save picture": a PNG of one pane as it is on screen, with its orientation letters, scale bar
+//! and measurements (the pane draws them; the picture is the frame's pixels, cropped). The app
+//! asks eframe for a screenshot of the next frame (`ViewportCommand::Screenshot`, on the web and
+//! natively), crops it to the pane and encodes it as PNG; the page offers it as a download (a
+//! `blob:` URL on an `<a download>`: nothing leaves the machine), natively it is written into the
+//! current folder. Also the scale bar the panes draw: a round length in mm near a fifth of the
+//! pane's width.
+
+use std::sync::{Arc, Mutex};
+
+use super::{PaneId, ShapecastApp};
+
+/// A picture made: its file name and PNG bytes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Picture {
+    pub name: String,
+    pub png: Vec<u8>,
+    pub size: [u32; 2],
+}
+
+/// Where eframe's screenshot callback leaves the frame's pixels.
+type ScreenshotSlot = Arc<Mutex<Option<Arc<egui::ColorImage>>>>;
+
+/// The picture being made and the last one made.
+#[derive(Default)]
+pub(super) struct PictureState {
+    /// The pane asked for, and the screenshot when it arrives.
+    pending: Option<(PaneId, ScreenshotSlot)>,
+    /// The pane asked for and the frames to wait before the screenshot (the menu that asked
+    /// closes first).
+    requested: Option<(PaneId, u8)>,
+    pub last: Option<Picture>,
+    /// Natively, the folder pictures are written into (`None`: the current folder).
+    #[cfg(not(target_arch = "wasm32"))]
+    pub dir: Option<std::path::PathBuf>,
+}
+
+/// A round length (1, 2 or 5 times a power of ten) in mm close to `target_mm`.
+pub fn round_length_mm(target_mm: f64) -> f64 {
+    if !(target_mm.is_finite() && target_mm > 0.0) {
+        return 1.0;
+    }
+    let power = 10f64.powf(target_mm.log10().floor());
+    let m = target_mm / power;
+    let step = if m < 1.5 {
+        1.0
+    } else if m < 3.5 {
+        2.0
+    } else if m < 7.5 {
+        5.0
+    } else {
+        10.0
+    };
+    step * power
+}
+
+/// A scale bar in the bottom-right corner of `area` for `points_per_mm` on screen: a round
+/// length near a fifth of the width, with end ticks and its length written above.
+pub fn draw_scale_bar(painter: &egui::Painter, area: egui::Rect, points_per_mm: f32) {
+    if !(points_per_mm.is_finite() && points_per_mm > 0.0) || area.width() < 60.0 {
+        return;
+    }
+    let mm = round_length_mm(f64::from(area.width() / points_per_mm) / 5.0);
+    let length = mm as f32 * points_per_mm;
+    let right = area.right_bottom() + egui::vec2(-10.0, -10.0);
+    let left = right - egui::vec2(length, 0.0);
+    let stroke = egui::Stroke::new(2.0, egui::Color32::from_gray(235));
+    painter.line_segment([left, right], stroke);
+    for p in [left, right] {
+        painter.line_segment([p - egui::vec2(0.0, 5.0), p], stroke);
+    }
+    let label = if mm >= 1.0 {
+        format!("{mm:.0} mm")
+    } else {
+        format!("{mm} mm")
+    };
+    painter.text(
+        left + egui::vec2(0.5 * length, -4.0),
+        egui::Align2::CENTER_BOTTOM,
+        label,
+        egui::FontId::proportional(12.0),
+        egui::Color32::from_gray(235),
+    );
+}
+
+/// The pixels of `rect` (points) of a screenshot taken at `pixels_per_point`, as PNG.
+pub fn crop_png(
+    image: &egui::ColorImage,
+    rect: egui::Rect,
+    pixels_per_point: f32,
+) -> Result<(Vec<u8>, [u32; 2]), String> {
+    let [w, h] = image.size;
+    let x0 = ((rect.left() * pixels_per_point).round().max(0.0) as usize).min(w);
+    let y0 = ((rect.top() * pixels_per_point).round().max(0.0) as usize).min(h);
+    let x1 = ((rect.right() * pixels_per_point).round().max(0.0) as usize).min(w);
+    let y1 = ((rect.bottom() * pixels_per_point).round().max(0.0) as usize).min(h);
+    if x1 <= x0 || y1 <= y0 {
+        return Err(format!("the pane ({rect:?}) is not on the screen"));
+    }
+    let mut rgba = Vec::with_capacity((x1 - x0) * (y1 - y0) * 4);
+    for y in y0..y1 {
+        for c in &image.pixels[y * w + x0..y * w + x1] {
+            // Opaque: the panes are; a viewer shows the picture as seen.
+            rgba.extend_from_slice(&[c.r(), c.g(), c.b(), 255]);
+        }
+    }
+    let size = [(x1 - x0) as u32, (y1 - y0) as u32];
+    let mut png = Vec::new();
+    let mut encoder = png::Encoder::new(&mut png, size[0], size[1]);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder
+        .write_header()
+        .and_then(|mut w| w.write_image_data(&rgba))
+        .map_err(|e| format!("encoding the picture as PNG: {e}"))?;
+    Ok((png, size))
+}
+
+impl ShapecastApp {
+    /// Asks for a picture of `pane` (made from the pixels of a frame or two later, once the
+    /// menu that asked has closed).
+    pub fn save_picture(&mut self, ctx: &egui::Context, pane: PaneId) {
+        self.picture.requested = Some((pane, 2));
+        ctx.request_repaint();
+    }
+
+    fn take_screenshot(&mut self, ctx: &egui::Context, pane: PaneId) {
+        let slot: ScreenshotSlot = Arc::default();
+        let sink = Arc::clone(&slot);
+        let repaint = ctx.clone();
+        ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(
+            egui::ScreenshotCallback::new(move |image| {
+                if let Ok(mut s) = sink.lock() {
+                    *s = Some(image);
+                }
+                repaint.request_repaint();
+            }),
+        ));
+        self.picture.pending = Some((pane, slot));
+        ctx.request_repaint();
+    }
+
+    /// Natively, where pictures are written (the current folder unless set).
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn set_picture_dir(&mut self, dir: std::path::PathBuf) {
+        self.picture.dir = Some(dir);
+    }
+
+    /// The last picture made (tests; the page downloads it, natively it is written to a file).
+    pub fn last_picture(&self) -> Option<&Picture> {
+        self.picture.last.as_ref()
+    }
+
+    /// Turns an arrived screenshot into the picture and hands it on.
+    pub(super) fn poll_picture(&mut self, ctx: &egui::Context) {
+        if let Some((pane, wait)) = self.picture.requested {
+            if wait == 0 {
+                self.picture.requested = None;
+                self.take_screenshot(ctx, pane);
+            } else {
+                self.picture.requested = Some((pane, wait - 1));
+                ctx.request_repaint();
+            }
+            return;
+        }
+        let Some((pane, slot)) = &self.picture.pending else {
+            return;
+        };
+        let image = match slot.lock() {
+            Ok(mut s) => s.take(),
+            Err(_) => None,
+        };
+        let Some(image) = image else {
+            ctx.request_repaint();
+            return;
+        };
+        let pane = *pane;
+        self.picture.pending = None;
+        let rect = match pane {
+            PaneId::Mip => matches!(
+                self.layout,
+                super::Layout::Single(PaneId::Mip)
+                    | super::Layout::Grid
+                    | super::Layout::MipAndSlices
+            )
+            .then(|| self.mip_view.image_area())
+            .filter(|r| r.is_positive()),
+            PaneId::Slice(k) => self
+                .panes
+                .iter()
+                .find(|p| p.kind == k)
+                .and_then(|p| p.area_rect),
+        };
+        let Some(rect) = rect else {
+            return self.error(format!(
+                "Save picture: the {} pane is not shown",
+                pane.name()
+            ));
+        };
+        let ppp = ctx.pixels_per_point();
+        let (png, size) = match crop_png(&image, rect, ppp) {
+            Ok(p) => p,
+            Err(e) => return self.error(format!("Save picture: {e}")),
+        };
+        let stem = self
+            .volume()
+            .map(|v| {
+                let name = v.source.rsplit(['/', '\\']).next().unwrap_or(&v.source);
+                let name = name.split('.').next().unwrap_or(name);
+                // Letters and digits; anything else becomes one '-'.
+                name.split(|c: char| !c.is_ascii_alphanumeric())
+                    .filter(|w| !w.is_empty())
+                    .collect::<Vec<_>>()
+                    .join("-")
+            })
+            .unwrap_or_else(|| "shapecast".to_owned());
+        let picture = Picture {
+            name: format!("{stem}-{}.png", pane.name()),
+            png,
+            size,
+        };
+        #[cfg(not(target_arch = "wasm32"))]
+        let delivered = deliver(&picture, self.picture.dir.as_deref());
+        #[cfg(target_arch = "wasm32")]
+        let delivered = deliver(&picture);
+        match delivered {
+            Ok(note) => self.notes.push(note),
+            Err(e) => self.error(format!("Save picture: {e}")),
+        }
+        self.picture.last = Some(picture);
+    }
+
+    /// The "Save picture" menu: one entry per pane shown.
+    pub(super) fn save_picture_ui(&mut self, ui: &mut egui::Ui) {
+        ui.menu_button("Save picture", |ui| {
+            ui.label("A PNG of a pane as shown, with its letters and scale bar:");
+            for (label, pane) in [
+                ("MIP pane", PaneId::Mip),
+                ("Axial pane", PaneId::Slice(super::SliceKind::Axial)),
+                ("Coronal pane", PaneId::Slice(super::SliceKind::Coronal)),
+                ("Sagittal pane", PaneId::Slice(super::SliceKind::Sagittal)),
+            ] {
+                let shown = match self.layout {
+                    super::Layout::Single(p) => p == pane,
+                    _ => true,
+                };
+                if ui
+                    .add_enabled(shown && self.scene.is_some(), egui::Button::new(label))
+                    .clicked()
+                {
+                    let ctx = ui.ctx().clone();
+                    self.save_picture(&ctx, pane);
+                    ui.close();
+                }
+            }
+        });
+    }
+}
+
+/// Hands the picture to the user: a download in the page.
+#[cfg(target_arch = "wasm32")]
+fn deliver(picture: &Picture) -> Result<String, String> {
+    download(picture).map_err(|e| super::web_files::js_error(&e))?;
+    Ok(format!("picture saved: {} (your downloads)", picture.name))
+}
+
+/// Hands the picture to the user: a file in `dir` (the current folder when `None`).
+#[cfg(not(target_arch = "wasm32"))]
+fn deliver(picture: &Picture, dir: Option<&std::path::Path>) -> Result<String, String> {
+    let path = dir.map_or_else(
+        || std::path::PathBuf::from(&picture.name),
+        |d| d.join(&picture.name),
+    );
+    std::fs::write(&path, &picture.png).map_err(|e| format!("writing {}: {e}", path.display()))?;
+    let shown = std::path::absolute(&path).unwrap_or(path);
+    Ok(format!("picture saved: {}", shown.display()))
+}
+
+#[cfg(target_arch = "wasm32")]
+fn download(picture: &Picture) -> Result<(), wasm_bindgen::JsValue> {
+    use wasm_bindgen::JsCast as _;
+    let window = web_sys::window().ok_or("no window")?;
+    let document = window.document().ok_or("no document")?;
+    let bytes = js_sys::Uint8Array::from(picture.png.as_slice());
+    let parts = js_sys::Array::of1(&bytes);
+    let options = web_sys::BlobPropertyBag::new();
+    options.set_type("image/png");
+    let blob = web_sys::Blob::new_with_u8_array_sequence_and_options(&parts, &options)?;
+    let url = web_sys::Url::create_object_url_with_blob(&blob)?;
+    let a: web_sys::HtmlAnchorElement = document.create_element("a")?.dyn_into()?;
+    a.set_href(&url);
+    a.set_download(&picture.name);
+    a.click();
+    // The URL is kept until the next picture: revoked at once, a browser may not have started
+    // reading it yet.
+    LAST_URL.with(|last| {
+        if let Some(old) = last.replace(Some(url)) {
+            let _ = web_sys::Url::revoke_object_url(&old);
+        }
+    });
+    Ok(())
+}
+
+#[cfg(target_arch = "wasm32")]
+thread_local! {
+    static LAST_URL: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_lengths() {
+        for (target, want) in [
+            (0.9, 1.0),
+            (1.6, 2.0),
+            (4.0, 5.0),
+            (8.0, 10.0),
+            (23.0, 20.0),
+            (0.3, 0.2),
+        ] {
+            let got = round_length_mm(target);
+            assert!((got - want).abs() < 1e-9, "{target}: {got}");
+        }
+        assert_eq!(round_length_mm(f64::NAN), 1.0);
+        assert_eq!(round_length_mm(-3.0), 1.0);
+    }
+
+    #[test]
+    fn crop_keeps_the_pixels_of_the_rect() {
+        let mut image = egui::ColorImage::filled([8, 6], egui::Color32::BLACK);
+        image.pixels[2 * 8 + 3] = egui::Color32::from_rgb(200, 10, 20);
+        let rect = egui::Rect::from_min_max(egui::pos2(1.0, 0.5), egui::pos2(2.5, 2.0));
+        let (png, size) = crop_png(&image, rect, 2.0).expect("png");
+        assert_eq!(size, [3, 3]);
+        let decoder = png::Decoder::new(std::io::Cursor::new(png));
+        let mut reader = decoder.read_info().expect("png header");
+        let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+        reader.next_frame(&mut buf).expect("frame");
+        // (3, 2) of the image is (1, 1) of the crop from (2, 1).
+        assert_eq!(&buf[(3 + 1) * 4..(3 + 1) * 4 + 4], &[200, 10, 20, 255]);
+        let off = egui::Rect::from_min_size(egui::pos2(50.0, 50.0), egui::vec2(4.0, 4.0));
+        assert!(crop_png(&image, off, 1.0).is_err());
+    }
+}
