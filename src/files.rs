@@ -253,13 +253,88 @@ pub fn read(path: &Path) -> Result<Vec<u8>, FilesError> {
     Ok(bytes)
 }
 
-/// Lists and reads the given paths into loader inputs named by their paths, with what was
-/// skipped.
+/// A listed file as the loaders read it: on demand, so that an uncompressed payload goes from
+/// the disk straight into the voxel buffer and a DICOM series is read one file at a time. Each
+/// read opens the file again (a series of thousands of files holds no descriptors), checks it
+/// is still a regular file and reads from the offset asked.
+#[derive(Debug)]
+pub struct DiskFile {
+    path: PathBuf,
+    len: u64,
+}
+
+impl DiskFile {
+    /// The file at `path`, refused when it is not a regular file or is over [`MAX_FILE_BYTES`].
+    pub fn open(path: &Path) -> Result<Self, FilesError> {
+        let meta = std::fs::metadata(path).map_err(|e| FilesError::Read {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        if !meta.is_file() {
+            return Err(FilesError::NotAFile {
+                path: path.display().to_string(),
+                kind: kind_of(meta.file_type()),
+            });
+        }
+        check_size(path, meta.len())?;
+        Ok(Self {
+            path: path.to_owned(),
+            len: meta.len(),
+        })
+    }
+}
+
+impl crate::io::FileSource for DiskFile {
+    fn len(&self) -> u64 {
+        self.len
+    }
+
+    fn read_exact_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()> {
+        use std::io::{Seek as _, SeekFrom};
+        let end = offset.saturating_add(buf.len() as u64);
+        if end > self.len {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!(
+                    "bytes {offset}..{end} asked of a file of {} bytes",
+                    self.len
+                ),
+            ));
+        }
+        // Opened again for each read: the path is checked to be a regular file first, so a
+        // file replaced by a FIFO since it was listed cannot block the open.
+        let meta = std::fs::metadata(&self.path)?;
+        if !meta.is_file() || meta.len() < end {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!(
+                    "the file changed since it was listed ({}, {} bytes)",
+                    kind_of(meta.file_type()),
+                    meta.len()
+                ),
+            ));
+        }
+        let mut f = std::fs::File::open(&self.path)?;
+        f.seek(SeekFrom::Start(offset))?;
+        f.read_exact(buf)
+    }
+}
+
+/// Lists the given paths as loader inputs named by their paths, read on demand (see
+/// [`DiskFile`]), with what was skipped.
 pub fn read_all(paths: &[PathBuf]) -> Result<(Vec<crate::io::InputFile>, Vec<String>), FilesError> {
     let listing = list(paths)?;
     let mut files = Vec::with_capacity(listing.files.len());
     for (p, _) in &listing.files {
-        files.push(crate::io::InputFile::new(p.display().to_string(), read(p)?));
+        let source = std::sync::Arc::new(DiskFile::open(p)?);
+        let file =
+            crate::io::InputFile::on_demand(p.display().to_string(), source).map_err(|e| {
+                FilesError::Read {
+                    path: p.display().to_string(),
+                    message: e.to_string(),
+                }
+            })?;
+        files.push(file);
     }
     Ok((files, listing.skipped))
 }

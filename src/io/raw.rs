@@ -3,6 +3,7 @@
 
 use std::io::Read;
 
+use super::input::Data;
 use super::{Limits, LoadError};
 use crate::volume::Voxels;
 
@@ -621,19 +622,144 @@ impl SampleLayout {
     }
 }
 
-/// Checks that `needed` bytes of `what` are present, then decodes them (NRRD and MetaImage data).
+/// Checks that `needed` bytes of `what` are present in `data`, then decodes `layout` (its
+/// offset counted from the start of `data`): from memory, or read from the file straight into
+/// the voxel buffer ([`decode_source`]).
 pub(crate) fn decode_present(
     file: &str,
     what: &str,
-    bytes: &[u8],
+    data: Data<'_>,
     needed: u64,
     layout: SampleLayout,
     limits: &Limits,
 ) -> Result<Voxels, LoadError> {
-    if (bytes.len() as u64) < needed {
-        return Err(LoadError::truncated(file, what, needed, bytes.len() as u64));
+    if data.len() < needed {
+        return Err(LoadError::truncated(file, what, needed, data.len()));
     }
-    decode_samples(file, bytes, layout, limits)
+    match data {
+        Data::Memory(bytes) => decode_samples(file, bytes, layout, limits),
+        Data::Source { .. } => decode_source(file, data, layout, limits),
+    }
+}
+
+/// Bytes read at a time when samples are converted from a file read on demand.
+const SOURCE_CHUNK_BYTES: usize = 1 << 20;
+
+/// [`decode_samples`] for data read on demand, with the same result: samples whose stored type
+/// is the voxels' own are read straight into the voxel buffer (then byte-swapped in place if
+/// need be), others are converted from chunks of [`SOURCE_CHUNK_BYTES`]. Peak memory is the
+/// voxels plus one chunk.
+fn decode_source(
+    file: &str,
+    data: Data<'_>,
+    layout: SampleLayout,
+    limits: &Limits,
+) -> Result<Voxels, LoadError> {
+    let span = layout
+        .span_bytes()
+        .and_then(|s| s.checked_add(layout.offset as u64))
+        .unwrap_or(u64::MAX);
+    if span > data.len() {
+        return Err(LoadError::truncated(file, "voxel data", span, data.len()));
+    }
+    layout.check_voxel_budget(file, limits)?;
+    let n = layout.count;
+    let offset = layout.offset as u64;
+    let swap = (layout.endian == Endian::Little) != cfg!(target_endian = "little");
+    if layout.stride_samples == 1 || n <= 1 {
+        match layout.ty {
+            SampleType::U8 => {
+                let mut v = try_vec::<u8>(file, "voxels", n)?;
+                data.read_at(file, offset, &mut v)?;
+                return Ok(Voxels::U8(v));
+            }
+            SampleType::I16 => {
+                let mut v = try_vec::<i16>(file, "voxels", n)?;
+                data.read_at(file, offset, bytemuck::cast_slice_mut(&mut v))?;
+                if swap {
+                    v.iter_mut().for_each(|x| *x = x.swap_bytes());
+                }
+                return Ok(Voxels::I16(v));
+            }
+            SampleType::U16 => {
+                let mut v = try_vec::<u16>(file, "voxels", n)?;
+                data.read_at(file, offset, bytemuck::cast_slice_mut(&mut v))?;
+                if swap {
+                    v.iter_mut().for_each(|x| *x = x.swap_bytes());
+                }
+                return Ok(Voxels::U16(v));
+            }
+            SampleType::F32 => {
+                let mut v = try_vec::<f32>(file, "voxels", n)?;
+                data.read_at(file, offset, bytemuck::cast_slice_mut(&mut v))?;
+                if swap {
+                    v.iter_mut()
+                        .for_each(|x| *x = f32::from_bits(x.to_bits().swap_bytes()));
+                }
+                return Ok(Voxels::F32(v));
+            }
+            _ => {}
+        }
+    }
+    let mut chunks = SourceChunks {
+        file,
+        data,
+        layout,
+        buf: Vec::new(),
+        first: 0,
+        held: 0,
+    };
+    Ok(match layout.ty {
+        SampleType::U8 => Voxels::U8(collect(file, n, |i| Ok(chunks.value(i)? as u8))?),
+        SampleType::I8 | SampleType::I16 => {
+            Voxels::I16(collect(file, n, |i| Ok(chunks.value(i)? as i16))?)
+        }
+        SampleType::U16 => Voxels::U16(collect(file, n, |i| Ok(chunks.value(i)? as u16))?),
+        SampleType::F32 | SampleType::F64 => {
+            Voxels::F32(collect(file, n, |i| Ok(chunks.value(i)? as f32))?)
+        }
+        SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64 => {
+            // One pass for the range decides the compact type; a second reads again and converts.
+            let range = value_range(n, |i| chunks.value(i))?;
+            compact_wide(file, n, range, |i| chunks.value(i))?
+        }
+    })
+}
+
+/// The samples of a layout in data read on demand, a chunk at a time.
+struct SourceChunks<'a> {
+    file: &'a str,
+    data: Data<'a>,
+    layout: SampleLayout,
+    buf: Vec<u8>,
+    /// Index of the first sample in `buf`, and how many it holds.
+    first: usize,
+    held: usize,
+}
+
+impl SourceChunks<'_> {
+    /// Sample `i` as its value (any order; in order reads each chunk once).
+    fn value(&mut self, i: usize) -> Result<f64, LoadError> {
+        let size = self.layout.ty.size();
+        let step = self.layout.stride_samples.saturating_mul(size).max(1);
+        if !(self.first..self.first + self.held).contains(&i) {
+            let per_chunk = (SOURCE_CHUNK_BYTES / step).max(1);
+            let c = per_chunk.min(self.layout.count.saturating_sub(i)).max(1);
+            let bytes = (c - 1).saturating_mul(step).saturating_add(size);
+            let at =
+                (self.layout.offset as u64).saturating_add((i as u64).saturating_mul(step as u64));
+            self.buf.resize(bytes, 0);
+            self.data.read_at(self.file, at, &mut self.buf)?;
+            (self.first, self.held) = (i, c);
+        }
+        Ok(sample_f64(
+            &self.buf,
+            self.layout.ty,
+            self.layout.endian,
+            (i - self.first) * step,
+        )
+        .unwrap_or(0.0))
+    }
 }
 
 /// How a volume read from `header` and, possibly, a separate data file is named to the user.

@@ -41,13 +41,15 @@ fn chain(e: &dyn std::error::Error) -> String {
     s
 }
 
-/// Parses a DICOM file from bytes; with `headers_only` it stops before the pixel data.
+/// Parses a DICOM file from bytes; with `headers_only` it stops before the pixel data. A file
+/// read on demand is read here and its bytes dropped once the object is built.
 pub(super) fn open(
     file: &InputFile,
     headers_only: bool,
     limits: &Limits,
 ) -> Result<DefaultDicomObject, LoadError> {
-    let bytes = file.bytes.as_slice();
+    let contents = file.contents()?;
+    let bytes: &[u8] = &contents;
     let body = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
         &bytes[128..]
     } else {
@@ -310,7 +312,7 @@ pub(super) fn read_header(
     }
     // Every frame needs at least a byte of the file, and uncompressed frames need all their
     // bytes: checked here, before a per-frame table or any pixel buffer is made.
-    let file_len = file.bytes.len() as u64;
+    let file_len = file.len();
     if n_frames as u64 > file_len {
         return Err(LoadError::truncated(
             name,

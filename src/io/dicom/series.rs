@@ -734,7 +734,11 @@ pub(super) fn check_before_decoding(
     }
     if ts == encapsulated::RLE_LOSSLESS {
         // The whole file bounds the compressed size.
-        encapsulated::check_rle_size(&file.name, header, file.bytes.len())?;
+        encapsulated::check_rle_size(
+            &file.name,
+            header,
+            usize::try_from(file.len()).unwrap_or(usize::MAX),
+        )?;
     }
     Ok(())
 }

@@ -1,0 +1,509 @@
+//! Peak memory while reading, for every format (issue 14): at most 1.5x the final voxel bytes
+//! plus a small constant. Natively files are read on demand (`shapecast::files::read_all`, as
+//! the command line reads them): an uncompressed payload goes from the file straight into the
+//! voxel buffer and a DICOM series is read one file at a time. In memory (the browser's reads,
+//! whose bytes cannot be avoided) the loaders add at most the voxels to the input. Each file
+//! is built here in a temporary folder; a counting allocator measures each load.
+
+#[path = "common/counting.rs"]
+mod counting;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use counting::peak_during;
+use shapecast::io::{self, InputFile};
+use shapecast::{Volume, Voxels};
+
+const MIB: usize = 1 << 20;
+/// The constant allowed above the voxels: a 1 MiB read chunk, 4 KiB heads, a DICOM slice or
+/// two, names and headers.
+const SLACK: usize = 3 * MIB;
+const DIMS: [usize; 3] = [256, 256, 48];
+const N: usize = DIMS[0] * DIMS[1] * DIMS[2];
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("shapecast-mem-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+/// A value per voxel that every stored type holds (0..=250, varied).
+fn value(i: usize) -> f64 {
+    ((i * 7 + i / 256) % 251) as f64
+}
+
+fn samples(ty: &str, big_endian: bool) -> Vec<u8> {
+    let mut out = Vec::new();
+    for i in 0..N {
+        let v = value(i);
+        let mut b: Vec<u8> = match ty {
+            "u8" => vec![v as u8],
+            "i16" => (v as i16).to_le_bytes().to_vec(),
+            "u16" => (v as u16).to_le_bytes().to_vec(),
+            "f32" => (v as f32).to_le_bytes().to_vec(),
+            "f64" => v.to_le_bytes().to_vec(),
+            "i32" => (v as i32).to_le_bytes().to_vec(),
+            _ => unreachable!("{ty}"),
+        };
+        if big_endian {
+            b.reverse();
+        }
+        out.extend_from_slice(&b);
+    }
+    out
+}
+
+/// NIfTI-1 single file (or, with `pair`, the 348-byte .hdr of a .hdr/.img pair).
+fn nifti_header(datatype: i16, bitpix: i16, pair: bool) -> Vec<u8> {
+    let mut b = vec![0u8; if pair { 348 } else { 352 }];
+    b[0..4].copy_from_slice(&348i32.to_le_bytes());
+    b[40..42].copy_from_slice(&3i16.to_le_bytes());
+    for (i, d) in DIMS.iter().enumerate() {
+        b[42 + 2 * i..44 + 2 * i].copy_from_slice(&(*d as i16).to_le_bytes());
+    }
+    b[70..72].copy_from_slice(&datatype.to_le_bytes());
+    b[72..74].copy_from_slice(&bitpix.to_le_bytes());
+    for i in 0..4 {
+        b[76 + 4 * i..80 + 4 * i].copy_from_slice(&1f32.to_le_bytes());
+    }
+    let off: f32 = if pair { 0.0 } else { 352.0 };
+    b[108..112].copy_from_slice(&off.to_le_bytes());
+    b[344..348].copy_from_slice(if pair { b"ni1\0" } else { b"n+1\0" });
+    b
+}
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    enc.write_all(bytes).expect("gzip");
+    enc.finish().expect("gzip")
+}
+
+fn zlib(bytes: &[u8]) -> Vec<u8> {
+    let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+    enc.write_all(bytes).expect("zlib");
+    enc.finish().expect("zlib")
+}
+
+fn nrrd_header(ty: &str, encoding: &str, endian: &str, data_file: Option<&str>) -> Vec<u8> {
+    let mut h = format!(
+        "NRRD0004\ntype: {ty}\ndimension: 3\nsizes: {} {} {}\nspacings: 1 1 1\nendian: {endian}\nencoding: {encoding}\n",
+        DIMS[0], DIMS[1], DIMS[2]
+    );
+    match data_file {
+        Some(f) => h.push_str(&format!("data file: {f}\n")),
+        None => h.push('\n'),
+    }
+    h.into_bytes()
+}
+
+fn mha_header(ty: &str, compressed: bool, data_file: &str) -> Vec<u8> {
+    format!(
+        "ObjectType = Image\nNDims = 3\nDimSize = {} {} {}\nElementType = {ty}\nElementSpacing = 1 1 1\nCompressedData = {}\nElementDataFile = {data_file}\n",
+        DIMS[0],
+        DIMS[1],
+        DIMS[2],
+        if compressed { "True" } else { "False" }
+    )
+    .into_bytes()
+}
+
+fn cat(a: Vec<u8>, b: &[u8]) -> Vec<u8> {
+    let mut a = a;
+    a.extend_from_slice(b);
+    a
+}
+
+/// The cases: a label, the files (name, bytes; the first is the one given), the voxel type.
+fn cases() -> Vec<(&'static str, Vec<(String, Vec<u8>)>, &'static str)> {
+    let one = |n: &str, b: Vec<u8>| vec![(n.to_owned(), b)];
+    vec![
+        (
+            "nii i16",
+            one(
+                "a.nii",
+                cat(nifti_header(4, 16, false), &samples("i16", false)),
+            ),
+            "i16",
+        ),
+        (
+            "nii u8",
+            one(
+                "a.nii",
+                cat(nifti_header(2, 8, false), &samples("u8", false)),
+            ),
+            "u8",
+        ),
+        (
+            "nii f32",
+            one(
+                "a.nii",
+                cat(nifti_header(16, 32, false), &samples("f32", false)),
+            ),
+            "f32",
+        ),
+        (
+            "nii f64 -> f32",
+            one(
+                "a.nii",
+                cat(nifti_header(64, 64, false), &samples("f64", false)),
+            ),
+            "f32",
+        ),
+        (
+            "nii i32 -> i16",
+            one(
+                "a.nii",
+                cat(nifti_header(8, 32, false), &samples("i32", false)),
+            ),
+            "i16",
+        ),
+        (
+            "hdr/img (ANALYZE-style pair)",
+            vec![
+                ("a.hdr".to_owned(), nifti_header(4, 16, true)),
+                ("a.img".to_owned(), samples("i16", false)),
+            ],
+            "i16",
+        ),
+        (
+            "nii.gz",
+            one(
+                "a.nii.gz",
+                gzip(&cat(nifti_header(4, 16, false), &samples("i16", false))),
+            ),
+            "i16",
+        ),
+        (
+            "nrrd raw",
+            one(
+                "a.nrrd",
+                cat(
+                    nrrd_header("short", "raw", "little", None),
+                    &samples("i16", false),
+                ),
+            ),
+            "i16",
+        ),
+        (
+            "nrrd raw big endian",
+            one(
+                "a.nrrd",
+                cat(
+                    nrrd_header("ushort", "raw", "big", None),
+                    &samples("u16", true),
+                ),
+            ),
+            "u16",
+        ),
+        (
+            "nhdr + raw (detached)",
+            vec![
+                (
+                    "a.nhdr".to_owned(),
+                    nrrd_header("float", "raw", "little", Some("a.raw")),
+                ),
+                ("a.raw".to_owned(), samples("f32", false)),
+            ],
+            "f32",
+        ),
+        (
+            "nrrd gzip",
+            one(
+                "a.nrrd",
+                cat(
+                    nrrd_header("short", "gzip", "little", None),
+                    &gzip(&samples("i16", false)),
+                ),
+            ),
+            "i16",
+        ),
+        (
+            "mha raw",
+            one(
+                "a.mha",
+                cat(
+                    mha_header("MET_SHORT", false, "LOCAL"),
+                    &samples("i16", false),
+                ),
+            ),
+            "i16",
+        ),
+        (
+            "mhd + raw",
+            vec![
+                ("a.mhd".to_owned(), mha_header("MET_UCHAR", false, "a.raw")),
+                ("a.raw".to_owned(), samples("u8", false)),
+            ],
+            "u8",
+        ),
+        (
+            "mha zlib",
+            one(
+                "a.mha",
+                cat(
+                    mha_header("MET_SHORT", true, "LOCAL"),
+                    &zlib(&samples("i16", false)),
+                ),
+            ),
+            "i16",
+        ),
+    ]
+}
+
+fn check_values(label: &str, v: &Volume, ty: &str) {
+    assert_eq!(v.dims, DIMS, "{label}");
+    assert_eq!(v.voxels.type_name(), ty, "{label}");
+    for i in [0, 1, 255, 256, 4097, N / 2, N - 1] {
+        assert_eq!(
+            f64::from(v.voxels.raw_f32(i)),
+            value(i),
+            "{label}: voxel {i}"
+        );
+    }
+}
+
+fn write_all(dir: &Path, files: &[(String, Vec<u8>)]) {
+    for (n, b) in files {
+        std::fs::write(dir.join(n), b).expect("write");
+    }
+}
+
+#[test]
+fn every_format_read_from_files_peaks_within_one_and_a_half_times_the_voxels() {
+    let dir = temp_dir("formats");
+    let mut report = Vec::new();
+    for (label, files, ty) in cases() {
+        let sub = dir.join(label.replace([' ', '/', '(', ')', '>'], "_"));
+        std::fs::create_dir_all(&sub).expect("dir");
+        write_all(&sub, &files);
+        // The first file is given; the others are found beside it.
+        let given = sub.join(&files[0].0);
+        drop(files);
+        let (r, peak) = peak_during(|| {
+            let (inputs, _) = shapecast::files::read_all(&[given]).expect("lists the files");
+            io::load(&inputs)
+        });
+        let v = r.unwrap_or_else(|e| panic!("{label}: {e}")).volume;
+        check_values(label, &v, ty);
+        let voxel_bytes = v.voxels.byte_len();
+        report.push(format!(
+            "{label}: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+            peak as f64 / voxel_bytes as f64
+        ));
+        assert!(
+            peak <= voxel_bytes * 3 / 2 + SLACK,
+            "{label}: peak {peak} bytes for {voxel_bytes} voxel bytes"
+        );
+        std::fs::remove_dir_all(&sub).expect("clean up");
+    }
+    eprintln!("{}", report.join("\n"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn every_format_in_memory_adds_at_most_the_voxels_to_its_input() {
+    // The browser's path: the file bytes are already in memory (not counted: allocated before
+    // the load); the load itself allocates the voxels and a constant.
+    let mut report = Vec::new();
+    for (label, files, ty) in cases() {
+        let inputs: Vec<InputFile> = files
+            .into_iter()
+            .map(|(n, b)| InputFile::new(n, b))
+            .collect();
+        let (r, peak) = peak_during(|| io::load(&inputs));
+        let v = r.unwrap_or_else(|e| panic!("{label}: {e}")).volume;
+        check_values(label, &v, ty);
+        let voxel_bytes = v.voxels.byte_len();
+        report.push(format!(
+            "{label}: input + {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+            peak as f64 / voxel_bytes as f64
+        ));
+        assert!(
+            peak <= voxel_bytes + SLACK,
+            "{label}: the load allocated {peak} bytes for {voxel_bytes} voxel bytes"
+        );
+    }
+    eprintln!("{}", report.join("\n"));
+}
+
+#[test]
+fn a_file_read_on_demand_loads_what_the_same_bytes_in_memory_load() {
+    for (label, files, _) in cases() {
+        let in_memory: Vec<InputFile> = files
+            .iter()
+            .map(|(n, b)| InputFile::new(n.clone(), b.clone()))
+            .collect();
+        let on_demand: Vec<InputFile> = files
+            .into_iter()
+            .map(|(n, b)| {
+                InputFile::on_demand(n, std::sync::Arc::new(io::MemorySource(b)))
+                    .expect("reads the head")
+            })
+            .collect();
+        let a = io::load(&in_memory).unwrap_or_else(|e| panic!("{label}: {e}"));
+        let b = io::load(&on_demand).unwrap_or_else(|e| panic!("{label}: {e}"));
+        assert_eq!(a.volume, b.volume, "{label}");
+        assert_eq!(a.notes, b.notes, "{label}");
+    }
+}
+
+#[test]
+fn a_data_file_shorter_than_its_header_says_is_refused_by_name_on_demand_too() {
+    let mut raw = samples("i16", false);
+    raw.truncate(raw.len() - 2);
+    let files = [
+        InputFile::new(
+            "a.nhdr",
+            nrrd_header("short", "raw", "little", Some("a.raw")),
+        ),
+        InputFile::on_demand("a.raw", std::sync::Arc::new(io::MemorySource(raw)))
+            .expect("reads the head"),
+    ];
+    let e = io::load(&files).expect_err("one sample short");
+    let m = e.to_string();
+    assert!(m.contains("a.raw") && m.contains("truncated"), "{m}");
+    // A nii cut short, read on demand.
+    let mut nii = cat(nifti_header(4, 16, false), &samples("i16", false));
+    nii.truncate(nii.len() / 2);
+    let f = InputFile::on_demand("cut.nii", std::sync::Arc::new(io::MemorySource(nii)))
+        .expect("reads the head");
+    let m = io::load(&[f]).expect_err("half the voxels").to_string();
+    assert!(m.contains("cut.nii") && m.contains("truncated"), "{m}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// DICOM: a series of slices and one multi-frame file, written by hand (explicit VR little endian).
+
+fn element(out: &mut Vec<u8>, tag: (u16, u16), vr: &[u8; 2], value: &[u8]) {
+    let mut v = value.to_vec();
+    if v.len() % 2 == 1 {
+        v.push(if matches!(vr, b"UI" | b"OB") { 0 } else { b' ' });
+    }
+    out.extend_from_slice(&tag.0.to_le_bytes());
+    out.extend_from_slice(&tag.1.to_le_bytes());
+    out.extend_from_slice(vr);
+    if matches!(vr, b"OB" | b"OW" | b"SQ" | b"UN" | b"UT") {
+        out.extend_from_slice(&[0, 0]);
+        out.extend_from_slice(&(v.len() as u32).to_le_bytes());
+    } else {
+        out.extend_from_slice(&(v.len() as u16).to_le_bytes());
+    }
+    out.extend_from_slice(&v);
+}
+
+/// A CT image of DIMS[0] x DIMS[1] with `frames` frames at z = `z` mm, pixels `value(first + i)`.
+fn dicom(z: usize, frames: usize, first: usize) -> Vec<u8> {
+    let mut group = Vec::new();
+    element(&mut group, (0x0002, 0x0001), b"OB", &[0, 1]);
+    element(
+        &mut group,
+        (0x0002, 0x0002),
+        b"UI",
+        b"1.2.840.10008.5.1.4.1.1.2",
+    );
+    element(
+        &mut group,
+        (0x0002, 0x0003),
+        b"UI",
+        format!("1.2.3.4.{z}").as_bytes(),
+    );
+    element(&mut group, (0x0002, 0x0010), b"UI", b"1.2.840.10008.1.2.1");
+    let mut f = vec![0u8; 128];
+    f.extend_from_slice(b"DICM");
+    element(
+        &mut f,
+        (0x0002, 0x0000),
+        b"UL",
+        &(group.len() as u32).to_le_bytes(),
+    );
+    f.extend_from_slice(&group);
+    let us = |v: u16| v.to_le_bytes().to_vec();
+    element(
+        &mut f,
+        (0x0008, 0x0018),
+        b"UI",
+        format!("1.2.3.4.{z}").as_bytes(),
+    );
+    element(&mut f, (0x0008, 0x0060), b"CS", b"CT");
+    element(&mut f, (0x0020, 0x000E), b"UI", b"1.2.3.99");
+    element(
+        &mut f,
+        (0x0020, 0x0032),
+        b"DS",
+        format!("0\\0\\{z}").as_bytes(),
+    );
+    element(&mut f, (0x0020, 0x0037), b"DS", b"1\\0\\0\\0\\1\\0");
+    element(&mut f, (0x0028, 0x0002), b"US", &us(1));
+    element(&mut f, (0x0028, 0x0004), b"CS", b"MONOCHROME2");
+    if frames > 1 {
+        element(
+            &mut f,
+            (0x0028, 0x0008),
+            b"IS",
+            frames.to_string().as_bytes(),
+        );
+    }
+    element(&mut f, (0x0028, 0x0010), b"US", &us(DIMS[1] as u16));
+    element(&mut f, (0x0028, 0x0011), b"US", &us(DIMS[0] as u16));
+    element(&mut f, (0x0028, 0x0030), b"DS", b"1\\1");
+    element(&mut f, (0x0028, 0x0100), b"US", &us(16));
+    element(&mut f, (0x0028, 0x0101), b"US", &us(16));
+    element(&mut f, (0x0028, 0x0102), b"US", &us(15));
+    element(&mut f, (0x0028, 0x0103), b"US", &us(1));
+    let n = DIMS[0] * DIMS[1] * frames;
+    let pixels: Vec<u8> = (0..n)
+        .flat_map(|i| (value(first + i) as i16).to_le_bytes())
+        .collect();
+    element(&mut f, (0x7FE0, 0x0010), b"OW", &pixels);
+    f
+}
+
+#[test]
+fn a_dicom_series_read_from_files_peaks_within_one_and_a_half_times_the_voxels() {
+    let dir = temp_dir("dicom");
+    let slice = DIMS[0] * DIMS[1];
+    for z in 0..DIMS[2] {
+        std::fs::write(dir.join(format!("s{z:03}.dcm")), dicom(z, 1, z * slice)).expect("write");
+    }
+    let (r, peak) = peak_during(|| {
+        let (inputs, _) = shapecast::files::read_all(std::slice::from_ref(&dir)).expect("lists");
+        io::load(&inputs)
+    });
+    let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    check_values("DICOM series", &v, "i16");
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!(
+        "DICOM series of {} files from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+        DIMS[2],
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+
+    // The same files in memory: the load adds the voxels and a slice or two to the input.
+    let inputs: Vec<InputFile> = (0..DIMS[2])
+        .map(|z| InputFile::new(format!("s{z:03}.dcm"), dicom(z, 1, z * slice)))
+        .collect();
+    let (r, peak) = peak_during(|| io::load(&inputs));
+    assert_eq!(r.expect("loads").volume.voxels, v.voxels);
+    eprintln!("DICOM series in memory: input + {peak} bytes");
+    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn voxels_type_is_kept() {
+    // The fast path reads stored bytes into the voxels as they are: a type mix-up would show.
+    let f = InputFile::on_demand(
+        "t.nii",
+        std::sync::Arc::new(io::MemorySource(cat(
+            nifti_header(512, 16, false),
+            &samples("u16", false),
+        ))),
+    )
+    .expect("head");
+    let v = io::load(&[f]).expect("loads").volume;
+    assert!(matches!(v.voxels, Voxels::U16(_)));
+    check_values("nii u16", &v, "u16");
+}
