@@ -505,7 +505,9 @@ fn gzip_padding_is_accepted_and_trailing_garbage_refused() {
     let mut junk = gz;
     junk.extend_from_slice(b"junk");
     let r = load_one("junk.nii.gz", junk, &Limits::default());
-    expect_err(r, "junk.nii.gz", &["neither zero padding"]);
+    // Refused: by the trailer check (the junk reads as a size) or, were the bytes 1F 8B 08 in
+    // the stream, after inflating, as neither padding nor another member.
+    expect_err(r, "junk.nii.gz", &["gzip"]);
 }
 
 #[test]
@@ -534,6 +536,45 @@ fn gzip_memory_is_the_voxels_plus_a_constant() {
     long.resize(352 + 4096 + 2 * MIB, 0);
     let r = load_one("long.nii.gz", gzip(&long), &Limits::default());
     expect_err(r, "long.nii.gz", &["more than"]);
+}
+
+#[test]
+fn a_gzip_trailer_promising_the_wrong_size_is_refused_before_inflating() {
+    // 256^3 u8 voxels (16 MiB) in one member; its ISIZE is rewritten to say 1000 bytes.
+    let dims = [256u16, 256, 256];
+    let mut plain = nifti_u8_header(dims);
+    plain.resize(352 + 256 * 256 * 256, 0);
+    let good = gzip(&plain);
+    drop(plain);
+    let n = good.len();
+    assert!(
+        !good[10..].windows(3).any(|w| w == [0x1f, 0x8b, 0x08]),
+        "the test stream must look single-member"
+    );
+    let mut lie = good.clone();
+    lie[n - 4..].copy_from_slice(&1000u32.to_le_bytes());
+    let (r, peak) = peak_during(|| load_one("lie.nii.gz", lie.clone(), &Limits::default()));
+    expect_err(
+        r,
+        "lie.nii.gz",
+        &["trailer", "1000", "nothing was inflated"],
+    );
+    assert!(peak < MIB, "peak {peak} bytes: the voxels were allocated");
+    // The same lie behind zero padding is found too.
+    let mut padded = lie;
+    padded.extend_from_slice(&[0u8; 300]);
+    let r = load_one("padded-lie.nii.gz", padded, &Limits::default());
+    expect_err(r, "padded-lie.nii.gz", &["trailer"]);
+    // The true trailer, padded, loads; so do several members, whose last ISIZE is only its own.
+    let mut padded = good.clone();
+    padded.extend_from_slice(&[0u8; 300]);
+    assert!(load_one("padded.nii.gz", padded, &Limits::default()).is_ok());
+    let plain = nifti_i16([40, 30, 20], 9);
+    let mut members = gzip(&plain[..1000]);
+    members.extend_from_slice(&gzip(&plain[1000..]));
+    let v = load_one("members.nii.gz", members, &Limits::default()).expect("two members");
+    let one = load_one("one.nii.gz", gzip(&plain), &Limits::default()).expect("one member");
+    assert_eq!(v.volume.voxels, one.volume.voxels);
 }
 
 #[test]

@@ -309,6 +309,9 @@ pub(crate) fn inflate_voxels(
         });
     }
     layout.check_voxel_budget(file, limits)?;
+    if kind == Compression::Gzip {
+        check_gzip_trailer(file, compressed, needed, declared_bytes)?;
+    }
     let stream = Stream {
         file,
         kind,
@@ -368,6 +371,78 @@ pub(crate) fn inflate_voxels(
         }
     };
     Ok((voxels, needed + rest))
+}
+
+/// Refuses, before anything is inflated, a single-member gzip stream whose trailer (ISIZE, the
+/// uncompressed size mod 2^32) cannot be the size of data that hold the `needed` bytes and no
+/// more than `declared` plus the slack: the checks the full read makes at the end, made first.
+///
+/// Safe only for a single member, whose ISIZE is the whole stream's: a stream in which the
+/// bytes 1F 8B 08 (a member's start) occur anywhere after the first header might hold several
+/// members (the last one's ISIZE says nothing about the others), so it is left to the full read.
+/// Zero padding after the member is allowed (as gzip does): every place the trailer could end,
+/// from the last byte back over the trailing zeros, is tried, and one that fits is enough.
+fn check_gzip_trailer(
+    file: &str,
+    compressed: &[u8],
+    needed: u64,
+    declared: u64,
+) -> Result<(), LoadError> {
+    const HEADER: usize = 10;
+    if compressed.len() < HEADER + 8 {
+        return Ok(()); // the full read reports the truncated stream
+    }
+    let body = &compressed[HEADER..];
+    if body.windows(3).any(|w| w == [0x1f, 0x8b, 0x08]) {
+        return Ok(());
+    }
+    let max = declared.saturating_add(STREAM_SLACK_BYTES);
+    // A size s fits when needed <= s <= max and s = isize (mod 2^32).
+    let fits = |isize: u32| {
+        let isize = u64::from(isize);
+        let k = needed.saturating_sub(isize).div_ceil(1 << 32);
+        isize
+            .checked_add(k.saturating_mul(1 << 32))
+            .is_some_and(|s| s >= needed && s <= max)
+    };
+    let zeros = compressed.iter().rev().take_while(|&&b| b == 0).count();
+    if zeros > 1 << 16 {
+        return Ok(()); // that much padding is rare: left to the full read
+    }
+    let mut seen = None;
+    for pad in 0..=zeros {
+        let Some(end) = compressed.len().checked_sub(pad) else {
+            break;
+        };
+        let Some(t) = end.checked_sub(4).filter(|&t| t >= HEADER + 4) else {
+            break;
+        };
+        let isize = u32::from_le_bytes([
+            compressed[t],
+            compressed[t + 1],
+            compressed[t + 2],
+            compressed[t + 3],
+        ]);
+        if fits(isize) {
+            return Ok(());
+        }
+        seen.get_or_insert(isize);
+    }
+    match seen {
+        Some(isize) if u64::from(isize) < needed => Err(LoadError::truncated(
+            file,
+            format!("gzip data (its trailer says {isize} bytes, mod 2^32; nothing was inflated)"),
+            needed,
+            u64::from(isize),
+        )),
+        Some(isize) => Err(LoadError::Decompress {
+            file: file.to_owned(),
+            message: format!(
+                "gzip: the trailer says the data are {isize} bytes (mod 2^32), more than the {max} the header allows: the file is corrupt or has bytes after its end (nothing was inflated)"
+            ),
+        }),
+        None => Ok(()),
+    }
 }
 
 /// A layout's samples (offset 0) in a decompressing stream, after `skip` bytes: `needed` bytes
