@@ -913,7 +913,8 @@ fn native_dicom_memory_is_bounded() {
         "native DICOM of {voxel_bytes} voxel bytes: peak {peak} bytes ({:.2}x)",
         peak as f64 / voxel_bytes as f64
     );
-    assert!(peak < voxel_bytes * 5 / 2, "peak {peak} bytes");
+    // Native samples are read where they lie in the input: only the voxels are added.
+    assert!(peak < voxel_bytes + 2 * MIB, "peak {peak} bytes");
 }
 
 #[test]

@@ -428,13 +428,16 @@ fn dicom(z: usize, frames: usize, first: usize) -> Vec<u8> {
     );
     element(&mut f, (0x0008, 0x0060), b"CS", b"CT");
     element(&mut f, (0x0020, 0x000E), b"UI", b"1.2.3.99");
-    element(
-        &mut f,
-        (0x0020, 0x0032),
-        b"DS",
-        format!("0\\0\\{z}").as_bytes(),
-    );
-    element(&mut f, (0x0020, 0x0037), b"DS", b"1\\0\\0\\0\\1\\0");
+    if frames == 1 {
+        // A multi-frame file without per-frame positions is stacked in frame order.
+        element(
+            &mut f,
+            (0x0020, 0x0032),
+            b"DS",
+            format!("0\\0\\{z}").as_bytes(),
+        );
+        element(&mut f, (0x0020, 0x0037), b"DS", b"1\\0\\0\\0\\1\\0");
+    }
     element(&mut f, (0x0028, 0x0002), b"US", &us(1));
     element(&mut f, (0x0028, 0x0004), b"CS", b"MONOCHROME2");
     if frames > 1 {
@@ -488,6 +491,33 @@ fn a_dicom_series_read_from_files_peaks_within_one_and_a_half_times_the_voxels()
     let (r, peak) = peak_during(|| io::load(&inputs));
     assert_eq!(r.expect("loads").volume.voxels, v.voxels);
     eprintln!("DICOM series in memory: input + {peak} bytes");
+    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn a_multi_frame_dicom_peaks_within_one_and_a_half_times_the_voxels() {
+    // One file of DIMS[2] frames: its native samples are read where they lie in the file, a
+    // frame at a time (no parsed copy of the pixel data).
+    let dir = temp_dir("multiframe");
+    let path = dir.join("frames.dcm");
+    std::fs::write(&path, dicom(0, DIMS[2], 0)).expect("write");
+    let (r, peak) = peak_during(|| {
+        let (inputs, _) = shapecast::files::read_all(std::slice::from_ref(&path)).expect("lists");
+        io::load(&inputs)
+    });
+    let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    check_values("multi-frame DICOM", &v, "i16");
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!(
+        "multi-frame DICOM from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+    let inputs = [InputFile::new("frames.dcm", dicom(0, DIMS[2], 0))];
+    let (r, peak) = peak_during(|| io::load(&inputs));
+    assert_eq!(r.expect("loads").volume.voxels, v.voxels);
+    eprintln!("multi-frame DICOM in memory: input + {peak} bytes");
     assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
     std::fs::remove_dir_all(&dir).expect("clean up");
 }

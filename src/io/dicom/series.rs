@@ -557,14 +557,73 @@ pub(super) fn store_frame(
     }
 }
 
-/// Opens a file, decodes its pixel data once and hands the bytes of all its frames to `f`
-/// (native samples are read where the parsed object holds them, without a copy).
+/// A file's pixel data, ready for [`Pixels::frame_samples`]: decoded bytes of all frames, or
+/// native samples where they lie in the file (read a frame at a time).
+pub(super) enum Pixels<'a> {
+    Bytes(&'a [u8]),
+    InFile {
+        file: &'a InputFile,
+        offset: u64,
+        len: u64,
+    },
+}
+
+impl Pixels<'_> {
+    /// [`frame_samples`] of frame `frame` of `n_frames`.
+    pub(super) fn frame_samples(
+        &self,
+        h: &FileHeader,
+        frame: usize,
+        n_frames: usize,
+        frame_len: usize,
+        out: &mut Vec<i64>,
+    ) -> Result<(), String> {
+        match self {
+            Self::Bytes(data) => frame_samples(h, data, frame, n_frames, frame_len, out),
+            Self::InFile { file, offset, len } => {
+                let frame_bytes = frame_len as u64 * u64::from(h.bits_allocated / 8);
+                let start = frame as u64 * frame_bytes;
+                if start + frame_bytes > *len {
+                    return Err(format!(
+                        "pixel data has {len} bytes; frame {frame} of {}x{} pixels at {} bits needs {}",
+                        h.cols,
+                        h.rows,
+                        h.bits_allocated,
+                        start + frame_bytes
+                    ));
+                }
+                let mut buf = vec![0u8; frame_bytes as usize];
+                file.data()
+                    .read_at(&file.name, offset + start, &mut buf)
+                    .map_err(|e| e.to_string())?;
+                frame_samples(h, &buf, 0, 1, frame_len, out)
+            }
+        }
+    }
+}
+
+/// Opens a file, decodes its pixel data once and hands them to `f`. Native little-endian
+/// samples are read where they lie: in memory without a copy, from a file read on demand a
+/// frame at a time (no parsed object holds them); others where the parsed object holds them.
 pub(super) fn with_pixel_data<R>(
     file: &InputFile,
     header: &FileHeader,
     limits: &Limits,
-    f: impl FnOnce(&[u8]) -> Result<R, LoadError>,
+    f: impl FnOnce(&Pixels<'_>) -> Result<R, LoadError>,
 ) -> Result<R, LoadError> {
+    if let Some((offset, len)) = header.native_pixels
+        && offset.saturating_add(len) <= file.len()
+    {
+        if !file.is_on_demand() {
+            let at = usize::try_from(offset).unwrap_or(usize::MAX);
+            let end = usize::try_from(offset + len).unwrap_or(usize::MAX);
+            if let Some(data) = file.bytes.get(at..end) {
+                return f(&Pixels::Bytes(data));
+            }
+        } else {
+            return f(&Pixels::InFile { file, offset, len });
+        }
+    }
     let obj = open(file, false, limits)?;
     let fragments = encapsulated::fragments(&obj);
     let rle_data;
@@ -601,7 +660,7 @@ pub(super) fn with_pixel_data<R>(
             decoded.data()
         }
     };
-    f(data)
+    f(&Pixels::Bytes(data))
 }
 
 /// Decodes each file's pixel data once and copies its frames into their slots.
@@ -667,7 +726,7 @@ fn read_pixels(
                     message,
                 };
                 samples.clear();
-                frame_samples(header, data, frame, n_frames, frame_len, &mut samples)
+                data.frame_samples(header, frame, n_frames, frame_len, &mut samples)
                     .map_err(slice_error)?;
                 let info = frames[slot].info;
                 let rescale = if same_rescale {

@@ -161,12 +161,11 @@ impl SeriesBuilder {
         let decoded = series::with_pixel_data(&file, &header, &self.limits, |data| {
             for k in 0..n_frames {
                 samples.clear();
-                series::frame_samples(&header, data, k, n_frames, frame_len, samples).map_err(
-                    |message| LoadError::Dicom {
+                data.frame_samples(&header, k, n_frames, frame_len, samples)
+                    .map_err(|message| LoadError::Dicom {
                         file: file.name.clone(),
                         message: format!("frame {k}: {message}"),
-                    },
-                )?;
+                    })?;
                 series::store_frame(
                     &mut st.voxels,
                     start + k * frame_len..start + (k + 1) * frame_len,
