@@ -115,8 +115,11 @@ fn cat(a: Vec<u8>, b: &[u8]) -> Vec<u8> {
     a
 }
 
-/// The cases: a label, the files (name, bytes; the first is the one given), the voxel type.
-fn cases() -> Vec<(&'static str, Vec<(String, Vec<u8>)>, &'static str)> {
+/// Files by name and content; the first is the one given, the others are found beside it.
+type Files = Vec<(String, Vec<u8>)>;
+
+/// The cases: a label, the files, the voxel type.
+fn cases() -> Vec<(&'static str, Files, &'static str)> {
     let one = |n: &str, b: Vec<u8>| vec![(n.to_owned(), b)];
     vec![
         (

@@ -577,7 +577,7 @@ fn ascii_voxels(
                 LoadError::header(file, "ascii data", format!("\"{shown}\" is not a number"))
             })?;
         let t = seen as usize;
-        if t % stride == 0
+        if t.is_multiple_of(stride)
             && let Some(o) = out.get_mut(t / stride)
         {
             *o = v as f32;
