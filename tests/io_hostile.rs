@@ -913,8 +913,9 @@ fn native_dicom_memory_is_bounded() {
         "native DICOM of {voxel_bytes} voxel bytes: peak {peak} bytes ({:.2}x)",
         peak as f64 / voxel_bytes as f64
     );
-    // Native samples are read where they lie in the input: only the voxels are added.
-    assert!(peak < voxel_bytes + 2 * MIB, "peak {peak} bytes");
+    // Native samples are read where they lie in the input: only the voxels are added, and one
+    // frame's samples as i64 (2 MiB for 512 x 512).
+    assert!(peak < voxel_bytes + 3 * MIB, "peak {peak} bytes");
 }
 
 #[test]

@@ -98,6 +98,20 @@ fn nrrd_header(ty: &str, encoding: &str, endian: &str, data_file: Option<&str>) 
     h.into_bytes()
 }
 
+/// The voxel values as text, one per line, with varied separators.
+fn ascii_text() -> Vec<u8> {
+    let mut t = Vec::new();
+    for i in 0..N {
+        t.extend_from_slice(format!("{}", value(i)).as_bytes());
+        t.extend_from_slice(match i % 3 {
+            0 => b" ",
+            1 => b",",
+            _ => b"\n",
+        });
+    }
+    t
+}
+
 fn mha_header(ty: &str, compressed: bool, data_file: &str) -> Vec<u8> {
     format!(
         "ObjectType = Image\nNDims = 3\nDimSize = {} {} {}\nElementType = {ty}\nElementSpacing = 1 1 1\nCompressedData = {}\nElementDataFile = {data_file}\n",
@@ -221,6 +235,14 @@ fn cases() -> Vec<(&'static str, Files, &'static str)> {
                 ),
             ),
             "i16",
+        ),
+        (
+            "nrrd ascii",
+            one(
+                "a.nrrd",
+                cat(nrrd_header("float", "ascii", "little", None), &ascii_text()),
+            ),
+            "f32",
         ),
         (
             "mha raw",
@@ -523,6 +545,73 @@ fn a_multi_frame_dicom_peaks_within_one_and_a_half_times_the_voxels() {
     eprintln!("multi-frame DICOM in memory: input + {peak} bytes");
     assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
     std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn ascii_numbers_cut_by_a_read_chunk_are_read_whole() {
+    // The text is read in 1 MiB chunks: numbers straddling each chunk's end, and the last one
+    // without a separator after it.
+    let mut text = Vec::new();
+    let mut expect = Vec::new();
+    let mut k = 0u32;
+    while text.len() < 3 << 20 {
+        let v = 1000.0 + f64::from(k) * 0.25;
+        text.extend_from_slice(format!("{v} ").as_bytes());
+        expect.push(v as f32);
+        k += 1;
+    }
+    text.pop();
+    let header = format!(
+        "NRRD0004\ntype: double\ndimension: 1\nsizes: {}\nencoding: ascii\n\n",
+        expect.len()
+    );
+    for on_demand in [false, true] {
+        let bytes = cat(header.clone().into_bytes(), &text);
+        let f = if on_demand {
+            InputFile::on_demand("t.nrrd", std::sync::Arc::new(io::MemorySource(bytes)))
+                .expect("head")
+        } else {
+            InputFile::new("t.nrrd", bytes)
+        };
+        let v = io::load(&[f]).expect("loads").volume;
+        assert_eq!(
+            v.voxels,
+            Voxels::F32(expect.clone()),
+            "on demand: {on_demand}"
+        );
+    }
+    // One number short: refused by name.
+    let cut = text.iter().rposition(|&c| c == b' ').expect("a space");
+    let f = InputFile::new("short.nrrd", cat(header.into_bytes(), &text[..cut]));
+    let m = io::load(&[f]).expect_err("short").to_string();
+    assert!(m.contains("short.nrrd") && m.contains("truncated"), "{m}");
+}
+
+#[test]
+fn an_incompressible_gzip_file_is_inflated_from_the_file_not_from_memory() {
+    // Noise compresses to about its own size: holding the compressed bytes would cost ~2x.
+    let mut x = 0x2545_F491_4F6C_DD1Du64;
+    let noise: Vec<u8> = (0..N * 2)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect();
+    let gz = gzip(&cat(nifti_header(4, 16, false), &noise));
+    assert!(gz.len() > N * 2, "{} compressed bytes", gz.len());
+    let f = InputFile::on_demand("noise.nii.gz", std::sync::Arc::new(io::MemorySource(gz)))
+        .expect("head");
+    let (r, peak) = peak_during(|| io::load(std::slice::from_ref(&f)));
+    let v = r.expect("loads").volume;
+    let voxel_bytes = v.voxels.byte_len();
+    assert_eq!(
+        v.voxels.raw_f32(1),
+        f32::from(i16::from_le_bytes([noise[2], noise[3]]))
+    );
+    eprintln!("noise .nii.gz on demand: peak {peak} bytes for {voxel_bytes} voxel bytes");
+    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
 }
 
 #[test]

@@ -163,21 +163,6 @@ impl<'a> Data<'a> {
         }
     }
 
-    /// All of the bytes in memory (a compressed stream, ascii text): borrowed, or read now.
-    pub(crate) fn all(&self, file: &str) -> Result<Cow<'a, [u8]>, LoadError> {
-        match *self {
-            Self::Memory(b) => Ok(Cow::Borrowed(b)),
-            Self::Source { source, start, len } => {
-                let n = usize::try_from(len).unwrap_or(usize::MAX);
-                let mut v = super::raw::try_vec::<u8>(file, "the file's bytes", n)?;
-                source
-                    .read_exact_at(start, &mut v)
-                    .map_err(|e| read_error(file, start, &e))?;
-                Ok(Cow::Owned(v))
-            }
-        }
-    }
-
     /// Reads `buf.len()` bytes at `offset` within the range (the caller checks the length).
     pub(crate) fn read_at(&self, file: &str, offset: u64, buf: &mut [u8]) -> Result<(), LoadError> {
         match *self {

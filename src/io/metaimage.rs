@@ -298,7 +298,7 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
         raw::inflate_voxels(
             &data_name,
             raw::Compression::Zlib,
-            &data.all(&data_name)?,
+            data,
             0,
             layout,
             total_bytes,

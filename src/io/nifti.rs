@@ -411,7 +411,7 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
         raw::inflate_voxels(
             &data_name,
             raw::Compression::Gzip,
-            &data_file.data().all(&data_name)?,
+            data_file.data(),
             vox_offset,
             layout,
             declared,

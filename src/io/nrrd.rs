@@ -482,7 +482,7 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
             let (voxels, _) = raw::inflate_voxels(
                 &data_name,
                 raw::Compression::Gzip,
-                &data.all(&data_name)?,
+                data,
                 skip,
                 layout,
                 skip.saturating_add(data_bytes_total),
@@ -491,13 +491,7 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
             return finish(name, &data_name, dims, steps, origin, voxels, warnings);
         }
         "ascii" | "text" | "txt" => {
-            let voxels = ascii_voxels(
-                &data_name,
-                &data.all(&data_name)?,
-                total,
-                layout,
-                input.limits,
-            )?;
+            let voxels = ascii_voxels(&data_name, data, total, layout, input.limits)?;
             return finish(name, &data_name, dims, steps, origin, voxels, warnings);
         }
         other => {
@@ -546,7 +540,7 @@ fn finish(
 /// the binary encodings' f64 samples would (no buffer of all the numbers is made).
 fn ascii_voxels(
     file: &str,
-    data: &[u8],
+    data: Data<'_>,
     total: u64,
     layout: SampleLayout,
     limits: &Limits,
@@ -563,12 +557,11 @@ fn ascii_voxels(
     raw::check_voxel_budget(file, layout.count as u64, 4, limits)?;
     let mut out = raw::try_vec::<f32>(file, "voxels", layout.count)?;
     let stride = layout.stride_samples.max(1);
-    let mut seen = 0u64;
-    for tok in data
-        .split(|&c| c.is_ascii_whitespace() || c == b',')
-        .filter(|t| !t.is_empty())
-        .take(usize::try_from(total).unwrap_or(usize::MAX))
-    {
+    let seen = std::cell::Cell::new(0u64);
+    let mut take = |tok: &[u8]| -> Result<(), LoadError> {
+        if seen.get() >= total {
+            return Ok(());
+        }
         let v: f64 = std::str::from_utf8(tok)
             .ok()
             .and_then(|t| t.parse().ok())
@@ -576,14 +569,64 @@ fn ascii_voxels(
                 let shown: String = String::from_utf8_lossy(tok).chars().take(40).collect();
                 LoadError::header(file, "ascii data", format!("\"{shown}\" is not a number"))
             })?;
-        let t = seen as usize;
+        let t = seen.get() as usize;
         if t.is_multiple_of(stride)
             && let Some(o) = out.get_mut(t / stride)
         {
             *o = v as f32;
         }
-        seen += 1;
+        seen.set(seen.get() + 1);
+        Ok(())
+    };
+    let separator = |c: &u8| c.is_ascii_whitespace() || *c == b',';
+    // The text a chunk at a time (read on demand, it is never all in memory); a token cut by a
+    // chunk's end is carried into the next.
+    let mut carry: Vec<u8> = Vec::new();
+    let mut chunk = Vec::new();
+    let mut at = 0u64;
+    while at < data.len() {
+        let n = (data.len() - at).min(1 << 20) as usize;
+        chunk.resize(n, 0);
+        data.read_at(file, at, &mut chunk)?;
+        at += n as u64;
+        let mut rest: &[u8] = &chunk;
+        if !carry.is_empty() {
+            let end = rest.iter().position(separator).unwrap_or(rest.len());
+            carry.extend_from_slice(&rest[..end]);
+            rest = &rest[end..];
+            if rest.is_empty() && at < data.len() {
+                if carry.len() > 1 << 20 {
+                    let shown: String = String::from_utf8_lossy(&carry).chars().take(40).collect();
+                    return Err(LoadError::header(
+                        file,
+                        "ascii data",
+                        format!("\"{shown}...\" is over 1 MiB long, not a number"),
+                    ));
+                }
+                continue;
+            }
+            take(&carry)?;
+            carry.clear();
+        }
+        // The last token may go on in the next chunk.
+        let cut = if at < data.len() {
+            rest.iter().rposition(separator).map_or(0, |p| p + 1)
+        } else {
+            rest.len()
+        };
+        for tok in rest[..cut].split(separator).filter(|t| !t.is_empty()) {
+            take(tok)?;
+        }
+        carry.extend_from_slice(&rest[cut..]);
+        if seen.get() >= total {
+            break;
+        }
     }
+    if !carry.is_empty() {
+        take(&carry)?;
+    }
+    let seen = seen.get();
+    drop(take);
     if seen < total {
         return Err(LoadError::truncated(
             file,

@@ -1,7 +1,7 @@
 //! Shared low-level pieces of the loaders: capped decompression, fallible allocation, and the
 //! conversion of raw sample bytes (any type, either endianness) into compact `Voxels`.
 
-use std::io::Read;
+use std::io::{BufRead as _, Read};
 
 use super::input::Data;
 use super::{Limits, LoadError};
@@ -160,7 +160,7 @@ pub(crate) fn gunzip_prefix(
 ) -> Result<(Vec<u8>, bool), LoadError> {
     read_capped(
         file,
-        Members::new(Compression::Gzip, bytes),
+        Members::new(file, Compression::Gzip, Data::Memory(bytes)),
         max_out,
         "gzip",
     )
@@ -188,6 +188,98 @@ impl Compression {
 /// before it is refused as longer than its header says.
 const STREAM_SLACK_BYTES: u64 = 1 << 20;
 
+/// The compressed bytes as the decoders read them: a slice in memory, or a file read on
+/// demand through a 64 KiB buffer. Its position is known, so what follows a member can be
+/// looked at without being consumed.
+struct Input<'a> {
+    file: &'a str,
+    data: Data<'a>,
+    pos: u64,
+    buf: Vec<u8>,
+    /// Position of `buf[0]` in `data`.
+    buf_start: u64,
+}
+
+impl<'a> Input<'a> {
+    fn new(file: &'a str, data: Data<'a>) -> Self {
+        Self {
+            file,
+            data,
+            pos: 0,
+            buf: Vec::new(),
+            buf_start: 0,
+        }
+    }
+
+    fn remaining(&self) -> u64 {
+        self.data.len().saturating_sub(self.pos)
+    }
+
+    /// Whether every byte from the position on is zero (read, not consumed).
+    fn rest_is_zero(&self) -> std::io::Result<bool> {
+        let mut at = self.pos;
+        let mut chunk = Vec::new();
+        while at < self.data.len() {
+            let n = (self.data.len() - at).min(64 << 10) as usize;
+            chunk.resize(n, 0);
+            self.data
+                .read_at(self.file, at, &mut chunk)
+                .map_err(|e| std::io::Error::other(e.to_string()))?;
+            if chunk.iter().any(|&b| b != 0) {
+                return Ok(false);
+            }
+            at += n as u64;
+        }
+        Ok(true)
+    }
+
+    /// The next two bytes (fewer at the end), not consumed.
+    fn peek2(&self) -> std::io::Result<Vec<u8>> {
+        let mut two = vec![0u8; self.remaining().min(2) as usize];
+        self.data
+            .read_at(self.file, self.pos, &mut two)
+            .map_err(|e| std::io::Error::other(e.to_string()))?;
+        Ok(two)
+    }
+}
+
+impl Read for Input<'_> {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        let n = {
+            let b = self.fill_buf()?;
+            let n = b.len().min(out.len());
+            out[..n].copy_from_slice(&b[..n]);
+            n
+        };
+        self.consume(n);
+        Ok(n)
+    }
+}
+
+impl std::io::BufRead for Input<'_> {
+    fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
+        match self.data {
+            Data::Memory(b) => Ok(b.get(self.pos as usize..).unwrap_or_default()),
+            Data::Source { .. } => {
+                let end = self.buf_start + self.buf.len() as u64;
+                if self.pos < self.buf_start || self.pos >= end {
+                    let n = self.remaining().min(64 << 10) as usize;
+                    self.buf.resize(n, 0);
+                    self.data
+                        .read_at(self.file, self.pos, &mut self.buf)
+                        .map_err(|e| std::io::Error::other(e.to_string()))?;
+                    self.buf_start = self.pos;
+                }
+                Ok(&self.buf[(self.pos - self.buf_start) as usize..])
+            }
+        }
+    }
+
+    fn consume(&mut self, n: usize) {
+        self.pos = (self.pos + n as u64).min(self.data.len());
+    }
+}
+
 /// The decompressed bytes of a whole gzip file (members one after the other, each checked
 /// against its CRC-32 and ISIZE by flate2 when its end is read), or of a zlib stream. After the
 /// last member, zero bytes are padding (gzip accepts them too); anything else is refused.
@@ -198,15 +290,16 @@ struct Members<'a> {
 }
 
 enum Decoder<'a> {
-    Gzip(flate2::bufread::GzDecoder<&'a [u8]>),
-    Zlib(flate2::bufread::ZlibDecoder<&'a [u8]>),
+    Gzip(flate2::bufread::GzDecoder<Input<'a>>),
+    Zlib(flate2::bufread::ZlibDecoder<Input<'a>>),
 }
 
 impl<'a> Members<'a> {
-    fn new(kind: Compression, bytes: &'a [u8]) -> Self {
+    fn new(file: &'a str, kind: Compression, data: Data<'a>) -> Self {
+        let input = Input::new(file, data);
         let decoder = match kind {
-            Compression::Gzip => Decoder::Gzip(flate2::bufread::GzDecoder::new(bytes)),
-            Compression::Zlib => Decoder::Zlib(flate2::bufread::ZlibDecoder::new(bytes)),
+            Compression::Gzip => Decoder::Gzip(flate2::bufread::GzDecoder::new(input)),
+            Compression::Zlib => Decoder::Zlib(flate2::bufread::ZlibDecoder::new(input)),
         };
         Self {
             kind,
@@ -215,26 +308,30 @@ impl<'a> Members<'a> {
     }
 }
 
-impl<'a> Read for Members<'a> {
+impl Read for Members<'_> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         if buf.is_empty() {
             return Ok(0);
         }
         loop {
-            // The bytes after the member, once it has ended.
-            let (n, rest): (usize, &'a [u8]) = match &mut self.decoder {
-                Some(Decoder::Gzip(g)) => (g.read(buf)?, *g.get_ref()),
-                Some(Decoder::Zlib(z)) => (z.read(buf)?, *z.get_ref()),
+            let n = match &mut self.decoder {
+                Some(Decoder::Gzip(g)) => g.read(buf)?,
+                Some(Decoder::Zlib(z)) => z.read(buf)?,
                 None => return Ok(0),
             };
             if n > 0 {
                 return Ok(n);
             }
-            self.decoder = None;
-            if rest.iter().all(|&b| b == 0) {
+            // The member has ended: what follows it?
+            let rest = match self.decoder.take() {
+                Some(Decoder::Gzip(g)) => g.into_inner(),
+                Some(Decoder::Zlib(z)) => z.into_inner(),
+                None => return Ok(0),
+            };
+            if rest.rest_is_zero()? {
                 return Ok(0);
             }
-            if self.kind == Compression::Gzip && is_gzip(rest) {
+            if self.kind == Compression::Gzip && is_gzip(&rest.peek2()?) {
                 self.decoder = Some(Decoder::Gzip(flate2::bufread::GzDecoder::new(rest)));
                 continue;
             }
@@ -242,7 +339,7 @@ impl<'a> Read for Members<'a> {
                 std::io::ErrorKind::InvalidData,
                 format!(
                     "{} bytes after the end of the {} stream are neither zero padding nor another member",
-                    rest.len(),
+                    rest.remaining(),
                     self.kind.name()
                 ),
             ));
@@ -292,7 +389,7 @@ fn skip_bytes(reader: &mut impl Read, n: u64) -> std::io::Result<bool> {
 pub(crate) fn inflate_voxels(
     file: &str,
     kind: Compression,
-    compressed: &[u8],
+    compressed: Data<'_>,
     skip: u64,
     layout: SampleLayout,
     declared_bytes: u64,
@@ -321,7 +418,8 @@ pub(crate) fn inflate_voxels(
     };
     let err = |e: std::io::Error| stream.error(&e);
     let truncated = |got: u64| stream.truncated(got);
-    let mut reader = std::io::BufReader::with_capacity(64 << 10, Members::new(kind, compressed));
+    let mut reader =
+        std::io::BufReader::with_capacity(64 << 10, Members::new(file, kind, compressed));
     if !skip_bytes(&mut reader, skip).map_err(err)? {
         return Err(truncated(skip));
     }
@@ -361,7 +459,7 @@ pub(crate) fn inflate_voxels(
         (Some(v), _) => v,
         (None, range) => {
             let mut again =
-                std::io::BufReader::with_capacity(64 << 10, Members::new(kind, compressed));
+                std::io::BufReader::with_capacity(64 << 10, Members::new(file, kind, compressed));
             if !skip_bytes(&mut again, skip).map_err(err)? {
                 return Err(truncated(skip));
             }
@@ -384,18 +482,36 @@ pub(crate) fn inflate_voxels(
 /// from the last byte back over the trailing zeros, is tried, and one that fits is enough.
 fn check_gzip_trailer(
     file: &str,
-    compressed: &[u8],
+    compressed: Data<'_>,
     needed: u64,
     declared: u64,
 ) -> Result<(), LoadError> {
-    const HEADER: usize = 10;
-    if compressed.len() < HEADER + 8 {
+    const HEADER: u64 = 10;
+    let len = compressed.len();
+    if len < HEADER + 8 {
         return Ok(()); // the full read reports the truncated stream
     }
-    let body = &compressed[HEADER..];
-    if body.windows(3).any(|w| w == [0x1f, 0x8b, 0x08]) {
-        return Ok(());
+    // Another member's start anywhere after the first header? (Read in chunks that overlap by
+    // two bytes, so that no place is missed.)
+    let mut at = HEADER;
+    let mut chunk = Vec::new();
+    while at < len {
+        let n = (len - at).min(1 << 20) as usize;
+        chunk.resize(n, 0);
+        compressed.read_at(file, at, &mut chunk)?;
+        if chunk.windows(3).any(|w| w == [0x1f, 0x8b, 0x08]) {
+            return Ok(());
+        }
+        if at + n as u64 >= len {
+            break;
+        }
+        at += (n as u64).saturating_sub(2).max(1);
     }
+    // The last bytes: the trailer, behind at most 64 KiB of zero padding.
+    let tail_len = len.min((1 << 16) + 16);
+    let tail_start = len - tail_len;
+    let mut tail = vec![0u8; tail_len as usize];
+    compressed.read_at(file, tail_start, &mut tail)?;
     let max = declared.saturating_add(STREAM_SLACK_BYTES);
     // A size s fits when needed <= s <= max and s = isize (mod 2^32).
     let fits = |isize: u32| {
@@ -405,24 +521,23 @@ fn check_gzip_trailer(
             .checked_add(k.saturating_mul(1 << 32))
             .is_some_and(|s| s >= needed && s <= max)
     };
-    let zeros = compressed.iter().rev().take_while(|&&b| b == 0).count();
+    let zeros = tail.iter().rev().take_while(|&&b| b == 0).count();
     if zeros > 1 << 16 {
         return Ok(()); // that much padding is rare: left to the full read
     }
     let mut seen = None;
     for pad in 0..=zeros {
-        let Some(end) = compressed.len().checked_sub(pad) else {
+        // The ISIZE field ends `pad` bytes before the end; the CRC-32 and a header precede it.
+        let Some(end) = tail.len().checked_sub(pad) else {
             break;
         };
-        let Some(t) = end.checked_sub(4).filter(|&t| t >= HEADER + 4) else {
+        let Some(t) = end.checked_sub(4) else {
             break;
         };
-        let isize = u32::from_le_bytes([
-            compressed[t],
-            compressed[t + 1],
-            compressed[t + 2],
-            compressed[t + 3],
-        ]);
+        if tail_start + (t as u64) < HEADER + 4 {
+            break;
+        }
+        let isize = u32::from_le_bytes([tail[t], tail[t + 1], tail[t + 2], tail[t + 3]]);
         if fits(isize) {
             return Ok(());
         }
