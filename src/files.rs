@@ -391,6 +391,50 @@ mod tests {
     }
 
     #[test]
+    fn a_file_read_on_demand_that_shrinks_or_turns_into_a_fifo_is_an_error_naming_it() {
+        use crate::io::FileSource as _;
+        let d = temp_dir("shrink");
+        // A NIfTI-1 header (u8, 64 x 64 x 2) and its voxels: over HEAD_BYTES, so read on demand.
+        let mut nii = vec![0u8; 352];
+        nii[0..4].copy_from_slice(&348i32.to_le_bytes());
+        for (at, v) in [(40, 3i16), (42, 64), (44, 64), (46, 2), (70, 2), (72, 8)] {
+            nii[at..at + 2].copy_from_slice(&v.to_le_bytes());
+        }
+        for i in 0..4 {
+            nii[76 + 4 * i..80 + 4 * i].copy_from_slice(&1f32.to_le_bytes());
+        }
+        nii[108..112].copy_from_slice(&352f32.to_le_bytes());
+        nii[344..348].copy_from_slice(b"n+1\0");
+        nii.resize(352 + 64 * 64 * 2, 7);
+        let p = d.join("a.nii");
+        std::fs::write(&p, &nii).unwrap();
+        let (files, _) = read_all(std::slice::from_ref(&p)).unwrap();
+        assert!(files[0].is_on_demand());
+        assert_eq!(crate::io::load(&files).unwrap().volume.dims, [64, 64, 2]);
+        // Cut short after it was listed: the read fails, named.
+        std::fs::write(&p, &nii[..1000]).unwrap();
+        let e = crate::io::load(&files).unwrap_err().to_string();
+        assert!(e.contains("a.nii") && e.contains("cannot read"), "{e}");
+        // Replaced by a FIFO: refused without opening it (which would block).
+        let made = std::process::Command::new("mkfifo")
+            .arg(d.join("f.nii"))
+            .status();
+        if made.is_ok_and(|s| s.success()) {
+            std::fs::write(d.join("g.nii"), &nii).unwrap();
+            let g = DiskFile::open(&d.join("g.nii")).unwrap();
+            std::fs::remove_file(d.join("g.nii")).unwrap();
+            std::fs::rename(d.join("f.nii"), d.join("g.nii")).unwrap();
+            let mut buf = [0u8; 4];
+            let t = std::time::Instant::now();
+            assert!(g.read_exact_at(0, &mut buf).is_err());
+            assert!(t.elapsed().as_secs() < 5);
+        } else {
+            eprintln!("SKIPPED: the FIFO case (mkfifo not available)");
+        }
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
     fn a_header_brings_its_data_file() {
         let d = temp_dir("pair");
         std::fs::write(d.join("x.nhdr"), b"NRRD0004\n").unwrap();
