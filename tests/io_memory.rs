@@ -614,6 +614,87 @@ fn an_incompressible_gzip_file_is_inflated_from_the_file_not_from_memory() {
     assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
 }
 
+/// [`dicom`] re-encoded as implicit VR little endian (no VR in the data set).
+fn implicit(explicit: &[u8]) -> Vec<u8> {
+    // The meta group (explicit, always) ends where its group length says.
+    let group_len =
+        u32::from_le_bytes([explicit[140], explicit[141], explicit[142], explicit[143]]);
+    let meta_end = 144 + group_len as usize;
+    let mut out = explicit[..meta_end].to_vec();
+    let ts = b"1.2.840.10008.1.2.1\0";
+    let at = out
+        .windows(ts.len())
+        .position(|w| w == ts)
+        .expect("transfer syntax");
+    // "1.2.840.10008.1.2" padded to the same 20 bytes.
+    out[at..at + 20].copy_from_slice(b"1.2.840.10008.1.2\0\0\0");
+    let mut p = meta_end;
+    while p + 8 <= explicit.len() {
+        let tag = &explicit[p..p + 4];
+        let vr = &explicit[p + 4..p + 6];
+        let (len, head) = if matches!(vr, b"OB" | b"OW" | b"SQ" | b"UN" | b"UT") {
+            let l = &explicit[p + 8..p + 12];
+            (u32::from_le_bytes([l[0], l[1], l[2], l[3]]) as usize, 12)
+        } else {
+            (
+                usize::from(u16::from_le_bytes([explicit[p + 6], explicit[p + 7]])),
+                8,
+            )
+        };
+        out.extend_from_slice(tag);
+        out.extend_from_slice(&(len as u32).to_le_bytes());
+        out.extend_from_slice(&explicit[p + head..p + head + len]);
+        p += head + len;
+    }
+    out
+}
+
+#[test]
+fn implicit_little_endian_pixels_are_read_where_they_lie() {
+    let slice = DIMS[0] * DIMS[1];
+    let explicit: Vec<InputFile> = (0..DIMS[2])
+        .map(|z| InputFile::new(format!("s{z:03}.dcm"), dicom(z, 1, z * slice)))
+        .collect();
+    let want = io::load(&explicit).expect("explicit loads").volume;
+    let files: Vec<InputFile> = (0..DIMS[2])
+        .map(|z| InputFile::new(format!("s{z:03}.dcm"), implicit(&dicom(z, 1, z * slice))))
+        .collect();
+    let (r, peak) = peak_during(|| io::load(&files));
+    let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    assert_eq!(
+        v,
+        Volume {
+            source: v.source.clone(),
+            ..want.clone()
+        }
+    );
+    assert!(
+        peak <= v.voxels.byte_len() + SLACK,
+        "in memory: input + {peak} bytes"
+    );
+    let on_demand: Vec<InputFile> = files
+        .into_iter()
+        .map(|f| {
+            InputFile::on_demand(f.name, std::sync::Arc::new(io::MemorySource(f.bytes)))
+                .expect("head")
+        })
+        .collect();
+    let w = io::load(&on_demand).expect("on demand").volume;
+    assert_eq!(w.voxels, want.voxels);
+    // One multi-frame file: a parsed copy of its pixels would cost the voxels again.
+    let f = [InputFile::new(
+        "frames.dcm",
+        implicit(&dicom(0, DIMS[2], 0)),
+    )];
+    let (r, peak) = peak_during(|| io::load(&f));
+    let v = r.expect("multi-frame loads").volume;
+    check_values("implicit multi-frame", &v, "i16");
+    assert!(
+        peak <= v.voxels.byte_len() + SLACK,
+        "in memory: input + {peak} bytes"
+    );
+}
+
 #[test]
 fn voxels_type_is_kept() {
     // The fast path reads stored bytes into the voxels as they are: a type mix-up would show.
