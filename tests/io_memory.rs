@@ -696,6 +696,23 @@ fn implicit_little_endian_pixels_are_read_where_they_lie() {
 }
 
 #[test]
+fn a_gzip_header_longer_than_the_bytes_held_is_read_on_demand_too() {
+    // A gzip FNAME of 10 KB: more than the head an on-demand file keeps (HEAD_BYTES).
+    let nii = cat(nifti_header(2, 8, false), &samples("u8", false));
+    let mut enc = flate2::GzBuilder::new()
+        .filename(vec![b'n'; 10_000])
+        .write(Vec::new(), flate2::Compression::fast());
+    enc.write_all(&nii).expect("gzip");
+    let gz = enc.finish().expect("gzip");
+    let a = io::load(&[InputFile::new("long.nii.gz", gz.clone())]).expect("in memory");
+    let f = InputFile::on_demand("long.nii.gz", std::sync::Arc::new(io::MemorySource(gz)))
+        .expect("head");
+    let b = io::load(&[f]).expect("on demand");
+    assert_eq!(a.volume, b.volume);
+    check_values("long gzip header", &b.volume, "u8");
+}
+
+#[test]
 fn voxels_type_is_kept() {
     // The fast path reads stored bytes into the voxels as they are: a type mix-up would show.
     let f = InputFile::on_demand(

@@ -101,6 +101,19 @@ pub fn sniff(name: &str, bytes: &[u8]) -> Format {
     Format::Unknown
 }
 
+/// [`sniff`] of a given file: a file read on demand is sniffed from its first bytes, except
+/// that a gzip stream is inflated from the file (its header's optional fields may be longer
+/// than the bytes held).
+fn sniff_file(f: &InputFile) -> Format {
+    if f.is_on_demand() && raw::is_gzip(&f.bytes) {
+        return match raw::gunzip_prefix_data(&f.name, f.data(), 1024) {
+            Ok((head, _)) if nifti::looks_like_header(&head) => Format::NiftiGz,
+            _ => Format::Unknown,
+        };
+    }
+    sniff(&f.name, &f.bytes)
+}
+
 /// The last path component of a name, for pairing headers with data files and for messages.
 pub(crate) fn base_name(name: &str) -> &str {
     name.rsplit(['/', '\\']).next().unwrap_or(name)
@@ -232,7 +245,7 @@ pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadErr
     if files.is_empty() {
         return Err(LoadError::NoFiles);
     }
-    let formats: Vec<Format> = files.iter().map(|f| sniff(&f.name, &f.bytes)).collect();
+    let formats: Vec<Format> = files.iter().map(sniff_file).collect();
     let dicom_count = formats.iter().filter(|f| **f == Format::Dicom).count();
     let primary = formats
         .iter()

@@ -354,9 +354,8 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
     // The header first: from a gzip stream only its first bytes are inflated at this point.
     let header_bytes;
     let head: &[u8] = if gz {
-        // A gzip header's optional fields may be long: 64 KiB of the stream is plenty.
-        let start = input.file.prefix(64 << 10)?;
-        header_bytes = raw::gunzip_prefix(name, &start, NIFTI2_HEADER_BYTES as u64)?.0;
+        header_bytes =
+            raw::gunzip_prefix_data(name, input.file.data(), NIFTI2_HEADER_BYTES as u64)?.0;
         &header_bytes
     } else {
         &input.file.bytes

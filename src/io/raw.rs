@@ -166,6 +166,21 @@ pub(crate) fn gunzip_prefix(
     )
 }
 
+/// [`gunzip_prefix`] of a file's bytes in memory or read on demand (only what the first
+/// `max_out` bytes need is read).
+pub(crate) fn gunzip_prefix_data(
+    file: &str,
+    data: Data<'_>,
+    max_out: u64,
+) -> Result<(Vec<u8>, bool), LoadError> {
+    read_capped(
+        file,
+        Members::new(file, Compression::Gzip, data),
+        max_out,
+        "gzip",
+    )
+}
+
 /// How a compressed data stream is wrapped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Compression {
