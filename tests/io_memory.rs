@@ -713,6 +713,31 @@ fn a_gzip_header_longer_than_the_bytes_held_is_read_on_demand_too() {
 }
 
 #[test]
+fn text_headers_longer_than_64_kib_are_read_whole_on_demand() {
+    // A header line crossing 64 KiB (where an on-demand header is first parsed) and the field
+    // after it must be read as in memory.
+    let long = "x".repeat(70_000);
+    let nrrd = cat(
+        format!("NRRD0004\n# {long}\n").into_bytes(),
+        &nrrd_header("short", "raw", "little", None)[9..],
+    );
+    let nrrd = cat(nrrd, &samples("i16", false));
+    let mha = cat(
+        format!("ObjectType = Image\nComment = {long}\n").into_bytes(),
+        &mha_header("MET_SHORT", false, "LOCAL")[19..],
+    );
+    let mha = cat(mha, &samples("i16", false));
+    for (name, bytes) in [("long.nrrd", nrrd), ("long.mha", mha)] {
+        let a = io::load(&[InputFile::new(name, bytes.clone())]).expect("in memory");
+        let f =
+            InputFile::on_demand(name, std::sync::Arc::new(io::MemorySource(bytes))).expect("head");
+        let b = io::load(&[f]).unwrap_or_else(|e| panic!("{name} on demand: {e}"));
+        assert_eq!(a.volume, b.volume, "{name}");
+        check_values(name, &b.volume, "i16");
+    }
+}
+
+#[test]
 fn voxels_type_is_kept() {
     // The fast path reads stored bytes into the voxels as they are: a type mix-up would show.
     let f = InputFile::on_demand(

@@ -193,7 +193,9 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
                 .file
                 .prefix(if on_demand { 64 << 10 } else { usize::MAX })?,
         );
-        if on_demand && input.file.len() > 64 << 10 && !matches!(parsed, Ok((_, Some(_)))) {
+        // The prefix's end may cut a line: its parse counts only if the header ended before it.
+        let whole = !on_demand || input.file.len() <= 64 << 10;
+        if !whole && !matches!(parsed, Ok((_, Some(start))) if start < 64 << 10) {
             parsed = split_header(name, &input.file.prefix(MAX_HEADER_BYTES + 1)?);
         }
         parsed?
