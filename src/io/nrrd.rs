@@ -628,7 +628,6 @@ fn ascii_voxels(
         take(&carry)?;
     }
     let seen = seen.get();
-    drop(take);
     if seen < total {
         return Err(LoadError::truncated(
             file,
