@@ -738,6 +738,44 @@ fn text_headers_longer_than_64_kib_are_read_whole_on_demand() {
 }
 
 #[test]
+fn one_large_frame_is_converted_in_pieces() {
+    // One 4096 x 2048 frame: its samples go through the i64 scratch in pieces, not whole
+    // (which would be 64 MiB beside 16 MiB of voxels).
+    let (rows, cols) = (2048usize, 4096usize);
+    let mut f = dicom(0, 1, 0);
+    let at = f
+        .windows(4)
+        .rposition(|w| w == [0xE0, 0x7F, 0x10, 0x00])
+        .expect("PixelData");
+    f.truncate(at);
+    for (tag, v) in [(0x0010u16, rows as u16), (0x0011, cols as u16)] {
+        let p = f
+            .windows(6)
+            .position(|w| w == [0x28, 0x00, tag as u8, 0x00, b'U', b'S'])
+            .expect("Rows/Columns");
+        f[p + 8..p + 10].copy_from_slice(&v.to_le_bytes());
+    }
+    let pixels: Vec<u8> = (0..rows * cols)
+        .flat_map(|i| ((i % 3000) as i16).to_le_bytes())
+        .collect();
+    f.extend_from_slice(&[0xE0, 0x7F, 0x10, 0x00, b'O', b'W', 0, 0]);
+    f.extend_from_slice(&(pixels.len() as u32).to_le_bytes());
+    f.extend_from_slice(&pixels);
+    drop(pixels);
+    let files = [InputFile::new("big-frame.dcm", f)];
+    let (r, peak) = peak_during(|| io::load(&files));
+    let v = r.expect("loads").volume;
+    assert_eq!(v.dims, [cols, rows, 1]);
+    assert_eq!(
+        v.voxels.raw_f32(rows * cols - 1),
+        ((rows * cols - 1) % 3000) as f32
+    );
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!("one {cols} x {rows} frame: input + {peak} bytes for {voxel_bytes} voxel bytes");
+    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+}
+
+#[test]
 fn voxels_type_is_kept() {
     // The fast path reads stored bytes into the voxels as they are: a type mix-up would show.
     let f = InputFile::on_demand(
