@@ -253,13 +253,88 @@ pub fn read(path: &Path) -> Result<Vec<u8>, FilesError> {
     Ok(bytes)
 }
 
-/// Lists and reads the given paths into loader inputs named by their paths, with what was
-/// skipped.
+/// A listed file as the loaders read it: on demand, so that an uncompressed payload goes from
+/// the disk straight into the voxel buffer and a DICOM series is read one file at a time. Each
+/// read opens the file again (a series of thousands of files holds no descriptors), checks it
+/// is still a regular file and reads from the offset asked.
+#[derive(Debug)]
+pub struct DiskFile {
+    path: PathBuf,
+    len: u64,
+}
+
+impl DiskFile {
+    /// The file at `path`, refused when it is not a regular file or is over [`MAX_FILE_BYTES`].
+    pub fn open(path: &Path) -> Result<Self, FilesError> {
+        let meta = std::fs::metadata(path).map_err(|e| FilesError::Read {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        if !meta.is_file() {
+            return Err(FilesError::NotAFile {
+                path: path.display().to_string(),
+                kind: kind_of(meta.file_type()),
+            });
+        }
+        check_size(path, meta.len())?;
+        Ok(Self {
+            path: path.to_owned(),
+            len: meta.len(),
+        })
+    }
+}
+
+impl crate::io::FileSource for DiskFile {
+    fn len(&self) -> u64 {
+        self.len
+    }
+
+    fn read_exact_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()> {
+        use std::io::{Seek as _, SeekFrom};
+        let end = offset.saturating_add(buf.len() as u64);
+        if end > self.len {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!(
+                    "bytes {offset}..{end} asked of a file of {} bytes",
+                    self.len
+                ),
+            ));
+        }
+        // Opened again for each read: the path is checked to be a regular file first, so a
+        // file replaced by a FIFO since it was listed cannot block the open.
+        let meta = std::fs::metadata(&self.path)?;
+        if !meta.is_file() || meta.len() < end {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!(
+                    "the file changed since it was listed ({}, {} bytes)",
+                    kind_of(meta.file_type()),
+                    meta.len()
+                ),
+            ));
+        }
+        let mut f = std::fs::File::open(&self.path)?;
+        f.seek(SeekFrom::Start(offset))?;
+        f.read_exact(buf)
+    }
+}
+
+/// Lists the given paths as loader inputs named by their paths, read on demand (see
+/// [`DiskFile`]), with what was skipped.
 pub fn read_all(paths: &[PathBuf]) -> Result<(Vec<crate::io::InputFile>, Vec<String>), FilesError> {
     let listing = list(paths)?;
     let mut files = Vec::with_capacity(listing.files.len());
     for (p, _) in &listing.files {
-        files.push(crate::io::InputFile::new(p.display().to_string(), read(p)?));
+        let source = std::sync::Arc::new(DiskFile::open(p)?);
+        let file =
+            crate::io::InputFile::on_demand(p.display().to_string(), source).map_err(|e| {
+                FilesError::Read {
+                    path: p.display().to_string(),
+                    message: e.to_string(),
+                }
+            })?;
+        files.push(file);
     }
     Ok((files, listing.skipped))
 }
@@ -309,6 +384,50 @@ mod tests {
             // Given by name it is refused, not opened.
             let r = list(&[fifo]);
             assert!(matches!(r, Err(FilesError::NotAFile { .. })), "{r:?}");
+        } else {
+            eprintln!("SKIPPED: the FIFO case (mkfifo not available)");
+        }
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn a_file_read_on_demand_that_shrinks_or_turns_into_a_fifo_is_an_error_naming_it() {
+        use crate::io::FileSource as _;
+        let d = temp_dir("shrink");
+        // A NIfTI-1 header (u8, 64 x 64 x 2) and its voxels: over HEAD_BYTES, so read on demand.
+        let mut nii = vec![0u8; 352];
+        nii[0..4].copy_from_slice(&348i32.to_le_bytes());
+        for (at, v) in [(40, 3i16), (42, 64), (44, 64), (46, 2), (70, 2), (72, 8)] {
+            nii[at..at + 2].copy_from_slice(&v.to_le_bytes());
+        }
+        for i in 0..4 {
+            nii[76 + 4 * i..80 + 4 * i].copy_from_slice(&1f32.to_le_bytes());
+        }
+        nii[108..112].copy_from_slice(&352f32.to_le_bytes());
+        nii[344..348].copy_from_slice(b"n+1\0");
+        nii.resize(352 + 64 * 64 * 2, 7);
+        let p = d.join("a.nii");
+        std::fs::write(&p, &nii).unwrap();
+        let (files, _) = read_all(std::slice::from_ref(&p)).unwrap();
+        assert!(files[0].is_on_demand());
+        assert_eq!(crate::io::load(&files).unwrap().volume.dims, [64, 64, 2]);
+        // Cut short after it was listed: the read fails, named.
+        std::fs::write(&p, &nii[..1000]).unwrap();
+        let e = crate::io::load(&files).unwrap_err().to_string();
+        assert!(e.contains("a.nii") && e.contains("cannot read"), "{e}");
+        // Replaced by a FIFO: refused without opening it (which would block).
+        let made = std::process::Command::new("mkfifo")
+            .arg(d.join("f.nii"))
+            .status();
+        if made.is_ok_and(|s| s.success()) {
+            std::fs::write(d.join("g.nii"), &nii).unwrap();
+            let g = DiskFile::open(&d.join("g.nii")).unwrap();
+            std::fs::remove_file(d.join("g.nii")).unwrap();
+            std::fs::rename(d.join("f.nii"), d.join("g.nii")).unwrap();
+            let mut buf = [0u8; 4];
+            let t = std::time::Instant::now();
+            assert!(g.read_exact_at(0, &mut buf).is_err());
+            assert!(t.elapsed().as_secs() < 5);
         } else {
             eprintln!("SKIPPED: the FIFO case (mkfifo not available)");
         }

@@ -41,6 +41,9 @@ pub enum LoadError {
         detail: String,
     },
 
+    #[error("{file}: cannot read: {message}")]
+    Read { file: String, message: String },
+
     #[error("{file}: decompression failed: {message}")]
     Decompress { file: String, message: String },
 

@@ -5,6 +5,7 @@
 use glam::DVec3;
 
 use super::geometry::checked_grid;
+use super::input::Data;
 use super::raw::{self, Endian, SampleLayout, SampleType};
 use super::{HeaderInput, LoadError};
 use crate::volume::{Modality, Volume};
@@ -112,7 +113,23 @@ fn is_true(v: Option<&str>) -> bool {
 /// Reads a .mha, or a .mhd whose data file is looked up among `companions`.
 pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
     let name = input.file.name.as_str();
-    let (fields, data_start) = parse_header(name, &input.file.bytes)?;
+    // A file read on demand is parsed from its first 64 KiB, or up to the header cap when the
+    // header is longer.
+    let (fields, data_start) = {
+        let on_demand = input.file.is_on_demand();
+        let mut parsed = parse_header(
+            name,
+            &input
+                .file
+                .prefix(if on_demand { 64 << 10 } else { usize::MAX })?,
+        );
+        // The prefix's end may cut a line: its parse counts only if the header ended before it.
+        let whole = !on_demand || input.file.len() <= 64 << 10;
+        if !whole && !matches!(parsed, Ok((_, start)) if start < 64 << 10) {
+            parsed = parse_header(name, &input.file.prefix(MAX_HEADER_BYTES + 1)?);
+        }
+        parsed?
+    };
     let mut warnings = Vec::new();
     let need = |key: &str| {
         get(&fields, key)
@@ -250,8 +267,13 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
         ));
     }
     let data_file = need("ElementDataFile")?;
-    let (data_name, data): (String, &[u8]) = if data_file.eq_ignore_ascii_case("LOCAL") {
-        (name.to_owned(), &input.file.bytes[data_start..])
+    let (data_name, data): (String, Data<'_>) = if data_file.eq_ignore_ascii_case("LOCAL") {
+        let data = input
+            .file
+            .data()
+            .after(data_start as u64)
+            .unwrap_or(Data::Memory(&[]));
+        (name.to_owned(), data)
     } else {
         let f = input.companions.data_file(
             name,
@@ -260,7 +282,7 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
             ("MetaImage ElementDataFile", "one file per slice"),
             &mut warnings,
         )?;
-        (f.name.clone(), f.bytes.as_slice())
+        (f.name.clone(), f.data())
     };
     let header_size: i64 = get(&fields, "HeaderSize")
         .and_then(|s| s.parse().ok())
@@ -288,15 +310,15 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
     } else {
         let skip = if header_size == -1 {
             // -1: the data are the last bytes of the file.
-            (data.len() as u64).saturating_sub(total_bytes)
+            data.len().saturating_sub(total_bytes)
         } else {
             u64::try_from(header_size).unwrap_or(0)
         };
-        let skip = usize::try_from(skip).unwrap_or(usize::MAX).min(data.len());
+        let data = data.after(skip.min(data.len())).unwrap_or(data);
         raw::decode_present(
             &data_name,
             "MetaImage data",
-            &data[skip..],
+            data,
             total_bytes,
             layout,
             input.limits,

@@ -10,6 +10,7 @@ mod dicom;
 pub mod dicomweb;
 mod error;
 mod geometry;
+mod input;
 mod metaimage;
 pub mod nifti;
 mod nrrd;
@@ -18,25 +19,9 @@ pub mod zip;
 
 pub use dicom::{SeriesBuilder, decodable_transfer_syntaxes};
 pub use error::LoadError;
+pub use input::{FileSource, HEAD_BYTES, InputFile, MemorySource};
 
 use crate::volume::Volume;
-
-/// One file as the user gave it: its name (a path or just a file name; only the last component
-/// is used to pair headers with data files) and its whole content.
-#[derive(Clone, Debug)]
-pub struct InputFile {
-    pub name: String,
-    pub bytes: Vec<u8>,
-}
-
-impl InputFile {
-    pub fn new(name: impl Into<String>, bytes: Vec<u8>) -> Self {
-        Self {
-            name: name.into(),
-            bytes,
-        }
-    }
-}
 
 /// A loaded volume and what the loader wants the user to know about the files it was given
 /// (other DICOM series that were not chosen, files that were ignored). Problems with the volume
@@ -137,6 +122,19 @@ pub fn sniff(name: &str, bytes: &[u8]) -> Format {
         return Format::Dicom;
     }
     Format::Unknown
+}
+
+/// [`sniff`] of a given file: a file read on demand is sniffed from its first bytes, except
+/// that a gzip stream is inflated from the file (its header's optional fields may be longer
+/// than the bytes held).
+fn sniff_file(f: &InputFile) -> Format {
+    if f.is_on_demand() && raw::is_gzip(&f.bytes) {
+        return match raw::gunzip_prefix_data(&f.name, f.data(), 1024) {
+            Ok((head, _)) if nifti::looks_like_header(&head) => Format::NiftiGz,
+            _ => Format::Unknown,
+        };
+    }
+    sniff(&f.name, &f.bytes)
 }
 
 /// The last path component of a name, for pairing headers with data files and for messages.
@@ -270,7 +268,7 @@ pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadErr
     if files.is_empty() {
         return Err(LoadError::NoFiles);
     }
-    let formats: Vec<Format> = files.iter().map(|f| sniff(&f.name, &f.bytes)).collect();
+    let formats: Vec<Format> = files.iter().map(sniff_file).collect();
     let dicom_count = formats.iter().filter(|f| **f == Format::Dicom).count();
     let primary = formats
         .iter()
@@ -322,7 +320,7 @@ pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadErr
         let reason = if raw::is_gzip(&file.bytes) {
             "gzip-compressed, but not a NIfTI file; a compressed data file needs its header"
                 .to_owned()
-        } else if file.bytes.is_empty() {
+        } else if file.is_empty() {
             "the file is empty".to_owned()
         } else {
             "no NIfTI, NRRD, MetaImage or DICOM header found; a raw data file (.img, .raw) needs its header".to_owned()

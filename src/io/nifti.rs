@@ -354,7 +354,8 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
     // The header first: from a gzip stream only its first bytes are inflated at this point.
     let header_bytes;
     let head: &[u8] = if gz {
-        header_bytes = raw::gunzip_prefix(name, &input.file.bytes, NIFTI2_HEADER_BYTES as u64)?.0;
+        header_bytes =
+            raw::gunzip_prefix_data(name, input.file.data(), NIFTI2_HEADER_BYTES as u64)?.0;
         &header_bytes
     } else {
         &input.file.bytes
@@ -409,29 +410,28 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
         raw::inflate_voxels(
             &data_name,
             raw::Compression::Gzip,
-            &data_file.bytes,
+            data_file.data(),
             vox_offset,
             layout,
             declared,
             input.limits,
         )?
     } else {
-        let needed = vox_offset.saturating_add(data_bytes);
-        if needed > data_file.bytes.len() as u64 {
-            return Err(LoadError::truncated(
-                &data_name,
-                "NIfTI voxel data",
-                needed,
-                data_file.bytes.len() as u64,
-            ));
-        }
+        // From memory, or straight from the file into the voxels.
         let layout = SampleLayout {
-            offset: vox_offset as usize,
+            offset: usize::try_from(vox_offset).unwrap_or(usize::MAX),
             ..layout
         };
         (
-            raw::decode_samples(&data_name, &data_file.bytes, layout, input.limits)?,
-            data_file.bytes.len() as u64,
+            raw::decode_present(
+                &data_name,
+                "NIfTI voxel data",
+                data_file.data(),
+                vox_offset.saturating_add(data_bytes),
+                layout,
+                input.limits,
+            )?,
+            data_file.len(),
         )
     };
     if volumes > 1 && data_bytes > 0 {

@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use glam::DVec3;
 
 use super::geometry::checked_grid;
+use super::input::Data;
 use super::raw::{self, Endian, SampleLayout, SampleType};
 use super::{HeaderInput, Limits, LoadError};
 use crate::volume::Volume;
@@ -182,7 +183,23 @@ fn space_to_lps(space: &str) -> Option<DVec3> {
 /// Reads an attached .nrrd or a detached .nhdr (its data file is looked up among `companions`).
 pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
     let name = input.file.name.as_str();
-    let (fields, data_start) = split_header(name, &input.file.bytes)?;
+    // A file read on demand is parsed from its first 64 KiB, or up to the header cap when the
+    // header is longer.
+    let (fields, data_start) = {
+        let on_demand = input.file.is_on_demand();
+        let mut parsed = split_header(
+            name,
+            &input
+                .file
+                .prefix(if on_demand { 64 << 10 } else { usize::MAX })?,
+        );
+        // The prefix's end may cut a line: its parse counts only if the header ended before it.
+        let whole = !on_demand || input.file.len() <= 64 << 10;
+        if !whole && !matches!(parsed, Ok((_, Some(start))) if start < 64 << 10) {
+            parsed = split_header(name, &input.file.prefix(MAX_HEADER_BYTES + 1)?);
+        }
+        parsed?
+    };
     let mut warnings = Vec::new();
     let need = |names: &[&str]| {
         get(&fields, names)
@@ -376,7 +393,8 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
     }
 
     // The data bytes: attached after the blank line, or in the named data file.
-    let (data_name, data_file): (String, &[u8]) = match get(&fields, &["data file", "datafile"]) {
+    let (data_name, data_file): (String, Data<'_>) = match get(&fields, &["data file", "datafile"])
+    {
         Some(df) => {
             let f = input.companions.data_file(
                 name,
@@ -385,18 +403,21 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
                 ("NRRD data file", "multiple data files"),
                 &mut warnings,
             )?;
-            (f.name.clone(), &f.bytes)
+            (f.name.clone(), f.data())
         }
         None => {
-            let start = data_start.ok_or_else(|| {
-                LoadError::truncated(
-                    name,
-                    "NRRD header (no blank line before the data)",
-                    input.file.bytes.len() as u64 + 1,
-                    input.file.bytes.len() as u64,
-                )
-            })?;
-            (name.to_owned(), &input.file.bytes[start..])
+            let file_len = input.file.len();
+            let data = data_start
+                .and_then(|start| input.file.data().after(start as u64))
+                .ok_or_else(|| {
+                    LoadError::truncated(
+                        name,
+                        "NRRD header (no blank line before the data)",
+                        file_len + 1,
+                        file_len,
+                    )
+                })?;
+            (name.to_owned(), data)
         }
     };
     let line_skip: usize = get(&fields, &["line skip", "lineskip"])
@@ -405,20 +426,14 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
     let byte_skip: i64 = get(&fields, &["byte skip", "byteskip"])
         .and_then(|s| s.parse().ok())
         .unwrap_or(0);
-    let mut data = data_file;
-    for _ in 0..line_skip {
-        match data.iter().position(|&b| b == b'\n') {
-            Some(p) => data = &data[p + 1..],
-            None => {
-                return Err(LoadError::truncated(
-                    &data_name,
-                    "line skip",
-                    line_skip as u64,
-                    0,
-                ));
-            }
-        }
-    }
+    let Some(data) = data_file.skip_lines(&data_name, line_skip)? else {
+        return Err(LoadError::truncated(
+            &data_name,
+            "line skip",
+            line_skip as u64,
+            0,
+        ));
+    };
 
     let endian = match get(&fields, &["endian"]).map(str::trim) {
         Some("big") => Endian::Big,
@@ -440,35 +455,26 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
     let encoding = need(&["encoding"])?.trim().to_ascii_lowercase();
     // Only the first volume is read (a short file is still a broken file). Ascii data are
     // parsed into f64 first.
-    let mut layout = SampleLayout {
+    let layout = SampleLayout {
         ty,
         endian,
         offset: 0,
         count: count as usize,
         stride_samples: usize::try_from(stride).unwrap_or(usize::MAX),
     };
-    let decoded: std::borrow::Cow<'_, [u8]> = match encoding.as_str() {
+    let decoded: Data<'_> = match encoding.as_str() {
         "raw" => {
             let skip = if byte_skip == -1 {
                 // -1: the data are the last bytes of the file.
-                (data.len() as u64)
-                    .checked_sub(data_bytes_total)
-                    .ok_or_else(|| {
-                        LoadError::truncated(
-                            &data_name,
-                            "NRRD raw data",
-                            data_bytes_total,
-                            data.len() as u64,
-                        )
-                    })?
+                data.len().checked_sub(data_bytes_total).ok_or_else(|| {
+                    LoadError::truncated(&data_name, "NRRD raw data", data_bytes_total, data.len())
+                })?
             } else {
                 u64::try_from(byte_skip)
                     .map_err(|_| LoadError::header(name, "byte skip", format!("{byte_skip}")))?
             };
-            let skip = usize::try_from(skip).unwrap_or(usize::MAX);
-            std::borrow::Cow::Borrowed(data.get(skip..).ok_or_else(|| {
-                LoadError::truncated(&data_name, "byte skip", skip as u64, data.len() as u64)
-            })?)
+            data.after(skip)
+                .ok_or_else(|| LoadError::truncated(&data_name, "byte skip", skip, data.len()))?
         }
         "gzip" | "gz" => {
             let skip = u64::try_from(byte_skip).map_err(|_| {
@@ -487,7 +493,8 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
             return finish(name, &data_name, dims, steps, origin, voxels, warnings);
         }
         "ascii" | "text" | "txt" => {
-            std::borrow::Cow::Owned(ascii_to_f64_bytes(&data_name, data, total, input.limits)?)
+            let voxels = ascii_voxels(&data_name, data, total, layout, input.limits)?;
+            return finish(name, &data_name, dims, steps, origin, voxels, warnings);
         }
         other => {
             return Err(LoadError::unsupported(
@@ -497,14 +504,11 @@ pub(crate) fn read(input: HeaderInput<'_>) -> Result<Volume, LoadError> {
             ));
         }
     };
-    if matches!(encoding.as_str(), "ascii" | "text" | "txt") {
-        (layout.ty, layout.endian) = (SampleType::F64, Endian::Little);
-    }
     let needed = total.saturating_mul(layout.ty.size() as u64);
     let voxels = raw::decode_present(
         &data_name,
         "NRRD data",
-        &decoded,
+        decoded,
         needed,
         layout,
         input.limits,
@@ -532,13 +536,17 @@ fn finish(
     Ok(grid.volume(dims, voxels, source, warnings))
 }
 
-/// Parses whitespace-separated numbers (ascii encoding) into little-endian f64 bytes.
-fn ascii_to_f64_bytes(
+/// Parses whitespace- or comma-separated numbers (ascii encoding) straight into f32 voxels:
+/// the first `total` numbers must all be numbers and present (a short file is a broken file),
+/// and `layout`'s samples among them (its stride picks one component) become the voxels, as
+/// the binary encodings' f64 samples would (no buffer of all the numbers is made).
+fn ascii_voxels(
     file: &str,
-    data: &[u8],
+    data: Data<'_>,
     total: u64,
+    layout: SampleLayout,
     limits: &Limits,
-) -> Result<Vec<u8>, LoadError> {
+) -> Result<crate::volume::Voxels, LoadError> {
     let bytes = total.saturating_mul(8);
     if bytes > limits.max_decompressed_bytes {
         return Err(LoadError::TooLarge {
@@ -548,19 +556,87 @@ fn ascii_to_f64_bytes(
             limit: limits.max_decompressed_bytes,
         });
     }
-    let text = String::from_utf8_lossy(data);
-    let mut out = Vec::new();
-    for tok in text
-        .split(|c: char| c.is_whitespace() || c == ',')
-        .filter(|t| !t.is_empty())
-        .take(total as usize)
-    {
-        let v: f64 = tok.parse().map_err(|_| {
-            LoadError::header(file, "ascii data", format!("\"{tok}\" is not a number"))
-        })?;
-        out.extend_from_slice(&v.to_le_bytes());
+    raw::check_voxel_budget(file, layout.count as u64, 4, limits)?;
+    let mut out = raw::try_vec::<f32>(file, "voxels", layout.count)?;
+    let stride = layout.stride_samples.max(1);
+    let seen = std::cell::Cell::new(0u64);
+    let mut take = |tok: &[u8]| -> Result<(), LoadError> {
+        if seen.get() >= total {
+            return Ok(());
+        }
+        let v: f64 = std::str::from_utf8(tok)
+            .ok()
+            .and_then(|t| t.parse().ok())
+            .ok_or_else(|| {
+                let shown: String = String::from_utf8_lossy(tok).chars().take(40).collect();
+                LoadError::header(file, "ascii data", format!("\"{shown}\" is not a number"))
+            })?;
+        let t = seen.get() as usize;
+        if t.is_multiple_of(stride)
+            && let Some(o) = out.get_mut(t / stride)
+        {
+            *o = v as f32;
+        }
+        seen.set(seen.get() + 1);
+        Ok(())
+    };
+    let separator = |c: &u8| c.is_ascii_whitespace() || *c == b',';
+    // The text a chunk at a time (read on demand, it is never all in memory); a token cut by a
+    // chunk's end is carried into the next.
+    let mut carry: Vec<u8> = Vec::new();
+    let mut chunk = Vec::new();
+    let mut at = 0u64;
+    while at < data.len() {
+        let n = (data.len() - at).min(1 << 20) as usize;
+        chunk.resize(n, 0);
+        data.read_at(file, at, &mut chunk)?;
+        at += n as u64;
+        let mut rest: &[u8] = &chunk;
+        if !carry.is_empty() {
+            let end = rest.iter().position(separator).unwrap_or(rest.len());
+            carry.extend_from_slice(&rest[..end]);
+            rest = &rest[end..];
+            if rest.is_empty() && at < data.len() {
+                if carry.len() > 1 << 20 {
+                    let shown: String = String::from_utf8_lossy(&carry).chars().take(40).collect();
+                    return Err(LoadError::header(
+                        file,
+                        "ascii data",
+                        format!("\"{shown}...\" is over 1 MiB long, not a number"),
+                    ));
+                }
+                continue;
+            }
+            take(&carry)?;
+            carry.clear();
+        }
+        // The last token may go on in the next chunk.
+        let cut = if at < data.len() {
+            rest.iter().rposition(separator).map_or(0, |p| p + 1)
+        } else {
+            rest.len()
+        };
+        for tok in rest[..cut].split(separator).filter(|t| !t.is_empty()) {
+            take(tok)?;
+        }
+        carry.extend_from_slice(&rest[cut..]);
+        if seen.get() >= total {
+            break;
+        }
     }
-    Ok(out)
+    if !carry.is_empty() {
+        take(&carry)?;
+    }
+    let seen = seen.get();
+    if seen < total {
+        return Err(LoadError::truncated(
+            file,
+            "NRRD data",
+            bytes,
+            seen.saturating_mul(8),
+        ));
+    }
+    Ok(crate::volume::Voxels::F32(out))
 }
 
 #[cfg(test)]

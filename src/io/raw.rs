@@ -1,8 +1,9 @@
 //! Shared low-level pieces of the loaders: capped decompression, fallible allocation, and the
 //! conversion of raw sample bytes (any type, either endianness) into compact `Voxels`.
 
-use std::io::Read;
+use std::io::{BufRead as _, Read};
 
+use super::input::Data;
 use super::{Limits, LoadError};
 use crate::volume::Voxels;
 
@@ -159,7 +160,22 @@ pub(crate) fn gunzip_prefix(
 ) -> Result<(Vec<u8>, bool), LoadError> {
     read_capped(
         file,
-        Members::new(Compression::Gzip, bytes),
+        Members::new(file, Compression::Gzip, Data::Memory(bytes)),
+        max_out,
+        "gzip",
+    )
+}
+
+/// [`gunzip_prefix`] of a file's bytes in memory or read on demand (only what the first
+/// `max_out` bytes need is read).
+pub(crate) fn gunzip_prefix_data(
+    file: &str,
+    data: Data<'_>,
+    max_out: u64,
+) -> Result<(Vec<u8>, bool), LoadError> {
+    read_capped(
+        file,
+        Members::new(file, Compression::Gzip, data),
         max_out,
         "gzip",
     )
@@ -187,6 +203,98 @@ impl Compression {
 /// before it is refused as longer than its header says.
 const STREAM_SLACK_BYTES: u64 = 1 << 20;
 
+/// The compressed bytes as the decoders read them: a slice in memory, or a file read on
+/// demand through a 64 KiB buffer. Its position is known, so what follows a member can be
+/// looked at without being consumed.
+struct Input<'a> {
+    file: &'a str,
+    data: Data<'a>,
+    pos: u64,
+    buf: Vec<u8>,
+    /// Position of `buf[0]` in `data`.
+    buf_start: u64,
+}
+
+impl<'a> Input<'a> {
+    fn new(file: &'a str, data: Data<'a>) -> Self {
+        Self {
+            file,
+            data,
+            pos: 0,
+            buf: Vec::new(),
+            buf_start: 0,
+        }
+    }
+
+    fn remaining(&self) -> u64 {
+        self.data.len().saturating_sub(self.pos)
+    }
+
+    /// Whether every byte from the position on is zero (read, not consumed).
+    fn rest_is_zero(&self) -> std::io::Result<bool> {
+        let mut at = self.pos;
+        let mut chunk = Vec::new();
+        while at < self.data.len() {
+            let n = (self.data.len() - at).min(64 << 10) as usize;
+            chunk.resize(n, 0);
+            self.data
+                .read_at(self.file, at, &mut chunk)
+                .map_err(|e| std::io::Error::other(e.to_string()))?;
+            if chunk.iter().any(|&b| b != 0) {
+                return Ok(false);
+            }
+            at += n as u64;
+        }
+        Ok(true)
+    }
+
+    /// The next two bytes (fewer at the end), not consumed.
+    fn peek2(&self) -> std::io::Result<Vec<u8>> {
+        let mut two = vec![0u8; self.remaining().min(2) as usize];
+        self.data
+            .read_at(self.file, self.pos, &mut two)
+            .map_err(|e| std::io::Error::other(e.to_string()))?;
+        Ok(two)
+    }
+}
+
+impl Read for Input<'_> {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        let n = {
+            let b = self.fill_buf()?;
+            let n = b.len().min(out.len());
+            out[..n].copy_from_slice(&b[..n]);
+            n
+        };
+        self.consume(n);
+        Ok(n)
+    }
+}
+
+impl std::io::BufRead for Input<'_> {
+    fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
+        match self.data {
+            Data::Memory(b) => Ok(b.get(self.pos as usize..).unwrap_or_default()),
+            Data::Source { .. } => {
+                let end = self.buf_start + self.buf.len() as u64;
+                if self.pos < self.buf_start || self.pos >= end {
+                    let n = self.remaining().min(64 << 10) as usize;
+                    self.buf.resize(n, 0);
+                    self.data
+                        .read_at(self.file, self.pos, &mut self.buf)
+                        .map_err(|e| std::io::Error::other(e.to_string()))?;
+                    self.buf_start = self.pos;
+                }
+                Ok(&self.buf[(self.pos - self.buf_start) as usize..])
+            }
+        }
+    }
+
+    fn consume(&mut self, n: usize) {
+        self.pos = (self.pos + n as u64).min(self.data.len());
+    }
+}
+
 /// The decompressed bytes of a whole gzip file (members one after the other, each checked
 /// against its CRC-32 and ISIZE by flate2 when its end is read), or of a zlib stream. After the
 /// last member, zero bytes are padding (gzip accepts them too); anything else is refused.
@@ -197,15 +305,16 @@ struct Members<'a> {
 }
 
 enum Decoder<'a> {
-    Gzip(flate2::bufread::GzDecoder<&'a [u8]>),
-    Zlib(flate2::bufread::ZlibDecoder<&'a [u8]>),
+    Gzip(flate2::bufread::GzDecoder<Input<'a>>),
+    Zlib(flate2::bufread::ZlibDecoder<Input<'a>>),
 }
 
 impl<'a> Members<'a> {
-    fn new(kind: Compression, bytes: &'a [u8]) -> Self {
+    fn new(file: &'a str, kind: Compression, data: Data<'a>) -> Self {
+        let input = Input::new(file, data);
         let decoder = match kind {
-            Compression::Gzip => Decoder::Gzip(flate2::bufread::GzDecoder::new(bytes)),
-            Compression::Zlib => Decoder::Zlib(flate2::bufread::ZlibDecoder::new(bytes)),
+            Compression::Gzip => Decoder::Gzip(flate2::bufread::GzDecoder::new(input)),
+            Compression::Zlib => Decoder::Zlib(flate2::bufread::ZlibDecoder::new(input)),
         };
         Self {
             kind,
@@ -214,26 +323,30 @@ impl<'a> Members<'a> {
     }
 }
 
-impl<'a> Read for Members<'a> {
+impl Read for Members<'_> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         if buf.is_empty() {
             return Ok(0);
         }
         loop {
-            // The bytes after the member, once it has ended.
-            let (n, rest): (usize, &'a [u8]) = match &mut self.decoder {
-                Some(Decoder::Gzip(g)) => (g.read(buf)?, *g.get_ref()),
-                Some(Decoder::Zlib(z)) => (z.read(buf)?, *z.get_ref()),
+            let n = match &mut self.decoder {
+                Some(Decoder::Gzip(g)) => g.read(buf)?,
+                Some(Decoder::Zlib(z)) => z.read(buf)?,
                 None => return Ok(0),
             };
             if n > 0 {
                 return Ok(n);
             }
-            self.decoder = None;
-            if rest.iter().all(|&b| b == 0) {
+            // The member has ended: what follows it?
+            let rest = match self.decoder.take() {
+                Some(Decoder::Gzip(g)) => g.into_inner(),
+                Some(Decoder::Zlib(z)) => z.into_inner(),
+                None => return Ok(0),
+            };
+            if rest.rest_is_zero()? {
                 return Ok(0);
             }
-            if self.kind == Compression::Gzip && is_gzip(rest) {
+            if self.kind == Compression::Gzip && is_gzip(&rest.peek2()?) {
                 self.decoder = Some(Decoder::Gzip(flate2::bufread::GzDecoder::new(rest)));
                 continue;
             }
@@ -241,7 +354,7 @@ impl<'a> Read for Members<'a> {
                 std::io::ErrorKind::InvalidData,
                 format!(
                     "{} bytes after the end of the {} stream are neither zero padding nor another member",
-                    rest.len(),
+                    rest.remaining(),
                     self.kind.name()
                 ),
             ));
@@ -291,7 +404,7 @@ fn skip_bytes(reader: &mut impl Read, n: u64) -> std::io::Result<bool> {
 pub(crate) fn inflate_voxels(
     file: &str,
     kind: Compression,
-    compressed: &[u8],
+    compressed: Data<'_>,
     skip: u64,
     layout: SampleLayout,
     declared_bytes: u64,
@@ -308,6 +421,9 @@ pub(crate) fn inflate_voxels(
         });
     }
     layout.check_voxel_budget(file, limits)?;
+    if kind == Compression::Gzip {
+        check_gzip_trailer(file, compressed, needed, declared_bytes)?;
+    }
     let stream = Stream {
         file,
         kind,
@@ -317,7 +433,8 @@ pub(crate) fn inflate_voxels(
     };
     let err = |e: std::io::Error| stream.error(&e);
     let truncated = |got: u64| stream.truncated(got);
-    let mut reader = std::io::BufReader::with_capacity(64 << 10, Members::new(kind, compressed));
+    let mut reader =
+        std::io::BufReader::with_capacity(64 << 10, Members::new(file, kind, compressed));
     if !skip_bytes(&mut reader, skip).map_err(err)? {
         return Err(truncated(skip));
     }
@@ -357,7 +474,7 @@ pub(crate) fn inflate_voxels(
         (Some(v), _) => v,
         (None, range) => {
             let mut again =
-                std::io::BufReader::with_capacity(64 << 10, Members::new(kind, compressed));
+                std::io::BufReader::with_capacity(64 << 10, Members::new(file, kind, compressed));
             if !skip_bytes(&mut again, skip).map_err(err)? {
                 return Err(truncated(skip));
             }
@@ -367,6 +484,95 @@ pub(crate) fn inflate_voxels(
         }
     };
     Ok((voxels, needed + rest))
+}
+
+/// Refuses, before anything is inflated, a single-member gzip stream whose trailer (ISIZE, the
+/// uncompressed size mod 2^32) cannot be the size of data that hold the `needed` bytes and no
+/// more than `declared` plus the slack: the checks the full read makes at the end, made first.
+///
+/// Safe only for a single member, whose ISIZE is the whole stream's: a stream in which the
+/// bytes 1F 8B 08 (a member's start) occur anywhere after the first header might hold several
+/// members (the last one's ISIZE says nothing about the others), so it is left to the full read.
+/// Zero padding after the member is allowed (as gzip does): every place the trailer could end,
+/// from the last byte back over the trailing zeros, is tried, and one that fits is enough.
+fn check_gzip_trailer(
+    file: &str,
+    compressed: Data<'_>,
+    needed: u64,
+    declared: u64,
+) -> Result<(), LoadError> {
+    const HEADER: u64 = 10;
+    let len = compressed.len();
+    if len < HEADER + 8 {
+        return Ok(()); // the full read reports the truncated stream
+    }
+    // Another member's start anywhere after the first header? (Read in chunks that overlap by
+    // two bytes, so that no place is missed.)
+    let mut at = HEADER;
+    let mut chunk = Vec::new();
+    while at < len {
+        let n = (len - at).min(1 << 20) as usize;
+        chunk.resize(n, 0);
+        compressed.read_at(file, at, &mut chunk)?;
+        if chunk.windows(3).any(|w| w == [0x1f, 0x8b, 0x08]) {
+            return Ok(());
+        }
+        if at + n as u64 >= len {
+            break;
+        }
+        at += (n as u64).saturating_sub(2).max(1);
+    }
+    // The last bytes: the trailer, behind at most 64 KiB of zero padding.
+    let tail_len = len.min((1 << 16) + 16);
+    let tail_start = len - tail_len;
+    let mut tail = vec![0u8; tail_len as usize];
+    compressed.read_at(file, tail_start, &mut tail)?;
+    let max = declared.saturating_add(STREAM_SLACK_BYTES);
+    // A size s fits when needed <= s <= max and s = isize (mod 2^32).
+    let fits = |isize: u32| {
+        let isize = u64::from(isize);
+        let k = needed.saturating_sub(isize).div_ceil(1 << 32);
+        isize
+            .checked_add(k.saturating_mul(1 << 32))
+            .is_some_and(|s| s >= needed && s <= max)
+    };
+    let zeros = tail.iter().rev().take_while(|&&b| b == 0).count();
+    if zeros > 1 << 16 {
+        return Ok(()); // that much padding is rare: left to the full read
+    }
+    let mut seen = None;
+    for pad in 0..=zeros {
+        // The ISIZE field ends `pad` bytes before the end; the CRC-32 and a header precede it.
+        let Some(end) = tail.len().checked_sub(pad) else {
+            break;
+        };
+        let Some(t) = end.checked_sub(4) else {
+            break;
+        };
+        if tail_start + (t as u64) < HEADER + 4 {
+            break;
+        }
+        let isize = u32::from_le_bytes([tail[t], tail[t + 1], tail[t + 2], tail[t + 3]]);
+        if fits(isize) {
+            return Ok(());
+        }
+        seen.get_or_insert(isize);
+    }
+    match seen {
+        Some(isize) if u64::from(isize) < needed => Err(LoadError::truncated(
+            file,
+            format!("gzip data (its trailer says {isize} bytes, mod 2^32; nothing was inflated)"),
+            needed,
+            u64::from(isize),
+        )),
+        Some(isize) => Err(LoadError::Decompress {
+            file: file.to_owned(),
+            message: format!(
+                "gzip: the trailer says the data are {isize} bytes (mod 2^32), more than the {max} the header allows: the file is corrupt or has bytes after its end (nothing was inflated)"
+            ),
+        }),
+        None => Ok(()),
+    }
 }
 
 /// A layout's samples (offset 0) in a decompressing stream, after `skip` bytes: `needed` bytes
@@ -621,19 +827,144 @@ impl SampleLayout {
     }
 }
 
-/// Checks that `needed` bytes of `what` are present, then decodes them (NRRD and MetaImage data).
+/// Checks that `needed` bytes of `what` are present in `data`, then decodes `layout` (its
+/// offset counted from the start of `data`): from memory, or read from the file straight into
+/// the voxel buffer ([`decode_source`]).
 pub(crate) fn decode_present(
     file: &str,
     what: &str,
-    bytes: &[u8],
+    data: Data<'_>,
     needed: u64,
     layout: SampleLayout,
     limits: &Limits,
 ) -> Result<Voxels, LoadError> {
-    if (bytes.len() as u64) < needed {
-        return Err(LoadError::truncated(file, what, needed, bytes.len() as u64));
+    if data.len() < needed {
+        return Err(LoadError::truncated(file, what, needed, data.len()));
     }
-    decode_samples(file, bytes, layout, limits)
+    match data {
+        Data::Memory(bytes) => decode_samples(file, bytes, layout, limits),
+        Data::Source { .. } => decode_source(file, data, layout, limits),
+    }
+}
+
+/// Bytes read at a time when samples are converted from a file read on demand.
+const SOURCE_CHUNK_BYTES: usize = 1 << 20;
+
+/// [`decode_samples`] for data read on demand, with the same result: samples whose stored type
+/// is the voxels' own are read straight into the voxel buffer (then byte-swapped in place if
+/// need be), others are converted from chunks of [`SOURCE_CHUNK_BYTES`]. Peak memory is the
+/// voxels plus one chunk.
+fn decode_source(
+    file: &str,
+    data: Data<'_>,
+    layout: SampleLayout,
+    limits: &Limits,
+) -> Result<Voxels, LoadError> {
+    let span = layout
+        .span_bytes()
+        .and_then(|s| s.checked_add(layout.offset as u64))
+        .unwrap_or(u64::MAX);
+    if span > data.len() {
+        return Err(LoadError::truncated(file, "voxel data", span, data.len()));
+    }
+    layout.check_voxel_budget(file, limits)?;
+    let n = layout.count;
+    let offset = layout.offset as u64;
+    let swap = (layout.endian == Endian::Little) != cfg!(target_endian = "little");
+    if layout.stride_samples == 1 || n <= 1 {
+        match layout.ty {
+            SampleType::U8 => {
+                let mut v = try_vec::<u8>(file, "voxels", n)?;
+                data.read_at(file, offset, &mut v)?;
+                return Ok(Voxels::U8(v));
+            }
+            SampleType::I16 => {
+                let mut v = try_vec::<i16>(file, "voxels", n)?;
+                data.read_at(file, offset, bytemuck::cast_slice_mut(&mut v))?;
+                if swap {
+                    v.iter_mut().for_each(|x| *x = x.swap_bytes());
+                }
+                return Ok(Voxels::I16(v));
+            }
+            SampleType::U16 => {
+                let mut v = try_vec::<u16>(file, "voxels", n)?;
+                data.read_at(file, offset, bytemuck::cast_slice_mut(&mut v))?;
+                if swap {
+                    v.iter_mut().for_each(|x| *x = x.swap_bytes());
+                }
+                return Ok(Voxels::U16(v));
+            }
+            SampleType::F32 => {
+                let mut v = try_vec::<f32>(file, "voxels", n)?;
+                data.read_at(file, offset, bytemuck::cast_slice_mut(&mut v))?;
+                if swap {
+                    v.iter_mut()
+                        .for_each(|x| *x = f32::from_bits(x.to_bits().swap_bytes()));
+                }
+                return Ok(Voxels::F32(v));
+            }
+            _ => {}
+        }
+    }
+    let mut chunks = SourceChunks {
+        file,
+        data,
+        layout,
+        buf: Vec::new(),
+        first: 0,
+        held: 0,
+    };
+    Ok(match layout.ty {
+        SampleType::U8 => Voxels::U8(collect(file, n, |i| Ok(chunks.value(i)? as u8))?),
+        SampleType::I8 | SampleType::I16 => {
+            Voxels::I16(collect(file, n, |i| Ok(chunks.value(i)? as i16))?)
+        }
+        SampleType::U16 => Voxels::U16(collect(file, n, |i| Ok(chunks.value(i)? as u16))?),
+        SampleType::F32 | SampleType::F64 => {
+            Voxels::F32(collect(file, n, |i| Ok(chunks.value(i)? as f32))?)
+        }
+        SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64 => {
+            // One pass for the range decides the compact type; a second reads again and converts.
+            let range = value_range(n, |i| chunks.value(i))?;
+            compact_wide(file, n, range, |i| chunks.value(i))?
+        }
+    })
+}
+
+/// The samples of a layout in data read on demand, a chunk at a time.
+struct SourceChunks<'a> {
+    file: &'a str,
+    data: Data<'a>,
+    layout: SampleLayout,
+    buf: Vec<u8>,
+    /// Index of the first sample in `buf`, and how many it holds.
+    first: usize,
+    held: usize,
+}
+
+impl SourceChunks<'_> {
+    /// Sample `i` as its value (any order; in order reads each chunk once).
+    fn value(&mut self, i: usize) -> Result<f64, LoadError> {
+        let size = self.layout.ty.size();
+        let step = self.layout.stride_samples.saturating_mul(size).max(1);
+        if !(self.first..self.first + self.held).contains(&i) {
+            let per_chunk = (SOURCE_CHUNK_BYTES / step).max(1);
+            let c = per_chunk.min(self.layout.count.saturating_sub(i)).max(1);
+            let bytes = (c - 1).saturating_mul(step).saturating_add(size);
+            let at =
+                (self.layout.offset as u64).saturating_add((i as u64).saturating_mul(step as u64));
+            self.buf.resize(bytes, 0);
+            self.data.read_at(self.file, at, &mut self.buf)?;
+            (self.first, self.held) = (i, c);
+        }
+        Ok(sample_f64(
+            &self.buf,
+            self.layout.ty,
+            self.layout.endian,
+            (i - self.first) * step,
+        )
+        .unwrap_or(0.0))
+    }
 }
 
 /// How a volume read from `header` and, possibly, a separate data file is named to the user.

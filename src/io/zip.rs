@@ -97,7 +97,7 @@ fn unpack(
     notes: &mut Vec<String>,
 ) -> Result<(), LoadError> {
     let name = archive_file.name.as_str();
-    let mut archive = ::zip::ZipArchive::new(std::io::Cursor::new(archive_file.bytes.as_slice()))
+    let mut archive = ::zip::ZipArchive::new(std::io::Cursor::new(archive_file.contents()?))
         .map_err(|e| zip_error(name, None, e))?;
     if archive.len() > MAX_ENTRIES {
         return Err(LoadError::TooLarge {

@@ -41,24 +41,38 @@ fn chain(e: &dyn std::error::Error) -> String {
     s
 }
 
-/// Parses a DICOM file from bytes; with `headers_only` it stops before the pixel data.
+/// Parses a DICOM file from bytes; with `headers_only` it stops before the pixel data. A file
+/// read on demand is read here and its bytes dropped once the object is built.
 pub(super) fn open(
     file: &InputFile,
     headers_only: bool,
     limits: &Limits,
 ) -> Result<DefaultDicomObject, LoadError> {
-    let bytes = file.bytes.as_slice();
-    let body = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
-        &bytes[128..]
+    open_located(file, headers_only, limits).map(|(obj, _)| obj)
+}
+
+/// [`open`], with where a top-level PixelData of defined length lies in the file (offset,
+/// declared length) when the data set is not deflated.
+pub(super) fn open_located(
+    file: &InputFile,
+    headers_only: bool,
+    limits: &Limits,
+) -> Result<(DefaultDicomObject, Option<(u64, u64)>), LoadError> {
+    let contents = file.contents()?;
+    let bytes: &[u8] = &contents;
+    let preamble = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
+        128
     } else {
-        bytes
+        0
     };
-    validate::check_lengths(&file.name, body, limits, headers_only)?;
+    let body = &bytes[preamble..];
+    let pixel_data = validate::check_lengths(&file.name, body, limits, headers_only)?
+        .map(|(at, len)| (at + preamble as u64, len));
     let mut options = OpenFileOptions::new().read_preamble(dicom_object::file::ReadPreamble::Never);
     if headers_only {
         options = options.read_until(tags::PIXEL_DATA);
     }
-    options.from_reader(body).map_err(|e| {
+    let obj = options.from_reader(body).map_err(|e| {
         // An unknown transfer syntax is the most useful thing to name.
         if let Some(uid) = sniff_transfer_syntax(bytes)
             && TransferSyntaxRegistry.get(&uid).is_none()
@@ -74,7 +88,8 @@ pub(super) fn open(
             file: file.name.clone(),
             message: chain(&e),
         }
-    })
+    })?;
+    Ok((obj, pixel_data))
 }
 
 /// The Transfer Syntax UID (0002,0010) read straight from the file meta group, which is always
@@ -224,6 +239,9 @@ pub(super) struct FileHeader {
     pub frames: Vec<FrameInfo>,
     pub warnings: Vec<String>,
     pub patient: crate::io::Patient,
+    /// Where native little-endian samples of 8, 16 or 32 bits lie in the file (offset, declared
+    /// length): they are then read there, frame by frame, without a parsed copy.
+    pub native_pixels: Option<(u64, u64)>,
 }
 
 fn frame_info(levels: &[Option<&InMemDicomObject>]) -> FrameInfo {
@@ -287,7 +305,7 @@ pub(super) fn read_header(
     file: &InputFile,
     limits: &Limits,
 ) -> Result<Option<FileHeader>, LoadError> {
-    let obj = open(file, true, limits)?;
+    let (obj, pixel_data) = open_located(file, true, limits)?;
     let (Some(rows), Some(cols)) = (elem_int(&obj, tags::ROWS), elem_int(&obj, tags::COLUMNS))
     else {
         return Ok(None);
@@ -311,7 +329,7 @@ pub(super) fn read_header(
     }
     // Every frame needs at least a byte of the file, and uncompressed frames need all their
     // bytes: checked here, before a per-frame table or any pixel buffer is made.
-    let file_len = file.bytes.len() as u64;
+    let file_len = file.len();
     if n_frames as u64 > file_len {
         return Err(LoadError::truncated(
             name,
@@ -408,7 +426,13 @@ pub(super) fn read_header(
             bits_stored.clamp(1, bits_allocated.max(1))
         ));
     }
+    let ts_trimmed = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']);
+    let native_pixels = pixel_data.filter(|_| {
+        matches!(ts_trimmed, "1.2.840.10008.1.2" | "1.2.840.10008.1.2.1")
+            && matches!(bits_allocated, 8 | 16 | 32)
+    });
     Ok(Some(FileHeader {
+        native_pixels,
         series_uid: elem_str(&obj, tags::SERIES_INSTANCE_UID)
             .unwrap_or_else(|| "(no SeriesInstanceUID)".to_owned()),
         series_description: elem_str(&obj, tags::SERIES_DESCRIPTION).unwrap_or_default(),

@@ -562,14 +562,142 @@ pub(super) fn store_frame(
     }
 }
 
-/// Opens a file, decodes its pixel data once and hands the bytes of all its frames to `f`
-/// (native samples are read where the parsed object holds them, without a copy).
+/// A file's pixel data, ready for [`Pixels::frame_samples`]: decoded bytes of all frames, or
+/// native samples where they lie in the file (read a frame at a time).
+pub(super) enum Pixels<'a> {
+    Bytes(&'a [u8]),
+    InFile {
+        file: &'a InputFile,
+        offset: u64,
+        len: u64,
+    },
+}
+
+/// Pixels converted at a time: a frame's samples go through an i64 scratch in pieces of at most
+/// this many, so that the scratch stays small whatever the frame's size (a 20000 x 20000 frame
+/// would otherwise need 3.2 GB of it).
+const PIECE_PIXELS: usize = 1 << 18;
+
+impl Pixels<'_> {
+    /// Stores frame `frame` of `n_frames` into `voxels` from `dst_start` on ([`store_frame`]),
+    /// a piece at a time; `samples` is the scratch.
+    #[allow(clippy::too_many_arguments)] // one frame's place: kept explicit rather than bundled
+    pub(super) fn store(
+        &self,
+        h: &FileHeader,
+        frame: usize,
+        n_frames: usize,
+        frame_len: usize,
+        voxels: &mut Voxels,
+        dst_start: usize,
+        rescale: (f64, f64),
+        samples: &mut Vec<i64>,
+    ) -> Result<(), String> {
+        let bytes = usize::from(h.bits_allocated / 8);
+        if !matches!(h.bits_allocated, 8 | 16 | 32) {
+            // 1-bit frames (packed or not) are taken whole; other sizes are refused whole.
+            samples.clear();
+            self.frame_samples(h, frame, n_frames, frame_len, 0, frame_len, samples)?;
+            store_frame(voxels, dst_start..dst_start + frame_len, samples, rescale);
+            return Ok(());
+        }
+        let frame_bytes = frame_len as u64 * bytes as u64;
+        let len = match self {
+            Self::Bytes(d) => d.len() as u64,
+            Self::InFile { len, .. } => *len,
+        };
+        if (frame as u64 + 1) * frame_bytes > len {
+            return Err(format!(
+                "pixel data has {len} bytes; frame {frame} of {}x{} pixels at {} bits needs {}",
+                h.cols,
+                h.rows,
+                h.bits_allocated,
+                (frame as u64 + 1) * frame_bytes
+            ));
+        }
+        let mut at = 0;
+        while at < frame_len {
+            let n = PIECE_PIXELS.min(frame_len - at);
+            samples.clear();
+            self.frame_samples(h, frame, n_frames, frame_len, at, n, samples)?;
+            store_frame(voxels, dst_start + at..dst_start + at + n, samples, rescale);
+            at += n;
+        }
+        Ok(())
+    }
+
+    /// [`frame_samples`] of pixels `first..first + count` of frame `frame` of `n_frames`
+    /// (the whole frame for 1-bit data).
+    #[allow(clippy::too_many_arguments)] // one piece's place: kept explicit rather than bundled
+    fn frame_samples(
+        &self,
+        h: &FileHeader,
+        frame: usize,
+        n_frames: usize,
+        frame_len: usize,
+        first: usize,
+        count: usize,
+        out: &mut Vec<i64>,
+    ) -> Result<(), String> {
+        let bytes = u64::from(h.bits_allocated / 8);
+        if !matches!(h.bits_allocated, 8 | 16 | 32) {
+            return match self {
+                Self::Bytes(data) => frame_samples(h, data, frame, n_frames, frame_len, out),
+                Self::InFile { .. } => Err(format!(
+                    "BitsAllocated {} is not read from the file directly",
+                    h.bits_allocated
+                )),
+            };
+        }
+        let start = (frame as u64 * frame_len as u64 + first as u64) * bytes;
+        let piece = count as u64 * bytes;
+        match self {
+            Self::Bytes(data) => {
+                let src = usize::try_from(start)
+                    .ok()
+                    .and_then(|s| data.get(s..s.checked_add(piece as usize)?))
+                    .ok_or("pixel data too short")?;
+                frame_samples(h, src, 0, 1, count, out)
+            }
+            Self::InFile { file, offset, len } => {
+                if start + piece > *len {
+                    return Err("pixel data too short".to_owned());
+                }
+                let mut buf = Vec::new();
+                buf.try_reserve_exact(piece as usize)
+                    .map_err(|_| format!("out of memory for {piece} bytes of a frame"))?;
+                buf.resize(piece as usize, 0);
+                file.data()
+                    .read_at(&file.name, offset + start, &mut buf)
+                    .map_err(|e| e.to_string())?;
+                frame_samples(h, &buf, 0, 1, count, out)
+            }
+        }
+    }
+}
+
+/// Opens a file, decodes its pixel data once and hands them to `f`. Native little-endian
+/// samples are read where they lie: in memory without a copy, from a file read on demand a
+/// frame at a time (no parsed object holds them); others where the parsed object holds them.
 pub(super) fn with_pixel_data<R>(
     file: &InputFile,
     header: &FileHeader,
     limits: &Limits,
-    f: impl FnOnce(&[u8]) -> Result<R, LoadError>,
+    f: impl FnOnce(&Pixels<'_>) -> Result<R, LoadError>,
 ) -> Result<R, LoadError> {
+    if let Some((offset, len)) = header.native_pixels
+        && offset.saturating_add(len) <= file.len()
+    {
+        if !file.is_on_demand() {
+            let at = usize::try_from(offset).unwrap_or(usize::MAX);
+            let end = usize::try_from(offset + len).unwrap_or(usize::MAX);
+            if let Some(data) = file.bytes.get(at..end) {
+                return f(&Pixels::Bytes(data));
+            }
+        } else {
+            return f(&Pixels::InFile { file, offset, len });
+        }
+    }
     let obj = open(file, false, limits)?;
     let fragments = encapsulated::fragments(&obj);
     let rle_data;
@@ -606,7 +734,7 @@ pub(super) fn with_pixel_data<R>(
             decoded.data()
         }
     };
-    f(data)
+    f(&Pixels::Bytes(data))
 }
 
 /// Decodes each file's pixel data once and copies its frames into their slots.
@@ -671,21 +799,23 @@ fn read_pixels(
                     file: file.name.clone(),
                     message,
                 };
-                samples.clear();
-                frame_samples(header, data, frame, n_frames, frame_len, &mut samples)
-                    .map_err(slice_error)?;
                 let info = frames[slot].info;
                 let rescale = if same_rescale {
                     (1.0, 0.0)
                 } else {
                     (info.slope, info.intercept)
                 };
-                store_frame(
+                data.store(
+                    header,
+                    frame,
+                    n_frames,
+                    frame_len,
                     voxels,
-                    slot * frame_len..(slot + 1) * frame_len,
-                    &samples,
+                    slot * frame_len,
                     rescale,
-                );
+                    &mut samples,
+                )
+                .map_err(slice_error)?;
             }
             Ok(())
         })?;
@@ -739,7 +869,11 @@ pub(super) fn check_before_decoding(
     }
     if ts == encapsulated::RLE_LOSSLESS {
         // The whole file bounds the compressed size.
-        encapsulated::check_rle_size(&file.name, header, file.bytes.len())?;
+        encapsulated::check_rle_size(
+            &file.name,
+            header,
+            usize::try_from(file.len()).unwrap_or(usize::MAX),
+        )?;
     }
     Ok(())
 }

@@ -160,19 +160,20 @@ impl SeriesBuilder {
         grow(&mut st.voxels, end, &file.name)?;
         let decoded = series::with_pixel_data(&file, &header, &self.limits, |data| {
             for k in 0..n_frames {
-                samples.clear();
-                series::frame_samples(&header, data, k, n_frames, frame_len, samples).map_err(
-                    |message| LoadError::Dicom {
-                        file: file.name.clone(),
-                        message: format!("frame {k}: {message}"),
-                    },
-                )?;
-                series::store_frame(
+                data.store(
+                    &header,
+                    k,
+                    n_frames,
+                    frame_len,
                     &mut st.voxels,
-                    start + k * frame_len..start + (k + 1) * frame_len,
-                    samples,
+                    start + k * frame_len,
                     (1.0, 0.0),
-                );
+                    samples,
+                )
+                .map_err(|message| LoadError::Dicom {
+                    file: file.name.clone(),
+                    message: format!("frame {k}: {message}"),
+                })?;
             }
             Ok(())
         });

@@ -39,14 +39,18 @@ const INFLATE_CHUNK: usize = 64 << 10;
 /// Checks the file meta group and the data set. `body` starts at the "DICM" magic (the preamble
 /// is already skipped). With `until_pixel_data` the walk stops where dicom-rs's header-only read
 /// stops (the first top-level tag at or after PixelData), after checking PixelData's length.
+///
+/// Returns where a top-level PixelData of defined length starts in `body` and how long it is
+/// declared (not checked to be present when `until_pixel_data`), for a data set that is not
+/// deflated: its native samples can then be read where they lie.
 pub(super) fn check_lengths(
     file: &str,
     body: &[u8],
     limits: &Limits,
     until_pixel_data: bool,
-) -> Result<(), LoadError> {
+) -> Result<Option<(u64, u64)>, LoadError> {
     let Some(rest) = body.strip_prefix(b"DICM") else {
-        return Ok(()); // dicom-rs reports the missing magic itself
+        return Ok(None); // dicom-rs reports the missing magic itself
     };
     // The meta group is always explicit VR little endian; it ends where group 0002 ends.
     let mut walker = Walker {
@@ -68,20 +72,22 @@ pub(super) fn check_lengths(
         pos: Rc::clone(&pos),
     };
     let Ok(meta) = FileMetaTable::from_reader(&mut source) else {
-        return Ok(());
+        return Ok(None);
     };
     let ts = meta.transfer_syntax().trim_end_matches(['\0', ' ']);
     let data = body.get(pos.get()..).unwrap_or_default();
+    let data_start = pos.get() as u64;
     let walk = Walk {
         file,
         limits,
         until_pixel_data,
+        pixel_data: Cell::new(None),
     };
     if ts == DEFLATED_EXPLICIT_LE {
         // dicom-rs inflates the data set and reads it as explicit VR little endian; so does the
         // walk, holding only a window of the inflated bytes.
         let Some(syntax) = TransferSyntaxRegistry.get(EXPLICIT_LE) else {
-            return Ok(());
+            return Ok(None);
         };
         let inflater = Rc::new(RefCell::new(Inflater::new(
             file,
@@ -99,10 +105,10 @@ pub(super) fn check_lengths(
         if let Some(e) = inflater.borrow_mut().failure.take() {
             return Err(e);
         }
-        return result;
+        return result.map(|()| None);
     }
     let Some(syntax) = TransferSyntaxRegistry.get(ts) else {
-        return Ok(()); // dicom-rs names the unknown transfer syntax itself
+        return Ok(None); // dicom-rs names the unknown transfer syntax itself
     };
     let pos = Rc::new(Cell::new(0));
     let source = CountingReader {
@@ -112,7 +118,11 @@ pub(super) fn check_lengths(
     let total = data.len() as u64;
     walk.tokens(source, syntax, &pos, |at, _| {
         Ok(total.saturating_sub(at as u64))
-    })
+    })?;
+    Ok(walk
+        .pixel_data
+        .get()
+        .map(|(at, len)| (data_start + at as u64, len)))
 }
 
 /// A byte source that tells how far it has been read.
@@ -285,6 +295,8 @@ struct Walk<'a> {
     file: &'a str,
     limits: &'a Limits,
     until_pixel_data: bool,
+    /// Where the top-level PixelData's value starts (in the data set) and its declared length.
+    pixel_data: Cell<Option<(usize, u64)>>,
 }
 
 impl Walk<'_> {
@@ -352,6 +364,7 @@ impl Walk<'_> {
                             && let Some(len) = header.len.get()
                         {
                             self.check_native_pixel_data(u64::from(len), &size)?;
+                            self.pixel_data.set(Some((pos.get(), u64::from(len))));
                         }
                         if self.until_pixel_data && tag >= pixel_tag() {
                             return Ok(());

@@ -1,0 +1,792 @@
+//! Peak memory while reading, for every format (issue 14): at most 1.5x the final voxel bytes
+//! plus a small constant. Natively files are read on demand (`shapecast::files::read_all`, as
+//! the command line reads them): an uncompressed payload goes from the file straight into the
+//! voxel buffer and a DICOM series is read one file at a time. In memory (the browser's reads,
+//! whose bytes cannot be avoided) the loaders add at most the voxels to the input. Each file
+//! is built here in a temporary folder; a counting allocator measures each load.
+
+#[path = "common/counting.rs"]
+mod counting;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use counting::peak_during;
+use shapecast::io::{self, InputFile};
+use shapecast::{Volume, Voxels};
+
+const MIB: usize = 1 << 20;
+/// The constant allowed above the voxels: a 1 MiB read chunk, 4 KiB heads, a DICOM slice or
+/// two, names and headers.
+const SLACK: usize = 3 * MIB;
+const DIMS: [usize; 3] = [256, 256, 48];
+const N: usize = DIMS[0] * DIMS[1] * DIMS[2];
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("shapecast-mem-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+/// A value per voxel that every stored type holds (0..=250, varied).
+fn value(i: usize) -> f64 {
+    ((i * 7 + i / 256) % 251) as f64
+}
+
+fn samples(ty: &str, big_endian: bool) -> Vec<u8> {
+    let mut out = Vec::new();
+    for i in 0..N {
+        let v = value(i);
+        let mut b: Vec<u8> = match ty {
+            "u8" => vec![v as u8],
+            "i16" => (v as i16).to_le_bytes().to_vec(),
+            "u16" => (v as u16).to_le_bytes().to_vec(),
+            "f32" => (v as f32).to_le_bytes().to_vec(),
+            "f64" => v.to_le_bytes().to_vec(),
+            "i32" => (v as i32).to_le_bytes().to_vec(),
+            _ => unreachable!("{ty}"),
+        };
+        if big_endian {
+            b.reverse();
+        }
+        out.extend_from_slice(&b);
+    }
+    out
+}
+
+/// NIfTI-1 single file (or, with `pair`, the 348-byte .hdr of a .hdr/.img pair).
+fn nifti_header(datatype: i16, bitpix: i16, pair: bool) -> Vec<u8> {
+    let mut b = vec![0u8; if pair { 348 } else { 352 }];
+    b[0..4].copy_from_slice(&348i32.to_le_bytes());
+    b[40..42].copy_from_slice(&3i16.to_le_bytes());
+    for (i, d) in DIMS.iter().enumerate() {
+        b[42 + 2 * i..44 + 2 * i].copy_from_slice(&(*d as i16).to_le_bytes());
+    }
+    b[70..72].copy_from_slice(&datatype.to_le_bytes());
+    b[72..74].copy_from_slice(&bitpix.to_le_bytes());
+    for i in 0..4 {
+        b[76 + 4 * i..80 + 4 * i].copy_from_slice(&1f32.to_le_bytes());
+    }
+    let off: f32 = if pair { 0.0 } else { 352.0 };
+    b[108..112].copy_from_slice(&off.to_le_bytes());
+    b[344..348].copy_from_slice(if pair { b"ni1\0" } else { b"n+1\0" });
+    b
+}
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    enc.write_all(bytes).expect("gzip");
+    enc.finish().expect("gzip")
+}
+
+fn zlib(bytes: &[u8]) -> Vec<u8> {
+    let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+    enc.write_all(bytes).expect("zlib");
+    enc.finish().expect("zlib")
+}
+
+fn nrrd_header(ty: &str, encoding: &str, endian: &str, data_file: Option<&str>) -> Vec<u8> {
+    let mut h = format!(
+        "NRRD0004\ntype: {ty}\ndimension: 3\nsizes: {} {} {}\nspacings: 1 1 1\nendian: {endian}\nencoding: {encoding}\n",
+        DIMS[0], DIMS[1], DIMS[2]
+    );
+    match data_file {
+        Some(f) => h.push_str(&format!("data file: {f}\n")),
+        None => h.push('\n'),
+    }
+    h.into_bytes()
+}
+
+/// The voxel values as text, one per line, with varied separators.
+fn ascii_text() -> Vec<u8> {
+    let mut t = Vec::new();
+    for i in 0..N {
+        t.extend_from_slice(format!("{}", value(i)).as_bytes());
+        t.extend_from_slice(match i % 3 {
+            0 => b" ",
+            1 => b",",
+            _ => b"\n",
+        });
+    }
+    t
+}
+
+fn mha_header(ty: &str, compressed: bool, data_file: &str) -> Vec<u8> {
+    format!(
+        "ObjectType = Image\nNDims = 3\nDimSize = {} {} {}\nElementType = {ty}\nElementSpacing = 1 1 1\nCompressedData = {}\nElementDataFile = {data_file}\n",
+        DIMS[0],
+        DIMS[1],
+        DIMS[2],
+        if compressed { "True" } else { "False" }
+    )
+    .into_bytes()
+}
+
+fn cat(a: Vec<u8>, b: &[u8]) -> Vec<u8> {
+    let mut a = a;
+    a.extend_from_slice(b);
+    a
+}
+
+/// Files by name and content; the first is the one given, the others are found beside it.
+type Files = Vec<(String, Vec<u8>)>;
+
+/// The cases: a label, the files, the voxel type.
+fn cases() -> Vec<(&'static str, Files, &'static str)> {
+    let one = |n: &str, b: Vec<u8>| vec![(n.to_owned(), b)];
+    vec![
+        (
+            "nii i16",
+            one(
+                "a.nii",
+                cat(nifti_header(4, 16, false), &samples("i16", false)),
+            ),
+            "i16",
+        ),
+        (
+            "nii u8",
+            one(
+                "a.nii",
+                cat(nifti_header(2, 8, false), &samples("u8", false)),
+            ),
+            "u8",
+        ),
+        (
+            "nii f32",
+            one(
+                "a.nii",
+                cat(nifti_header(16, 32, false), &samples("f32", false)),
+            ),
+            "f32",
+        ),
+        (
+            "nii f64 -> f32",
+            one(
+                "a.nii",
+                cat(nifti_header(64, 64, false), &samples("f64", false)),
+            ),
+            "f32",
+        ),
+        (
+            "nii i32 -> i16",
+            one(
+                "a.nii",
+                cat(nifti_header(8, 32, false), &samples("i32", false)),
+            ),
+            "i16",
+        ),
+        (
+            "hdr/img (ANALYZE-style pair)",
+            vec![
+                ("a.hdr".to_owned(), nifti_header(4, 16, true)),
+                ("a.img".to_owned(), samples("i16", false)),
+            ],
+            "i16",
+        ),
+        (
+            "nii.gz",
+            one(
+                "a.nii.gz",
+                gzip(&cat(nifti_header(4, 16, false), &samples("i16", false))),
+            ),
+            "i16",
+        ),
+        (
+            "nrrd raw",
+            one(
+                "a.nrrd",
+                cat(
+                    nrrd_header("short", "raw", "little", None),
+                    &samples("i16", false),
+                ),
+            ),
+            "i16",
+        ),
+        (
+            "nrrd raw big endian",
+            one(
+                "a.nrrd",
+                cat(
+                    nrrd_header("ushort", "raw", "big", None),
+                    &samples("u16", true),
+                ),
+            ),
+            "u16",
+        ),
+        (
+            "nhdr + raw (detached)",
+            vec![
+                (
+                    "a.nhdr".to_owned(),
+                    nrrd_header("float", "raw", "little", Some("a.raw")),
+                ),
+                ("a.raw".to_owned(), samples("f32", false)),
+            ],
+            "f32",
+        ),
+        (
+            "nrrd gzip",
+            one(
+                "a.nrrd",
+                cat(
+                    nrrd_header("short", "gzip", "little", None),
+                    &gzip(&samples("i16", false)),
+                ),
+            ),
+            "i16",
+        ),
+        (
+            "nrrd ascii",
+            one(
+                "a.nrrd",
+                cat(nrrd_header("float", "ascii", "little", None), &ascii_text()),
+            ),
+            "f32",
+        ),
+        (
+            "mha raw",
+            one(
+                "a.mha",
+                cat(
+                    mha_header("MET_SHORT", false, "LOCAL"),
+                    &samples("i16", false),
+                ),
+            ),
+            "i16",
+        ),
+        (
+            "mhd + raw",
+            vec![
+                ("a.mhd".to_owned(), mha_header("MET_UCHAR", false, "a.raw")),
+                ("a.raw".to_owned(), samples("u8", false)),
+            ],
+            "u8",
+        ),
+        (
+            "mha zlib",
+            one(
+                "a.mha",
+                cat(
+                    mha_header("MET_SHORT", true, "LOCAL"),
+                    &zlib(&samples("i16", false)),
+                ),
+            ),
+            "i16",
+        ),
+    ]
+}
+
+fn check_values(label: &str, v: &Volume, ty: &str) {
+    assert_eq!(v.dims, DIMS, "{label}");
+    assert_eq!(v.voxels.type_name(), ty, "{label}");
+    for i in [0, 1, 255, 256, 4097, N / 2, N - 1] {
+        assert_eq!(
+            f64::from(v.voxels.raw_f32(i)),
+            value(i),
+            "{label}: voxel {i}"
+        );
+    }
+}
+
+fn write_all(dir: &Path, files: &[(String, Vec<u8>)]) {
+    for (n, b) in files {
+        std::fs::write(dir.join(n), b).expect("write");
+    }
+}
+
+#[test]
+fn every_format_read_from_files_peaks_within_one_and_a_half_times_the_voxels() {
+    let dir = temp_dir("formats");
+    let mut report = Vec::new();
+    for (label, files, ty) in cases() {
+        let sub = dir.join(label.replace([' ', '/', '(', ')', '>'], "_"));
+        std::fs::create_dir_all(&sub).expect("dir");
+        write_all(&sub, &files);
+        // The first file is given; the others are found beside it.
+        let given = sub.join(&files[0].0);
+        drop(files);
+        let (r, peak) = peak_during(|| {
+            let (inputs, _) = shapecast::files::read_all(&[given]).expect("lists the files");
+            io::load(&inputs)
+        });
+        let v = r.unwrap_or_else(|e| panic!("{label}: {e}")).volume;
+        check_values(label, &v, ty);
+        let voxel_bytes = v.voxels.byte_len();
+        report.push(format!(
+            "{label}: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+            peak as f64 / voxel_bytes as f64
+        ));
+        assert!(
+            peak <= voxel_bytes * 3 / 2 + SLACK,
+            "{label}: peak {peak} bytes for {voxel_bytes} voxel bytes"
+        );
+        std::fs::remove_dir_all(&sub).expect("clean up");
+    }
+    eprintln!("{}", report.join("\n"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn every_format_in_memory_adds_at_most_the_voxels_to_its_input() {
+    // The browser's path: the file bytes are already in memory (not counted: allocated before
+    // the load); the load itself allocates the voxels and a constant.
+    let mut report = Vec::new();
+    for (label, files, ty) in cases() {
+        let inputs: Vec<InputFile> = files
+            .into_iter()
+            .map(|(n, b)| InputFile::new(n, b))
+            .collect();
+        let (r, peak) = peak_during(|| io::load(&inputs));
+        let v = r.unwrap_or_else(|e| panic!("{label}: {e}")).volume;
+        check_values(label, &v, ty);
+        let voxel_bytes = v.voxels.byte_len();
+        report.push(format!(
+            "{label}: input + {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+            peak as f64 / voxel_bytes as f64
+        ));
+        assert!(
+            peak <= voxel_bytes + SLACK,
+            "{label}: the load allocated {peak} bytes for {voxel_bytes} voxel bytes"
+        );
+    }
+    eprintln!("{}", report.join("\n"));
+}
+
+#[test]
+fn a_file_read_on_demand_loads_what_the_same_bytes_in_memory_load() {
+    for (label, files, _) in cases() {
+        let in_memory: Vec<InputFile> = files
+            .iter()
+            .map(|(n, b)| InputFile::new(n.clone(), b.clone()))
+            .collect();
+        let on_demand: Vec<InputFile> = files
+            .into_iter()
+            .map(|(n, b)| {
+                InputFile::on_demand(n, std::sync::Arc::new(io::MemorySource(b)))
+                    .expect("reads the head")
+            })
+            .collect();
+        let a = io::load(&in_memory).unwrap_or_else(|e| panic!("{label}: {e}"));
+        let b = io::load(&on_demand).unwrap_or_else(|e| panic!("{label}: {e}"));
+        assert_eq!(a.volume, b.volume, "{label}");
+        assert_eq!(a.notes, b.notes, "{label}");
+    }
+}
+
+#[test]
+fn a_data_file_shorter_than_its_header_says_is_refused_by_name_on_demand_too() {
+    let mut raw = samples("i16", false);
+    raw.truncate(raw.len() - 2);
+    let files = [
+        InputFile::new(
+            "a.nhdr",
+            nrrd_header("short", "raw", "little", Some("a.raw")),
+        ),
+        InputFile::on_demand("a.raw", std::sync::Arc::new(io::MemorySource(raw)))
+            .expect("reads the head"),
+    ];
+    let e = io::load(&files).expect_err("one sample short");
+    let m = e.to_string();
+    assert!(m.contains("a.raw") && m.contains("truncated"), "{m}");
+    // A nii cut short, read on demand.
+    let mut nii = cat(nifti_header(4, 16, false), &samples("i16", false));
+    nii.truncate(nii.len() / 2);
+    let f = InputFile::on_demand("cut.nii", std::sync::Arc::new(io::MemorySource(nii)))
+        .expect("reads the head");
+    let m = io::load(&[f]).expect_err("half the voxels").to_string();
+    assert!(m.contains("cut.nii") && m.contains("truncated"), "{m}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// DICOM: a series of slices and one multi-frame file, written by hand (explicit VR little endian).
+
+fn element(out: &mut Vec<u8>, tag: (u16, u16), vr: &[u8; 2], value: &[u8]) {
+    let mut v = value.to_vec();
+    if v.len() % 2 == 1 {
+        v.push(if matches!(vr, b"UI" | b"OB") { 0 } else { b' ' });
+    }
+    out.extend_from_slice(&tag.0.to_le_bytes());
+    out.extend_from_slice(&tag.1.to_le_bytes());
+    out.extend_from_slice(vr);
+    if matches!(vr, b"OB" | b"OW" | b"SQ" | b"UN" | b"UT") {
+        out.extend_from_slice(&[0, 0]);
+        out.extend_from_slice(&(v.len() as u32).to_le_bytes());
+    } else {
+        out.extend_from_slice(&(v.len() as u16).to_le_bytes());
+    }
+    out.extend_from_slice(&v);
+}
+
+/// A CT image of DIMS[0] x DIMS[1] with `frames` frames at z = `z` mm, pixels `value(first + i)`.
+fn dicom(z: usize, frames: usize, first: usize) -> Vec<u8> {
+    let mut group = Vec::new();
+    element(&mut group, (0x0002, 0x0001), b"OB", &[0, 1]);
+    element(
+        &mut group,
+        (0x0002, 0x0002),
+        b"UI",
+        b"1.2.840.10008.5.1.4.1.1.2",
+    );
+    element(
+        &mut group,
+        (0x0002, 0x0003),
+        b"UI",
+        format!("1.2.3.4.{z}").as_bytes(),
+    );
+    element(&mut group, (0x0002, 0x0010), b"UI", b"1.2.840.10008.1.2.1");
+    let mut f = vec![0u8; 128];
+    f.extend_from_slice(b"DICM");
+    element(
+        &mut f,
+        (0x0002, 0x0000),
+        b"UL",
+        &(group.len() as u32).to_le_bytes(),
+    );
+    f.extend_from_slice(&group);
+    let us = |v: u16| v.to_le_bytes().to_vec();
+    element(
+        &mut f,
+        (0x0008, 0x0018),
+        b"UI",
+        format!("1.2.3.4.{z}").as_bytes(),
+    );
+    element(&mut f, (0x0008, 0x0060), b"CS", b"CT");
+    element(&mut f, (0x0020, 0x000E), b"UI", b"1.2.3.99");
+    if frames == 1 {
+        // A multi-frame file without per-frame positions is stacked in frame order.
+        element(
+            &mut f,
+            (0x0020, 0x0032),
+            b"DS",
+            format!("0\\0\\{z}").as_bytes(),
+        );
+        element(&mut f, (0x0020, 0x0037), b"DS", b"1\\0\\0\\0\\1\\0");
+    }
+    element(&mut f, (0x0028, 0x0002), b"US", &us(1));
+    element(&mut f, (0x0028, 0x0004), b"CS", b"MONOCHROME2");
+    if frames > 1 {
+        element(
+            &mut f,
+            (0x0028, 0x0008),
+            b"IS",
+            frames.to_string().as_bytes(),
+        );
+    }
+    element(&mut f, (0x0028, 0x0010), b"US", &us(DIMS[1] as u16));
+    element(&mut f, (0x0028, 0x0011), b"US", &us(DIMS[0] as u16));
+    element(&mut f, (0x0028, 0x0030), b"DS", b"1\\1");
+    element(&mut f, (0x0028, 0x0100), b"US", &us(16));
+    element(&mut f, (0x0028, 0x0101), b"US", &us(16));
+    element(&mut f, (0x0028, 0x0102), b"US", &us(15));
+    element(&mut f, (0x0028, 0x0103), b"US", &us(1));
+    let n = DIMS[0] * DIMS[1] * frames;
+    let pixels: Vec<u8> = (0..n)
+        .flat_map(|i| (value(first + i) as i16).to_le_bytes())
+        .collect();
+    element(&mut f, (0x7FE0, 0x0010), b"OW", &pixels);
+    f
+}
+
+#[test]
+fn a_dicom_series_read_from_files_peaks_within_one_and_a_half_times_the_voxels() {
+    let dir = temp_dir("dicom");
+    let slice = DIMS[0] * DIMS[1];
+    for z in 0..DIMS[2] {
+        std::fs::write(dir.join(format!("s{z:03}.dcm")), dicom(z, 1, z * slice)).expect("write");
+    }
+    let (r, peak) = peak_during(|| {
+        let (inputs, _) = shapecast::files::read_all(std::slice::from_ref(&dir)).expect("lists");
+        io::load(&inputs)
+    });
+    let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    check_values("DICOM series", &v, "i16");
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!(
+        "DICOM series of {} files from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+        DIMS[2],
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+
+    // The same files in memory: the load adds the voxels and a slice or two to the input.
+    let inputs: Vec<InputFile> = (0..DIMS[2])
+        .map(|z| InputFile::new(format!("s{z:03}.dcm"), dicom(z, 1, z * slice)))
+        .collect();
+    let (r, peak) = peak_during(|| io::load(&inputs));
+    assert_eq!(r.expect("loads").volume.voxels, v.voxels);
+    eprintln!("DICOM series in memory: input + {peak} bytes");
+    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn a_multi_frame_dicom_peaks_within_one_and_a_half_times_the_voxels() {
+    // One file of DIMS[2] frames: its native samples are read where they lie in the file, a
+    // frame at a time (no parsed copy of the pixel data).
+    let dir = temp_dir("multiframe");
+    let path = dir.join("frames.dcm");
+    std::fs::write(&path, dicom(0, DIMS[2], 0)).expect("write");
+    let (r, peak) = peak_during(|| {
+        let (inputs, _) = shapecast::files::read_all(std::slice::from_ref(&path)).expect("lists");
+        io::load(&inputs)
+    });
+    let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    check_values("multi-frame DICOM", &v, "i16");
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!(
+        "multi-frame DICOM from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+    let inputs = [InputFile::new("frames.dcm", dicom(0, DIMS[2], 0))];
+    let (r, peak) = peak_during(|| io::load(&inputs));
+    assert_eq!(r.expect("loads").volume.voxels, v.voxels);
+    eprintln!("multi-frame DICOM in memory: input + {peak} bytes");
+    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn ascii_numbers_cut_by_a_read_chunk_are_read_whole() {
+    // The text is read in 1 MiB chunks: numbers straddling each chunk's end, and the last one
+    // without a separator after it.
+    let mut text = Vec::new();
+    let mut expect = Vec::new();
+    let mut k = 0u32;
+    while text.len() < 3 << 20 {
+        let v = 1000.0 + f64::from(k) * 0.25;
+        text.extend_from_slice(format!("{v} ").as_bytes());
+        expect.push(v as f32);
+        k += 1;
+    }
+    text.pop();
+    let header = format!(
+        "NRRD0004\ntype: double\ndimension: 1\nsizes: {}\nencoding: ascii\n\n",
+        expect.len()
+    );
+    for on_demand in [false, true] {
+        let bytes = cat(header.clone().into_bytes(), &text);
+        let f = if on_demand {
+            InputFile::on_demand("t.nrrd", std::sync::Arc::new(io::MemorySource(bytes)))
+                .expect("head")
+        } else {
+            InputFile::new("t.nrrd", bytes)
+        };
+        let v = io::load(&[f]).expect("loads").volume;
+        assert_eq!(
+            v.voxels,
+            Voxels::F32(expect.clone()),
+            "on demand: {on_demand}"
+        );
+    }
+    // One number short: refused by name.
+    let cut = text.iter().rposition(|&c| c == b' ').expect("a space");
+    let f = InputFile::new("short.nrrd", cat(header.into_bytes(), &text[..cut]));
+    let m = io::load(&[f]).expect_err("short").to_string();
+    assert!(m.contains("short.nrrd") && m.contains("truncated"), "{m}");
+}
+
+#[test]
+fn an_incompressible_gzip_file_is_inflated_from_the_file_not_from_memory() {
+    // Noise compresses to about its own size: holding the compressed bytes would cost ~2x.
+    let mut x = 0x2545_F491_4F6C_DD1Du64;
+    let noise: Vec<u8> = (0..N * 2)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect();
+    let gz = gzip(&cat(nifti_header(4, 16, false), &noise));
+    assert!(gz.len() > N * 2, "{} compressed bytes", gz.len());
+    let f = InputFile::on_demand("noise.nii.gz", std::sync::Arc::new(io::MemorySource(gz)))
+        .expect("head");
+    let (r, peak) = peak_during(|| io::load(std::slice::from_ref(&f)));
+    let v = r.expect("loads").volume;
+    let voxel_bytes = v.voxels.byte_len();
+    assert_eq!(
+        v.voxels.raw_f32(1),
+        f32::from(i16::from_le_bytes([noise[2], noise[3]]))
+    );
+    eprintln!("noise .nii.gz on demand: peak {peak} bytes for {voxel_bytes} voxel bytes");
+    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+}
+
+/// [`dicom`] re-encoded as implicit VR little endian (no VR in the data set).
+fn implicit(explicit: &[u8]) -> Vec<u8> {
+    // The meta group (explicit, always) ends where its group length says.
+    let group_len =
+        u32::from_le_bytes([explicit[140], explicit[141], explicit[142], explicit[143]]);
+    let meta_end = 144 + group_len as usize;
+    let mut out = explicit[..meta_end].to_vec();
+    let ts = b"1.2.840.10008.1.2.1\0";
+    let at = out
+        .windows(ts.len())
+        .position(|w| w == ts)
+        .expect("transfer syntax");
+    // "1.2.840.10008.1.2" padded to the same 20 bytes.
+    out[at..at + 20].copy_from_slice(b"1.2.840.10008.1.2\0\0\0");
+    let mut p = meta_end;
+    while p + 8 <= explicit.len() {
+        let tag = &explicit[p..p + 4];
+        let vr = &explicit[p + 4..p + 6];
+        let (len, head) = if matches!(vr, b"OB" | b"OW" | b"SQ" | b"UN" | b"UT") {
+            let l = &explicit[p + 8..p + 12];
+            (u32::from_le_bytes([l[0], l[1], l[2], l[3]]) as usize, 12)
+        } else {
+            (
+                usize::from(u16::from_le_bytes([explicit[p + 6], explicit[p + 7]])),
+                8,
+            )
+        };
+        out.extend_from_slice(tag);
+        out.extend_from_slice(&(len as u32).to_le_bytes());
+        out.extend_from_slice(&explicit[p + head..p + head + len]);
+        p += head + len;
+    }
+    out
+}
+
+#[test]
+fn implicit_little_endian_pixels_are_read_where_they_lie() {
+    let slice = DIMS[0] * DIMS[1];
+    let explicit: Vec<InputFile> = (0..DIMS[2])
+        .map(|z| InputFile::new(format!("s{z:03}.dcm"), dicom(z, 1, z * slice)))
+        .collect();
+    let want = io::load(&explicit).expect("explicit loads").volume;
+    let files: Vec<InputFile> = (0..DIMS[2])
+        .map(|z| InputFile::new(format!("s{z:03}.dcm"), implicit(&dicom(z, 1, z * slice))))
+        .collect();
+    let (r, peak) = peak_during(|| io::load(&files));
+    let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    assert_eq!(
+        v,
+        Volume {
+            source: v.source.clone(),
+            ..want.clone()
+        }
+    );
+    assert!(
+        peak <= v.voxels.byte_len() + SLACK,
+        "in memory: input + {peak} bytes"
+    );
+    let on_demand: Vec<InputFile> = files
+        .into_iter()
+        .map(|f| {
+            InputFile::on_demand(f.name, std::sync::Arc::new(io::MemorySource(f.bytes)))
+                .expect("head")
+        })
+        .collect();
+    let w = io::load(&on_demand).expect("on demand").volume;
+    assert_eq!(w.voxels, want.voxels);
+    // One multi-frame file: a parsed copy of its pixels would cost the voxels again.
+    let f = [InputFile::new(
+        "frames.dcm",
+        implicit(&dicom(0, DIMS[2], 0)),
+    )];
+    let (r, peak) = peak_during(|| io::load(&f));
+    let v = r.expect("multi-frame loads").volume;
+    check_values("implicit multi-frame", &v, "i16");
+    assert!(
+        peak <= v.voxels.byte_len() + SLACK,
+        "in memory: input + {peak} bytes"
+    );
+}
+
+#[test]
+fn a_gzip_header_longer_than_the_bytes_held_is_read_on_demand_too() {
+    // A gzip FNAME of 10 KB: more than the head an on-demand file keeps (HEAD_BYTES).
+    let nii = cat(nifti_header(2, 8, false), &samples("u8", false));
+    let mut enc = flate2::GzBuilder::new()
+        .filename(vec![b'n'; 10_000])
+        .write(Vec::new(), flate2::Compression::fast());
+    enc.write_all(&nii).expect("gzip");
+    let gz = enc.finish().expect("gzip");
+    let a = io::load(&[InputFile::new("long.nii.gz", gz.clone())]).expect("in memory");
+    let f = InputFile::on_demand("long.nii.gz", std::sync::Arc::new(io::MemorySource(gz)))
+        .expect("head");
+    let b = io::load(&[f]).expect("on demand");
+    assert_eq!(a.volume, b.volume);
+    check_values("long gzip header", &b.volume, "u8");
+}
+
+#[test]
+fn text_headers_longer_than_64_kib_are_read_whole_on_demand() {
+    // A header line crossing 64 KiB (where an on-demand header is first parsed) and the field
+    // after it must be read as in memory.
+    let long = "x".repeat(70_000);
+    let nrrd = cat(
+        format!("NRRD0004\n# {long}\n").into_bytes(),
+        &nrrd_header("short", "raw", "little", None)[9..],
+    );
+    let nrrd = cat(nrrd, &samples("i16", false));
+    let mha = cat(
+        format!("ObjectType = Image\nComment = {long}\n").into_bytes(),
+        &mha_header("MET_SHORT", false, "LOCAL")[19..],
+    );
+    let mha = cat(mha, &samples("i16", false));
+    for (name, bytes) in [("long.nrrd", nrrd), ("long.mha", mha)] {
+        let a = io::load(&[InputFile::new(name, bytes.clone())]).expect("in memory");
+        let f =
+            InputFile::on_demand(name, std::sync::Arc::new(io::MemorySource(bytes))).expect("head");
+        let b = io::load(&[f]).unwrap_or_else(|e| panic!("{name} on demand: {e}"));
+        assert_eq!(a.volume, b.volume, "{name}");
+        check_values(name, &b.volume, "i16");
+    }
+}
+
+#[test]
+fn one_large_frame_is_converted_in_pieces() {
+    // One 4096 x 2048 frame: its samples go through the i64 scratch in pieces, not whole
+    // (which would be 64 MiB beside 16 MiB of voxels).
+    let (rows, cols) = (2048usize, 4096usize);
+    let mut f = dicom(0, 1, 0);
+    let at = f
+        .windows(4)
+        .rposition(|w| w == [0xE0, 0x7F, 0x10, 0x00])
+        .expect("PixelData");
+    f.truncate(at);
+    for (tag, v) in [(0x0010u16, rows as u16), (0x0011, cols as u16)] {
+        let p = f
+            .windows(6)
+            .position(|w| w == [0x28, 0x00, tag as u8, 0x00, b'U', b'S'])
+            .expect("Rows/Columns");
+        f[p + 8..p + 10].copy_from_slice(&v.to_le_bytes());
+    }
+    let pixels: Vec<u8> = (0..rows * cols)
+        .flat_map(|i| ((i % 3000) as i16).to_le_bytes())
+        .collect();
+    f.extend_from_slice(&[0xE0, 0x7F, 0x10, 0x00, b'O', b'W', 0, 0]);
+    f.extend_from_slice(&(pixels.len() as u32).to_le_bytes());
+    f.extend_from_slice(&pixels);
+    drop(pixels);
+    let files = [InputFile::new("big-frame.dcm", f)];
+    let (r, peak) = peak_during(|| io::load(&files));
+    let v = r.expect("loads").volume;
+    assert_eq!(v.dims, [cols, rows, 1]);
+    assert_eq!(
+        v.voxels.raw_f32(rows * cols - 1),
+        ((rows * cols - 1) % 3000) as f32
+    );
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!("one {cols} x {rows} frame: input + {peak} bytes for {voxel_bytes} voxel bytes");
+    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+}
+
+#[test]
+fn voxels_type_is_kept() {
+    // The fast path reads stored bytes into the voxels as they are: a type mix-up would show.
+    let f = InputFile::on_demand(
+        "t.nii",
+        std::sync::Arc::new(io::MemorySource(cat(
+            nifti_header(512, 16, false),
+            &samples("u16", false),
+        ))),
+    )
+    .expect("head");
+    let v = io::load(&[f]).expect("loads").volume;
+    assert!(matches!(v.voxels, Voxels::U16(_)));
+    check_values("nii u16", &v, "u16");
+}
