@@ -4,7 +4,8 @@
 // src/compute/eigen_features.rs). Twins: src/cpu/features.rs, src/cpu/structure_tensor.rs.
 //
 // Output, component-major over the output slices (n_out = nx * ny * out_nz, index uses
-// k - out_z0):
+// k - out_z0). A dispatch computes the part part_k0 .. part_k0 + part_nk of the output slices
+// (the feature job's paced steps; all of them by default), indexed as in the whole block:
 // - mode 0 (features): 3 components (V, A, B) of map MAP_SIMPLE / MAP_LI / MAP_FRANGI (c), of
 //   the eigenvalues (negated first when `negate`, the structure tensor's mapping). With
 //   `accumulate`, each component keeps the maximum of what is there and the new value
@@ -34,6 +35,10 @@ struct Params {
     // max_norm only: the rows row0 .. row0 + n_rows count (a brick's core; n_rows 0 = all).
     row0: u32,
     n_rows: u32,
+    part_k0: u32,
+    part_nk: u32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -47,11 +52,11 @@ struct Params {
 @group(0) @binding(8) var<storage, read_write> norm_max: atomic<u32>;
 
 fn inside(gid: vec3<u32>) -> bool {
-    return gid.x < params.dims.x && gid.y < params.dims.y && gid.z < params.out_nz;
+    return gid.x < params.dims.x && gid.y < params.dims.y && gid.z < params.part_nk;
 }
 
 fn slab_index(gid: vec3<u32>) -> u32 {
-    return linear_index(gid.x, gid.y, params.out_z0 + gid.z, params.dims);
+    return linear_index(gid.x, gid.y, params.out_z0 + params.part_k0 + gid.z, params.dims);
 }
 
 fn diag(idx: u32) -> vec3<f32> {
@@ -71,7 +76,7 @@ fn eigen_features(@builtin(global_invocation_id) gid: vec3<u32>) {
     let d = diag(idx);
     let o = offdiag(idx);
     let n_out = params.dims.x * params.dims.y * params.out_nz;
-    let oi = gid.x + params.dims.x * (gid.y + params.dims.y * gid.z);
+    let oi = gid.x + params.dims.x * (gid.y + params.dims.y * (params.part_k0 + gid.z));
     let l = eigenvalues_sorted(d, o);
     let acc = params.accumulate != 0u;
     if params.mode == 0u {

@@ -31,8 +31,11 @@ struct Params {
     radius: u32,
     // convolve_block3: how many of dst, dst1, dst2 to write (1..3).
     outputs: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // The part of the slab this dispatch computes: lines cut_lo .. cut_hi across the pass
+    // (z for the x and y passes, y for the z pass; `cut_axis` in src/compute/gaussian.rs).
+    // Every output depends only on its own line, so parts give the whole pass's bits.
+    cut_lo: u32,
+    cut_hi: u32,
     // Sum of each kernel's taps (x: the only kernel of `convolve` and `convolve_block`).
     tap_sum: vec4<f32>,
 }
@@ -58,8 +61,21 @@ struct UniformTaps {
 @group(0) @binding(6) var<storage, read_write> dst2: array<f32>;
 
 @compute @workgroup_size(8, 8, 1)
-fn convolve(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn convolve(@builtin(global_invocation_id) id: vec3<u32>) {
     let dims = params.dims;
+    // The dispatch spans the part's lines only: offset the cut coordinate.
+    var gid = id;
+    if params.axis == 2u {
+        gid.y = id.y + params.cut_lo;
+        if gid.y >= params.cut_hi {
+            return;
+        }
+    } else {
+        gid.z = id.z + params.cut_lo;
+        if gid.z >= params.cut_hi {
+            return;
+        }
+    }
     if gid.x >= dims.x || gid.y >= dims.y || gid.z >= dims.z {
         return;
     }
@@ -98,7 +114,7 @@ struct Line {
 }
 
 // The block kernels run over (a, b, block): a and b the two other axes (a the faster one), the
-// block along the pass axis.
+// block along the pass axis; b is the cut axis, offset by cut_lo.
 fn line_of(gid: vec3<u32>, block: u32) -> Line {
     let d = params.dims;
     var l: Line;
@@ -123,9 +139,10 @@ fn line_of(gid: vec3<u32>, block: u32) -> Line {
         l.stride = d.x;
         l.n = d.y;
     }
-    l.base = gid.x * sa + gid.y * sb;
+    let b = gid.y + params.cut_lo;
+    l.base = gid.x * sa + b * sb;
     l.start = gid.z * block;
-    l.ok = gid.x < na && gid.y < nb && l.start < l.n;
+    l.ok = gid.x < na && b < nb && b < params.cut_hi && l.start < l.n;
     return l;
 }
 

@@ -14,9 +14,10 @@ use crate::gpu::volume_texture::FeatureTexture;
 use crate::volume::Volume;
 use std::sync::Arc;
 
-/// GPU seconds of RST work per feature-job step while the viewer runs (issue "full-size scans",
-/// deliver 5: no frame waits on more than ~100 ms of GPU work).
-const STEP_SECONDS: f64 = 0.1;
+/// GPU seconds of work per feature-job step while the viewer runs (the RST's rays, the
+/// Hessian's passes and its eigenvalue pass; issue "full-size scans", deliver 5: no frame waits
+/// on more than ~100 ms of GPU work).
+pub const STEP_SECONDS: f64 = 0.1;
 /// What the MIP and the slice overlay show.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DisplayMode {
@@ -328,7 +329,7 @@ impl FeatureManager {
     ) -> Result<(), String> {
         self.cancel();
         // The job reads its slices from the loaded volume itself (no copy per computation).
-        // Its RST steps follow the device's speed, so that a frame of the viewer never waits
+        // Its RST and Hessian steps follow the device's speed, so that a frame of the viewer never waits
         // behind more than `STEP_SECONDS` of feature work.
         let options = JobOptions {
             step_seconds: Some(STEP_SECONDS),

@@ -750,7 +750,11 @@ impl ShapecastApp {
                 }
             }
         }
-        if let Some(gpu) = &self.gpu {
+        // While the MIP refines a frame drawn coarse first, its bands go before feature work:
+        // a sharp picture first (on a slow device the two compete for the same GPU time, and
+        // the coarse picture stayed for minutes).
+        let mip_first = self.mip_view.refining();
+        if let Some(gpu) = self.gpu.as_ref().filter(|_| !mip_first) {
             match self.features.step(gpu) {
                 Some(JobEvent::Finished { method, notes }) => {
                     for n in notes {

@@ -246,8 +246,10 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
 
     let mut request = Request::new(opts.method);
     request.preset = opts.preset;
+    // Paced as the viewer paces its steps.
     let options = JobOptions {
         limits: opts.webgpu_limits.then(wgpu::Limits::default),
+        step_seconds: Some(crate::app::features::STEP_SECONDS),
         ..JobOptions::default()
     };
     let t = Instant::now();

@@ -21,6 +21,7 @@ use crate::cpu::features::FeatureMap;
 use crate::gpu::checks::{self, RecordError};
 use crate::gpu::kernel::{SlabGrid, WORKGROUP};
 use crate::gpu::{GpuContext, shaders};
+use std::ops::Range;
 
 /// Mirrors `Params` in eigen_features.wgsl (keep in sync).
 #[repr(C)]
@@ -36,8 +37,11 @@ struct Params {
     negate: u32,
     /// `max_norm` only: rows `[row0, n_rows]` (n_rows 0 = all).
     rows: [u32; 2],
+    /// The output slices this dispatch computes, `[k0, nk]` within `out_z`.
+    part: [u32; 2],
+    _pad: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 48);
+const _: () = assert!(std::mem::size_of::<Params>() == 64);
 
 /// How sorted eigenvalues become `[V, A, B]` (the numbers are feature_maps.wgsl's MAP_*).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -130,6 +134,7 @@ impl EigenFeatures {
         grid: &SlabGrid,
         tensor: &[&wgpu::Buffer; 6],
         out_z: (u32, u32),
+        part: &Range<u32>,
     ) -> Result<[u32; 3], RecordError> {
         let (z0, nz) = out_z;
         if z0.checked_add(nz).is_none_or(|end| end > grid.dims[2]) {
@@ -139,11 +144,19 @@ impl EigenFeatures {
                 depth: grid.dims[2],
             });
         }
+        if part.start > part.end || part.end > nz {
+            return Err(RecordError::Invalid(
+                "eigen_features: the part must lie within the output slices",
+            ));
+        }
         let bytes = checks::f32_bytes(grid.len(), 1);
         for t in tensor {
             checks::buffer(ctx, "tensor component", t, bytes)?;
         }
-        let out_grid = SlabGrid::new([grid.dims[0], grid.dims[1], nz], grid.spacing_mm);
+        let out_grid = SlabGrid::new(
+            [grid.dims[0], grid.dims[1], part.len() as u32],
+            grid.spacing_mm,
+        );
         checks::workgroups(ctx, "eigen_features", out_grid.workgroups(WORKGROUP))
     }
 
@@ -165,6 +178,8 @@ impl EigenFeatures {
             frangi_c: c,
             negate,
             rows: [0; 2],
+            part: [0, out_z.1],
+            _pad: [0; 2],
         }
     }
 
@@ -179,8 +194,24 @@ impl EigenFeatures {
         out_z: (u32, u32),
         pass: EigenPass<'_>,
     ) -> Result<(), RecordError> {
-        let groups = Self::check(ctx, grid, &tensor, out_z)?;
-        if grid.is_empty() || out_z.1 == 0 {
+        self.record_part(ctx, encoder, grid, tensor, out_z, 0..out_z.1, pass)
+    }
+
+    /// [`Self::record`] for the output slices `part` (within `0..out_nz`) only, written where
+    /// the whole output block has them: the parts of a block give the whole block's bits.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_part(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        tensor: [&wgpu::Buffer; 6],
+        out_z: (u32, u32),
+        part: Range<u32>,
+        pass: EigenPass<'_>,
+    ) -> Result<(), RecordError> {
+        let groups = Self::check(ctx, grid, &tensor, out_z, &part)?;
+        if grid.is_empty() || part.is_empty() {
             return Ok(());
         }
         let (label, pipeline, params, last) = match pass {
@@ -197,7 +228,8 @@ impl EigenFeatures {
                         "eigen_features: the output cannot be a tensor component",
                     ));
                 }
-                let params = Self::params(grid, out_z, what, accumulate);
+                let mut params = Self::params(grid, out_z, what, accumulate);
+                params.part = [part.start, part.len() as u32];
                 let params =
                     crate::gpu::kernel::uniform_buffer(&ctx.device, "eigen params", &params);
                 (
@@ -211,6 +243,7 @@ impl EigenFeatures {
                 checks::buffer(ctx, "largest norm", norm_bits, 4)?;
                 let mut params = Self::params(grid, out_z, TensorOutput::Eigen, false);
                 params.rows = rows.unwrap_or([0, 0]);
+                params.part = [part.start, part.len() as u32];
                 let params =
                     crate::gpu::kernel::uniform_buffer(&ctx.device, "norm params", &params);
                 let norm = wgpu::BindGroupEntry {

@@ -19,6 +19,7 @@ use crate::cpu::gaussian::{GaussianOrder, derivative_kernel, kernel_radius_vox, 
 use crate::gpu::checks::{self, RecordError};
 use crate::gpu::kernel::{SlabGrid, WORKGROUP};
 use crate::gpu::{GpuContext, shaders};
+use std::ops::Range;
 
 /// Mirrors `Params` in gaussian.wgsl (keep in sync).
 #[repr(C)]
@@ -28,10 +29,19 @@ struct Params {
     axis: u32,
     radius: u32,
     outputs: u32,
-    _pad: [u32; 2],
+    cut_lo: u32,
+    cut_hi: u32,
     tap_sum: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 48);
+
+/// The axis across which a pass along `axis` may be cut into parts (z for the x and y passes,
+/// y for the z pass): each part is a range of lines of the pass, whose outputs depend on those
+/// lines only, so a pass recorded in parts gives the same bits as in one dispatch (the feature
+/// job's paced steps).
+pub fn cut_axis(axis: usize) -> usize {
+    if axis == 2 { 1 } else { 2 }
+}
 
 /// Outputs per invocation of `convolve_block` along the pass axis (`BLOCK` in gaussian.wgsl).
 pub const BLOCK: u32 = 16;
@@ -107,6 +117,11 @@ impl AxisTaps {
     pub fn radius(&self) -> u32 {
         self.radius
     }
+
+    /// Loads and stores per output voxel of a pass with this kernel.
+    pub fn accesses_per_voxel(&self) -> f64 {
+        Gaussian::accesses_per_voxel(self.radius, 1, self.uniform.is_some())
+    }
 }
 
 fn scaled_kernel(sigma_mm: f64, spacing_mm: f64, order: GaussianOrder, scale: f64) -> Vec<f64> {
@@ -154,6 +169,17 @@ impl AxisTapSet {
     /// The longest radius of the three kernels.
     pub fn radius(&self) -> u32 {
         self.radius
+    }
+
+    /// Loads and stores per output voxel of [`Gaussian::record_axis_multi`] with `outputs`
+    /// kernels of this set.
+    pub fn accesses_per_voxel(&self, outputs: usize) -> f64 {
+        match (&self.packed, outputs) {
+            (Some(_), 2..) => Gaussian::accesses_per_voxel(self.radius, outputs, true),
+            _ => (0..outputs.min(3))
+                .map(|o| self.orders[o].accesses_per_voxel())
+                .sum(),
+        }
     }
 }
 
@@ -238,11 +264,17 @@ impl Gaussian {
         ctx: &GpuContext,
         grid: &SlabGrid,
         axis: usize,
+        cut: &Range<u32>,
         src: &wgpu::Buffer,
         dst: &[&wgpu::Buffer],
     ) -> Result<(), RecordError> {
         if axis > 2 {
             return Err(RecordError::Invalid("axis must be 0, 1 or 2"));
+        }
+        if cut.start > cut.end || cut.end > grid.dims[cut_axis(axis)] {
+            return Err(RecordError::Invalid(
+                "a convolution's part must lie within the slab",
+            ));
         }
         if dst.contains(&src) {
             return Err(RecordError::Invalid(
@@ -270,6 +302,7 @@ impl Gaussian {
         encoder: &mut wgpu::CommandEncoder,
         grid: &SlabGrid,
         axis: usize,
+        cut: &Range<u32>,
         taps: &PassTaps<'_>,
         src: &wgpu::Buffer,
         dst: &[&wgpu::Buffer],
@@ -279,12 +312,15 @@ impl Gaussian {
             axis: axis as u32,
             radius: taps.radius,
             outputs: dst.len() as u32,
-            _pad: [0; 2],
+            cut_lo: cut.start,
+            cut_hi: cut.end,
             tap_sum: taps.sums,
         };
         let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "gaussian params", &params);
-        let d = grid.dims;
-        // (a, b) = the other two axes, the faster first.
+        // The dispatch spans the part's lines of the cut axis only.
+        let mut d = grid.dims;
+        d[cut_axis(axis)] = cut.end - cut.start;
+        // (a, b) = the other two axes, the faster first (b is the cut axis).
         let (a, b) = match axis {
             0 => (d[1], d[2]),
             1 => (d[0], d[2]),
@@ -325,7 +361,7 @@ impl Gaussian {
                         checks::entry(2, t),
                         checks::entry(3, d0),
                     ],
-                    grid.workgroups(WORKGROUP),
+                    SlabGrid::new(d, grid.spacing_mm).workgroups(WORKGROUP),
                 ),
                 None => return Err(RecordError::Invalid("gaussian: no taps for this pass")),
             },
@@ -358,8 +394,26 @@ impl Gaussian {
         src: &wgpu::Buffer,
         dst: &wgpu::Buffer,
     ) -> Result<(), RecordError> {
-        Self::check_pass(ctx, grid, axis, src, &[dst])?;
-        if grid.is_empty() {
+        let all = 0..grid.dims[cut_axis(axis)];
+        self.record_axis_part(ctx, encoder, grid, axis, all, taps, src, dst)
+    }
+
+    /// [`Self::record_axis`] for the lines `cut` of [`cut_axis`]`(axis)` only (the rest of
+    /// `dst` is left as it is).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_axis_part(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        axis: usize,
+        cut: Range<u32>,
+        taps: &AxisTaps,
+        src: &wgpu::Buffer,
+        dst: &wgpu::Buffer,
+    ) -> Result<(), RecordError> {
+        Self::check_pass(ctx, grid, axis, &cut, src, &[dst])?;
+        if grid.is_empty() || cut.is_empty() {
             return Ok(());
         }
         let pass = PassTaps {
@@ -368,7 +422,7 @@ impl Gaussian {
             radius: taps.radius,
             sums: [taps.sum, 0.0, 0.0, 0.0],
         };
-        self.dispatch(ctx, encoder, grid, axis, &pass, src, &[dst])
+        self.dispatch(ctx, encoder, grid, axis, &cut, &pass, src, &[dst])
     }
 
     /// Records `dst[o] = src (*) taps of order o` along `axis` for `o < dst.len()` (one to three
@@ -385,13 +439,30 @@ impl Gaussian {
         src: &wgpu::Buffer,
         dst: &[&wgpu::Buffer],
     ) -> Result<(), RecordError> {
+        let all = 0..grid.dims[cut_axis(axis)];
+        self.record_axis_multi_part(ctx, encoder, grid, axis, all, taps, src, dst)
+    }
+
+    /// [`Self::record_axis_multi`] for the lines `cut` of [`cut_axis`]`(axis)` only.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_axis_multi_part(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        axis: usize,
+        cut: Range<u32>,
+        taps: &AxisTapSet,
+        src: &wgpu::Buffer,
+        dst: &[&wgpu::Buffer],
+    ) -> Result<(), RecordError> {
         if dst.is_empty() || dst.len() > 3 {
             return Err(RecordError::Invalid(
                 "gaussian: one to three outputs per pass",
             ));
         }
-        Self::check_pass(ctx, grid, axis, src, dst)?;
-        if grid.is_empty() {
+        Self::check_pass(ctx, grid, axis, &cut, src, dst)?;
+        if grid.is_empty() || cut.is_empty() {
             return Ok(());
         }
         match (&taps.packed, dst) {
@@ -402,16 +473,31 @@ impl Gaussian {
                     radius: taps.radius,
                     sums: [taps.sums[0], taps.sums[1], taps.sums[2], 0.0],
                 };
-                self.dispatch(ctx, encoder, grid, axis, &pass, src, dst)
+                self.dispatch(ctx, encoder, grid, axis, &cut, &pass, src, dst)
             }
             // One output, or kernels too long for the uniform array: one pass per order.
             _ => {
                 for (o, d) in dst.iter().enumerate() {
-                    self.record_axis(ctx, encoder, grid, axis, &taps.orders[o], src, d)?;
+                    let taps = &taps.orders[o];
+                    self.record_axis_part(ctx, encoder, grid, axis, cut.clone(), taps, src, d)?;
                 }
                 Ok(())
             }
         }
+    }
+
+    /// Loads and stores per output voxel of a pass (what a pass costs on lavapipe, where
+    /// storage accesses dominate): the block kernels' sliding window reads `(B + 2 radius) / B`
+    /// inputs per output (`B` = [`BLOCK`] for one kernel, [`BLOCK3`] for several), the
+    /// fallback `2 radius + 1`; each output stores once.
+    pub fn accesses_per_voxel(radius: u32, outputs: usize, uniform: bool) -> f64 {
+        let r = f64::from(radius);
+        let loads = match (uniform, outputs) {
+            (false, _) => (2.0 * r + 1.0) * outputs as f64,
+            (true, 1) => (f64::from(BLOCK) + 2.0 * r) / f64::from(BLOCK),
+            (true, _) => (f64::from(BLOCK3) + 2.0 * r) / f64::from(BLOCK3),
+        };
+        loads + outputs as f64
     }
 
     /// Records the separable filter `kernel` (x, then y, then z, as the CPU's `separable`):

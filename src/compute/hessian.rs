@@ -8,10 +8,11 @@
 //! input). The sigma^2 normalisation is folded into the x taps. Intermediate results are parked
 //! in output buffers not yet written, so the working set is one temporary plus the six outputs.
 
-use crate::compute::gaussian::{AxisTapSet, Gaussian};
+use crate::compute::gaussian::{AxisTapSet, Gaussian, cut_axis};
 use crate::gpu::checks::RecordError;
 use crate::gpu::kernel::SlabGrid;
 use crate::gpu::{GpuContext, shaders};
+use std::ops::Range;
 
 /// The 9 kernels (3 axes x orders 0, 1, 2) of one sigma on one spacing, uploaded once and
 /// reused for every slab.
@@ -92,13 +93,16 @@ impl Hessian {
         out: [&wgpu::Buffer; 6],
     ) -> Result<(), RecordError> {
         (0..PASSES).try_for_each(|pass| {
-            self.record_pass(ctx, encoder, grid, kernels, input, tmp, out, pass)
+            let all = 0..cut_lines(grid, pass);
+            self.record_pass(ctx, encoder, grid, kernels, input, tmp, out, pass, all)
         })
     }
 
-    /// Records pass `pass` (of [`PASSES`], in order) of [`Self::record`]: the passes may go in
-    /// separate submissions (the feature job's steps), since every intermediate lives in `tmp`
-    /// and `out`.
+    /// Records pass `pass` (of [`PASSES`], in order) of [`Self::record`] for the lines `cut`
+    /// of its cut axis ([`cut_lines`]): the passes may go in separate submissions, and a pass
+    /// in parts (the feature job's paced steps), since every intermediate lives in `tmp` and
+    /// `out` and each output depends on its own line only. A pass's parts must all be recorded
+    /// before the next pass.
     #[allow(clippy::too_many_arguments)]
     pub fn record_pass(
         &self,
@@ -110,6 +114,7 @@ impl Hessian {
         tmp: &wgpu::Buffer,
         out: [&wgpu::Buffer; 6],
         pass: usize,
+        cut: Range<u32>,
     ) -> Result<(), RecordError> {
         let all: [&wgpu::Buffer; 8] = [input, tmp, out[0], out[1], out[2], out[3], out[4], out[5]];
         for (n, a) in all.iter().enumerate() {
@@ -130,7 +135,14 @@ impl Hessian {
                      src: &wgpu::Buffer,
                      dst: &[&wgpu::Buffer]| {
             let taps = [x, y, z][axis];
-            g.record_axis_multi(ctx, encoder, grid, axis, taps, src, dst)
+            g.record_axis_multi_part(ctx, encoder, grid, axis, cut.clone(), taps, src, dst)
+        };
+        let single = |encoder: &mut wgpu::CommandEncoder,
+                      order: usize,
+                      src: &wgpu::Buffer,
+                      dst: &wgpu::Buffer| {
+            let taps = x.order(order);
+            g.record_axis_part(ctx, encoder, grid, 0, cut.clone(), taps, src, dst)
         };
         // z orders 0, 1, 2 of the input, parked in outputs written last.
         let (z0, z1, z2) = (yz, xz, xy);
@@ -144,13 +156,13 @@ impl Hessian {
             2 => multi(encoder, 0, tmp, &[zz]),
             // xx, xy, yy from z0 (z2, in xy, is consumed).
             3 => multi(encoder, 1, z0, &[z0y0, z0y1, z0y2]),
-            4 => g.record_axis(ctx, encoder, grid, 0, x.order(2), z0y0, xx),
-            5 => g.record_axis(ctx, encoder, grid, 0, x.order(0), z0y2, yy),
-            6 => g.record_axis(ctx, encoder, grid, 0, x.order(1), z0y1, xy),
+            4 => single(encoder, 2, z0y0, xx),
+            5 => single(encoder, 0, z0y2, yy),
+            6 => single(encoder, 1, z0y1, xy),
             // xz, yz from z1 (z0, in yz, is consumed).
-            7 => g.record_axis_multi(ctx, encoder, grid, 1, y, z1, &[z1y0, z1y1]),
-            8 => g.record_axis(ctx, encoder, grid, 0, x.order(1), z1y0, xz),
-            9 => g.record_axis(ctx, encoder, grid, 0, x.order(0), z1y1, yz),
+            7 => multi(encoder, 1, z1, &[z1y0, z1y1]),
+            8 => single(encoder, 1, z1y0, xz),
+            9 => single(encoder, 0, z1y1, yz),
             _ => Err(RecordError::Invalid("Hessian: no such pass")),
         }
     }
@@ -158,3 +170,34 @@ impl Hessian {
 
 /// Passes of [`Hessian::record`] (dispatches: 15 convolutions, the z and y ones shared).
 pub const PASSES: usize = 10;
+
+/// The axis each pass convolves along, and how many kernels (outputs) it applies.
+const PASS_AXIS_OUTPUTS: [(usize, usize); PASSES] = [
+    (2, 3),
+    (1, 1),
+    (0, 1),
+    (1, 3),
+    (0, 1),
+    (0, 1),
+    (0, 1),
+    (1, 2),
+    (0, 1),
+    (0, 1),
+];
+
+/// Lines of pass `pass` that [`Hessian::record_pass`] may be cut into: slices (z) for the x
+/// and y passes, rows (y) for the z pass.
+pub fn cut_lines(grid: &SlabGrid, pass: usize) -> u32 {
+    let axis = PASS_AXIS_OUTPUTS.get(pass).map_or(0, |p| p.0);
+    grid.dims[cut_axis(axis)]
+}
+
+/// Storage loads and stores per voxel of pass `pass` with `kernels` (its relative cost, for
+/// pacing steps).
+pub fn pass_accesses_per_voxel(kernels: &HessianKernels, pass: usize) -> f64 {
+    match PASS_AXIS_OUTPUTS.get(pass) {
+        Some(&(axis, outputs)) if outputs > 1 => kernels.taps[axis].accesses_per_voxel(outputs),
+        Some(&(axis, _)) => kernels.taps[axis].order(0).accesses_per_voxel(),
+        None => 0.0,
+    }
+}

@@ -122,55 +122,58 @@ impl Default for JobOptions {
     }
 }
 
-/// Paces the RST's steps to [`JobOptions::step_seconds`] of GPU time: the first step is one
-/// row of voxels; each finished step measures the device's voxels per second, from the
+/// Paces a kind of step to [`JobOptions::step_seconds`] of GPU time: the first step holds the
+/// least work allowed; each finished step measures the device's work per second, from the
 /// submission to the queue's completion callback (work of the viewer's frames queued before it
 /// counts too, which errs towards smaller steps); the step follows a slower rate at once and a
-/// faster one at most doubling per step.
-struct RstPace {
+/// faster one at most doubling per step. Work is counted in a unit of the step's kind: ray
+/// voxels for the RST, storage accesses for the Hessian's convolutions, voxels for the
+/// eigenvalue pass.
+struct StepPace {
     seconds: Option<f64>,
-    /// Voxels per second, once measured.
+    /// Work per second, once measured.
     rate: Option<f64>,
-    /// Voxels of the step in flight.
-    in_flight: Option<u64>,
-    /// The last step's size.
-    last: u64,
+    /// Work of the step in flight.
+    in_flight: Option<f64>,
+    /// The last step's work.
+    last: f64,
 }
 
-impl RstPace {
+impl StepPace {
     fn new(seconds: Option<f64>) -> Self {
         Self {
             seconds,
             rate: None,
             in_flight: None,
-            last: 0,
+            last: 0.0,
         }
     }
 
-    /// Voxels for the next step: `max` without pacing; with it, what the measured rate does in
-    /// the step's seconds, between one row (`row` voxels) and `max`.
-    fn voxels(&self, row: u64, max: u64) -> u64 {
+    /// Work for the next step: `max` without pacing; with it, what the measured rate does in
+    /// the step's seconds, between `min` (the smallest step there is) and `max`.
+    fn work(&self, min: f64, max: f64) -> f64 {
         let Some(seconds) = self.seconds else {
             return max;
         };
         let want = match self.rate {
-            None => row,
-            Some(rate) => ((rate * seconds) as u64).min(self.last.saturating_mul(2)),
+            None => min,
+            Some(rate) => (rate * seconds).min(2.0 * self.last),
         };
-        want.clamp(row.min(max), max)
+        want.clamp(min.min(max), max)
     }
 
-    fn submitted(&mut self, voxels: u64) {
-        self.last = voxels;
-        self.in_flight = self.seconds.map(|_| voxels);
+    fn submitted(&mut self, work: f64) {
+        self.last = work;
+        self.in_flight = self.seconds.map(|_| work);
     }
 
-    /// The step in flight took `secs` from its submission to the queue's completion callback.
+    /// The step in flight, if it was this kind's, took `secs` from its submission to the
+    /// queue's completion callback.
     fn finished(&mut self, secs: f64) {
-        let Some(voxels) = self.in_flight.take() else {
+        let Some(work) = self.in_flight.take() else {
             return;
         };
-        let rate = voxels as f64 / secs.max(1e-4);
+        let rate = work / secs.max(1e-4);
         self.rate = Some(match self.rate {
             Some(old) if rate > old => old + 0.5 * (rate - old),
             _ => rate,
@@ -269,8 +272,14 @@ pub struct FeatureJob {
     /// Where the next RST step starts: core slice and row within it (brick-local offsets
     /// from the core's first slice and row).
     rst_cursor: (usize, usize),
-    /// RST pacing (with [`JobOptions::step_seconds`]).
-    rst_pace: RstPace,
+    /// Pacing (with [`JobOptions::step_seconds`]) of the RST's rays, the Hessian's
+    /// convolution passes and the eigenvalue pass.
+    rst_pace: StepPace,
+    conv_pace: StepPace,
+    eigen_pace: StepPace,
+    /// Lines of the current Hessian pass already recorded (its cut axis; core slices for the
+    /// eigenvalue pass).
+    pass_cursor: u32,
     /// The slab's (I, gx, gy, gz) texture the rays read, with its dims.
     packed: Option<([u32; 3], wgpu::Texture)>,
     // GPU sync.
@@ -278,6 +287,8 @@ pub struct FeatureJob {
     /// stored by the queue's completion callback.
     busy: Option<Arc<AtomicU64>>,
     pending: Option<(PendingRead, ReadFor)>,
+    /// Steps that recorded and submitted work (a step may only find the GPU still busy).
+    submissions: usize,
     components: Option<Components3>,
     notes: Vec<String>,
     stage: String,
@@ -468,15 +479,24 @@ impl FeatureJob {
             rst_slices_per_step,
             rst_max_step: per_step.max(1),
             rst_cursor: (0, 0),
-            rst_pace: RstPace::new(step_seconds),
+            rst_pace: StepPace::new(step_seconds),
+            conv_pace: StepPace::new(step_seconds),
+            eigen_pace: StepPace::new(step_seconds),
+            pass_cursor: 0,
             packed: None,
             busy: None,
             pending: None,
+            submissions: 0,
             components,
             notes,
             stage: "starting".to_owned(),
             done: false,
         })
+    }
+
+    /// Steps so far that recorded and submitted work.
+    pub fn submissions(&self) -> usize {
+        self.submissions
     }
 
     /// Number of bricks the volume is processed in.
@@ -544,7 +564,10 @@ impl FeatureJob {
                 return Ok(self.state());
             }
             self.busy = None;
-            self.rst_pace.finished(micros as f64 * 1e-6);
+            let secs = micros as f64 * 1e-6;
+            self.rst_pace.finished(secs);
+            self.conv_pace.finished(secs);
+            self.eigen_pace.finished(secs);
         }
         if let Some((read, what)) = &mut self.pending {
             match read.poll(ctx) {
@@ -573,6 +596,7 @@ impl FeatureJob {
             });
         let read = self.record(ctx, &mut encoder, task)?;
         ctx.queue.submit([encoder.finish()]);
+        self.submissions += 1;
         if let Some((buffer, size, what)) = read {
             self.pending = Some((PendingRead::start(ctx, &buffer, size), what));
         } else {
@@ -922,29 +946,13 @@ impl FeatureJob {
                 part,
                 pass,
             } => {
-                let slab = &self.slabs[s];
-                let grid = box_grid(&self.compute, &slab.slab_c);
-                let (core, _) = core_in_slab(slab);
                 self.stage = format!(
                     "brick {}/{n_slabs}: Hessian, sigma {} mm",
                     s + 1,
                     self.sigmas_mm[part]
                 );
-                if pass < hessian::PASSES {
-                    let b = &self.buffers;
-                    let out: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
-                    self.kernels.hessian.record_pass(
-                        ctx,
-                        encoder,
-                        &grid,
-                        &self.kernels.hessian_kernels[part],
-                        self.vol(),
-                        &b.tmp[0],
-                        out,
-                        pass,
-                    )?;
-                } else {
-                    self.record_features_of_tensor(ctx, encoder, &grid, 0, core, part)?;
+                if !self.record_hessian_part(ctx, encoder, s, part, pass)? {
+                    self.tasks.push_front(task);
                 }
                 Ok(None)
             }
@@ -973,6 +981,73 @@ impl FeatureJob {
         }
     }
 
+    /// The next part of Hessian pass `pass` (the eigenvalue pass when `pass ==
+    /// hessian::PASSES`) at scale `part` of brick `s`, from [`Self::pass_cursor`]: the whole
+    /// pass without pacing, else as many lines as the measured rate does in a step. True when
+    /// the pass is done.
+    fn record_hessian_part(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        s: usize,
+        part: usize,
+        pass: usize,
+    ) -> Result<bool, PipelineError> {
+        let slab = &self.slabs[s];
+        let grid = box_grid(&self.compute, &slab.slab_c);
+        let (core, _) = core_in_slab(slab);
+        let conv = pass < hessian::PASSES;
+        let (lines, per_line) = if conv {
+            let lines = hessian::cut_lines(&grid, pass);
+            let accesses =
+                hessian::pass_accesses_per_voxel(&self.kernels.hessian_kernels[part], pass);
+            (
+                lines,
+                grid.len() as f64 / f64::from(lines.max(1)) * accesses,
+            )
+        } else {
+            let plane = u64::from(grid.dims[0]) * u64::from(grid.dims[1]);
+            (core.1, plane as f64)
+        };
+        let done = self.pass_cursor.min(lines);
+        let left = lines - done;
+        let pace = if conv {
+            &mut self.conv_pace
+        } else {
+            &mut self.eigen_pace
+        };
+        let all = per_line * f64::from(left);
+        let work = pace.work(per_line, all);
+        // Whole lines; all that is left when the step may hold it (no rounding short of it).
+        let n = if work >= all {
+            left
+        } else {
+            ((work / per_line) as u32).clamp(left.min(1), left)
+        };
+        pace.submitted(per_line * f64::from(n));
+        let cut = done..done + n;
+        if conv {
+            let b = &self.buffers;
+            let out: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
+            self.kernels.hessian.record_pass(
+                ctx,
+                encoder,
+                &grid,
+                &self.kernels.hessian_kernels[part],
+                self.vol(),
+                &b.tmp[0],
+                out,
+                pass,
+                cut.clone(),
+            )?;
+        } else {
+            self.record_features_of_tensor(ctx, encoder, &grid, 0, core, cut.clone(), part)?;
+        }
+        let finished = cut.end >= lines;
+        self.pass_cursor = if finished { 0 } else { cut.end };
+        Ok(finished)
+    }
+
     fn tensor_output(&self, part: usize) -> TensorOutput {
         if self.request.eigen {
             return TensorOutput::Eigen;
@@ -989,6 +1064,7 @@ impl FeatureJob {
 
     /// Eigenvalues or features of the six tensor components in `work[first..first + 6]` for the
     /// core slices, into `out_core` (the multi-scale maximum from the second scale on).
+    #[allow(clippy::too_many_arguments)]
     fn record_features_of_tensor(
         &self,
         ctx: &GpuContext,
@@ -996,18 +1072,20 @@ impl FeatureJob {
         grid: &SlabGrid,
         first: usize,
         core: (u32, u32),
+        slices: std::ops::Range<u32>,
         part: usize,
     ) -> Result<(), PipelineError> {
         let b = &self.buffers;
         let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[first + c]);
         self.kernels
             .eigen
-            .record(
+            .record_part(
                 ctx,
                 encoder,
                 grid,
                 tensor,
                 core,
+                slices,
                 EigenPass::Output {
                     what: self.tensor_output(part),
                     accumulate: part > 0,
@@ -1051,7 +1129,7 @@ impl FeatureJob {
                     [&b.tmp[0], &b.tmp[1]],
                     tensor,
                 )?;
-                self.record_features_of_tensor(ctx, encoder, &grid, 4, core, part)?;
+                self.record_features_of_tensor(ctx, encoder, &grid, 4, core, 0..core.1, part)?;
             }
             // Their steps are `Task::HessianPass` and `Task::Rst`.
             Method::Hessian | Method::Li | Method::Frangi | Method::Rst => {
@@ -1102,7 +1180,7 @@ impl FeatureJob {
         }
         let nx = self.compute.dims[0].max(1) as u64;
         let core_plane = nx * yc.len() as u64;
-        let voxels = self.rst_pace.voxels(nx, self.rst_max_step);
+        let voxels = self.rst_pace.work(nx as f64, self.rst_max_step as f64) as u64;
         let (dz, j0) = self.rst_cursor;
         let first = zc.start + dz;
         let (last, nj) = if j0 == 0 && voxels >= core_plane {
@@ -1171,7 +1249,7 @@ impl FeatureJob {
             );
         }
         self.rst_pace
-            .submitted(nj as u64 * nx * (last - first) as u64);
+            .submitted((nj as u64 * nx * (last - first) as u64) as f64);
         self.rst_cursor = if j0 + nj < yc.len() {
             (dz, j0 + nj)
         } else {
