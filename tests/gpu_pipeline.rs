@@ -499,6 +499,11 @@ fn hessian_passes_paced_to_the_device_give_the_same_features() {
     assert_eq!(whole_steps, whole.slabs * scales * (hessian::PASSES + 1));
     assert_eq!(line_steps, expected, "one line per step");
     assert!(whole_steps < growing_steps && growing_steps < line_steps / 2);
+    let read = |r: &FeatureResult| {
+        shapecast::gpu::volume_texture::read_texture_blocking(&ctx, &r.texture)
+            .expect("texture readback")
+    };
+    let whole_texels = read(&whole);
     for (what, paced) in [("one line", &lines), ("growing", &growing)] {
         let (worst, _) = compare(
             paced.components.as_ref().expect("exported"),
@@ -509,5 +514,9 @@ fn hessian_passes_paced_to_the_device_give_the_same_features() {
             worst, 0.0,
             "{what} steps differ from whole passes by {worst:.2e}"
         );
+        // Stored a slice per step too: the same texels, maxima and 99.9th percentiles.
+        assert!(read(paced) == whole_texels, "{what}: texels differ");
+        assert_eq!(paced.texture.max, whole.texture.max, "{what}: maxima");
+        assert_eq!(paced.texture.p999, whole.texture.p999, "{what}: p99.9");
     }
 }

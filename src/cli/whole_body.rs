@@ -276,10 +276,19 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
         }
     }
     steps_ms.sort_by(f64::total_cmp);
-    let median = steps_ms.get(steps_ms.len() / 2).copied().unwrap_or(0.0);
+    let quantile = |q: f64| {
+        let i = ((steps_ms.len() as f64 * q) as usize).min(steps_ms.len().saturating_sub(1));
+        steps_ms.get(i).copied().unwrap_or(0.0)
+    };
+    let over = |ms: f64| steps_ms.iter().filter(|&&t| t > ms).count();
     println!(
-        "feature job: {} step(s), median {median:.0} ms, largest {:.0} ms ({})",
+        "feature job: {} step(s), median {:.0} ms, 95th percentile {:.0} ms, 99th {:.0} ms, {} over 200 ms, {} over 500 ms, largest {:.0} ms ({})",
         steps_ms.len(),
+        quantile(0.5),
+        quantile(0.95),
+        quantile(0.99),
+        over(200.0),
+        over(500.0),
         largest.0,
         largest.1
     );

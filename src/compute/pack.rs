@@ -83,7 +83,23 @@ impl Pack {
         dst: &FeatureTexture,
         at: PackBox,
     ) {
-        let [nx, ny, nz] = [at.src_dims[0], at.ny, at.src_dims[2]];
+        self.record_slices(ctx, encoder, src, dst, at, 0..at.src_dims[2]);
+    }
+
+    /// [`Self::record`] for the box's slices `slices` only (the feature job's paced steps):
+    /// every texel and every count of the maxima and histograms is the same however the box
+    /// is cut (maxima and counts are order-free atomics).
+    pub fn record_slices(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        src: &wgpu::Buffer,
+        dst: &FeatureTexture,
+        at: PackBox,
+        slices: std::ops::Range<u32>,
+    ) {
+        let [nx, ny] = [at.src_dims[0], at.ny];
+        let nz = slices.end.min(at.src_dims[2]);
         // Copies into a texture take rows of a multiple of 256 bytes; the staging buffer of one
         // chunk of slices stays within one storage binding.
         let row_bytes =
@@ -95,7 +111,7 @@ impl Pack {
             .min(ctx.limits.max_buffer_size);
         let slice_bytes = u64::from(row_bytes) * u64::from(ny);
         let chunk = (limit / slice_bytes.max(1)).clamp(1, u64::from(nz.max(1))) as u32;
-        let mut src_z0 = 0;
+        let mut src_z0 = slices.start;
         while src_z0 < nz {
             let dims = [nx, ny, chunk.min(nz - src_z0)];
             // Slices src_z0.. of the box: encoded into a staging buffer, then copied.

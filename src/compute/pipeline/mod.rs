@@ -277,8 +277,9 @@ pub struct FeatureJob {
     rst_pace: StepPace,
     conv_pace: StepPace,
     eigen_pace: StepPace,
+    pack_pace: StepPace,
     /// Lines of the current Hessian pass already recorded (its cut axis; core slices for the
-    /// eigenvalue pass).
+    /// eigenvalue pass), or slices of the brick being stored.
     pass_cursor: u32,
     /// The slab's (I, gx, gy, gz) texture the rays read, with its dims.
     packed: Option<([u32; 3], wgpu::Texture)>,
@@ -482,6 +483,7 @@ impl FeatureJob {
             rst_pace: StepPace::new(step_seconds),
             conv_pace: StepPace::new(step_seconds),
             eigen_pace: StepPace::new(step_seconds),
+            pack_pace: StepPace::new(step_seconds),
             pass_cursor: 0,
             packed: None,
             busy: None,
@@ -568,6 +570,7 @@ impl FeatureJob {
             self.rst_pace.finished(secs);
             self.conv_pace.finished(secs);
             self.eigen_pace.finished(secs);
+            self.pack_pace.finished(secs);
         }
         if let Some((read, what)) = &mut self.pending {
             match read.poll(ctx) {
@@ -968,7 +971,11 @@ impl FeatureJob {
             }
             Task::Deliver(s) => {
                 self.stage = format!("brick {}/{n_slabs}: storing", s + 1);
-                self.record_deliver(ctx, encoder, s)
+                let (read, finished) = self.record_deliver(ctx, encoder, s)?;
+                if !finished {
+                    self.tasks.push_front(task);
+                }
+                Ok(read)
             }
             Task::Maxima => {
                 self.stage = "finishing".to_owned();
@@ -1289,55 +1296,75 @@ impl FeatureJob {
         }
     }
 
+    /// The next part of storing brick `s`, from [`Self::pass_cursor`] (slices of its box): the
+    /// first step takes the core back onto the input grid when it was refined, then each step
+    /// packs as many slices into the texture as the measured rate does in a step (all without
+    /// pacing). Returns the export readback once the last slice is stored, and whether it is.
+    #[allow(clippy::type_complexity)]
     fn record_deliver(
         &mut self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         s: usize,
-    ) -> Result<Option<(wgpu::Buffer, u64, ReadFor)>, PipelineError> {
+    ) -> Result<(Option<(wgpu::Buffer, u64, ReadFor)>, bool), PipelineError> {
         let slab = self.slabs[s].clone();
-        let b = &self.buffers;
         let at = self.pack_box(s);
+        let b = &self.buffers;
+        let done = self.pass_cursor;
         let features = match &b.out_in {
             Some(out_in) => {
-                let core_dims = [
-                    to_u32(self.compute.dims[0]),
-                    to_u32(slab.slab_c[1].len()),
-                    to_u32(slab.core_c[2].len()),
-                ];
-                let geometry = ResampleGeometry::subsample(
-                    self.factors.map(to_u32),
-                    self.compute.dims.map(to_u32),
-                )
-                .blocks(
-                    [
-                        0,
-                        to_u32(slab.slab_c[1].start),
-                        to_u32(slab.core_c[2].start),
-                    ],
-                    starts(&slab.out),
-                );
-                self.kernels.resample.record(
-                    ctx,
-                    encoder,
-                    &b.out_core,
-                    core_dims,
-                    out_in,
-                    at.src_dims,
-                    3,
-                    &geometry,
-                )?;
-                out_in
+                if done == 0 {
+                    let core_dims = [
+                        to_u32(self.compute.dims[0]),
+                        to_u32(slab.slab_c[1].len()),
+                        to_u32(slab.core_c[2].len()),
+                    ];
+                    let geometry = ResampleGeometry::subsample(
+                        self.factors.map(to_u32),
+                        self.compute.dims.map(to_u32),
+                    )
+                    .blocks(
+                        [
+                            0,
+                            to_u32(slab.slab_c[1].start),
+                            to_u32(slab.core_c[2].start),
+                        ],
+                        starts(&slab.out),
+                    );
+                    self.kernels.resample.record(
+                        ctx,
+                        encoder,
+                        &b.out_core,
+                        core_dims,
+                        out_in,
+                        at.src_dims,
+                        3,
+                        &geometry,
+                    )?;
+                }
+                out_in.clone()
             }
-            None => &b.out_core,
+            None => b.out_core.clone(),
         };
+        let slices = at.src_dims[2];
+        let left = slices.saturating_sub(done);
+        let per_slice = f64::from(at.src_dims[0]) * f64::from(at.ny);
+        let all = per_slice * f64::from(left);
+        let work = self.pack_pace.work(per_slice, all);
+        let n = if work >= all {
+            left
+        } else {
+            ((work / per_slice) as u32).clamp(left.min(1), left)
+        };
+        self.pack_pace.submitted(per_slice * f64::from(n));
         self.kernels
             .pack
-            .record(ctx, encoder, features, &self.texture, at);
+            .record_slices(ctx, encoder, &features, &self.texture, at, done..done + n);
+        let finished = done + n >= slices;
+        self.pass_cursor = if finished { 0 } else { done + n };
         let bytes = 3 * at.src_dims.iter().map(|&d| u64::from(d)).product::<u64>() * 4;
-        Ok(self
-            .options
-            .export
-            .then(|| (features.clone(), bytes, ReadFor::Export(s))))
+        let read =
+            (finished && self.options.export).then_some((features, bytes, ReadFor::Export(s)));
+        Ok((read, finished))
     }
 }
