@@ -900,3 +900,56 @@ fn voxels_type_is_kept() {
     assert!(matches!(v.voxels, Voxels::U16(_)));
     check_values("nii u16", &v, "u16");
 }
+
+#[test]
+fn the_viewers_load_of_a_large_volume_from_disk_peaks_within_one_and_a_half_times_the_voxels() {
+    // The viewer's own path (`app::load::LoadJob` of a dropped or given path), a frame's step at
+    // a time: its files are read on demand as the command line's are, so the file's bytes are
+    // never held beside the voxels. 512 x 512 x 200 i16: 100 MiB of voxels.
+    use shapecast::app::load::{LoadJob, LoadSource, LoadStep};
+    let dims = [512usize, 512, 200];
+    let mut nii = nifti_header(4, 16, false);
+    for (i, d) in dims.iter().enumerate() {
+        nii[42 + 2 * i..44 + 2 * i].copy_from_slice(&(*d as i16).to_le_bytes());
+    }
+    let n = dims.iter().product::<usize>();
+    nii.reserve(n * 2);
+    for i in 0..n {
+        nii.extend_from_slice(&((i % 3001) as i16 - 1000).to_le_bytes());
+    }
+    let dir = temp_dir("viewer");
+    let path = dir.join("large.nii");
+    std::fs::write(&path, &nii).expect("write");
+    drop(nii);
+    let (outcome, peak) = peak_during(|| {
+        let mut job = LoadJob::new(LoadSource::Paths(vec![path.clone()]));
+        let mut steps = Vec::new();
+        loop {
+            match job.step() {
+                LoadStep::Working { what, .. } => steps.push(what),
+                LoadStep::Done(loaded) => return Ok((loaded, steps)),
+                LoadStep::Failed(e) => return Err(e),
+            }
+        }
+    });
+    let (loaded, steps) = outcome.unwrap_or_else(|e| panic!("{e}"));
+    let v = loaded.volume;
+    assert_eq!(v.dims, dims);
+    for i in [0, 1, 3000, 3001, n / 2, n - 1] {
+        assert_eq!(
+            v.voxels.raw_f32(i),
+            ((i % 3001) as i16 - 1000) as f32,
+            "voxel {i}"
+        );
+    }
+    // The 100 MiB file was read over several steps (at most ~48 MB each), then decoded in one.
+    let reading = steps.iter().filter(|s| s.starts_with("reading")).count();
+    assert!(reading >= 3, "{steps:?}");
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!(
+        "the viewer's load of a {voxel_bytes}-byte NIfTI from disk: peak {peak} bytes ({:.3}x), steps {steps:?}",
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
