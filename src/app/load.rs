@@ -399,6 +399,30 @@ mod tests {
     }
 
     #[test]
+    fn a_zip_archive_on_disk_is_read_on_demand_and_unpacked() {
+        use std::io::Write as _;
+        let (volume, nii) = sphere_nii();
+        let mut w = ::zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        w.start_file("scan/s.nii", ::zip::write::SimpleFileOptions::default())
+            .unwrap();
+        w.write_all(&nii).unwrap();
+        let zip = w.finish().unwrap().into_inner();
+        let dir = std::env::temp_dir().join(format!("shapecast-load-zip-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("s.zip");
+        std::fs::write(&path, zip).unwrap();
+        let (_, r) = run(LoadJob::new(LoadSource::Paths(vec![path])));
+        let loaded = r.unwrap();
+        assert_eq!(loaded.volume.dims, volume.dims);
+        assert!(
+            loaded.volume.source.contains("s.zip/scan/s.nii"),
+            "{}",
+            loaded.volume.source
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn errors_name_the_file() {
         let (_, r) = run(LoadJob::new(LoadSource::Files {
             label: "x".into(),
