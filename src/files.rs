@@ -227,32 +227,6 @@ fn add_companions(path: &Path, listing: &mut Listing) {
     listing.files.extend(found);
 }
 
-/// Reads one listed file, refusing one that has grown past [`MAX_FILE_BYTES`] or is no longer
-/// a regular file.
-pub fn read(path: &Path) -> Result<Vec<u8>, FilesError> {
-    let err = |e: std::io::Error| FilesError::Read {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    };
-    let meta = std::fs::metadata(path).map_err(err)?;
-    if !meta.is_file() {
-        return Err(FilesError::NotAFile {
-            path: path.display().to_string(),
-            kind: kind_of(meta.file_type()),
-        });
-    }
-    check_size(path, meta.len())?;
-    let mut bytes = Vec::new();
-    let _ = bytes.try_reserve_exact(meta.len() as usize);
-    std::fs::File::open(path)
-        .map_err(err)?
-        .take(MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(err)?;
-    check_size(path, bytes.len() as u64)?;
-    Ok(bytes)
-}
-
 /// A listed file as the loaders read it: on demand, so that an uncompressed payload goes from
 /// the disk straight into the voxel buffer and a DICOM series is read one file at a time. Each
 /// read opens the file again (a series of thousands of files holds no descriptors), checks it

@@ -568,6 +568,28 @@ fn dicom_multiframe_transfer_syntaxes() {
 }
 
 #[test]
+fn compressed_multi_frame_files_decode_frame_by_frame_to_the_uncompressed_voxels() {
+    // RLE and JPEG 2000 frames are decoded one at a time (straight into the voxel buffer): every
+    // voxel must equal the uncompressed copy's, frame order included.
+    let Some(plain) = load_shared(&["formats/emri_small.dcm"]) else {
+        return;
+    };
+    let plain = plain.expect("uncompressed loads").volume;
+    let mut compressed = vec!["formats/emri_small_RLE.dcm"];
+    if cfg!(not(target_arch = "wasm32")) {
+        compressed.push("formats/emri_small_jpeg_2k_lossless.dcm");
+    }
+    for f in compressed {
+        let v = load_shared(&[f])
+            .expect("shared data present")
+            .unwrap_or_else(|e| panic!("{f}: {e}"))
+            .volume;
+        assert_eq!(v.voxels, plain.voxels, "{f}");
+        assert_eq!(v.dims, plain.dims, "{f}");
+    }
+}
+
+#[test]
 fn dicom_jpeg_ls_is_named_as_unsupported() {
     let Some(r) = load_shared(&["formats/emri_small_jpeg_ls_lossless.dcm"]) else {
         return;

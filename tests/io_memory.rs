@@ -547,6 +547,116 @@ fn a_multi_frame_dicom_peaks_within_one_and_a_half_times_the_voxels() {
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 
+/// PackBits (as RLE Lossless uses it): runs of 2 or more equal bytes as repeats, the rest as
+/// literals of at most 128 bytes.
+fn pack_bits(data: &[u8], out: &mut Vec<u8>) {
+    let mut i = 0;
+    while i < data.len() {
+        let mut run = 1;
+        while i + run < data.len() && run < 128 && data[i + run] == data[i] {
+            run += 1;
+        }
+        if run >= 2 {
+            out.push((1i16 - run as i16) as i8 as u8);
+            out.push(data[i]);
+            i += run;
+        } else {
+            let start = i;
+            while i < data.len()
+                && i - start < 128
+                && !(i + 1 < data.len() && data[i + 1] == data[i])
+            {
+                i += 1;
+            }
+            let n = (i - start).max(1);
+            i = start + n;
+            out.push((n - 1) as u8);
+            out.extend_from_slice(&data[start..start + n]);
+        }
+    }
+}
+
+/// [`dicom`] of `frames` frames re-encoded as RLE Lossless: one fragment per frame (an empty
+/// Basic Offset Table), two segments each (high bytes, then low bytes).
+fn dicom_rle(frames: usize) -> Vec<u8> {
+    let mut f = dicom(0, frames, 0);
+    let at = f
+        .windows(4)
+        .rposition(|w| w == [0xE0, 0x7F, 0x10, 0x00])
+        .expect("PixelData");
+    let pixels = f.split_off(at)[12..].to_vec();
+    let ts = b"1.2.840.10008.1.2.1\0";
+    let p = f.windows(ts.len()).position(|w| w == ts).expect("syntax");
+    f[p..p + ts.len()].copy_from_slice(b"1.2.840.10008.1.2.5\0");
+    f.extend_from_slice(&[
+        0xE0, 0x7F, 0x10, 0x00, b'O', b'B', 0, 0, 0xFF, 0xFF, 0xFF, 0xFF,
+    ]);
+    let item = |out: &mut Vec<u8>, len: usize| {
+        out.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0]);
+        out.extend_from_slice(&(len as u32).to_le_bytes());
+    };
+    item(&mut f, 0);
+    let frame_bytes = DIMS[0] * DIMS[1] * 2;
+    for frame in pixels.chunks_exact(frame_bytes) {
+        let (mut high, mut low) = (Vec::new(), Vec::new());
+        pack_bits(
+            &frame.iter().skip(1).step_by(2).copied().collect::<Vec<_>>(),
+            &mut high,
+        );
+        pack_bits(
+            &frame.iter().step_by(2).copied().collect::<Vec<_>>(),
+            &mut low,
+        );
+        let mut frag = vec![0u8; 64];
+        frag[0..4].copy_from_slice(&2u32.to_le_bytes());
+        frag[4..8].copy_from_slice(&64u32.to_le_bytes());
+        frag[8..12].copy_from_slice(&(64 + high.len() as u32).to_le_bytes());
+        frag.extend_from_slice(&high);
+        frag.extend_from_slice(&low);
+        if frag.len() % 2 == 1 {
+            frag.push(0);
+        }
+        item(&mut f, frag.len());
+        f.extend_from_slice(&frag);
+    }
+    f.extend_from_slice(&[0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]);
+    f
+}
+
+#[test]
+fn a_compressed_multi_frame_dicom_is_decoded_a_frame_at_a_time() {
+    // One RLE file of DIMS[2] frames. Decoding every frame at once would hold the fragments,
+    // all frames decoded and the voxels (~2.5x here); a frame at a time, the fragments, one
+    // frame and the voxels.
+    let rle = dicom_rle(DIMS[2]);
+    let dir = temp_dir("rle");
+    let path = dir.join("frames-rle.dcm");
+    std::fs::write(&path, &rle).expect("write");
+    let (r, peak) = peak_during(|| {
+        let (inputs, _) = shapecast::files::read_all(std::slice::from_ref(&path)).expect("lists");
+        io::load(&inputs)
+    });
+    let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    check_values("RLE multi-frame DICOM", &v, "i16");
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!(
+        "RLE multi-frame DICOM ({} bytes) from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+        rle.len(),
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+    // In memory: the parsed fragments, one frame and the voxels beside the input.
+    let inputs = [InputFile::new("frames-rle.dcm", rle.clone())];
+    let (r, peak) = peak_during(|| io::load(&inputs));
+    assert_eq!(r.expect("loads").volume.voxels, v.voxels);
+    eprintln!("RLE multi-frame DICOM in memory: input + {peak} bytes");
+    assert!(
+        peak <= voxel_bytes + rle.len() + SLACK,
+        "input + {peak} bytes"
+    );
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
 #[test]
 fn ascii_numbers_cut_by_a_read_chunk_are_read_whole() {
     // The text is read in 1 MiB chunks: numbers straddling each chunk's end, and the last one
@@ -789,4 +899,57 @@ fn voxels_type_is_kept() {
     let v = io::load(&[f]).expect("loads").volume;
     assert!(matches!(v.voxels, Voxels::U16(_)));
     check_values("nii u16", &v, "u16");
+}
+
+#[test]
+fn the_viewers_load_of_a_large_volume_from_disk_peaks_within_one_and_a_half_times_the_voxels() {
+    // The viewer's own path (`app::load::LoadJob` of a dropped or given path), a frame's step at
+    // a time: its files are read on demand as the command line's are, so the file's bytes are
+    // never held beside the voxels. 512 x 512 x 200 i16: 100 MiB of voxels.
+    use shapecast::app::load::{LoadJob, LoadSource, LoadStep};
+    let dims = [512usize, 512, 200];
+    let mut nii = nifti_header(4, 16, false);
+    for (i, d) in dims.iter().enumerate() {
+        nii[42 + 2 * i..44 + 2 * i].copy_from_slice(&(*d as i16).to_le_bytes());
+    }
+    let n = dims.iter().product::<usize>();
+    nii.reserve(n * 2);
+    for i in 0..n {
+        nii.extend_from_slice(&((i % 3001) as i16 - 1000).to_le_bytes());
+    }
+    let dir = temp_dir("viewer");
+    let path = dir.join("large.nii");
+    std::fs::write(&path, &nii).expect("write");
+    drop(nii);
+    let (outcome, peak) = peak_during(|| {
+        let mut job = LoadJob::new(LoadSource::Paths(vec![path.clone()]));
+        let mut steps = Vec::new();
+        loop {
+            match job.step() {
+                LoadStep::Working { what, .. } => steps.push(what),
+                LoadStep::Done(loaded) => return Ok((loaded, steps)),
+                LoadStep::Failed(e) => return Err(e),
+            }
+        }
+    });
+    let (loaded, steps) = outcome.unwrap_or_else(|e| panic!("{e}"));
+    let v = loaded.volume;
+    assert_eq!(v.dims, dims);
+    for i in [0, 1, 3000, 3001, n / 2, n - 1] {
+        assert_eq!(
+            v.voxels.raw_f32(i),
+            ((i % 3001) as i16 - 1000) as f32,
+            "voxel {i}"
+        );
+    }
+    // The 100 MiB file was read over several steps (at most ~48 MB each), then decoded in one.
+    let reading = steps.iter().filter(|s| s.starts_with("reading")).count();
+    assert!(reading >= 3, "{steps:?}");
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!(
+        "the viewer's load of a {voxel_bytes}-byte NIfTI from disk: peak {peak} bytes ({:.3}x), steps {steps:?}",
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+    std::fs::remove_dir_all(&dir).expect("clean up");
 }

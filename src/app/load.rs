@@ -1,6 +1,7 @@
 //! Getting a volume into the app without freezing it: a [`LoadJob`] reads and decodes in steps,
 //! one per frame. Natively it reads dropped or given paths (files and folders) a bounded number
-//! of bytes per step; in the browser the files arrive already read (asynchronously, by
+//! of bytes per step and hands the loaders files read on demand, as the command line does (the
+//! file bytes are never held beside the voxels); in the browser the files arrive already read (asynchronously, by
 //! `web_files`), and the job only decodes. Decoding is one step, announced a frame before it
 //! starts so the progress bar says what is being decoded.
 
@@ -58,10 +59,7 @@ enum Stage {
     Listing(Vec<std::path::PathBuf>),
     #[cfg(not(target_arch = "wasm32"))]
     Reading {
-        queue: std::collections::VecDeque<(std::path::PathBuf, u64)>,
-        files: Vec<InputFile>,
-        done_bytes: u64,
-        total_bytes: u64,
+        reader: native::Reader,
         skipped: Vec<String>,
     },
     Decode {
@@ -112,13 +110,9 @@ impl LoadJob {
             #[cfg(not(target_arch = "wasm32"))]
             Stage::Listing(paths) => match native::list(&paths) {
                 Ok((queue, skipped)) => {
-                    let total_bytes = queue.iter().map(|(_, n)| n).sum();
                     let what = format!("reading {} files", queue.len());
                     self.stage = Stage::Reading {
-                        queue: queue.into(),
-                        files: Vec::new(),
-                        done_bytes: 0,
-                        total_bytes,
+                        reader: native::Reader::new(queue),
                         skipped,
                     };
                     LoadStep::Working {
@@ -130,38 +124,29 @@ impl LoadJob {
             },
             #[cfg(not(target_arch = "wasm32"))]
             Stage::Reading {
-                mut queue,
-                mut files,
-                mut done_bytes,
-                total_bytes,
+                mut reader,
                 skipped,
             } => {
-                if let Err(e) = native::read_some(&mut queue, &mut files, &mut done_bytes) {
+                if let Err(e) = reader.read_some() {
                     return LoadStep::Failed(e);
                 }
-                if queue.is_empty() {
+                if reader.remaining() == 0 {
                     self.stage = Stage::Decode {
-                        files,
+                        files: reader.files,
                         announced: false,
                         skipped,
                     };
                     return self.step();
                 }
-                let fraction = done_bytes as f32 / total_bytes.max(1) as f32;
+                let fraction = reader.done_bytes as f32 / reader.total_bytes.max(1) as f32;
                 let what = format!(
                     "reading {} of {} files ({:.0} of {:.0} MB)",
-                    files.len(),
-                    files.len() + queue.len(),
-                    done_bytes as f64 / 1e6,
-                    total_bytes as f64 / 1e6
+                    reader.files.len(),
+                    reader.files.len() + reader.remaining(),
+                    reader.done_bytes as f64 / 1e6,
+                    reader.total_bytes as f64 / 1e6
                 );
-                self.stage = Stage::Reading {
-                    queue,
-                    files,
-                    done_bytes,
-                    total_bytes,
-                    skipped,
-                };
+                self.stage = Stage::Reading { reader, skipped };
                 LoadStep::Working {
                     fraction: 0.5 * fraction,
                     what,
@@ -250,11 +235,16 @@ pub fn phantom_volume(name: &str) -> Option<Volume> {
 mod native {
     use std::collections::VecDeque;
     use std::path::PathBuf;
+    use std::sync::Arc;
 
-    use crate::io::InputFile;
+    use crate::files::DiskFile;
+    use crate::io::{FileSource as _, InputFile};
 
     /// Bytes read per step: a frame or two of disk time.
     const BYTES_PER_STEP: u64 = 48 << 20;
+
+    /// Bytes read at a time into the reader's scratch buffer.
+    const CHUNK_BYTES: usize = 1 << 20;
 
     /// Expands folders (recursively, skipping hidden entries) into regular files with their
     /// sizes (`crate::files`: no FIFOs, devices or links into folders; sizes capped), and
@@ -268,23 +258,79 @@ mod native {
         Ok((listing.files, listing.skipped))
     }
 
-    /// Reads files from the front of `queue` until about [`BYTES_PER_STEP`] are read.
-    pub fn read_some(
-        queue: &mut VecDeque<(PathBuf, u64)>,
-        files: &mut Vec<InputFile>,
-        done_bytes: &mut u64,
-    ) -> Result<(), String> {
-        let mut budget = BYTES_PER_STEP;
-        while let Some((path, size)) = queue.pop_front() {
-            let bytes = crate::files::read(&path).map_err(|e| e.to_string())?;
-            *done_bytes += size;
-            files.push(InputFile::new(path.to_string_lossy(), bytes));
-            budget = budget.saturating_sub(size.max(1));
-            if budget == 0 {
-                break;
+    /// The listed files read step by step, as the command line reads them: each becomes an
+    /// [`InputFile::on_demand`] (`crate::files::DiskFile`), so that decoding reads the payload
+    /// straight into the voxel buffer and the viewer never holds the file bytes beside the
+    /// voxels. Each file is first read through once, a bounded number of bytes per step into a
+    /// small scratch buffer that is not kept: the progress bar shows the disk's progress, and
+    /// the one decoding step then reads from the system's file cache rather than waiting on the
+    /// disk.
+    pub struct Reader {
+        queue: VecDeque<(PathBuf, u64)>,
+        /// The file being read through, and how far.
+        current: Option<(PathBuf, Arc<DiskFile>, u64)>,
+        pub files: Vec<InputFile>,
+        pub done_bytes: u64,
+        pub total_bytes: u64,
+        scratch: Vec<u8>,
+    }
+
+    impl Reader {
+        pub fn new(queue: Vec<(PathBuf, u64)>) -> Self {
+            let total_bytes = queue.iter().map(|(_, n)| n).sum();
+            Self {
+                queue: queue.into(),
+                current: None,
+                files: Vec::new(),
+                done_bytes: 0,
+                total_bytes,
+                scratch: Vec::new(),
             }
         }
-        Ok(())
+
+        /// Files still to be read (the one being read included).
+        pub fn remaining(&self) -> usize {
+            self.queue.len() + usize::from(self.current.is_some())
+        }
+
+        /// Reads about [`BYTES_PER_STEP`] bytes (a file costs at least one), finishing files
+        /// as they are read through; the error names the file.
+        pub fn read_some(&mut self) -> Result<(), String> {
+            let mut budget = BYTES_PER_STEP;
+            while budget > 0 {
+                let (path, source, at) = match self.current.take() {
+                    Some(c) => c,
+                    None => match self.queue.pop_front() {
+                        Some((path, _)) => {
+                            let source = DiskFile::open(&path).map_err(|e| e.to_string())?;
+                            (path, Arc::new(source), 0)
+                        }
+                        None => break,
+                    },
+                };
+                let len = source.len();
+                let mut at = at;
+                while at < len && budget > 0 {
+                    let n = (len - at).min(CHUNK_BYTES as u64).min(budget) as usize;
+                    self.scratch.resize(n.max(self.scratch.len()), 0);
+                    source
+                        .read_exact_at(at, &mut self.scratch[..n])
+                        .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+                    at += n as u64;
+                    self.done_bytes += n as u64;
+                    budget -= n as u64;
+                }
+                if at < len {
+                    self.current = Some((path, source, at));
+                    break;
+                }
+                let file = InputFile::on_demand(path.to_string_lossy(), source)
+                    .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+                self.files.push(file);
+                budget = budget.saturating_sub(1);
+            }
+            Ok(())
+        }
     }
 }
 
@@ -350,6 +396,30 @@ mod tests {
             "{}",
             loaded.volume.source
         );
+    }
+
+    #[test]
+    fn a_zip_archive_on_disk_is_read_on_demand_and_unpacked() {
+        use std::io::Write as _;
+        let (volume, nii) = sphere_nii();
+        let mut w = ::zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        w.start_file("scan/s.nii", ::zip::write::SimpleFileOptions::default())
+            .unwrap();
+        w.write_all(&nii).unwrap();
+        let zip = w.finish().unwrap().into_inner();
+        let dir = std::env::temp_dir().join(format!("shapecast-load-zip-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("s.zip");
+        std::fs::write(&path, zip).unwrap();
+        let (_, r) = run(LoadJob::new(LoadSource::Paths(vec![path])));
+        let loaded = r.unwrap();
+        assert_eq!(loaded.volume.dims, volume.dims);
+        assert!(
+            loaded.volume.source.contains("s.zip/scan/s.nii"),
+            "{}",
+            loaded.volume.source
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -21,6 +21,160 @@ pub(super) fn fragments(obj: &DefaultDicomObject) -> Option<Vec<&[u8]>> {
     }
 }
 
+/// The Basic Offset Table of encapsulated pixel data (empty when absent or native).
+pub(super) fn offset_table(obj: &DefaultDicomObject) -> &[u32] {
+    match obj.get(tags::PIXEL_DATA).map(|e| e.value()) {
+        Some(DicomValue::PixelSequence(seq)) => seq.offset_table(),
+        _ => &[],
+    }
+}
+
+/// Which fragments make each frame (PS3.5 A.4), as ranges of fragment indices, so that frames
+/// are decoded one at a time: RLE has one fragment per frame; otherwise one fragment per frame
+/// when the counts agree, all of them for a single frame, else the Basic Offset Table, else a
+/// new frame at each fragment that starts a codestream (JPEG SOI, JPEG 2000 SOC or the JP2
+/// signature). `None` when none of these gives `n_frames` frames.
+pub(super) fn frame_fragments(
+    transfer_syntax: &str,
+    n_frames: usize,
+    frags: &[&[u8]],
+    offset_table: &[u32],
+) -> Option<Vec<std::ops::Range<usize>>> {
+    let one_each = || Some((0..n_frames).map(|k| k..k + 1).collect());
+    if transfer_syntax == RLE_LOSSLESS {
+        return if frags.len() >= n_frames {
+            one_each()
+        } else {
+            None
+        };
+    }
+    if n_frames == 0 || frags.is_empty() {
+        return None;
+    }
+    if frags.len() == n_frames {
+        return one_each();
+    }
+    if n_frames == 1 {
+        return Some(std::iter::once(0..frags.len()).collect());
+    }
+    if offset_table.len() == n_frames && offset_table[0] == 0 {
+        // Offsets are from the first fragment's item header; each item header is 8 bytes.
+        let mut starts = Vec::with_capacity(n_frames);
+        let mut at = 0u64;
+        let mut next = 0;
+        for (i, frag) in frags.iter().enumerate() {
+            if next < n_frames && u64::from(offset_table[next]) == at {
+                starts.push(i);
+                next += 1;
+            }
+            at += frag.len() as u64 + 8;
+        }
+        if starts.len() == n_frames {
+            return Some(ranges_from_starts(&starts, frags.len()));
+        }
+    }
+    let starts: Vec<usize> = (0..frags.len())
+        .filter(|&i| starts_codestream(frags[i]))
+        .collect();
+    (starts.len() == n_frames && starts.first() == Some(&0))
+        .then(|| ranges_from_starts(&starts, frags.len()))
+}
+
+fn ranges_from_starts(starts: &[usize], n_frags: usize) -> Vec<std::ops::Range<usize>> {
+    starts
+        .iter()
+        .enumerate()
+        .map(|(k, &s)| s..starts.get(k + 1).copied().unwrap_or(n_frags))
+        .collect()
+}
+
+/// Whether a fragment begins a JPEG (SOI), JPEG 2000 (SOC + SIZ) or JP2 codestream.
+fn starts_codestream(frag: &[u8]) -> bool {
+    frag.starts_with(&[0xFF, 0xD8])
+        || frag.starts_with(&[0xFF, 0x4F, 0xFF, 0x51])
+        || frag.starts_with(&[0, 0, 0, 0x0C, b'j', b'P', b' ', b' '])
+}
+
+/// One frame's codestream as dicom-rs's decoders read a DICOM object: a single frame in a
+/// single fragment. Handing the codec only this frame (rather than the whole object, whose
+/// `raw_pixel_data` clones every fragment on each call) is what lets frames be decoded one at a
+/// time.
+struct OneFrame<'a> {
+    header: &'a FileHeader,
+    codestream: &'a [u8],
+}
+
+impl dicom_encoding::adapters::PixelDataObject for OneFrame<'_> {
+    fn transfer_syntax_uid(&self) -> &str {
+        self.header.transfer_syntax.trim_end_matches(['\0', ' '])
+    }
+    fn rows(&self) -> Option<u16> {
+        u16::try_from(self.header.rows).ok()
+    }
+    fn cols(&self) -> Option<u16> {
+        u16::try_from(self.header.cols).ok()
+    }
+    fn samples_per_pixel(&self) -> Option<u16> {
+        Some(self.header.samples_per_pixel)
+    }
+    fn bits_allocated(&self) -> Option<u16> {
+        Some(self.header.bits_allocated)
+    }
+    fn bits_stored(&self) -> Option<u16> {
+        Some(self.header.bits_stored)
+    }
+    fn photometric_interpretation(&self) -> Option<&str> {
+        Some(self.header.photometric.as_str())
+    }
+    fn number_of_frames(&self) -> Option<u32> {
+        Some(1)
+    }
+    fn number_of_fragments(&self) -> Option<u32> {
+        Some(1)
+    }
+    fn fragment(&self, fragment: usize) -> Option<std::borrow::Cow<'_, [u8]>> {
+        (fragment == 0).then_some(std::borrow::Cow::Borrowed(self.codestream))
+    }
+    fn offset_table(&self) -> Option<std::borrow::Cow<'_, [u32]>> {
+        None
+    }
+    fn raw_pixel_data(&self) -> Option<dicom_encoding::adapters::RawPixelData> {
+        Some(dicom_encoding::adapters::RawPixelData {
+            fragments: vec![self.codestream.to_vec()].into(),
+            offset_table: Vec::new().into(),
+        })
+    }
+}
+
+/// Decodes one JPEG or JPEG 2000 frame (its codestream, the frame's fragments joined) with the
+/// transfer syntax's decoder into `out` (little-endian samples).
+pub(super) fn decode_codestream_frame(
+    h: &FileHeader,
+    codestream: &[u8],
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
+    use dicom_encoding::transfer_syntax::{Codec, TransferSyntaxIndex as _};
+    let ts = h.transfer_syntax.trim_end_matches(['\0', ' ']);
+    let decoder = match dicom_transfer_syntax_registry::TransferSyntaxRegistry
+        .get(ts)
+        .map(|t| t.codec())
+    {
+        Some(Codec::EncapsulatedPixelData(Some(decoder), _)) => decoder,
+        _ => return Err(format!("no decoder for transfer syntax {ts}")),
+    };
+    out.clear();
+    decoder
+        .decode_frame(
+            &OneFrame {
+                header: h,
+                codestream,
+            },
+            0,
+            out,
+        )
+        .map_err(|e| format!("cannot decode ({ts}): {}", super::chain(&e)))
+}
+
 /// Decodes RLE Lossless frames (DICOM PS3.5 annex G) into little-endian samples, one frame
 /// per fragment.
 pub(super) fn decode_rle(
@@ -32,11 +186,6 @@ pub(super) fn decode_rle(
         file: file.to_owned(),
         message: format!("RLE Lossless: {message}"),
     };
-    let bytes_per_sample = match h.bits_allocated {
-        8 => 1,
-        16 => 2,
-        other => return Err(err(format!("BitsAllocated {other} is not supported"))),
-    };
     let n_frames = h.frames.len();
     if frags.len() < n_frames {
         return Err(err(format!(
@@ -44,63 +193,86 @@ pub(super) fn decode_rle(
             frags.len()
         )));
     }
-    let pixels = h.rows as usize * h.cols as usize;
-    let frame_bytes = pixels * bytes_per_sample;
     let compressed: usize = frags.iter().map(|f| f.len()).sum();
     let total = check_rle_size(file, h, compressed)?;
     let mut out = crate::io::raw::try_vec::<u8>(file, "RLE pixel data", total)?;
-    let mut segment = Vec::with_capacity(pixels);
+    let frame_bytes = total / n_frames.max(1);
+    let mut segment = Vec::new();
     for (f, frag) in frags.iter().take(n_frames).enumerate() {
-        if frag.len() < 64 {
-            return Err(err(format!(
-                "frame {f}: fragment of {} bytes has no RLE header",
-                frag.len()
-            )));
-        }
-        let word = |i: usize| {
-            u32::from_le_bytes([
-                frag[4 * i],
-                frag[4 * i + 1],
-                frag[4 * i + 2],
-                frag[4 * i + 3],
-            ]) as usize
-        };
-        let n_segments = word(0);
-        if n_segments != bytes_per_sample {
-            return Err(err(format!(
-                "frame {f}: {n_segments} segments; expected {bytes_per_sample}"
-            )));
-        }
-        for s in 0..n_segments {
-            let start = word(1 + s);
-            let end = if s + 1 < n_segments {
-                word(2 + s)
-            } else {
-                frag.len()
-            };
-            let data = frag.get(start..end).ok_or_else(|| {
-                err(format!(
-                    "frame {f}: segment {s} at {start}..{end} lies outside the {} byte fragment",
-                    frag.len()
-                ))
-            })?;
-            segment.clear();
-            unpack_bits(data, pixels, &mut segment);
-            if segment.len() < pixels {
-                return Err(err(format!(
-                    "frame {f}: segment {s} decodes to {} of {pixels} bytes",
-                    segment.len()
-                )));
-            }
-            // Segment 0 holds the most significant bytes; output is little endian.
-            let byte_in_sample = bytes_per_sample - 1 - s;
-            let base = f * frame_bytes;
-            for (p, &b) in segment.iter().enumerate() {
-                out[base + p * bytes_per_sample + byte_in_sample] = b;
-            }
-        }
+        let dst = &mut out[f * frame_bytes..(f + 1) * frame_bytes];
+        decode_rle_frame(h, frag, dst, &mut segment).map_err(|m| err(format!("frame {f}: {m}")))?;
     }
     Ok(out)
+}
+
+/// Decodes one RLE Lossless frame (one fragment) into `dst`, the frame's little-endian
+/// samples (Rows x Columns x BitsAllocated / 8 bytes); `segment` is scratch.
+pub(super) fn decode_rle_frame(
+    h: &FileHeader,
+    frag: &[u8],
+    dst: &mut [u8],
+    segment: &mut Vec<u8>,
+) -> Result<(), String> {
+    let bytes_per_sample = match h.bits_allocated {
+        8 => 1,
+        16 => 2,
+        other => return Err(format!("BitsAllocated {other} is not supported")),
+    };
+    let pixels = h.rows as usize * h.cols as usize;
+    if dst.len() != pixels * bytes_per_sample {
+        return Err(format!(
+            "internal: {} bytes for a frame of {pixels} pixels",
+            dst.len()
+        ));
+    }
+    if frag.len() < 64 {
+        return Err(format!(
+            "fragment of {} bytes has no RLE header",
+            frag.len()
+        ));
+    }
+    let word = |i: usize| {
+        u32::from_le_bytes([
+            frag[4 * i],
+            frag[4 * i + 1],
+            frag[4 * i + 2],
+            frag[4 * i + 3],
+        ]) as usize
+    };
+    let n_segments = word(0);
+    if n_segments != bytes_per_sample {
+        return Err(format!(
+            "{n_segments} segments; expected {bytes_per_sample}"
+        ));
+    }
+    for s in 0..n_segments {
+        let start = word(1 + s);
+        let end = if s + 1 < n_segments {
+            word(2 + s)
+        } else {
+            frag.len()
+        };
+        let data = frag.get(start..end).ok_or_else(|| {
+            format!(
+                "segment {s} at {start}..{end} lies outside the {} byte fragment",
+                frag.len()
+            )
+        })?;
+        segment.clear();
+        unpack_bits(data, pixels, segment);
+        if segment.len() < pixels {
+            return Err(format!(
+                "segment {s} decodes to {} of {pixels} bytes",
+                segment.len()
+            ));
+        }
+        // Segment 0 holds the most significant bytes; output is little endian.
+        let byte_in_sample = bytes_per_sample - 1 - s;
+        for (p, &b) in segment.iter().enumerate() {
+            dst[p * bytes_per_sample + byte_in_sample] = b;
+        }
+    }
+    Ok(())
 }
 
 /// The decoded size of a file's RLE frames, refused when `compressed` bytes cannot hold them:
@@ -240,6 +412,47 @@ pub(super) fn check_codestreams(
 #[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 mod tests {
     use super::*;
+
+    #[test]
+    fn fragments_are_assigned_to_frames() {
+        const JPEG: &str = "1.2.840.10008.1.2.4.70";
+        let soi: &[u8] = &[0xFF, 0xD8, 1, 2];
+        let soc: &[u8] = &[0xFF, 0x4F, 0xFF, 0x51, 9, 9];
+        let more: &[u8] = &[7, 7, 7, 7, 7, 7];
+        // One fragment per frame, and every fragment for one frame.
+        assert_eq!(
+            frame_fragments(JPEG, 2, &[soi, soi], &[]),
+            Some(vec![0..1, 1..2])
+        );
+        assert_eq!(
+            frame_fragments(JPEG, 1, &[soi, more, more], &[]),
+            Some(std::iter::once(0..3).collect::<Vec<_>>())
+        );
+        // The Basic Offset Table: frame 1 starts at the third fragment (4 + 8 + 6 + 8 bytes in).
+        assert_eq!(
+            frame_fragments(JPEG, 2, &[soi, more, soi, more, more], &[0, 26]),
+            Some(vec![0..2, 2..5])
+        );
+        // A table that points between fragments is not used; the codestream starts are.
+        assert_eq!(
+            frame_fragments(JPEG, 2, &[soi, more, soi, more, more], &[0, 25]),
+            Some(vec![0..2, 2..5])
+        );
+        assert_eq!(
+            frame_fragments(JPEG, 3, &[soc, more, soc, soc, more], &[]),
+            Some(vec![0..2, 2..3, 3..5])
+        );
+        // Neither says: the caller decodes the whole pixel data at once.
+        assert_eq!(frame_fragments(JPEG, 2, &[soi, more, more], &[]), None);
+        assert_eq!(frame_fragments(JPEG, 3, &[soi, soi], &[]), None);
+        assert_eq!(frame_fragments(JPEG, 1, &[], &[]), None);
+        // RLE: one fragment per frame, extra fragments ignored, too few refused.
+        assert_eq!(
+            frame_fragments(RLE_LOSSLESS, 2, &[more, more, more], &[]),
+            Some(vec![0..1, 1..2])
+        );
+        assert_eq!(frame_fragments(RLE_LOSSLESS, 3, &[more, more], &[]), None);
+    }
 
     #[test]
     fn packbits() {

@@ -562,14 +562,20 @@ pub(super) fn store_frame(
     }
 }
 
-/// A file's pixel data, ready for [`Pixels::frame_samples`]: decoded bytes of all frames, or
-/// native samples where they lie in the file (read a frame at a time).
+/// A file's pixel data, ready for [`Pixels::frame_samples`]: decoded bytes of all frames,
+/// native samples where they lie in the file (read a frame at a time), or encapsulated frames
+/// decoded one at a time when stored.
 pub(super) enum Pixels<'a> {
     Bytes(&'a [u8]),
     InFile {
         file: &'a InputFile,
         offset: u64,
         len: u64,
+    },
+    Encoded {
+        fragments: &'a [&'a [u8]],
+        /// The fragments of each frame ([`encapsulated::frame_fragments`]).
+        frames: Vec<std::ops::Range<usize>>,
     },
 }
 
@@ -593,6 +599,12 @@ impl Pixels<'_> {
         rescale: (f64, f64),
         samples: &mut Vec<i64>,
     ) -> Result<(), String> {
+        if let Self::Encoded { fragments, frames } = self {
+            // One frame decoded, stored, and dropped before the next.
+            let decoded = decode_frame(h, fragments, frames, frame, frame_len)?;
+            return Pixels::Bytes(&decoded)
+                .store(h, 0, 1, frame_len, voxels, dst_start, rescale, samples);
+        }
         let bytes = usize::from(h.bits_allocated / 8);
         if !matches!(h.bits_allocated, 8 | 16 | 32) {
             // 1-bit frames (packed or not) are taken whole; other sizes are refused whole.
@@ -605,6 +617,7 @@ impl Pixels<'_> {
         let len = match self {
             Self::Bytes(d) => d.len() as u64,
             Self::InFile { len, .. } => *len,
+            Self::Encoded { .. } => return Err("internal: encoded frames are decoded first".into()),
         };
         if (frame as u64 + 1) * frame_bytes > len {
             return Err(format!(
@@ -643,7 +656,7 @@ impl Pixels<'_> {
         if !matches!(h.bits_allocated, 8 | 16 | 32) {
             return match self {
                 Self::Bytes(data) => frame_samples(h, data, frame, n_frames, frame_len, out),
-                Self::InFile { .. } => Err(format!(
+                Self::InFile { .. } | Self::Encoded { .. } => Err(format!(
                     "BitsAllocated {} is not read from the file directly",
                     h.bits_allocated
                 )),
@@ -672,8 +685,61 @@ impl Pixels<'_> {
                     .map_err(|e| e.to_string())?;
                 frame_samples(h, &buf, 0, 1, count, out)
             }
+            Self::Encoded { .. } => Err("internal: encoded frames are decoded first".to_owned()),
         }
     }
+}
+
+/// Decodes frame `frame` of encapsulated pixel data (RLE with our decoder, JPEG and JPEG 2000
+/// with dicom-rs's) into its little-endian samples.
+fn decode_frame(
+    h: &FileHeader,
+    fragments: &[&[u8]],
+    frames: &[std::ops::Range<usize>],
+    frame: usize,
+    frame_len: usize,
+) -> Result<Vec<u8>, String> {
+    let parts = frames
+        .get(frame)
+        .and_then(|r| fragments.get(r.clone()))
+        .ok_or_else(|| format!("no fragment holds frame {frame}"))?;
+    let frame_bytes = frame_len * usize::from(h.bits_allocated.div_ceil(8).max(1));
+    if h.transfer_syntax.trim_end_matches(['\0', ' ']) == encapsulated::RLE_LOSSLESS {
+        let mut out = Vec::new();
+        out.try_reserve_exact(frame_bytes)
+            .map_err(|_| format!("out of memory for a frame of {frame_bytes} bytes"))?;
+        out.resize(frame_bytes, 0);
+        let mut segment = Vec::new();
+        encapsulated::decode_rle_frame(
+            h,
+            parts.first().copied().unwrap_or_default(),
+            &mut out,
+            &mut segment,
+        )
+        .map_err(|m| format!("RLE Lossless: {m}"))?;
+        return Ok(out);
+    }
+    // A frame in several fragments is one codestream cut in pieces.
+    let joined: Vec<u8>;
+    let codestream: &[u8] = match parts {
+        [one] => one,
+        many => {
+            joined = many.concat();
+            &joined
+        }
+    };
+    let mut out = Vec::new();
+    encapsulated::decode_codestream_frame(h, codestream, &mut out)?;
+    if out.len() < frame_bytes {
+        return Err(format!(
+            "frame {frame} decodes to {} bytes; {}x{} pixels at {} bits need {frame_bytes}",
+            out.len(),
+            h.cols,
+            h.rows,
+            h.bits_allocated
+        ));
+    }
+    Ok(out)
 }
 
 /// Opens a file, decodes its pixel data once and hands them to `f`. Native little-endian
@@ -700,6 +766,33 @@ pub(super) fn with_pixel_data<R>(
     }
     let obj = open(file, false, limits)?;
     let fragments = encapsulated::fragments(&obj);
+    if let Some(frags) = &fragments {
+        let ts = header.transfer_syntax.trim_end_matches(['\0', ' ']);
+        // Checked for every frame before the first is decoded (and before the caller makes
+        // the voxel buffer).
+        if ts == encapsulated::RLE_LOSSLESS {
+            encapsulated::check_rle_size(&file.name, header, frags.iter().map(|f| f.len()).sum())?;
+        } else {
+            encapsulated::check_codestreams(&file.name, header, frags)?;
+        }
+        // Frames decoded one at a time: the fragments, one decoded frame and the voxels are
+        // what is held, not every frame decoded beside the voxels. RLE, JPEG and JPEG 2000 of
+        // 8 or 16 bits; the rest (deflated image frames, 1-bit data) are decoded whole below.
+        if !NATIVE_SYNTAXES.contains(&ts)
+            && matches!(header.bits_allocated, 8 | 16)
+            && let Some(frames) = encapsulated::frame_fragments(
+                ts,
+                header.frames.len(),
+                frags,
+                encapsulated::offset_table(&obj),
+            )
+        {
+            return f(&Pixels::Encoded {
+                fragments: frags,
+                frames,
+            });
+        }
+    }
     let rle_data;
     let decoded;
     let native;
