@@ -3,9 +3,27 @@
 //! of bytes per step; in the browser the files arrive already read (asynchronously, by
 //! `web_files`), and the job only decodes. Decoding is one step, announced a frame before it
 //! starts so the progress bar says what is being decoded.
+//!
+//! Files holding several DICOM series load the default one ([`crate::io::SeriesList`]) and keep
+//! a [`SeriesSet`], so that another series is one more job ([`LoadSource::Series`]) without the
+//! files being given again.
 
-use crate::io::{InputFile, Loaded};
+use std::sync::Arc;
+
+use crate::io::{InputFile, Loaded, SeriesList};
 use crate::volume::Volume;
+
+/// The series of files that hold several, kept so that another is a click away: the listing
+/// (headers only) and the files (natively, files on disk are read on demand from their paths,
+/// so only their first bytes stay in memory; the browser's files and unpacked archives stay as
+/// bytes). Cloning shares both.
+#[derive(Clone, Debug)]
+pub struct SeriesSet {
+    pub list: Arc<SeriesList>,
+    files: Arc<Vec<InputFile>>,
+    /// The entry loaded (or being loaded).
+    pub chosen: usize,
+}
 
 /// Spacing the app renders the paper's phantoms at (as `shapecast phantom` does by default).
 pub const PHANTOM_SPACING_MM: f64 = 0.5;
@@ -23,6 +41,8 @@ pub enum LoadSource {
     Paths(Vec<std::path::PathBuf>),
     /// One of the paper's phantoms by name (`crate::phantom::NAMES`, "fig8-sphere"), or "demo".
     Phantom(String),
+    /// Another series of files already listed: `chosen` of the set.
+    Series(SeriesSet),
 }
 
 impl LoadSource {
@@ -36,6 +56,34 @@ impl LoadSource {
                 many => format!("{} files and folders", many.len()),
             },
             Self::Phantom(name) => format!("phantom {name}"),
+            Self::Series(set) => set.label(),
+        }
+    }
+}
+
+impl SeriesSet {
+    /// The same files with entry `index` chosen.
+    pub fn with_chosen(&self, index: usize) -> Self {
+        Self {
+            chosen: index,
+            ..self.clone()
+        }
+    }
+
+    /// What the user is told is being loaded: "series 3 (CT, 93 images)".
+    pub fn label(&self) -> String {
+        match self.list.entries().get(self.chosen) {
+            Some(e) => format!(
+                "series {} ({}, {} images)",
+                e.number.map_or_else(|| "-".to_owned(), |n| n.to_string()),
+                if e.modality.is_empty() {
+                    "?"
+                } else {
+                    e.modality.as_str()
+                },
+                e.images
+            ),
+            None => "a series".to_owned(),
         }
     }
 }
@@ -60,6 +108,8 @@ enum Stage {
     Reading {
         queue: std::collections::VecDeque<(std::path::PathBuf, u64)>,
         files: Vec<InputFile>,
+        /// The path each file was read from, by its name.
+        paths: std::collections::HashMap<String, std::path::PathBuf>,
         done_bytes: u64,
         total_bytes: u64,
         skipped: Vec<String>,
@@ -69,6 +119,12 @@ enum Stage {
         announced: bool,
         /// What the folder walk skipped, put first among the loaded volume's notes.
         skipped: Vec<String>,
+        /// The path each file was read from, by its name (natively; kept for a series list).
+        paths: std::collections::HashMap<String, std::path::PathBuf>,
+    },
+    Series {
+        set: SeriesSet,
+        announced: bool,
     },
     Phantom {
         name: String,
@@ -81,6 +137,8 @@ enum Stage {
 pub struct LoadJob {
     label: String,
     stage: Stage,
+    /// The series list of the files loaded, when they held several series.
+    series: Option<SeriesSet>,
 }
 
 impl LoadJob {
@@ -91,6 +149,11 @@ impl LoadJob {
                 files,
                 announced: false,
                 skipped: Vec::new(),
+                paths: Default::default(),
+            },
+            LoadSource::Series(set) => Stage::Series {
+                set,
+                announced: false,
             },
             #[cfg(not(target_arch = "wasm32"))]
             LoadSource::Paths(paths) => Stage::Listing(paths),
@@ -99,11 +162,21 @@ impl LoadJob {
                 announced: false,
             },
         };
-        Self { label, stage }
+        Self {
+            label,
+            stage,
+            series: None,
+        }
     }
 
     pub fn label(&self) -> &str {
         &self.label
+    }
+
+    /// The series list of what was loaded, once the job is done, when the files held more
+    /// than one series.
+    pub fn take_series(&mut self) -> Option<SeriesSet> {
+        self.series.take()
     }
 
     /// Does the next bounded piece of work.
@@ -117,6 +190,7 @@ impl LoadJob {
                     self.stage = Stage::Reading {
                         queue: queue.into(),
                         files: Vec::new(),
+                        paths: Default::default(),
                         done_bytes: 0,
                         total_bytes,
                         skipped,
@@ -132,11 +206,14 @@ impl LoadJob {
             Stage::Reading {
                 mut queue,
                 mut files,
+                mut paths,
                 mut done_bytes,
                 total_bytes,
                 skipped,
             } => {
-                if let Err(e) = native::read_some(&mut queue, &mut files, &mut done_bytes) {
+                if let Err(e) =
+                    native::read_some(&mut queue, &mut files, &mut paths, &mut done_bytes)
+                {
                     return LoadStep::Failed(e);
                 }
                 if queue.is_empty() {
@@ -144,6 +221,7 @@ impl LoadJob {
                         files,
                         announced: false,
                         skipped,
+                        paths,
                     };
                     return self.step();
                 }
@@ -158,6 +236,7 @@ impl LoadJob {
                 self.stage = Stage::Reading {
                     queue,
                     files,
+                    paths,
                     done_bytes,
                     total_bytes,
                     skipped,
@@ -171,6 +250,7 @@ impl LoadJob {
                 files,
                 announced,
                 skipped,
+                paths,
             } => {
                 if !announced {
                     let what = match files.as_slice() {
@@ -181,25 +261,64 @@ impl LoadJob {
                         files,
                         announced: true,
                         skipped,
+                        paths,
                     };
                     return LoadStep::Working {
                         fraction: 0.5,
                         what,
                     };
                 }
+                let limits = crate::io::Limits::default();
                 // Archives (a zipped DICOM series, a header and its data) are unpacked first,
                 // then loaded as if their files had been dropped.
-                let (files, mut unpacked) =
-                    match crate::io::zip::expand(files, &crate::io::Limits::default()) {
-                        Ok(r) => r,
-                        Err(e) => return LoadStep::Failed(e.to_string()),
-                    };
-                match crate::io::load(&files) {
+                let (files, mut unpacked) = match crate::io::zip::expand(files, &limits) {
+                    Ok(r) => r,
+                    Err(e) => return LoadStep::Failed(e.to_string()),
+                };
+                let loaded = match crate::io::list_series(&files, &limits) {
+                    Ok(Some(list)) if list.entries().len() > 1 => {
+                        let chosen = list.default_choice();
+                        let loaded = list.load(&files, chosen, &limits);
+                        if loaded.is_ok() {
+                            self.series = Some(SeriesSet {
+                                list: Arc::new(list),
+                                files: Arc::new(kept_files(files, &paths)),
+                                chosen,
+                            });
+                        }
+                        loaded
+                    }
+                    Ok(Some(list)) => list.load(&files, list.default_choice(), &limits),
+                    Ok(None) => crate::io::load_with(&files, &limits),
+                    Err(e) => Err(e),
+                };
+                match loaded {
                     Ok(mut loaded) => {
                         let mut notes = skipped;
                         notes.append(&mut unpacked);
                         notes.append(&mut loaded.notes);
                         loaded.notes = notes;
+                        LoadStep::Done(Box::new(loaded))
+                    }
+                    Err(e) => LoadStep::Failed(e.to_string()),
+                }
+            }
+            Stage::Series { set, announced } => {
+                if !announced {
+                    let what = format!("decoding {}", set.label());
+                    self.stage = Stage::Series {
+                        set,
+                        announced: true,
+                    };
+                    return LoadStep::Working {
+                        fraction: 0.5,
+                        what,
+                    };
+                }
+                let limits = crate::io::Limits::default();
+                match set.list.load(&set.files, set.chosen, &limits) {
+                    Ok(loaded) => {
+                        self.series = Some(set);
                         LoadStep::Done(Box::new(loaded))
                     }
                     Err(e) => LoadStep::Failed(e.to_string()),
@@ -232,6 +351,33 @@ impl LoadJob {
             }
             Stage::Finished => LoadStep::Failed("internal: the load already finished".to_owned()),
         }
+    }
+}
+
+/// The files to keep for a series list: natively, a file read from a path is kept as that path
+/// (read on demand, only its first bytes in memory); other files (the browser's, unpacked
+/// archives' entries) as they are.
+fn kept_files(
+    files: Vec<InputFile>,
+    paths: &std::collections::HashMap<String, std::path::PathBuf>,
+) -> Vec<InputFile> {
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        files
+            .into_iter()
+            .map(|f| {
+                let on_demand = paths.get(&f.name).and_then(|p| {
+                    let source = crate::files::DiskFile::open(p).ok()?;
+                    InputFile::on_demand(f.name.clone(), Arc::new(source)).ok()
+                });
+                on_demand.unwrap_or(f)
+            })
+            .collect()
+    }
+    #[cfg(target_arch = "wasm32")]
+    {
+        let _ = paths;
+        files
     }
 }
 
@@ -272,13 +418,16 @@ mod native {
     pub fn read_some(
         queue: &mut VecDeque<(PathBuf, u64)>,
         files: &mut Vec<InputFile>,
+        paths: &mut std::collections::HashMap<String, PathBuf>,
         done_bytes: &mut u64,
     ) -> Result<(), String> {
         let mut budget = BYTES_PER_STEP;
         while let Some((path, size)) = queue.pop_front() {
             let bytes = crate::files::read(&path).map_err(|e| e.to_string())?;
             *done_bytes += size;
-            files.push(InputFile::new(path.to_string_lossy(), bytes));
+            let name = path.to_string_lossy().into_owned();
+            paths.insert(name.clone(), path);
+            files.push(InputFile::new(name, bytes));
             budget = budget.saturating_sub(size.max(1));
             if budget == 0 {
                 break;
