@@ -545,6 +545,8 @@ fn a_folder_of_several_series_lists_them_and_loads_the_one_clicked() {
     assert_eq!(status.volume.as_ref().expect("a volume").dims, [64, 64, 93]);
     let head_line = harness.state().patient_line().unwrap_or_default();
     assert!(!head_line.contains("1971"), "{head_line}");
+    let image = harness.render().expect("render");
+    save(&image, "app_series_list.png");
     let liver = rows.iter().position(|r| r.images == 3).expect("liver row");
     assert_eq!(rows[liver].thickness_mm, Some(1.25));
     assert_eq!((rows[liver].cols, rows[liver].rows), (512, 512));
