@@ -745,12 +745,17 @@ impl ShapecastApp {
                     self.load_progress = Some((fraction, what));
                 }
                 LoadStep::Done(loaded) => {
-                    // Files with one series (or another format, a phantom) have no list.
-                    self.series.set = job.take_series();
+                    let series = job.take_series();
                     self.series.loading = None;
                     self.load = None;
                     self.load_progress = None;
+                    let before = self.generation;
                     self.install(*loaded);
+                    // The list goes with the volume shown: files with one series (or another
+                    // format, a phantom) have none, and a volume the GPU refused changes nothing.
+                    if self.generation != before {
+                        self.series.set = series;
+                    }
                 }
                 LoadStep::Failed(message) => {
                     self.series.loading = None;
