@@ -66,6 +66,29 @@ pub struct CrosshairStatus {
     pub lps_mm: [f64; 3],
 }
 
+/// One row of the series list (the files given hold several DICOM series). No patient data.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SeriesStatus {
+    /// "CT", "MR", ... as written (empty when missing).
+    pub modality: String,
+    /// SeriesDescription (empty when missing).
+    pub description: String,
+    /// SeriesNumber.
+    pub number: Option<i64>,
+    /// Images (frames) in the series (or in this orientation of it).
+    pub images: usize,
+    pub rows: u32,
+    pub cols: u32,
+    /// SliceThickness, else SpacingBetweenSlices.
+    pub thickness_mm: Option<f64>,
+    /// "axial", "coronal", "sagittal", "oblique" or "unknown".
+    pub orientation: String,
+    /// The series shown.
+    pub chosen: bool,
+    /// Being loaded.
+    pub loading: bool,
+}
+
 /// Everything `window.shapecastStatus` holds.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct AppStatus {
@@ -92,8 +115,12 @@ pub struct AppStatus {
     /// Something the user is asked to do (a link's file to drop), or `None`.
     pub notice: Option<String>,
     /// Where some controls were drawn last frame, `[x, y, width, height]` in CSS pixels, by
-    /// name ("mode:li", "gain:0", "copy-link", "cancel-download", "pane:mip", "pane:axial"...).
+    /// name ("mode:li", "gain:0", "copy-link", "cancel-download", "pane:mip", "pane:axial",
+    /// "series:0"...).
     pub controls: Vec<(String, [f32; 4])>,
+    /// The series list (empty unless the files given hold several series); row `i` is the
+    /// control "series:i".
+    pub series: Vec<SeriesStatus>,
 }
 
 impl AppStatus {
@@ -184,6 +211,34 @@ mod web {
             set(&controls, name, array_f64(r.iter().map(|&x| f64::from(x))));
         }
         set(&obj, "controls", controls);
+        let series: Array = status
+            .series
+            .iter()
+            .map(|r| {
+                let o = Object::new();
+                set(&o, "modality", r.modality.as_str());
+                set(&o, "description", r.description.as_str());
+                set(
+                    &o,
+                    "number",
+                    r.number
+                        .map_or(JsValue::NULL, |n| JsValue::from_f64(n as f64)),
+                );
+                set(&o, "images", r.images as f64);
+                set(&o, "rows", f64::from(r.rows));
+                set(&o, "cols", f64::from(r.cols));
+                set(
+                    &o,
+                    "thickness_mm",
+                    r.thickness_mm.map_or(JsValue::NULL, JsValue::from_f64),
+                );
+                set(&o, "orientation", r.orientation.as_str());
+                set(&o, "chosen", r.chosen);
+                set(&o, "loading", r.loading);
+                JsValue::from(o)
+            })
+            .collect();
+        set(&obj, "series", series);
         let _ = Reflect::set(&window, &JsValue::from_str("shapecastStatus"), &obj);
     }
 }

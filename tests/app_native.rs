@@ -3,7 +3,10 @@
 //! (screenshots saved for a person to look at), the wheel moves through slices, a click in one
 //! pane moves the others, a right-button or ctrl drag changes the window, features are computed
 //! once and reused when switching modes, a corrupt file shows an error and keeps the volume, and
-//! a dropped folder (a DICOM series) loads.
+//! a dropped folder (a DICOM series) loads, and a folder of several series lists them and
+//! loads the one clicked.
+
+mod common;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -463,6 +466,130 @@ fn corrupt_file_shows_an_error_and_keeps_the_volume_then_a_folder_drop_loads() {
     assert_eq!(v.dims, [64, 64, 6]);
     assert_eq!(harness.state().status().error, None);
     assert_eq!(harness.state().crosshair(), [32, 32, 3]);
+}
+
+/// Clicks the control `name` of the published status (as the browser test does).
+fn click_control(h: &mut Harness<'static, ShapecastApp>, name: &str) {
+    let at = h
+        .state()
+        .status()
+        .controls
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, r)| egui::pos2(r[0] + 0.5 * r[2], r[1] + 0.5 * r[3]))
+        .unwrap_or_else(|| panic!("no control {name}: {:?}", h.state().status().controls));
+    h.hover_at(at);
+    for pressed in [true, false] {
+        h.event(egui::Event::PointerButton {
+            pos: at,
+            button: egui::PointerButton::Primary,
+            pressed,
+            modifiers: egui::Modifiers::NONE,
+        });
+    }
+    h.run_steps(1);
+}
+
+/// A folder holding three of ../shared/data's series (linked, in sub-folders) opens on the CT
+/// with the most images and lists all three with their counts; clicking another loads it with
+/// the geometry it has alone, and the list stays.
+#[test]
+fn a_folder_of_several_series_lists_them_and_loads_the_one_clicked() {
+    let dirs = [
+        "series/ct-3slice-liver",
+        "series/ct-head-64px",
+        "series/mr-prostate-adc-oblique",
+    ];
+    let Some(sources) = dirs
+        .iter()
+        .map(|d| common::shared_data(d))
+        .collect::<Option<Vec<PathBuf>>>()
+    else {
+        return;
+    };
+    let folder = Path::new(env!("CARGO_TARGET_TMPDIR")).join("several-series");
+    let _ = std::fs::remove_dir_all(&folder);
+    for src in &sources {
+        let sub = folder.join(src.file_name().expect("a folder name"));
+        std::fs::create_dir_all(&sub).expect("temp folder");
+        for entry in std::fs::read_dir(src).expect("series folder") {
+            let path = entry.expect("entry").path();
+            let link = sub.join(path.file_name().expect("a file name"));
+            #[cfg(unix)]
+            std::os::unix::fs::symlink(&path, &link).expect("link");
+            #[cfg(not(unix))]
+            std::fs::copy(&path, &link).expect("copy");
+        }
+    }
+    let Some(mut harness) = harness(intensity_only(StartWith::Paths(vec![folder.clone()]))) else {
+        return;
+    };
+    let status = harness.state().status().clone();
+    assert_eq!(status.error, None);
+    let rows = &status.series;
+    let mut listed: Vec<(String, usize, String)> = rows
+        .iter()
+        .map(|r| (r.modality.clone(), r.images, r.orientation.clone()))
+        .collect();
+    listed.sort();
+    assert_eq!(
+        listed,
+        [
+            ("CT".to_owned(), 3, "axial".to_owned()),
+            ("CT".to_owned(), 93, "axial".to_owned()),
+            ("MR".to_owned(), 20, "oblique".to_owned()),
+        ]
+    );
+    let chosen: Vec<usize> = rows.iter().filter(|r| r.chosen).map(|r| r.images).collect();
+    assert_eq!(chosen, [93], "{rows:?}");
+    assert_eq!(status.volume.as_ref().expect("a volume").dims, [64, 64, 93]);
+    let head_line = harness.state().patient_line().unwrap_or_default();
+    assert!(!head_line.contains("1971"), "{head_line}");
+    let image = harness.render().expect("render");
+    save(&image, "app_series_list.png");
+    let liver = rows.iter().position(|r| r.images == 3).expect("liver row");
+    assert_eq!(rows[liver].thickness_mm, Some(1.25));
+    assert_eq!((rows[liver].cols, rows[liver].rows), (512, 512));
+
+    // One click on the MR row loads the MR, as its folder alone does.
+    let mr = rows
+        .iter()
+        .position(|r| r.modality == "MR")
+        .expect("MR row");
+    let alone = shapecast::io::load(&common::inputs_in(&sources[2])).expect("MR alone");
+    click_control(&mut harness, &format!("series:{mr}"));
+    run_until(&mut harness, "the MR loaded", 40, |app| {
+        app.volume().is_some_and(|v| v.dims == alone.volume.dims)
+    });
+    harness.run_steps(2);
+    let app = harness.state();
+    let v = app.volume().expect("MR");
+    assert_eq!(v.spacing_mm, alone.volume.spacing_mm);
+    assert_eq!(v.origin_mm, alone.volume.origin_mm);
+    assert!(
+        *v == alone.volume,
+        "the MR differs from its folder loaded alone"
+    );
+    let status = app.status();
+    assert_eq!(status.error, None);
+    assert_eq!(status.series.len(), 3, "the list stays");
+    assert!(status.series[mr].chosen && !status.series[mr].loading);
+    assert_eq!(status.series.iter().filter(|r| r.chosen).count(), 1);
+    // The patient line follows the series shown: the MR's study date (1971), not the head's.
+    let line = app.patient_line().unwrap_or_default();
+    assert!(line.contains("study 1971-07-14"), "{line}");
+
+    // A file of another format has no list.
+    harness
+        .state_mut()
+        .open(LoadSource::Phantom("sphere".into()));
+    run_until(&mut harness, "the phantom loaded", 40, |app| {
+        app.volume()
+            .is_some_and(|v| v.modality == shapecast::Modality::Phantom)
+    });
+    harness.run_steps(1);
+    assert!(harness.state().status().series.is_empty());
+    let _ = std::fs::remove_dir_all(&folder);
 }
 
 /// A loaded volume opens on the preset that fits it, and the note says which and why.

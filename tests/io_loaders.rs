@@ -531,6 +531,95 @@ fn dicom_largest_series_is_chosen_and_others_listed() {
     );
 }
 
+/// The files of several series dirs, each named under its dir ("head/...", "liver/...").
+fn series_inputs(dirs: &[(&str, &std::path::Path)]) -> Vec<InputFile> {
+    let mut files = Vec::new();
+    for (label, dir) in dirs {
+        files.extend(
+            common::inputs_in(dir)
+                .into_iter()
+                .map(|f| InputFile::new(format!("{label}/{}", f.name), f.bytes)),
+        );
+    }
+    files
+}
+
+#[test]
+fn dicom_series_list_names_each_series_and_loads_the_one_chosen() {
+    use shapecast::io::{Limits, SliceOrientation};
+    let (Some(head), Some(liver), Some(mr), Some(licence)) = (
+        common::shared_data("series/ct-head-64px"),
+        common::shared_data("series/ct-3slice-liver"),
+        common::shared_data("series/mr-prostate-adc-oblique"),
+        common::shared_data("series/LICENSE-dcmqi.txt"),
+    ) else {
+        return;
+    };
+    let dirs = [("liver", liver.as_path()), ("head", &head), ("mr", &mr)];
+    let mut files = series_inputs(&dirs);
+    files.push(common::input(&licence));
+    let limits = Limits::default();
+    let list = io::list_series(&files, &limits)
+        .expect("listed")
+        .expect("a DICOM set");
+    let entries = list.entries();
+    assert_eq!(entries.len(), 3, "{entries:?}");
+    let find = |modality: &str, images: usize| {
+        entries
+            .iter()
+            .position(|e| e.modality == modality && e.images == images)
+            .unwrap_or_else(|| panic!("no {modality} series of {images} images: {entries:?}"))
+    };
+    let (i_head, i_liver, i_mr) = (find("CT", 93), find("CT", 3), find("MR", 20));
+    // Headers alone: counts, sizes, thickness and plane as the files say.
+    let (h, l, m) = (&entries[i_head], &entries[i_liver], &entries[i_mr]);
+    assert_eq!((h.files, h.rows, h.cols), (93, 64, 64));
+    assert_eq!((l.files, l.rows, l.cols), (3, 512, 512));
+    assert_eq!((m.files, m.rows, m.cols), (20, 256, 256));
+    assert_eq!(l.slice_thickness_mm, Some(1.25));
+    assert_eq!(h.orientation, SliceOrientation::Axial);
+    assert_eq!(l.orientation, SliceOrientation::Axial);
+    // The ADC's normal is 10.02 degrees from S (see dicom_series_oblique_mr's direction).
+    assert_eq!(m.orientation, SliceOrientation::Oblique);
+    assert!(entries.iter().all(|e| e.part == (0, 1)), "{entries:?}");
+    assert!(
+        list.notes().iter().any(|n| n.contains("LICENSE-dcmqi.txt")),
+        "{:?}",
+        list.notes()
+    );
+    // The default is the CT or MR series with the most images.
+    assert_eq!(list.default_choice(), i_head);
+    // Each entry loads exactly the volume its folder loads alone.
+    for (i, (label, dir)) in [(i_liver, dirs[0]), (i_head, dirs[1]), (i_mr, dirs[2])] {
+        let chosen = list.load(&files, i, &limits).expect(label);
+        let alone = io::load(&series_inputs(&[(label, dir)])).expect(label);
+        assert!(chosen.volume == alone.volume, "{label}: volume differs");
+        assert_eq!(chosen.volume.dims[2], entries[i].images, "{label}");
+    }
+    // The list does not depend on the order the files came in.
+    let reversed: Vec<InputFile> = files.iter().rev().cloned().collect();
+    let again = io::list_series(&reversed, &limits)
+        .expect("listed")
+        .expect("a DICOM set");
+    assert_eq!(again.entries(), entries);
+    // Other files than those listed are refused, naming the problem.
+    let e = list
+        .load(&reversed, i_mr, &limits)
+        .expect_err("other files")
+        .to_string();
+    assert!(e.contains("not the 117 files listed"), "{e}");
+    // One series, or another format, is no list of several.
+    let one = io::list_series(&series_inputs(&[dirs[0]]), &limits)
+        .expect("listed")
+        .expect("a DICOM set");
+    assert_eq!(one.entries().len(), 1);
+    assert!(
+        io::list_series(&[common::input(&licence)], &limits)
+            .expect("listed")
+            .is_none()
+    );
+}
+
 // ---------------------------------------------------------------- DICOM single files
 
 fn emri_expect() -> Expect {

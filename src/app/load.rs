@@ -4,9 +4,27 @@
 //! file bytes are never held beside the voxels); in the browser the files arrive already read (asynchronously, by
 //! `web_files`), and the job only decodes. Decoding is one step, announced a frame before it
 //! starts so the progress bar says what is being decoded.
+//!
+//! Files holding several DICOM series load the default one ([`crate::io::SeriesList`]) and keep
+//! a [`SeriesSet`], so that another series is one more job ([`LoadSource::Series`]) without the
+//! files being given again.
 
-use crate::io::{InputFile, Loaded};
+use std::sync::Arc;
+
+use crate::io::{InputFile, Loaded, SeriesList};
 use crate::volume::Volume;
+
+/// The series of files that hold several, kept so that another is a click away: the listing
+/// (headers only) and the files (natively, files on disk are read on demand from their paths,
+/// so only their first bytes stay in memory; the browser's files and unpacked archives stay as
+/// bytes). Cloning shares both.
+#[derive(Clone, Debug)]
+pub struct SeriesSet {
+    pub list: Arc<SeriesList>,
+    files: Arc<Vec<InputFile>>,
+    /// The entry loaded (or being loaded).
+    pub chosen: usize,
+}
 
 /// Spacing the app renders the paper's phantoms at (as `shapecast phantom` does by default).
 pub const PHANTOM_SPACING_MM: f64 = 0.5;
@@ -24,6 +42,8 @@ pub enum LoadSource {
     Paths(Vec<std::path::PathBuf>),
     /// One of the paper's phantoms by name (`crate::phantom::NAMES`, "fig8-sphere"), or "demo".
     Phantom(String),
+    /// Another series of files already listed: `chosen` of the set.
+    Series(SeriesSet),
 }
 
 impl LoadSource {
@@ -37,6 +57,34 @@ impl LoadSource {
                 many => format!("{} files and folders", many.len()),
             },
             Self::Phantom(name) => format!("phantom {name}"),
+            Self::Series(set) => set.label(),
+        }
+    }
+}
+
+impl SeriesSet {
+    /// The same files with entry `index` chosen.
+    pub fn with_chosen(&self, index: usize) -> Self {
+        Self {
+            chosen: index,
+            ..self.clone()
+        }
+    }
+
+    /// What the user is told is being loaded: "series 3 (CT, 93 images)".
+    pub fn label(&self) -> String {
+        match self.list.entries().get(self.chosen) {
+            Some(e) => format!(
+                "series {} ({}, {} images)",
+                e.number.map_or_else(|| "-".to_owned(), |n| n.to_string()),
+                if e.modality.is_empty() {
+                    "?"
+                } else {
+                    e.modality.as_str()
+                },
+                e.images
+            ),
+            None => "a series".to_owned(),
         }
     }
 }
@@ -68,6 +116,10 @@ enum Stage {
         /// What the folder walk skipped, put first among the loaded volume's notes.
         skipped: Vec<String>,
     },
+    Series {
+        set: SeriesSet,
+        announced: bool,
+    },
     Phantom {
         name: String,
         announced: bool,
@@ -79,6 +131,8 @@ enum Stage {
 pub struct LoadJob {
     label: String,
     stage: Stage,
+    /// The series list of the files loaded, when they held several series.
+    series: Option<SeriesSet>,
 }
 
 impl LoadJob {
@@ -90,6 +144,10 @@ impl LoadJob {
                 announced: false,
                 skipped: Vec::new(),
             },
+            LoadSource::Series(set) => Stage::Series {
+                set,
+                announced: false,
+            },
             #[cfg(not(target_arch = "wasm32"))]
             LoadSource::Paths(paths) => Stage::Listing(paths),
             LoadSource::Phantom(name) => Stage::Phantom {
@@ -97,11 +155,21 @@ impl LoadJob {
                 announced: false,
             },
         };
-        Self { label, stage }
+        Self {
+            label,
+            stage,
+            series: None,
+        }
     }
 
     pub fn label(&self) -> &str {
         &self.label
+    }
+
+    /// The series list of what was loaded, once the job is done, when the files held more
+    /// than one series.
+    pub fn take_series(&mut self) -> Option<SeriesSet> {
+        self.series.take()
     }
 
     /// Does the next bounded piece of work.
@@ -172,19 +240,59 @@ impl LoadJob {
                         what,
                     };
                 }
+                let limits = crate::io::Limits::default();
                 // Archives (a zipped DICOM series, a header and its data) are unpacked first,
                 // then loaded as if their files had been dropped.
-                let (files, mut unpacked) =
-                    match crate::io::zip::expand(files, &crate::io::Limits::default()) {
-                        Ok(r) => r,
-                        Err(e) => return LoadStep::Failed(e.to_string()),
-                    };
-                match crate::io::load(&files) {
+                let (files, mut unpacked) = match crate::io::zip::expand(files, &limits) {
+                    Ok(r) => r,
+                    Err(e) => return LoadStep::Failed(e.to_string()),
+                };
+                let loaded = match crate::io::list_series(&files, &limits) {
+                    Ok(Some(list)) if list.entries().len() > 1 => {
+                        let chosen = list.default_choice();
+                        let loaded = list.load(&files, chosen, &limits);
+                        if loaded.is_ok() {
+                            self.series = Some(SeriesSet {
+                                list: Arc::new(list),
+                                // Natively, files from paths are already read on demand
+                                // (only their first bytes in memory).
+                                files: Arc::new(files),
+                                chosen,
+                            });
+                        }
+                        loaded
+                    }
+                    Ok(Some(list)) => list.load(&files, list.default_choice(), &limits),
+                    Ok(None) => crate::io::load_with(&files, &limits),
+                    Err(e) => Err(e),
+                };
+                match loaded {
                     Ok(mut loaded) => {
                         let mut notes = skipped;
                         notes.append(&mut unpacked);
                         notes.append(&mut loaded.notes);
                         loaded.notes = notes;
+                        LoadStep::Done(Box::new(loaded))
+                    }
+                    Err(e) => LoadStep::Failed(e.to_string()),
+                }
+            }
+            Stage::Series { set, announced } => {
+                if !announced {
+                    let what = format!("decoding {}", set.label());
+                    self.stage = Stage::Series {
+                        set,
+                        announced: true,
+                    };
+                    return LoadStep::Working {
+                        fraction: 0.5,
+                        what,
+                    };
+                }
+                let limits = crate::io::Limits::default();
+                match set.list.load(&set.files, set.chosen, &limits) {
+                    Ok(loaded) => {
+                        self.series = Some(set);
                         LoadStep::Done(Box::new(loaded))
                     }
                     Err(e) => LoadStep::Failed(e.to_string()),

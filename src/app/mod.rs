@@ -16,6 +16,7 @@ mod pacs;
 mod panels;
 pub mod picture;
 mod probe;
+mod series_list;
 mod share;
 pub mod slices;
 pub mod url_params;
@@ -41,7 +42,7 @@ use crate::status::{
 use crate::volume::Volume;
 
 pub use features::{DisplayMode, FeatureDisplay, FeatureEntry, FeatureParams, JobOutcome};
-pub use load::LoadSource;
+pub use load::{LoadSource, SeriesSet};
 pub use pacs::PacsTarget;
 pub use slices::SliceKind;
 pub use view_link::{ViewSource, ViewState};
@@ -339,6 +340,8 @@ pub struct ShapecastApp {
     link_copied_at: Option<f64>,
     /// "Open from PACS…", DICOMweb retrievals and the patient line.
     pacs: pacs::Pacs,
+    /// The series of the files given, when they hold several.
+    series: series_list::SeriesState,
 }
 
 impl ShapecastApp {
@@ -428,6 +431,7 @@ impl ShapecastApp {
             controls: Vec::new(),
             link_copied_at: None,
             pacs: pacs::Pacs::default(),
+            series: series_list::SeriesState::default(),
         }
     }
 
@@ -532,6 +536,8 @@ impl ShapecastApp {
             LoadSource::Phantom(name) => Some(ViewSource::Phantom(name.clone())),
             #[cfg(not(target_arch = "wasm32"))]
             LoadSource::Paths(_) => None,
+            // Another series of the files shown: they came from where the shown one did.
+            LoadSource::Series(_) => self.scene.as_ref().and_then(|s| s.origin.clone()),
         };
         self.open_from(source, origin);
     }
@@ -541,6 +547,7 @@ impl ShapecastApp {
         self.load_progress = Some((0.0, format!("opening {}", source.label())));
         self.loading_origin = origin;
         self.load = Some(LoadJob::new(source));
+        self.series.loading = None;
     }
 
     /// Switches the display mode; computes its features if they are not kept yet.
@@ -738,11 +745,20 @@ impl ShapecastApp {
                     self.load_progress = Some((fraction, what));
                 }
                 LoadStep::Done(loaded) => {
+                    let series = job.take_series();
+                    self.series.loading = None;
                     self.load = None;
                     self.load_progress = None;
+                    let before = self.generation;
                     self.install(*loaded);
+                    // The list goes with the volume shown: files with one series (or another
+                    // format, a phantom) have none, and a volume the GPU refused changes nothing.
+                    if self.generation != before {
+                        self.series.set = series;
+                    }
                 }
                 LoadStep::Failed(message) => {
+                    self.series.loading = None;
                     self.load = None;
                     self.load_progress = None;
                     self.loading_origin = None;
@@ -899,6 +915,7 @@ impl ShapecastApp {
         });
         s.layout = self.layout.name().to_owned();
         s.error = self.errors.last().cloned();
+        s.series = series_list::status_of(&self.series);
 
         let computing = self.features.running_request().is_some();
         if let Some((f, what)) = &self.load_progress {

@@ -153,6 +153,7 @@ impl ShapecastApp {
                         ui.label("nothing loaded");
                     }
                 }
+                self.series_ui(ui);
                 if !self.notes.is_empty() {
                     let title = format!("Notes ({})", self.notes.len());
                     notes_ui(ui, title, "notes", &self.notes);

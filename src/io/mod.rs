@@ -3,7 +3,7 @@
 //!
 //! The entry point is [`load`]: it sniffs each file by content (not only by extension), pairs
 //! headers with their data files (.hdr/.img, .nhdr + data, .mhd + .raw), and gathers DICOM files
-//! into the largest series. Every size a header declares is checked against the bytes present and
+//! into series ([`list_series`] lists them from their headers; [`load`] loads the default one). Every size a header declares is checked against the bytes present and
 //! against [`Limits`] before anything is allocated.
 
 mod dicom;
@@ -17,7 +17,9 @@ mod nrrd;
 mod raw;
 pub mod zip;
 
-pub use dicom::{SeriesBuilder, decodable_transfer_syntaxes};
+pub use dicom::{
+    SeriesBuilder, SeriesEntry, SeriesList, SliceOrientation, decodable_transfer_syntaxes,
+};
 pub use error::LoadError;
 pub use input::{FileSource, HEAD_BYTES, InputFile, MemorySource};
 
@@ -263,20 +265,26 @@ pub fn load(files: &[InputFile]) -> Result<Loaded, LoadError> {
 }
 
 /// Loads one volume from the given files: a single file, a header and its data file, or a set
-/// of DICOM files (the largest series is chosen; the others are listed in the notes).
+/// of DICOM files (the CT or MR series with the most images is chosen, as
+/// [`SeriesList::default_choice`] says; the others are named in the notes).
 pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadError> {
     if files.is_empty() {
         return Err(LoadError::NoFiles);
     }
     let formats: Vec<Format> = files.iter().map(sniff_file).collect();
-    let dicom_count = formats.iter().filter(|f| **f == Format::Dicom).count();
+    if let Some(list) = list_sniffed(files, &formats, limits)? {
+        let chosen = list.default_choice();
+        let mut loaded = list.load(files, chosen, limits)?;
+        loaded.notes.extend(list.others_not_loaded(chosen));
+        return Ok(loaded);
+    }
     let primary = formats
         .iter()
         .position(|f| !matches!(f, Format::Dicom | Format::Unknown));
 
     let companions = Companions::new(files);
     let mut notes = Vec::new();
-    let mut loaded = if let (Some(p), true) = (primary, dicom_count <= 1) {
+    let mut loaded = if let Some(p) = primary {
         let file = &files[p];
         let input = HeaderInput::new(file, companions, limits);
         let volume = match formats[p] {
@@ -302,19 +310,6 @@ pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadErr
             notes: Vec::new(),
             patient: None,
         }
-    } else if dicom_count > 0 {
-        let dicom_files: Vec<&InputFile> = files
-            .iter()
-            .zip(&formats)
-            .filter(|(_, f)| **f == Format::Dicom)
-            .map(|(f, _)| f)
-            .collect();
-        for (f, fmt) in files.iter().zip(&formats) {
-            if *fmt != Format::Dicom {
-                notes.push(format!("{}: ignored (not DICOM)", f.name));
-            }
-        }
-        dicom::load_series(&dicom_files, limits)?
     } else {
         let file = &files[0];
         let reason = if raw::is_gzip(&file.bytes) {
@@ -336,6 +331,39 @@ pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadErr
         loaded.volume.warnings.push(w);
     }
     Ok(loaded)
+}
+
+/// The series in the given files when they are a DICOM set (what [`load`] would gather into a
+/// series: several DICOM files, or one without another format beside it), from the headers
+/// alone; `Ok(None)` for other files (another format is loaded from them). Each entry loads
+/// with [`SeriesList::load`] from the same files.
+pub fn list_series(files: &[InputFile], limits: &Limits) -> Result<Option<SeriesList>, LoadError> {
+    let formats: Vec<Format> = files.iter().map(sniff_file).collect();
+    list_sniffed(files, &formats, limits)
+}
+
+/// [`list_series`] of files whose formats are known.
+fn list_sniffed(
+    files: &[InputFile],
+    formats: &[Format],
+    limits: &Limits,
+) -> Result<Option<SeriesList>, LoadError> {
+    let dicom_files: Vec<usize> = (0..files.len())
+        .filter(|&i| formats.get(i) == Some(&Format::Dicom))
+        .collect();
+    let primary = formats
+        .iter()
+        .any(|f| !matches!(f, Format::Dicom | Format::Unknown));
+    if dicom_files.is_empty() || (primary && dicom_files.len() <= 1) {
+        return Ok(None);
+    }
+    let notes = files
+        .iter()
+        .zip(formats)
+        .filter(|(_, f)| **f != Format::Dicom)
+        .map(|(f, _)| format!("{}: ignored (not DICOM)", f.name))
+        .collect();
+    dicom::list_series(files, &dicom_files, notes, limits).map(Some)
 }
 
 fn unreachable_format(file: &InputFile) -> Result<Volume, LoadError> {

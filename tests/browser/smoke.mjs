@@ -4,7 +4,8 @@
 //     computed, and frames drawn (window.shapecastStatus),
 //  2. the screenshot is not blank,
 //  3. the page's file inputs and drag and drop load volumes: a corrupt file gives an error that
-//     names it and keeps the volume; a DICOM folder (the "Open folder" input); a detached-header
+//     names it and keeps the volume; a DICOM folder (the "Open folder" input), and one holding
+//     two series (both listed, one click on the other loads it); a detached-header
 //     NRRD with its data file dropped together; "Save picture" (key P over a pane) downloads a
 //     PNG of that pane,
 //  4. a browser without WebGPU gets a plain-words message instead of a blank canvas.
@@ -208,6 +209,35 @@ try {
       'the DICOM series');
     check('folder input: DICOM series loaded', JSON.stringify(status?.volume?.dims) === '[64,64,6]',
       `${JSON.stringify(status?.volume?.dims)} from ${status?.volume?.source}; error ${status?.error}`);
+
+    // 3b': a folder holding two series (those six CT slices and a 10-frame MR): the MR, with
+    // more images, is loaded, both are listed in the status (no patient data), and a click on
+    // the CT's row (its `controls` entry) loads the CT from the files already read.
+    const two = fs.mkdtempSync(path.join(os.tmpdir(), 'shapecast-two-series-'));
+    for (const f of fs.readdirSync(series)) fs.copyFileSync(path.join(series, f), path.join(two, f));
+    fs.copyFileSync(path.join(root, 'tests', 'data', 'dicom', 'emri_small_RLE.dcm'),
+      path.join(two, 'emri_small_RLE.dcm'));
+    await page.setInputFiles('#shapecast_open_folder', two);
+    status = await waitStatus(() => (window.shapecastStatus?.series?.length ?? 0) === 2
+      && JSON.stringify(window.shapecastStatus?.volume?.dims) === '[64,64,10]', 'the two-series folder');
+    const rows = status?.series ?? [];
+    check('folder of two series: both listed, the larger (MR, 10 images) loaded', rows.length === 2
+      && rows.some((r) => r.modality === 'CT' && r.images === 6 && !r.chosen)
+      && rows.some((r) => r.modality === 'MR' && r.images === 10 && r.chosen)
+      && JSON.stringify(status?.volume?.dims) === '[64,64,10]',
+      `${JSON.stringify(rows)}, dims ${JSON.stringify(status?.volume?.dims)}; error ${status?.error}`);
+    const ctRow = rows.findIndex((r) => r.modality === 'CT');
+    const rowRect = status?.controls?.[`series:${ctRow}`];
+    if (rowRect) {
+      await page.mouse.click(rowRect[0] + rowRect[2] / 2, rowRect[1] + rowRect[3] / 2);
+    }
+    status = await waitStatus(() => JSON.stringify(window.shapecastStatus?.volume?.dims) === '[64,64,6]',
+      'the CT series clicked');
+    check('folder of two series: one click on the CT row loads it, the list stays',
+      JSON.stringify(status?.volume?.dims) === '[64,64,6]' && status?.series?.length === 2
+      && status?.series?.[ctRow]?.chosen === true,
+      `row ${JSON.stringify(rowRect)}, dims ${JSON.stringify(status?.volume?.dims)}, series ${JSON.stringify(status?.series)}; error ${status?.error}`);
+    fs.rmSync(two, { recursive: true, force: true });
 
     // 3c: a detached-header NRRD and its data file dropped together on the canvas.
     await page.evaluate(() => {

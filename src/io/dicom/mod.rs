@@ -3,13 +3,15 @@
 //! frames of one series into a volume.
 
 mod encapsulated;
+mod listing;
 mod series;
 mod stream;
 #[cfg(test)]
 pub(crate) mod synth;
 mod validate;
 
-pub(crate) use series::load_series;
+pub(crate) use listing::list_series;
+pub use listing::{SeriesEntry, SeriesList, SliceOrientation};
 pub use stream::SeriesBuilder;
 
 use dicom_dictionary_std::tags;
@@ -224,6 +226,8 @@ pub(super) struct FrameInfo {
 pub(super) struct FileHeader {
     pub series_uid: String,
     pub series_description: String,
+    /// SeriesNumber.
+    pub series_number: Option<i64>,
     pub sop_instance_uid: String,
     pub instance_number: Option<i64>,
     pub modality: Modality,
@@ -436,6 +440,7 @@ pub(super) fn read_header(
         series_uid: elem_str(&obj, tags::SERIES_INSTANCE_UID)
             .unwrap_or_else(|| "(no SeriesInstanceUID)".to_owned()),
         series_description: elem_str(&obj, tags::SERIES_DESCRIPTION).unwrap_or_default(),
+        series_number: elem_int(&obj, tags::SERIES_NUMBER),
         sop_instance_uid: elem_str(&obj, tags::SOP_INSTANCE_UID).unwrap_or_default(),
         instance_number: elem_int(&obj, tags::INSTANCE_NUMBER),
         modality,

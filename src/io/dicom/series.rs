@@ -1,5 +1,6 @@
-//! Assembling DICOM files into one volume: grouping by SeriesInstanceUID (the largest series is
-//! loaded, the others are listed), ordering frames by ImagePositionPatient projected on the
+//! Assembling DICOM files into one volume: grouping by SeriesInstanceUID and orientation into
+//! stacks (`listing` lists them; the CT or MR stack with the most images is loaded unless
+//! another is chosen), ordering frames by ImagePositionPatient projected on the
 //! slice normal, slice spacing from the positions (with warnings for a disagreeing
 //! SliceThickness, uneven or missing slices), rescale, and pixel decoding frame by frame.
 
@@ -8,12 +9,10 @@ use std::collections::BTreeMap;
 use dicom_pixeldata::PixelDecoder;
 use glam::DVec3;
 
-use super::{
-    FileHeader, FrameInfo, NATIVE_SYNTAXES, check_transfer_syntax, encapsulated, open, read_header,
-};
+use super::{FileHeader, FrameInfo, NATIVE_SYNTAXES, check_transfer_syntax, encapsulated, open};
 use crate::io::geometry::checked_grid;
 use crate::io::raw::{self, try_vec};
-use crate::io::{InputFile, Limits, LoadError, Loaded};
+use crate::io::{InputFile, Limits, LoadError};
 use crate::volume::{Volume, Voxels};
 
 /// One frame of the chosen series: which file, which frame in it, and its header values.
@@ -21,48 +20,6 @@ pub(super) struct Frame<'a> {
     pub file: usize,
     pub frame: usize,
     pub info: &'a FrameInfo,
-}
-
-/// Loads the largest series among DICOM files (in any order, from any folders).
-pub(crate) fn load_series(files: &[&InputFile], limits: &Limits) -> Result<Loaded, LoadError> {
-    let mut notes = Vec::new();
-    let mut headers: Vec<(usize, FileHeader)> = Vec::new();
-    let mut first_error = None;
-    for (i, f) in files.iter().enumerate() {
-        match read_header(f, limits) {
-            Ok(Some(h)) => headers.push((i, h)),
-            Ok(None) => notes.push(format!("{}: DICOM without an image (skipped)", f.name)),
-            Err(e) => {
-                notes.push(format!("skipped: {e}"));
-                first_error.get_or_insert(e);
-            }
-        }
-    }
-    if headers.is_empty() {
-        return Err(first_error.unwrap_or_else(|| {
-            let names: Vec<&str> = files.iter().map(|f| f.name.as_str()).collect();
-            no_image_error(&names)
-        }));
-    }
-    let named: Vec<(&str, &FileHeader)> = headers
-        .iter()
-        .map(|(i, h)| (files[*i].name.as_str(), h))
-        .collect();
-    let (series, members) = choose_stack(&named, &mut notes)?;
-    let chosen: Vec<(&InputFile, &FileHeader)> = members
-        .iter()
-        .map(|&m| (files[headers[m].0], &headers[m].1))
-        .collect();
-    let mut volume = assemble(&series, &chosen, limits)?;
-    volume
-        .warnings
-        .extend(header_warnings(chosen.iter().map(|(_, h)| *h)));
-    let patient = Some(chosen[0].1.patient.clone());
-    Ok(Loaded {
-        volume,
-        notes,
-        patient,
-    })
 }
 
 /// What the headers of a series' images say for the user, sorted so that the volume does not
@@ -93,30 +50,40 @@ pub(super) fn no_image_error(names: &[&str]) -> LoadError {
     }
 }
 
+/// Images that make one volume: one series' images of one size and one orientation.
+#[derive(Clone, Debug)]
+pub(super) struct Stack {
+    pub series_uid: String,
+    pub rows: u32,
+    pub cols: u32,
+    /// Which of the series' orientations of this size (0 for the first met).
+    pub stack: usize,
+    /// The stack's ImageOrientationPatient (`None` when its images have none).
+    pub orientation: Option<[f64; 6]>,
+    /// Indices into the headers grouped, in a fixed order.
+    pub members: Vec<usize>,
+    /// Frames of all members.
+    pub frames: usize,
+}
+
 /// Groups images (named headers) by series and image size, which must be shared within a
-/// volume, and splits a series into stacks by ImageOrientationPatient; returns the largest
-/// stack's series UID and its members (indices into `headers`), and notes the others. The
-/// file loader and the streaming builder ([`super::stream::SeriesBuilder`]) share it.
-pub(super) fn choose_stack(
-    headers: &[(&str, &FileHeader)],
-    notes: &mut Vec<String>,
-) -> Result<(String, Vec<usize>), LoadError> {
-    // Group by series and image size, which must be shared within a volume, and split a
-    // series into stacks by ImageOrientationPatient (as dcm2niix does): a localizer, a sagittal
-    // slice among axial ones or a slice rotated in plane is not stacked with the others. Files
-    // are visited in a fixed order and BTreeMap sorts the groups, so the grouping does not
-    // depend on the order the files came in.
+/// volume, and splits a series into stacks by ImageOrientationPatient (as dcm2niix does): a
+/// localizer, a sagittal slice among axial ones or a slice rotated in plane is not stacked with
+/// the others. Files are visited in a fixed order and the stacks are sorted (series UID, size,
+/// orientation met first), so the grouping does not depend on the order the files came in.
+/// The file loader, the series list and the streaming builder share it.
+pub(super) fn group_stacks(headers: &[(&str, &FileHeader)]) -> Vec<Stack> {
     let mut order: Vec<usize> = (0..headers.len()).collect();
     order.sort_by(|&a, &b| {
         let (ha, hb) = (headers[a].1, headers[b].1);
         (&ha.sop_instance_uid, headers[a].0).cmp(&(&hb.sop_instance_uid, headers[b].0))
     });
-    let mut stacks: BTreeMap<(String, u32, u32), Vec<[f64; 6]>> = BTreeMap::new();
+    let mut known_orientations: BTreeMap<(String, u32, u32), Vec<[f64; 6]>> = BTreeMap::new();
     let mut groups: BTreeMap<(String, u32, u32, usize), Vec<usize>> = BTreeMap::new();
     for h_index in order {
         let h = headers[h_index].1;
         let series_key = (h.series_uid.clone(), h.rows, h.cols);
-        let known = stacks.entry(series_key).or_default();
+        let known = known_orientations.entry(series_key).or_default();
         // Files without an orientation join the first stack.
         let stack = match h.frames.iter().find_map(|f| f.orientation) {
             None => 0,
@@ -136,62 +103,101 @@ pub(super) fn choose_stack(
             .or_default()
             .push(h_index);
     }
-    let frame_count = |members: &Vec<usize>| {
-        members
-            .iter()
-            .map(|&m| headers[m].1.frames.len())
-            .sum::<usize>()
-    };
-    let chosen_key = groups
-        .iter()
-        .max_by(|a, b| {
-            frame_count(a.1)
-                .cmp(&frame_count(b.1))
-                .then_with(|| b.0.cmp(a.0))
+    groups
+        .into_iter()
+        .map(|((series_uid, rows, cols, stack), members)| {
+            let orientation = known_orientations
+                .get(&(series_uid.clone(), rows, cols))
+                .and_then(|k| k.get(stack))
+                .copied();
+            let frames = members.iter().map(|&m| headers[m].1.frames.len()).sum();
+            Stack {
+                series_uid,
+                rows,
+                cols,
+                stack,
+                orientation,
+                members,
+                frames,
+            }
         })
-        .map(|(k, _)| k.clone())
-        .ok_or_else(|| LoadError::DicomSeries {
-            series: "-".to_owned(),
-            message: "no series".to_owned(),
-        })?;
-    let orientation_of = |key: &(String, u32, u32, usize)| {
-        stacks
-            .get(&(key.0.clone(), key.1, key.2))
-            .and_then(|k| k.get(key.3))
-            .copied()
+        .collect()
+}
+
+/// The stack to load when none is chosen: the CT or MR stack with the most images, the first
+/// of equals (the archive's chooser, [`crate::io::dicomweb::choose_series`], on the stacks).
+pub(super) fn default_stack(stacks: &[Stack], headers: &[(&str, &FileHeader)]) -> Option<usize> {
+    let infos: Vec<crate::io::dicomweb::SeriesInfo> = stacks
+        .iter()
+        .map(|s| crate::io::dicomweb::SeriesInfo {
+            series_uid: s.series_uid.clone(),
+            modality: s
+                .members
+                .first()
+                .map(|&m| headers[m].1.modality_name.clone()),
+            instances: Some(s.frames as u64),
+            ..Default::default()
+        })
+        .collect();
+    crate::io::dicomweb::choose_series(&infos)
+}
+
+/// Notes on the stacks that were not loaded: another orientation of the chosen series, or
+/// another series.
+pub(super) fn other_stack_notes(
+    stacks: &[Stack],
+    chosen: usize,
+    headers: &[(&str, &FileHeader)],
+    notes: &mut Vec<String>,
+) {
+    let Some(c) = stacks.get(chosen) else {
+        return;
     };
-    for (key, members) in &groups {
-        if *key == chosen_key {
+    for (i, s) in stacks.iter().enumerate() {
+        let Some(&first) = s.members.first() else {
+            continue;
+        };
+        if i == chosen {
             continue;
         }
-        let h = headers[members[0]].1;
-        if (&key.0, key.1, key.2) == (&chosen_key.0, chosen_key.1, chosen_key.2) {
+        let h = headers[first].1;
+        if (&s.series_uid, s.rows, s.cols) == (&c.series_uid, c.rows, c.cols) {
             notes.push(format!(
                 "{} image(s) of series {} were not stacked with the others: their ImageOrientationPatient {:?} differs from the loaded images' {:?} (a localizer, another plane or a rotated slice?); first: {}",
-                frame_count(members),
-                key.0,
-                orientation_of(key).unwrap_or_default(),
-                orientation_of(&chosen_key).unwrap_or_default(),
-                headers[members[0]].0
+                s.frames,
+                s.series_uid,
+                s.orientation.unwrap_or_default(),
+                c.orientation.unwrap_or_default(),
+                headers[first].0
             ));
         } else {
             notes.push(format!(
                 "another series was not loaded: {} \"{}\" ({} images of {}x{}, {})",
-                key.0,
-                h.series_description,
-                frame_count(members),
-                key.2,
-                key.1,
-                h.modality_name
+                s.series_uid, h.series_description, s.frames, s.cols, s.rows, h.modality_name
             ));
         }
     }
-    let members = groups.remove(&chosen_key).unwrap_or_default();
-    Ok((chosen_key.0, members))
+}
+
+/// The stack to load among images (named headers; [`group_stacks`], [`default_stack`]): its
+/// series UID and its members (indices into `headers`), with notes on the others. The
+/// streaming builder ([`super::stream::SeriesBuilder`]) uses it.
+pub(super) fn choose_stack(
+    headers: &[(&str, &FileHeader)],
+    notes: &mut Vec<String>,
+) -> Result<(String, Vec<usize>), LoadError> {
+    let mut stacks = group_stacks(headers);
+    let chosen = default_stack(&stacks, headers).ok_or_else(|| LoadError::DicomSeries {
+        series: "-".to_owned(),
+        message: "no series".to_owned(),
+    })?;
+    other_stack_notes(&stacks, chosen, headers, notes);
+    let stack = stacks.swap_remove(chosen);
+    Ok((stack.series_uid, stack.members))
 }
 
 /// Geometry and voxels of one series.
-fn assemble(
+pub(super) fn assemble(
     series: &str,
     files: &[(&InputFile, &FileHeader)],
     limits: &Limits,

@@ -1,0 +1,123 @@
+//! The series list: when the files given (a folder, a drop, an archive) hold more than one
+//! DICOM series, the side panel lists them (modality, description, images, slice thickness,
+//! orientation) and one click loads another, from the files kept in the [`SeriesSet`]. The
+//! list carries no patient data, so it is also published in `window.shapecastStatus`.
+
+use super::ShapecastApp;
+use super::load::{LoadSource, SeriesSet};
+use crate::io::SeriesEntry;
+use crate::status::SeriesStatus;
+
+/// The app's series list and the entry being loaded, if one is.
+#[derive(Default)]
+pub(super) struct SeriesState {
+    pub set: Option<SeriesSet>,
+    /// The entry whose load is running (cleared when that load ends either way).
+    pub loading: Option<usize>,
+}
+
+/// One row of the list: "CT  93 images  1.5 mm  axial".
+pub(super) fn row_text(e: &SeriesEntry) -> String {
+    let mut s = format!(
+        "{}  {} image{}",
+        if e.modality.is_empty() {
+            "?"
+        } else {
+            e.modality.as_str()
+        },
+        e.images,
+        if e.images == 1 { "" } else { "s" }
+    );
+    if let Some(t) = e.thickness_mm() {
+        s.push_str(&format!("  {t} mm"));
+    }
+    s.push_str(&format!("  {}", e.orientation.name()));
+    if e.part.1 > 1 {
+        s.push_str(&format!(" (part {} of {})", e.part.0 + 1, e.part.1));
+    }
+    s
+}
+
+/// The series' number and description on a second line: "#3 HEAD STD".
+pub(super) fn row_description(e: &SeriesEntry) -> String {
+    let number = e.number.map(|n| format!("#{n}"));
+    let description = (!e.description.is_empty()).then(|| e.description.clone());
+    match (number, description) {
+        (Some(n), Some(d)) => format!("{n} {d}"),
+        (Some(n), None) => n,
+        (None, Some(d)) => d,
+        (None, None) => "(no description)".to_owned(),
+    }
+}
+
+/// What `window.shapecastStatus.series` shows of a list.
+pub(super) fn status_of(state: &SeriesState) -> Vec<SeriesStatus> {
+    let Some(set) = &state.set else {
+        return Vec::new();
+    };
+    set.list
+        .entries()
+        .iter()
+        .enumerate()
+        .map(|(i, e)| SeriesStatus {
+            modality: e.modality.clone(),
+            description: e.description.clone(),
+            number: e.number,
+            images: e.images,
+            rows: e.rows,
+            cols: e.cols,
+            thickness_mm: e.thickness_mm(),
+            orientation: e.orientation.name().to_owned(),
+            chosen: i == set.chosen,
+            loading: state.loading == Some(i),
+        })
+        .collect()
+}
+
+impl ShapecastApp {
+    /// The series of the files loaded, when they hold several; a click loads one.
+    pub(super) fn series_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(set) = self.series.set.clone() else {
+            return;
+        };
+        ui.separator();
+        ui.label(egui::RichText::new(format!("Series ({})", set.list.entries().len())).strong())
+            .on_hover_text("the files given hold several series; click one to load it");
+        let mut pick = None;
+        for (i, e) in set.list.entries().iter().enumerate() {
+            let mut text = row_text(e);
+            if self.series.loading == Some(i) {
+                text.push_str("  (loading…)");
+            }
+            let r = ui
+                .selectable_label(
+                    i == set.chosen,
+                    format!("{text}\n    {}", row_description(e)),
+                )
+                .on_hover_text(format!(
+                    "{} × {} pixels, {} file{}",
+                    e.cols,
+                    e.rows,
+                    e.files,
+                    if e.files == 1 { "" } else { "s" }
+                ));
+            self.control(&format!("series:{i}"), r.rect);
+            if r.clicked() && i != set.chosen && self.series.loading != Some(i) {
+                pick = Some(i);
+            }
+        }
+        if let Some(i) = pick {
+            self.open_series(&set, i);
+        }
+    }
+
+    /// Loads entry `index` of `set`; the volume shown and the list stay until it is loaded.
+    fn open_series(&mut self, set: &SeriesSet, index: usize) {
+        if index >= set.list.entries().len() {
+            return;
+        }
+        let origin = self.scene.as_ref().and_then(|s| s.origin.clone());
+        self.open_from(LoadSource::Series(set.with_chosen(index)), origin);
+        self.series.loading = Some(index);
+    }
+}
