@@ -524,6 +524,16 @@ fn number_keys_set_the_window_presets_and_question_mark_shows_the_keys() {
         let mip = h.state().view_state().mip_window.expect("mip window");
         assert_eq!(Window::from_bounds(mip), w, "{key:?}: the MIP's window");
     }
+    // 0: the volume's default windows, the slices' and the MIP's (a CT's MIP: -100..900 HU).
+    let default = shapecast::app::window_level::default_window(h.state().volume().expect("volume"));
+    h.key_press(egui::Key::Num0);
+    h.run_steps(1);
+    assert_eq!(h.state().window(), default);
+    assert_eq!(
+        h.state().view_state().mip_window,
+        Some((-100.0, 900.0)),
+        "0 resets the MIP's window too"
+    );
     assert!(!h.state().keys_help_shown());
     h.event(egui::Event::Text("?".into()));
     h.run_steps(2);

@@ -11,7 +11,7 @@ pub const HELP: &[(&str, &str)] = &[
         "1 … 5",
         "window presets: lung, mediastinum, abdomen, bone, brain (slices and MIP)",
     ),
-    ("0", "the volume's default window"),
+    ("0", "the volume's default windows (slices and MIP)"),
     (
         "wheel, arrow up/down, PgUp PgDn",
         "next slice towards superior / anterior / left (over a slice pane)",
@@ -91,6 +91,7 @@ impl ShapecastApp {
             Key::Num0 => {
                 if let Some(s) = &self.scene {
                     self.window = super::window_level::default_window(&s.volume);
+                    self.mip_view.settings.window = super::default_mip_window(s, self.window);
                 }
             }
             Key::D => self.measure.tool = Tool::Ruler,

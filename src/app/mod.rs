@@ -1071,11 +1071,8 @@ impl ShapecastApp {
                                 // contrast, vessels and bone are what should stay apart.
                                 if self.mip_window_for != Some(scene.generation) {
                                     self.mip_window_for = Some(scene.generation);
-                                    self.mip_view.settings.window = if scene.is_ct {
-                                        (-100.0, 900.0)
-                                    } else {
-                                        self.window.range()
-                                    };
+                                    self.mip_view.settings.window =
+                                        default_mip_window(scene, self.window);
                                 }
                                 for c in 0..3 {
                                     self.mip_view.settings.channels[c].on = self.display.enabled[c];
@@ -1202,6 +1199,17 @@ impl eframe::App for ShapecastApp {
         {
             ctx.request_repaint();
         }
+    }
+}
+
+/// The MIP's own window for a new volume (and key 0): -100..900 HU for CT, where contrast,
+/// vessels and bone stay apart (a soft-tissue window saturates a CT's MIP); for other volumes
+/// the slices' `slice_window`.
+fn default_mip_window(scene: &Scene, slice_window: Window) -> (f32, f32) {
+    if scene.is_ct {
+        (-100.0, 900.0)
+    } else {
+        slice_window.range()
     }
 }
 
