@@ -38,6 +38,10 @@ pub const HELP: &[(&str, &str)] = &[
         "P",
         "save a picture (PNG) of the pane under the pointer, or of the MIP",
     ),
+    (
+        "M",
+        "save a movie: a full turn of the MIP as an animated PNG",
+    ),
     ("?", "show or hide this help"),
 ];
 
@@ -61,6 +65,10 @@ impl ShapecastApp {
                     if key == egui::Key::P {
                         let pane = self.pane_under_pointer(ctx);
                         self.save_picture(ctx, pane);
+                    } else if key == egui::Key::M {
+                        if self.movie_progress().is_none() {
+                            self.save_movie(ctx, super::movie::MOVIE_FRAMES);
+                        }
                     } else {
                         self.key(key);
                     }

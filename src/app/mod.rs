@@ -12,6 +12,7 @@ mod keys;
 pub mod load;
 pub mod measure;
 pub mod mip_view;
+pub mod movie;
 mod pacs;
 mod panels;
 pub mod picture;
@@ -323,6 +324,8 @@ pub struct ShapecastApp {
     show_keys: bool,
     /// "Save picture": the picture being made and the last one.
     picture: picture::PictureState,
+    /// "Save movie": the movie being made and the last one.
+    movie: movie::MovieState,
     drop_hover: bool,
     #[cfg(not(target_arch = "wasm32"))]
     open_path: String,
@@ -419,6 +422,7 @@ impl ShapecastApp {
             show_about: false,
             show_keys: false,
             picture: picture::PictureState::default(),
+            movie: movie::MovieState::default(),
             drop_hover: false,
             #[cfg(not(target_arch = "wasm32"))]
             open_path: String::new(),
@@ -853,6 +857,7 @@ impl ShapecastApp {
             .iter()
             .map(|(n, r)| (n.clone(), [r.left(), r.top(), r.width(), r.height()]))
             .collect();
+        let movie = self.movie_progress();
         let s = &mut self.status;
         s.volume = self.scene.as_ref().map(|sc| VolumeStatus {
             dims: sc.volume.dims,
@@ -912,6 +917,11 @@ impl ShapecastApp {
                     .map_or("", |r| features::method_name(r.method)),
                 panels::time_left(self.features.timing())
             ));
+        } else if let Some((done, frames)) = movie {
+            // Saving a movie leaves the viewer ready; the task says how far it is.
+            s.phase = Phase::Ready;
+            s.progress = done as f32 / frames.max(1) as f32;
+            s.task = Some(format!("saving the movie: frame {done} of {frames}"));
         } else {
             s.task = None;
             s.progress = 1.0;
@@ -1186,6 +1196,7 @@ impl eframe::App for ShapecastApp {
         self.drop_overlay(&ctx);
 
         self.poll_picture(&ctx);
+        self.advance_movie(&ctx);
         self.update_probe();
         self.update_status();
         if self.published.as_ref() != Some(&self.status) {

@@ -77,6 +77,7 @@ impl ShapecastApp {
             ui.separator();
             self.copy_link_ui(ui);
             self.save_picture_ui(ui);
+            self.save_movie_ui(ui);
             ui.separator();
             if ui.button("About & data").clicked() {
                 self.show_about = !self.show_about;
@@ -417,6 +418,7 @@ impl ShapecastApp {
                     self.features.cancel();
                 }
             }
+            self.movie_progress_ui(ui);
             if let Some(a) = &self.status.adapter {
                 ui.separator();
                 ui.label(egui::RichText::new(format!("GPU: {} ({})", a.name, a.backend)).small());
