@@ -5,7 +5,8 @@
 //! diameter; an ellipse's statistics equal a direct computation over the same pixels; the
 //! measurements travel in the link; the number keys set the window presets (the MIP's too), 0
 //! the default windows, and "?" shows the keys; "Save movie" writes an animated PNG of a full
-//! turn of the MIP. Screenshots are saved for a person to look at.
+//! turn of the MIP; with the ruler, a click in the MIP measures in 3D. Screenshots are saved for
+//! a person to look at.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -400,7 +401,7 @@ fn a_ruler_reads_the_sphere_diameter_and_an_ellipse_its_statistics_and_both_go_i
     let ruler = list[0].measurement;
     assert_eq!(
         (ruler.kind, ruler.pane),
-        (MeasureKind::Ruler, SliceKind::Axial)
+        (MeasureKind::Ruler, Some(SliceKind::Axial))
     );
     let diameter = 2.0 * 5.0;
     eprintln!(
@@ -835,4 +836,104 @@ fn save_movie_writes_an_animated_png_of_a_full_turn() {
     );
     assert!(h.state().errors().is_empty(), "{:?}", h.state().errors());
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Two bright blobs (Gaussian, 1 mm voxels) in an empty volume, as NIfTI.
+fn two_blobs(centres: [[f64; 3]; 2]) -> Vec<u8> {
+    let dims = [48, 48, 48];
+    let mut values = Vec::with_capacity(48 * 48 * 48);
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p = DVec3::new(i as f64, j as f64, k as f64);
+                let v: f64 = centres
+                    .iter()
+                    .map(|c| 1000.0 * (-(p - DVec3::from(*c)).length_squared() / 4.5).exp())
+                    .sum();
+                values.push(v as f32);
+            }
+        }
+    }
+    let v = Volume::from_f32(dims, [1.0, 1.0, 1.0], values);
+    shapecast::io::nifti::write_volume("blobs.nii", &v).expect("nifti")
+}
+
+/// With the ruler, a click in the MIP measures in 3D from the crosshair to the point the pixel's
+/// maximum came from: between the centres of two blobs at different depths, the ruler reads
+/// their distance; it is in the list, in the link as a `3d` ruler, and comes back from it.
+#[test]
+fn a_click_in_the_mip_with_the_ruler_measures_in_3d() {
+    let Some(mut h) = harness(intensity_only(StartWith::Nothing)) else {
+        return;
+    };
+    let (a, b) = ([14.0, 12.0, 16.0], [33.0, 36.0, 30.0]);
+    h.state_mut().open(LoadSource::Files {
+        label: "blobs.nii".into(),
+        files: vec![shapecast::io::InputFile::new(
+            "blobs.nii",
+            two_blobs([a, b]),
+        )],
+    });
+    run_until(&mut h, "loaded", 40, |app| app.volume().is_some());
+    h.run_steps(3);
+    let v = h.state().volume().expect("volume").clone();
+    let world = v.world_from_voxel();
+    let (a_mm, b_mm) = (
+        world.transform_point3(DVec3::from(a)),
+        world.transform_point3(DVec3::from(b)),
+    );
+    h.state_mut().set_crosshair(a.map(|x| x as usize));
+    h.state_mut().set_tool(Tool::Ruler);
+    h.run_steps(3);
+    let at = h
+        .state()
+        .mip_screen_pos_of(b_mm)
+        .expect("blob b in the MIP");
+    h.hover_at(at);
+    h.run_steps(1);
+    h.event(egui::Event::PointerButton {
+        pos: at,
+        button: egui::PointerButton::Primary,
+        pressed: true,
+        modifiers: egui::Modifiers::NONE,
+    });
+    h.event(egui::Event::PointerButton {
+        pos: at,
+        button: egui::PointerButton::Primary,
+        pressed: false,
+        modifiers: egui::Modifiers::NONE,
+    });
+    run_until(&mut h, "a ruler in 3D", 40, |app| {
+        !app.measurements().is_empty()
+    });
+    let list = h.state().measurements().to_vec();
+    assert_eq!(list.len(), 1, "{list:?}");
+    let m = list[0].measurement;
+    assert_eq!((m.kind, m.pane), (MeasureKind::Ruler, None));
+    let want = (b_mm - a_mm).length();
+    eprintln!(
+        "3D ruler {:.3} mm from {:?} to {:?}; the blobs are {want:.3} mm apart",
+        m.length_mm(),
+        m.a_mm,
+        m.b_mm
+    );
+    assert!((m.a_mm - a_mm).length() < 1e-9, "from the crosshair");
+    // The click's pixel is within half a pixel of the blob's centre, the depth within a sample.
+    assert!((m.b_mm - b_mm).length() < 1.0, "{:?} vs {b_mm:?}", m.b_mm);
+    assert!((m.length_mm() - want).abs() < 1.0, "{} mm", m.length_mm());
+    assert_eq!(
+        h.state().crosshair(),
+        b.map(|x| x as usize),
+        "the crosshair moved to the picked point"
+    );
+    h.run_steps(3);
+    let image = h.render().expect("render");
+    save(&image, "reading_ruler_3d.png");
+
+    let fragment = h.state().view_state().fragment();
+    assert!(fragment.contains("&m=ruler,3d,"), "{fragment}");
+    let (back, problems) = shapecast::app::view_link::ViewState::from_fragment(&fragment);
+    assert!(problems.is_empty(), "{problems:?}");
+    assert_eq!(back.measurements, Some(vec![m]));
+    assert!(h.state().errors().is_empty(), "{:?}", h.state().errors());
 }

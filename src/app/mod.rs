@@ -802,6 +802,7 @@ impl ShapecastApp {
         self.hover = None;
         self.features.clear();
         self.measure.list.clear();
+        self.measure.last_pick = None;
         self.probe = probe::ProbeState::default();
         self.notes = notes;
         self.notes.extend(volume.warnings.iter().cloned());
@@ -1028,6 +1029,8 @@ impl ShapecastApp {
         let mut errors = Vec::new();
         let mut measured = Vec::new();
         let mut mip_drawn = false;
+        // The crosshair before a click in the MIP, and what the click picked.
+        let mut mip_click = None;
         for (id, rect) in &rects {
             let kind = match id {
                 PaneId::Mip => None,
@@ -1123,8 +1126,14 @@ impl ShapecastApp {
                                     t
                                 });
                                 if let Some(pick) = out.pick {
+                                    mip_click = Some((self.crosshair, pick));
                                     self.crosshair = pick.voxel;
                                 }
+                                measure::draw_rulers_3d(
+                                    &ui.painter_at(self.mip_view.image_area()),
+                                    inputs.measurements,
+                                    |p| self.mip_view.screen_pos_of(p),
+                                );
                                 if clicked {
                                     toggle = Some(id);
                                 }
@@ -1135,6 +1144,16 @@ impl ShapecastApp {
         }
         self.hover = hover;
         if let Some(s) = &self.scene {
+            // With the ruler, a click in the MIP measures in 3D from the crosshair to the point
+            // it picked.
+            if let Some((before, pick)) = mip_click {
+                measured.extend(self.measure.mip_pick(
+                    &s.volume,
+                    before,
+                    pick.voxel,
+                    pick.world_mm,
+                ));
+            }
             for m in measured {
                 self.measure.add(&s.volume, m);
             }
