@@ -262,14 +262,14 @@ impl MipView {
         self.last.as_ref().map(|k| k.size)
     }
 
-    /// Renders the rows `rows` of a frame of `scene` seen by `camera` into the caller's
-    /// `target` (an off-screen frame: "Save movie"), with the pane's ray caster and brick
-    /// tables; `samples` (its [`FrameCost`]) counts towards the pane's measured GPU rate.
+    /// Renders the rows `rows` of a frame of `volume` and `features` seen by `camera` into the
+    /// caller's `target` (an off-screen frame: "Save movie"), with the pane's ray caster and
+    /// brick tables; `samples` (its [`FrameCost`]) counts towards the pane's measured GPU rate.
     #[allow(clippy::too_many_arguments)]
     pub fn render_offscreen(
         &mut self,
         gpu: &GpuContext,
-        scene: &MipScene<'_>,
+        volume: &RenderVolume,
         features: Option<&FeatureTexture>,
         camera: &Camera,
         settings: &RenderSettings,
@@ -278,12 +278,12 @@ impl MipView {
         samples: f64,
     ) -> Result<(), String> {
         let started = web_time::Instant::now();
-        self.prepare(gpu, scene.volume, features)?;
+        self.prepare(gpu, volume, features)?;
         let Some(caster) = &self.caster else {
             return Err("the ray caster is not ready".to_owned());
         };
         let scene = Scene {
-            volume: scene.volume,
+            volume,
             features,
             bricks: self.bricks.as_ref(),
             feature_bricks: self.feature_bricks.as_ref(),

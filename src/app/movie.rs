@@ -7,15 +7,14 @@
 //! Nothing waits: each app frame draws a band of rows within the pane's GPU budget (the
 //! progressive frames' [`FrameCost`]), a finished frame is copied back with `map_async`
 //! ([`PendingTexture`], polled in later frames, a few in flight) and encoded into the APNG as
-//! it arrives. The status bar shows the progress and a Cancel; a new volume or another display
-//! mode stops it. Then the file is handed on as "Save picture" does (a download in the page,
+//! it arrives. The status bar shows the progress and a Cancel; a new volume stops it; features
+//! that arrive meanwhile (or another display mode) start it again from the first frame. Then the file is handed on as "Save picture" does (a download in the page,
 //! the pictures' folder natively).
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
 use super::ShapecastApp;
-use super::mip_view::MipScene;
 use crate::gpu::readback::PendingTexture;
 use crate::gpu::volume_texture::FeatureTexture;
 use crate::render::camera::Camera;
@@ -100,7 +99,7 @@ impl ApngWriter {
                 rgba.len()
             ));
         }
-        // Opaque, as the pane is (the ray caster's alpha is not the picture's).
+        // Opaque whatever the frame holds (the ray caster writes alpha 1; the pane is opaque).
         let opaque: Vec<u8> = rgba
             .chunks_exact(4)
             .flat_map(|p| [p[0], p[1], p[2], 255])
@@ -139,7 +138,7 @@ struct Making {
     frames: u32,
     camera: Camera,
     settings: RenderSettings,
-    /// The textures it shows: if the app shows others, the movie stops.
+    /// The textures it shows: another volume stops the movie, other features restart it.
     volume: wgpu::Texture,
     features: Option<wgpu::Texture>,
     target: RaycastTarget,
@@ -269,9 +268,18 @@ impl ShapecastApp {
         let Some(m) = &mut self.movie.making else {
             return Ok(false);
         };
-        if m.volume != scene.render.intensity || m.features.as_ref() != features.map(|f| &f.texture)
-        {
-            return Err("stopped: another volume or display mode is shown".to_owned());
+        if m.volume != scene.render.intensity {
+            return Err("stopped: another volume is shown".to_owned());
+        }
+        if m.features.as_ref() != features.map(|f| &f.texture) {
+            // The features arrived (asked for before they were computed) or another mode is
+            // shown: start again, so that every frame shows the same.
+            m.features = features.map(|f| f.texture.clone());
+            m.frame = 0;
+            m.next_row = 0;
+            m.cost = None;
+            m.reads.clear();
+            m.writer = ApngWriter::new(m.target.size, m.frames, FPS)?;
         }
         while let Some(read) = m.reads.front_mut() {
             match read.poll(gpu) {
@@ -304,14 +312,9 @@ impl ShapecastApp {
             let end = cost.band_within(m.next_row, budget);
             let rows = m.next_row..end;
             let samples = cost.rows(rows.clone());
-            let feats: Vec<(&str, &FeatureTexture)> = Vec::new();
-            let mip_scene = MipScene {
-                volume: &scene.render,
-                features: &feats,
-            };
             self.mip_view.render_offscreen(
                 gpu,
-                &mip_scene,
+                &scene.render,
                 features,
                 &camera,
                 &m.settings,
