@@ -3,8 +3,10 @@
 //! the point under the pointer, pans and fits; the wheel goes superior (anterior, left) in a file
 //! stored either way along z; cine plays and stops; a ruler across the phantom sphere reads its
 //! diameter; an ellipse's statistics equal a direct computation over the same pixels; the
-//! measurements travel in the link; the number keys set the window presets (the MIP's too) and
-//! "?" shows the keys. Screenshots are saved for a person to look at.
+//! measurements travel in the link; the number keys set the window presets (the MIP's too), 0
+//! the default windows, and "?" shows the keys; "Save movie" writes an animated PNG of a full
+//! turn of the MIP; with the ruler, a click in the MIP measures in 3D. Screenshots are saved for
+//! a person to look at.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -399,7 +401,7 @@ fn a_ruler_reads_the_sphere_diameter_and_an_ellipse_its_statistics_and_both_go_i
     let ruler = list[0].measurement;
     assert_eq!(
         (ruler.kind, ruler.pane),
-        (MeasureKind::Ruler, SliceKind::Axial)
+        (MeasureKind::Ruler, Some(SliceKind::Axial))
     );
     let diameter = 2.0 * 5.0;
     eprintln!(
@@ -524,6 +526,16 @@ fn number_keys_set_the_window_presets_and_question_mark_shows_the_keys() {
         let mip = h.state().view_state().mip_window.expect("mip window");
         assert_eq!(Window::from_bounds(mip), w, "{key:?}: the MIP's window");
     }
+    // 0: the volume's default windows, the slices' and the MIP's (a CT's MIP: -100..900 HU).
+    let default = shapecast::app::window_level::default_window(h.state().volume().expect("volume"));
+    h.key_press(egui::Key::Num0);
+    h.run_steps(1);
+    assert_eq!(h.state().window(), default);
+    assert_eq!(
+        h.state().view_state().mip_window,
+        Some((-100.0, 900.0)),
+        "0 resets the MIP's window too"
+    );
     assert!(!h.state().keys_help_shown());
     h.event(egui::Event::Text("?".into()));
     h.run_steps(2);
@@ -710,4 +722,218 @@ fn save_picture_writes_the_pane_with_letters_and_a_scale_bar() {
     });
     assert!(dir.join("phantom-sphere-coronal.png").exists());
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The frames of an APNG, decoded with `png`: (frames announced, frames as RGBA rows, size).
+fn apng_frames(bytes: &[u8]) -> (u32, Vec<Vec<u8>>, [u32; 2]) {
+    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .expect("a PNG");
+    let announced = reader
+        .info()
+        .animation_control()
+        .expect("an animated PNG (acTL)")
+        .num_frames;
+    let size = [reader.info().width, reader.info().height];
+    let mut frames = Vec::new();
+    let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+    while let Ok(out) = reader.next_frame(&mut buf) {
+        assert_eq!(
+            [out.width, out.height],
+            size,
+            "every frame is the whole image"
+        );
+        frames.push(buf[..out.buffer_size()].to_vec());
+    }
+    (announced, frames, size)
+}
+
+/// Mean absolute difference of the red channel of two RGBA images of `width` pixels per row;
+/// `mirror` compares `b` flipped left to right.
+fn mean_red_diff(a: &[u8], b: &[u8], width: usize, mirror: bool) -> f64 {
+    let rows = a.len() / (4 * width);
+    let mut sum = 0u64;
+    for y in 0..rows {
+        for x in 0..width {
+            let xb = if mirror { width - 1 - x } else { x };
+            let (p, q) = (a[(y * width + x) * 4], b[(y * width + xb) * 4]);
+            sum += u64::from(p.abs_diff(q));
+        }
+    }
+    sum as f64 / (rows * width) as f64
+}
+
+/// "Save movie": N frames of a full turn of the MIP as an APNG written to the pictures' folder,
+/// at the pane's size; the picture turns (a quarter turn changes it), half a turn is the first
+/// frame mirrored (a maximum does not depend on the ray's direction). The key M starts the
+/// menu's 36-frame movie, with its progress in the status, and Cancel stops it.
+#[test]
+fn save_movie_writes_an_animated_png_of_a_full_turn() {
+    let Some(mut h) = harness(intensity_only(StartWith::Phantom(
+        "bifurcation-nodules-far".into(),
+    ))) else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("shapecast-movie-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    h.state_mut().set_picture_dir(dir.clone());
+    let ctx = h.ctx.clone();
+    let frames_before = h.state().status().frames;
+    h.state_mut().save_movie(&ctx, 8);
+    let started = std::time::Instant::now();
+    run_until(&mut h, "the movie", 400, |app| app.last_movie().is_some());
+    let app_frames = h.state().status().frames - frames_before;
+    let movie = h.state().last_movie().expect("movie").clone();
+    eprintln!(
+        "movie {} {:?}: {} bytes, {app_frames} app frames, {:.1} s",
+        movie.name,
+        movie.size,
+        movie.png.len(),
+        started.elapsed().as_secs_f64()
+    );
+    assert_eq!(movie.name, "shapecast-rotation.png");
+    assert!(app_frames > 8, "made over several frames: {app_frames}");
+    let bytes = std::fs::read(dir.join(&movie.name)).expect("the file written");
+    assert_eq!(bytes, movie.png);
+    let (announced, frames, size) = apng_frames(&bytes);
+    assert_eq!((announced, frames.len()), (8, 8));
+    assert_eq!(size, movie.size);
+    assert_eq!(Some(size), h.state().mip_frame_size(), "the pane's size");
+    let w = size[0] as usize;
+    let frame0 = image::RgbaImage::from_raw(size[0], size[1], frames[0].clone()).expect("rgba");
+    save(&frame0, "reading_movie_frame0.png");
+    let frame2 = image::RgbaImage::from_raw(size[0], size[1], frames[2].clone()).expect("rgba");
+    save(&frame2, "reading_movie_frame2.png");
+    let (half, quarter) = (
+        mean_red_diff(&frames[4], &frames[0], w, true),
+        mean_red_diff(&frames[2], &frames[0], w, false),
+    );
+    eprintln!("mean |frame 4 - mirrored frame 0| = {half:.2}, |frame 2 - frame 0| = {quarter:.2}");
+    assert!(half < 3.0, "{half}");
+    assert!(
+        quarter > 4.0 * half.max(0.5),
+        "a quarter turn changes the picture: {quarter}"
+    );
+    assert!(
+        frames[0].chunks_exact(4).any(|p| p[0] > 100),
+        "frame 0 shows the phantom"
+    );
+
+    // M: the menu's movie, 36 frames; its progress is in the status; Cancel stops it.
+    std::fs::remove_file(dir.join(&movie.name)).expect("remove");
+    h.key_press(egui::Key::M);
+    h.run_steps(3);
+    assert_eq!(h.state().movie_progress().map(|p| p.1), Some(36));
+    let task = h.state().status().task.clone().unwrap_or_default();
+    assert!(task.starts_with("saving the movie: frame "), "{task}");
+    h.get_by_label("Cancel").click();
+    h.run_steps(2);
+    assert_eq!(h.state().movie_progress(), None);
+    h.run_steps(5);
+    assert!(
+        !dir.join(&movie.name).exists(),
+        "a cancelled movie is not saved"
+    );
+    assert!(h.state().errors().is_empty(), "{:?}", h.state().errors());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Two bright blobs (Gaussian, 1 mm voxels) in an empty volume, as NIfTI.
+fn two_blobs(centres: [[f64; 3]; 2]) -> Vec<u8> {
+    let dims = [48, 48, 48];
+    let mut values = Vec::with_capacity(48 * 48 * 48);
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p = DVec3::new(i as f64, j as f64, k as f64);
+                let v: f64 = centres
+                    .iter()
+                    .map(|c| 1000.0 * (-(p - DVec3::from(*c)).length_squared() / 4.5).exp())
+                    .sum();
+                values.push(v as f32);
+            }
+        }
+    }
+    let v = Volume::from_f32(dims, [1.0, 1.0, 1.0], values);
+    shapecast::io::nifti::write_volume("blobs.nii", &v).expect("nifti")
+}
+
+/// With the ruler, a click in the MIP measures in 3D from the crosshair to the point the pixel's
+/// maximum came from: between the centres of two blobs at different depths, the ruler reads
+/// their distance; it is in the list, in the link as a `3d` ruler, and comes back from it.
+#[test]
+fn a_click_in_the_mip_with_the_ruler_measures_in_3d() {
+    let Some(mut h) = harness(intensity_only(StartWith::Nothing)) else {
+        return;
+    };
+    let (a, b) = ([14.0, 12.0, 16.0], [33.0, 36.0, 30.0]);
+    h.state_mut().open(LoadSource::Files {
+        label: "blobs.nii".into(),
+        files: vec![shapecast::io::InputFile::new(
+            "blobs.nii",
+            two_blobs([a, b]),
+        )],
+    });
+    run_until(&mut h, "loaded", 40, |app| app.volume().is_some());
+    h.run_steps(3);
+    let v = h.state().volume().expect("volume").clone();
+    let world = v.world_from_voxel();
+    let (a_mm, b_mm) = (
+        world.transform_point3(DVec3::from(a)),
+        world.transform_point3(DVec3::from(b)),
+    );
+    h.state_mut().set_crosshair(a.map(|x| x as usize));
+    h.state_mut().set_tool(Tool::Ruler);
+    h.run_steps(3);
+    let at = h
+        .state()
+        .mip_screen_pos_of(b_mm)
+        .expect("blob b in the MIP");
+    h.hover_at(at);
+    h.run_steps(1);
+    h.event(egui::Event::PointerButton {
+        pos: at,
+        button: egui::PointerButton::Primary,
+        pressed: true,
+        modifiers: egui::Modifiers::NONE,
+    });
+    h.event(egui::Event::PointerButton {
+        pos: at,
+        button: egui::PointerButton::Primary,
+        pressed: false,
+        modifiers: egui::Modifiers::NONE,
+    });
+    run_until(&mut h, "a ruler in 3D", 40, |app| {
+        !app.measurements().is_empty()
+    });
+    let list = h.state().measurements().to_vec();
+    assert_eq!(list.len(), 1, "{list:?}");
+    let m = list[0].measurement;
+    assert_eq!((m.kind, m.pane), (MeasureKind::Ruler, None));
+    let want = (b_mm - a_mm).length();
+    eprintln!(
+        "3D ruler {:.3} mm from {:?} to {:?}; the blobs are {want:.3} mm apart",
+        m.length_mm(),
+        m.a_mm,
+        m.b_mm
+    );
+    assert!((m.a_mm - a_mm).length() < 1e-9, "from the crosshair");
+    // The click's pixel is within half a pixel of the blob's centre, the depth within a sample.
+    assert!((m.b_mm - b_mm).length() < 1.0, "{:?} vs {b_mm:?}", m.b_mm);
+    assert!((m.length_mm() - want).abs() < 1.0, "{} mm", m.length_mm());
+    assert_eq!(
+        h.state().crosshair(),
+        b.map(|x| x as usize),
+        "the crosshair moved to the picked point"
+    );
+    h.run_steps(3);
+    let image = h.render().expect("render");
+    save(&image, "reading_ruler_3d.png");
+
+    let fragment = h.state().view_state().fragment();
+    assert!(fragment.contains("&m=ruler,3d,"), "{fragment}");
+    let (back, problems) = shapecast::app::view_link::ViewState::from_fragment(&fragment);
+    assert!(problems.is_empty(), "{problems:?}");
+    assert_eq!(back.measurements, Some(vec![m]));
+    assert!(h.state().errors().is_empty(), "{:?}", h.state().errors());
 }

@@ -11,7 +11,7 @@ pub const HELP: &[(&str, &str)] = &[
         "1 … 5",
         "window presets: lung, mediastinum, abdomen, bone, brain (slices and MIP)",
     ),
-    ("0", "the volume's default window"),
+    ("0", "the volume's default windows (slices and MIP)"),
     (
         "wheel, arrow up/down, PgUp PgDn",
         "next slice towards superior / anterior / left (over a slice pane)",
@@ -38,6 +38,10 @@ pub const HELP: &[(&str, &str)] = &[
         "P",
         "save a picture (PNG) of the pane under the pointer, or of the MIP",
     ),
+    (
+        "M",
+        "save a movie: a full turn of the MIP as an animated PNG",
+    ),
     ("?", "show or hide this help"),
 ];
 
@@ -61,6 +65,10 @@ impl ShapecastApp {
                     if key == egui::Key::P {
                         let pane = self.pane_under_pointer(ctx);
                         self.save_picture(ctx, pane);
+                    } else if key == egui::Key::M {
+                        if self.movie_progress().is_none() {
+                            self.save_movie(ctx, super::movie::MOVIE_FRAMES);
+                        }
                     } else {
                         self.key(key);
                     }
@@ -91,6 +99,7 @@ impl ShapecastApp {
             Key::Num0 => {
                 if let Some(s) = &self.scene {
                     self.window = super::window_level::default_window(&s.volume);
+                    self.mip_view.settings.window = super::default_mip_window(s, self.window);
                 }
             }
             Key::D => self.measure.tool = Tool::Ruler,

@@ -3,6 +3,12 @@
 //! patient space (LPS mm), so it does not depend on the file's voxel order and travels in a link
 //! (`ViewState::measurements`, one `m=` field each).
 //!
+//! A ruler may also join two points in space: with the ruler tool, a click in the MIP measures
+//! from the crosshair point (or the point the last such click picked, while the crosshair stays
+//! there) to the 3D point the clicked pixel's maximum came from (`MipViewOutput::pick`), and
+//! the crosshair moves there, so clicks in a row measure a path. Such a ruler has no pane
+//! (`3d` in a link); the MIP draws it, and a slice pane marks each end on the slice it lies on.
+//!
 //! Which pixels an ellipse holds: those of the slice whose centres lie inside or on the ellipse
 //! (centre-in-ellipse), in the pane's voxel plane: pixel `(u, v)` (index across, index up the
 //! pane's vertical voxel axis) is inside when `((u - cu) / ru)² + ((v - cv) / rv)² <= 1`, with
@@ -69,10 +75,14 @@ impl MeasureKind {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Measurement {
     pub kind: MeasureKind,
-    pub pane: SliceKind,
+    /// The slice pane it was drawn on; `None` for a ruler in 3D (an end picked in the MIP).
+    pub pane: Option<SliceKind>,
     pub a_mm: DVec3,
     pub b_mm: DVec3,
 }
+
+/// The pane name of a ruler in 3D in a link.
+const PANE_3D: &str = "3d";
 
 /// Where a measurement lies in its pane, in continuous voxel coordinates of the volume.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -90,9 +100,10 @@ impl Measurement {
         (self.b_mm - self.a_mm).length()
     }
 
-    /// Its place in its pane for `volume`; `None` for an empty volume or non-finite points.
+    /// Its place in its pane for `volume`; `None` for a ruler in 3D, an empty volume or
+    /// non-finite points.
     pub fn in_pane(&self, volume: &Volume) -> Option<InPane> {
-        let axes = pane_axes(volume, self.pane);
+        let axes = pane_axes(volume, self.pane?);
         let n = volume.dims[axes.fixed];
         if n == 0 || !self.a_mm.is_finite() || !self.b_mm.is_finite() {
             return None;
@@ -110,13 +121,14 @@ impl Measurement {
         })
     }
 
-    /// The link's text form: `kind,pane,ax,ay,az,bx,by,bz` (LPS mm, shortest exact decimals).
+    /// The link's text form: `kind,pane,ax,ay,az,bx,by,bz` (LPS mm, shortest exact decimals;
+    /// the pane `3d` for a ruler in 3D).
     pub fn to_text(&self) -> String {
         let n = |x: f64| format!("{}", if x.is_finite() { x } else { 0.0 });
         format!(
             "{},{},{},{},{},{},{},{}",
             self.kind.name(),
-            self.pane.name(),
+            self.pane.map_or(PANE_3D, SliceKind::name),
             n(self.a_mm.x),
             n(self.a_mm.y),
             n(self.a_mm.z),
@@ -137,7 +149,11 @@ impl Measurement {
             "ellipse" => MeasureKind::Ellipse,
             _ => return None,
         };
-        let pane = SliceKind::ALL.into_iter().find(|k| k.name() == parts[1])?;
+        let pane = match parts[1] {
+            // Only a ruler joins two points in space; an ellipse lies in a slice.
+            PANE_3D if kind == MeasureKind::Ruler => None,
+            name => Some(SliceKind::ALL.into_iter().find(|k| k.name() == name)?),
+        };
         let mut x = [0.0f64; 6];
         for (slot, p) in x.iter_mut().zip(&parts[2..]) {
             *slot = p.parse::<f64>().ok().filter(|v| v.is_finite())?;
@@ -149,6 +165,18 @@ impl Measurement {
             b_mm: DVec3::new(x[3], x[4], x[5]),
         })
     }
+}
+
+/// The voxel nearest to a point (LPS mm), clamped into the volume; `None` for an empty volume
+/// or a non-finite point.
+pub fn nearest_voxel(volume: &Volume, p_mm: DVec3) -> Option<[usize; 3]> {
+    let v = volume.voxel_from_world().transform_point3(p_mm);
+    if !v.is_finite() || volume.dims.contains(&0) {
+        return None;
+    }
+    Some(std::array::from_fn(|a| {
+        v[a].round().clamp(0.0, (volume.dims[a] - 1) as f64) as usize
+    }))
 }
 
 /// Statistics of the pixels of an ellipse region.
@@ -188,7 +216,7 @@ pub fn region_stats(volume: &Volume, m: &Measurement) -> Option<RegionStats> {
         return None;
     }
     let p = m.in_pane(volume)?;
-    let axes = pane_axes(volume, m.pane);
+    let axes = pane_axes(volume, m.pane?);
     let (w, h) = (volume.dims[axes.across], volume.dims[axes.vertical]);
     let centre = [0.5 * (p.a[0] + p.b[0]), 0.5 * (p.a[1] + p.b[1])];
     let radii = [0.5 * (p.a[0] - p.b[0]).abs(), 0.5 * (p.a[1] - p.b[1]).abs()];
@@ -280,9 +308,38 @@ impl Entry {
 pub struct Measurements {
     pub tool: Tool,
     pub list: Vec<Entry>,
+    /// The point the last MIP click picked (LPS mm) and the voxel the crosshair went to.
+    pub last_pick: Option<([usize; 3], DVec3)>,
 }
 
 impl Measurements {
+    /// A click in the MIP picked `pick_mm` (voxel `pick_voxel`) while the crosshair was at
+    /// `crosshair`: with the ruler tool, the ruler in 3D from the crosshair's point (the last
+    /// picked point itself while the crosshair is still on its voxel) to the picked one.
+    pub fn mip_pick(
+        &mut self,
+        volume: &Volume,
+        crosshair: [usize; 3],
+        pick_voxel: [usize; 3],
+        pick_mm: DVec3,
+    ) -> Option<Measurement> {
+        let from = match self.last_pick {
+            Some((voxel, p)) if voxel == crosshair => p,
+            _ => volume.world_from_voxel().transform_point3(DVec3::new(
+                crosshair[0] as f64,
+                crosshair[1] as f64,
+                crosshair[2] as f64,
+            )),
+        };
+        self.last_pick = Some((pick_voxel, pick_mm));
+        (self.tool == Tool::Ruler && pick_mm.is_finite()).then_some(Measurement {
+            kind: MeasureKind::Ruler,
+            pane: None,
+            a_mm: from,
+            b_mm: pick_mm,
+        })
+    }
+
     /// Replaces the list (a link's, or none for a new volume), read on `volume`.
     pub fn set(&mut self, volume: &Volume, list: &[Measurement]) {
         self.list = list.iter().map(|m| Entry::new(volume, *m)).collect();
@@ -294,6 +351,37 @@ impl Measurements {
 
     pub fn measurements(&self) -> Vec<Measurement> {
         self.list.iter().map(|e| e.measurement).collect()
+    }
+}
+
+/// The rulers in 3D of `list` drawn over the MIP (`screen_of`: a point's place on it), each
+/// with its number and length.
+pub fn draw_rulers_3d(
+    painter: &egui::Painter,
+    list: &[Entry],
+    screen_of: impl Fn(DVec3) -> Option<egui::Pos2>,
+) {
+    let colour = egui::Color32::from_rgb(90, 200, 255);
+    let stroke = egui::Stroke::new(1.5, colour);
+    for (n, e) in list.iter().enumerate() {
+        let m = &e.measurement;
+        if m.pane.is_some() {
+            continue;
+        }
+        let (Some(a), Some(b)) = (screen_of(m.a_mm), screen_of(m.b_mm)) else {
+            continue;
+        };
+        painter.line_segment([a, b], stroke);
+        for p in [a, b] {
+            painter.circle_stroke(p, 4.0, stroke);
+        }
+        painter.text(
+            b + egui::vec2(6.0, -6.0),
+            egui::Align2::LEFT_BOTTOM,
+            format!("{} {}", n + 1, e.reading("")),
+            egui::FontId::proportional(13.0),
+            colour,
+        );
     }
 }
 
@@ -311,6 +399,11 @@ impl super::ShapecastApp {
     pub fn tool(&self) -> Tool {
         self.measure.tool
     }
+
+    /// Where a point (LPS mm) is in the MIP pane as last drawn (screen points), if inside it.
+    pub fn mip_screen_pos_of(&self, world_mm: DVec3) -> Option<egui::Pos2> {
+        self.mip_view.screen_pos_of(world_mm)
+    }
 }
 
 #[cfg(test)]
@@ -321,12 +414,24 @@ mod tests {
     fn text_round_trips_and_garbage_is_refused() {
         let m = Measurement {
             kind: MeasureKind::Ellipse,
-            pane: SliceKind::Coronal,
+            pane: Some(SliceKind::Coronal),
             a_mm: DVec3::new(-1.25, 0.1, 1e-7),
             b_mm: DVec3::new(300.0, -2.5, 17.333_333_333_333_332),
         };
         assert_eq!(Measurement::from_text(&m.to_text()), Some(m));
+        let ruler = Measurement {
+            kind: MeasureKind::Ruler,
+            pane: None,
+            ..m
+        };
+        assert!(
+            ruler.to_text().starts_with("ruler,3d,"),
+            "{}",
+            ruler.to_text()
+        );
+        assert_eq!(Measurement::from_text(&ruler.to_text()), Some(ruler));
         for bad in [
+            "ellipse,3d,1,2,3,4,5,6",
             "",
             "ruler",
             "ruler,axial,1,2,3,4,5",
@@ -354,7 +459,7 @@ mod tests {
         let world = v.world_from_voxel();
         let m = Measurement {
             kind: MeasureKind::Ellipse,
-            pane: SliceKind::Axial,
+            pane: Some(SliceKind::Axial),
             a_mm: world.transform_point3(DVec3::new(2.0, 4.0, 1.0)),
             b_mm: world.transform_point3(DVec3::new(8.0, 6.0, 1.0)),
         };

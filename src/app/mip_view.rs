@@ -246,8 +246,88 @@ impl MipView {
         crate::render::raycast::pixel_of_uv(DVec2::new(u, v), target.size)
     }
 
+    /// The settings the pane's frames are drawn with: [`Self::settings`] with the slab around
+    /// the crosshair (or the view's centre).
+    pub fn frame_settings(&self) -> RenderSettings {
+        let mut settings = self.settings;
+        settings.slab = self.slab_mm.map(|t| Slab {
+            centre_mm: self.crosshair_mm.unwrap_or(self.camera.centre_mm),
+            thickness_mm: t,
+        });
+        settings
+    }
+
+    /// The size of the pane's full-resolution frame, in pixels (`None` before the first).
+    pub fn full_size(&self) -> Option<[u32; 2]> {
+        self.last.as_ref().map(|k| k.size)
+    }
+
+    /// Renders the rows `rows` of a frame of `volume` and `features` seen by `camera` into the
+    /// caller's `target` (an off-screen frame: "Save movie"), with the pane's ray caster and
+    /// brick tables; `samples` (its [`FrameCost`]) counts towards the pane's measured GPU rate.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_offscreen(
+        &mut self,
+        gpu: &GpuContext,
+        volume: &RenderVolume,
+        features: Option<&FeatureTexture>,
+        camera: &Camera,
+        settings: &RenderSettings,
+        target: &mut RaycastTarget,
+        rows: std::ops::Range<u32>,
+        samples: f64,
+    ) -> Result<(), String> {
+        let started = web_time::Instant::now();
+        self.prepare(gpu, volume, features)?;
+        let Some(caster) = &self.caster else {
+            return Err("the ray caster is not ready".to_owned());
+        };
+        let scene = Scene {
+            volume,
+            features,
+            bricks: self.bricks.as_ref(),
+            feature_bricks: self.feature_bricks.as_ref(),
+        };
+        caster
+            .render(gpu, &scene, camera, settings, target, rows)
+            .map_err(|e| e.to_string())?;
+        self.pacer.submitted(gpu, samples, started);
+        Ok(())
+    }
+
+    /// The ray caster, and brick tables started for the textures shown.
+    fn prepare(
+        &mut self,
+        gpu: &GpuContext,
+        volume: &RenderVolume,
+        features: Option<&FeatureTexture>,
+    ) -> Result<(), String> {
+        if self.caster.is_none() {
+            self.caster = Some(Raycaster::new(gpu).map_err(|e| e.to_string())?);
+        }
+        let Some(caster) = &self.caster else {
+            return Err("the ray caster is not ready".to_owned());
+        };
+        if !self
+            .bricks
+            .as_ref()
+            .is_some_and(|b| b.of(&volume.intensity))
+        {
+            self.bricks = Some(caster.start_bricks(gpu, BrickSource::Intensity(volume)));
+        }
+        if let Some(f) = features
+            && !self
+                .feature_bricks
+                .as_ref()
+                .is_some_and(|b| b.of(&f.texture))
+        {
+            self.feature_bricks = Some(caster.start_bricks(gpu, BrickSource::Features(f)));
+        }
+        Ok(())
+    }
+
     /// The feature texture of the current mode, if the scene has it.
-    fn features<'a>(&self, scene: &MipScene<'a>) -> Option<&'a FeatureTexture> {
+    pub fn features<'a>(&self, scene: &MipScene<'a>) -> Option<&'a FeatureTexture> {
         let name = self.mode.as_deref()?;
         scene
             .features
@@ -484,11 +564,7 @@ impl MipView {
             ui.ctx().request_repaint();
         }
         let features = self.features(scene);
-        let mut settings = self.settings;
-        settings.slab = self.slab_mm.map(|t| Slab {
-            centre_mm: self.crosshair_mm.unwrap_or(self.camera.centre_mm),
-            thickness_mm: t,
-        });
+        let settings = self.frame_settings();
         let key = FrameKey {
             camera: self.camera,
             settings,
@@ -665,9 +741,7 @@ impl MipView {
         size: [u32; 2],
         rows: std::ops::Range<u32>,
     ) -> Result<(), String> {
-        if self.caster.is_none() {
-            self.caster = Some(Raycaster::new(gpu).map_err(|e| e.to_string())?);
-        }
+        self.prepare(gpu, volume, features)?;
         let resized = self.targets[slot].as_ref().is_none_or(|t| t.size != size);
         if resized {
             self.targets[slot] = Some(RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?);
@@ -675,21 +749,6 @@ impl MipView {
         let (Some(caster), Some(target)) = (&self.caster, &mut self.targets[slot]) else {
             return Err("the ray caster is not ready".to_owned());
         };
-        if !self
-            .bricks
-            .as_ref()
-            .is_some_and(|b| b.of(&volume.intensity))
-        {
-            self.bricks = Some(caster.start_bricks(gpu, BrickSource::Intensity(volume)));
-        }
-        if let Some(f) = features
-            && !self
-                .feature_bricks
-                .as_ref()
-                .is_some_and(|b| b.of(&f.texture))
-        {
-            self.feature_bricks = Some(caster.start_bricks(gpu, BrickSource::Features(f)));
-        }
         let scene = Scene {
             volume,
             features,

@@ -12,6 +12,7 @@ mod keys;
 pub mod load;
 pub mod measure;
 pub mod mip_view;
+pub mod movie;
 mod pacs;
 mod panels;
 pub mod picture;
@@ -324,6 +325,8 @@ pub struct ShapecastApp {
     show_keys: bool,
     /// "Save picture": the picture being made and the last one.
     picture: picture::PictureState,
+    /// "Save movie": the movie being made and the last one.
+    movie: movie::MovieState,
     drop_hover: bool,
     #[cfg(not(target_arch = "wasm32"))]
     open_path: String,
@@ -422,6 +425,7 @@ impl ShapecastApp {
             show_about: false,
             show_keys: false,
             picture: picture::PictureState::default(),
+            movie: movie::MovieState::default(),
             drop_hover: false,
             #[cfg(not(target_arch = "wasm32"))]
             open_path: String::new(),
@@ -818,6 +822,7 @@ impl ShapecastApp {
         self.hover = None;
         self.features.clear();
         self.measure.list.clear();
+        self.measure.last_pick = None;
         self.probe = probe::ProbeState::default();
         self.notes = notes;
         self.notes.extend(volume.warnings.iter().cloned());
@@ -873,6 +878,7 @@ impl ShapecastApp {
             .iter()
             .map(|(n, r)| (n.clone(), [r.left(), r.top(), r.width(), r.height()]))
             .collect();
+        let movie = self.movie_progress();
         let s = &mut self.status;
         s.volume = self.scene.as_ref().map(|sc| VolumeStatus {
             dims: sc.volume.dims,
@@ -933,6 +939,11 @@ impl ShapecastApp {
                     .map_or("", |r| features::method_name(r.method)),
                 panels::time_left(self.features.timing())
             ));
+        } else if let Some((done, frames)) = movie {
+            // Saving a movie leaves the viewer ready; the task says how far it is.
+            s.phase = Phase::Ready;
+            s.progress = done as f32 / frames.max(1) as f32;
+            s.task = Some(format!("saving the movie: frame {done} of {frames}"));
         } else {
             s.task = None;
             s.progress = 1.0;
@@ -1039,6 +1050,8 @@ impl ShapecastApp {
         let mut errors = Vec::new();
         let mut measured = Vec::new();
         let mut mip_drawn = false;
+        // The crosshair before a click in the MIP, and what the click picked.
+        let mut mip_click = None;
         for (id, rect) in &rects {
             let kind = match id {
                 PaneId::Mip => None,
@@ -1092,11 +1105,8 @@ impl ShapecastApp {
                                 // contrast, vessels and bone are what should stay apart.
                                 if self.mip_window_for != Some(scene.generation) {
                                     self.mip_window_for = Some(scene.generation);
-                                    self.mip_view.settings.window = if scene.is_ct {
-                                        (-100.0, 900.0)
-                                    } else {
-                                        self.window.range()
-                                    };
+                                    self.mip_view.settings.window =
+                                        default_mip_window(scene, self.window);
                                 }
                                 for c in 0..3 {
                                     self.mip_view.settings.channels[c].on = self.display.enabled[c];
@@ -1137,8 +1147,14 @@ impl ShapecastApp {
                                     t
                                 });
                                 if let Some(pick) = out.pick {
+                                    mip_click = Some((self.crosshair, pick));
                                     self.crosshair = pick.voxel;
                                 }
+                                measure::draw_rulers_3d(
+                                    &ui.painter_at(self.mip_view.image_area()),
+                                    inputs.measurements,
+                                    |p| self.mip_view.screen_pos_of(p),
+                                );
                                 if clicked {
                                     toggle = Some(id);
                                 }
@@ -1149,6 +1165,16 @@ impl ShapecastApp {
         }
         self.hover = hover;
         if let Some(s) = &self.scene {
+            // With the ruler, a click in the MIP measures in 3D from the crosshair to the point
+            // it picked.
+            if let Some((before, pick)) = mip_click {
+                measured.extend(self.measure.mip_pick(
+                    &s.volume,
+                    before,
+                    pick.voxel,
+                    pick.world_mm,
+                ));
+            }
             for m in measured {
                 self.measure.add(&s.volume, m);
             }
@@ -1210,6 +1236,7 @@ impl eframe::App for ShapecastApp {
         self.drop_overlay(&ctx);
 
         self.poll_picture(&ctx);
+        self.advance_movie(&ctx);
         self.update_probe();
         self.update_status();
         if self.published.as_ref() != Some(&self.status) {
@@ -1223,6 +1250,17 @@ impl eframe::App for ShapecastApp {
         {
             ctx.request_repaint();
         }
+    }
+}
+
+/// The MIP's own window for a new volume (and key 0): -100..900 HU for CT, where contrast,
+/// vessels and bone stay apart (a soft-tissue window saturates a CT's MIP); for other volumes
+/// the slices' `slice_window`.
+fn default_mip_window(scene: &Scene, slice_window: Window) -> (f32, f32) {
+    if scene.is_ct {
+        (-100.0, 900.0)
+    } else {
+        slice_window.range()
     }
 }
 

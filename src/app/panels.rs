@@ -77,6 +77,7 @@ impl ShapecastApp {
             ui.separator();
             self.copy_link_ui(ui);
             self.save_picture_ui(ui);
+            self.save_movie_ui(ui);
             ui.separator();
             if ui.button("About & data").clicked() {
                 self.show_about = !self.show_about;
@@ -307,7 +308,7 @@ impl ShapecastApp {
                     .selectable_label(self.measure.tool == tool, tool.label())
                     .on_hover_text(match tool {
                         super::measure::Tool::Navigate => "a left drag on a slice moves the crosshair (Esc)",
-                        super::measure::Tool::Ruler => "a left drag on a slice draws a distance ruler (D)",
+                        super::measure::Tool::Ruler => "a left drag on a slice draws a distance ruler; a click in the MIP measures in 3D from the crosshair to the clicked point (D)",
                         super::measure::Tool::Ellipse => "a left drag on a slice draws an ellipse, corner to corner: mean, SD, min, max and area (E)",
                     });
                 self.control(&format!("tool:{}", tool.label()), r.rect);
@@ -337,7 +338,7 @@ impl ShapecastApp {
                 ui.label(
                     egui::RichText::new(format!(
                         "{} at LPS ({:.1}, {:.1}, {:.1}) mm",
-                        m.pane.name(),
+                        m.pane.map_or("3D", SliceKind::name),
                         centre.x,
                         centre.y,
                         centre.z
@@ -347,12 +348,21 @@ impl ShapecastApp {
                 );
             });
         }
-        if let Some(n) = go_to
-            && let Some(p) = self.measure.list[n].measurement.in_pane(&scene.volume)
-        {
-            let axes =
-                super::slices::pane_axes(&scene.volume, self.measure.list[n].measurement.pane);
-            self.crosshair[axes.fixed] = p.slice;
+        if let Some(n) = go_to {
+            let m = self.measure.list[n].measurement;
+            match (m.pane, m.in_pane(&scene.volume)) {
+                (Some(pane), Some(p)) => {
+                    let axes = super::slices::pane_axes(&scene.volume, pane);
+                    self.crosshair[axes.fixed] = p.slice;
+                }
+                // A ruler in 3D: its far end (the point picked in the MIP).
+                (None, _) => {
+                    if let Some(v) = super::measure::nearest_voxel(&scene.volume, m.b_mm) {
+                        self.crosshair = v;
+                    }
+                }
+                _ => {}
+            }
         }
         if let Some(n) = remove {
             self.measure.list.remove(n);
@@ -418,6 +428,7 @@ impl ShapecastApp {
                     self.features.cancel();
                 }
             }
+            self.movie_progress_ui(ui);
             if let Some(a) = &self.status.adapter {
                 ui.separator();
                 ui.label(egui::RichText::new(format!("GPU: {} ({})", a.name, a.backend)).small());

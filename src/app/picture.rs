@@ -202,8 +202,22 @@ impl ShapecastApp {
             Ok(p) => p,
             Err(e) => return self.error(format!("Save picture: {e}")),
         };
-        let stem = self
-            .volume()
+        let picture = Picture {
+            name: format!("{}-{}.png", self.file_stem(), pane.name()),
+            png,
+            size,
+        };
+        match self.deliver(&picture.name, &picture.png) {
+            Ok(place) => self.notes.push(format!("picture saved: {place}")),
+            Err(e) => self.error(format!("Save picture: {e}")),
+        }
+        self.picture.last = Some(picture);
+    }
+
+    /// The loaded file's name without its extensions, letters and digits only (`shapecast`
+    /// without a volume): the start of a picture's file name.
+    pub(super) fn file_stem(&self) -> String {
+        self.volume()
             .map(|v| {
                 let name = v.source.rsplit(['/', '\\']).next().unwrap_or(&v.source);
                 let name = name.split('.').next().unwrap_or(name);
@@ -213,21 +227,16 @@ impl ShapecastApp {
                     .collect::<Vec<_>>()
                     .join("-")
             })
-            .unwrap_or_else(|| "shapecast".to_owned());
-        let picture = Picture {
-            name: format!("{stem}-{}.png", pane.name()),
-            png,
-            size,
-        };
+            .unwrap_or_else(|| "shapecast".to_owned())
+    }
+
+    /// Hands a file made here (a picture, a movie) to the user: a download in the page, a file
+    /// in the pictures' folder natively. Says where it went.
+    pub(super) fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String> {
         #[cfg(not(target_arch = "wasm32"))]
-        let delivered = deliver(&picture, self.picture.dir.as_deref());
+        return deliver(name, bytes, self.picture.dir.as_deref());
         #[cfg(target_arch = "wasm32")]
-        let delivered = deliver(&picture);
-        match delivered {
-            Ok(note) => self.notes.push(note),
-            Err(e) => self.error(format!("Save picture: {e}")),
-        }
-        self.picture.last = Some(picture);
+        deliver(name, bytes)
     }
 
     /// The "Save picture" menu: one entry per pane shown.
@@ -257,31 +266,28 @@ impl ShapecastApp {
     }
 }
 
-/// Hands the picture to the user: a download in the page.
+/// Hands a PNG to the user: a download in the page.
 #[cfg(target_arch = "wasm32")]
-fn deliver(picture: &Picture) -> Result<String, String> {
-    download(picture).map_err(|e| super::web_files::js_error(&e))?;
-    Ok(format!("picture saved: {} (your downloads)", picture.name))
+fn deliver(name: &str, bytes: &[u8]) -> Result<String, String> {
+    download(name, bytes).map_err(|e| super::web_files::js_error(&e))?;
+    Ok(format!("{name} (your downloads)"))
 }
 
-/// Hands the picture to the user: a file in `dir` (the current folder when `None`).
+/// Hands a file to the user: a file in `dir` (the current folder when `None`).
 #[cfg(not(target_arch = "wasm32"))]
-fn deliver(picture: &Picture, dir: Option<&std::path::Path>) -> Result<String, String> {
-    let path = dir.map_or_else(
-        || std::path::PathBuf::from(&picture.name),
-        |d| d.join(&picture.name),
-    );
-    std::fs::write(&path, &picture.png).map_err(|e| format!("writing {}: {e}", path.display()))?;
+fn deliver(name: &str, bytes: &[u8], dir: Option<&std::path::Path>) -> Result<String, String> {
+    let path = dir.map_or_else(|| std::path::PathBuf::from(name), |d| d.join(name));
+    std::fs::write(&path, bytes).map_err(|e| format!("writing {}: {e}", path.display()))?;
     let shown = std::path::absolute(&path).unwrap_or(path);
-    Ok(format!("picture saved: {}", shown.display()))
+    Ok(shown.display().to_string())
 }
 
 #[cfg(target_arch = "wasm32")]
-fn download(picture: &Picture) -> Result<(), wasm_bindgen::JsValue> {
+fn download(name: &str, png: &[u8]) -> Result<(), wasm_bindgen::JsValue> {
     use wasm_bindgen::JsCast as _;
     let window = web_sys::window().ok_or("no window")?;
     let document = window.document().ok_or("no document")?;
-    let bytes = js_sys::Uint8Array::from(picture.png.as_slice());
+    let bytes = js_sys::Uint8Array::from(png);
     let parts = js_sys::Array::of1(&bytes);
     let options = web_sys::BlobPropertyBag::new();
     options.set_type("image/png");
@@ -289,7 +295,7 @@ fn download(picture: &Picture) -> Result<(), wasm_bindgen::JsValue> {
     let url = web_sys::Url::create_object_url_with_blob(&blob)?;
     let a: web_sys::HtmlAnchorElement = document.create_element("a")?.dyn_into()?;
     a.set_href(&url);
-    a.set_download(&picture.name);
+    a.set_download(name);
     a.click();
     // The URL is kept until the next picture: revoked at once, a browser may not have started
     // reading it yet.

@@ -594,7 +594,7 @@ impl SlicePane {
                 if (a[0] - b[0]).abs() + (a[1] - b[1]).abs() > 0.25 {
                     out.measured = Some(Measurement {
                         kind,
-                        pane: self.kind,
+                        pane: Some(self.kind),
                         a_mm: axes.world_of(volume, slice, a),
                         b_mm: axes.world_of(volume, slice, b),
                     });
@@ -645,7 +645,7 @@ impl SlicePane {
             let b = axes.coord_at(rect, pos, w, h);
             let m = Measurement {
                 kind,
-                pane: self.kind,
+                pane: Some(self.kind),
                 a_mm: axes.world_of(volume, slice, a),
                 b_mm: axes.world_of(volume, slice, b),
             };
@@ -844,9 +844,13 @@ impl SlicePane {
         w: usize,
         h: usize,
     ) {
-        for entry in inputs.measurements {
+        for (n, entry) in inputs.measurements.iter().enumerate() {
             let m = &entry.measurement;
-            if m.pane != self.kind {
+            if m.pane.is_none() {
+                draw_ends_3d(painter, inputs, n, rect, axes, slice, w, h);
+                continue;
+            }
+            if m.pane != Some(self.kind) {
                 continue;
             }
             let Some(p) = m.in_pane(inputs.volume) else {
@@ -892,6 +896,49 @@ pub fn slice_position(volume: &Volume, axes: PaneAxes, crosshair: [usize; 3]) ->
     let along = p.dot(normal);
     let side = if along >= 0.0 { normal } else { -normal };
     format!("{} {:.1} mm", orientation_label(side), along.abs())
+}
+
+/// The ends of ruler `n` in 3D that lie on the slice shown: a ring each, with its number and
+/// length.
+#[allow(clippy::too_many_arguments)]
+fn draw_ends_3d(
+    painter: &egui::Painter,
+    inputs: &PaneInputs<'_>,
+    n: usize,
+    rect: egui::Rect,
+    axes: PaneAxes,
+    slice: usize,
+    w: usize,
+    h: usize,
+) {
+    let Some(entry) = inputs.measurements.get(n) else {
+        return;
+    };
+    let m = &entry.measurement;
+    let volume = inputs.volume;
+    let to_voxel = volume.voxel_from_world();
+    let top = volume.dims[axes.fixed].saturating_sub(1) as f64;
+    let colour = egui::Color32::from_rgb(90, 200, 255);
+    for end in [m.a_mm, m.b_mm] {
+        let v = to_voxel.transform_point3(end);
+        // An end is on the slice whose voxels hold it (none outside the volume).
+        let k = v[axes.fixed];
+        if !v.is_finite()
+            || !(-0.5..=top + 0.5).contains(&k)
+            || k.round().max(0.0) as usize != slice
+        {
+            continue;
+        }
+        let p = axes.screen_of_coord(rect, [v[axes.across], v[axes.vertical]], w, h);
+        painter.circle_stroke(p, 5.0, egui::Stroke::new(1.5, colour));
+        painter.text(
+            p + egui::vec2(7.0, -7.0),
+            egui::Align2::LEFT_BOTTOM,
+            format!("{} 3D {}", n + 1, entry.reading(inputs.unit)),
+            egui::FontId::proportional(13.0),
+            colour,
+        );
+    }
 }
 
 /// A ruler (line, end ticks, length) or an ellipse (outline and statistics) between pane

@@ -715,15 +715,22 @@ mod tests {
             measurements: Some(vec![
                 Measurement {
                     kind: MeasureKind::Ruler,
-                    pane: super::super::SliceKind::Axial,
+                    pane: Some(super::super::SliceKind::Axial),
                     a_mm: DVec3::new(-12.25, 1.0 / 3.0, 40.0),
                     b_mm: DVec3::new(3.5, 0.1, 40.0),
                 },
                 Measurement {
                     kind: MeasureKind::Ellipse,
-                    pane: super::super::SliceKind::Sagittal,
+                    pane: Some(super::super::SliceKind::Sagittal),
                     a_mm: DVec3::new(7.0, -20.0, 1e-3),
                     b_mm: DVec3::new(7.0, -5.5, 18.0),
+                },
+                // A ruler in 3D (an end picked in the MIP).
+                Measurement {
+                    kind: MeasureKind::Ruler,
+                    pane: None,
+                    a_mm: DVec3::new(1.5, -2.0, 30.25),
+                    b_mm: DVec3::new(-8.0, 14.125, -3.0),
                 },
             ]),
         }

@@ -427,9 +427,7 @@ fn turntable(
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let started = web_time::Instant::now();
     for f in 0..n {
-        let mut cam = *camera;
-        cam.orbit(360.0 * f64::from(f) / f64::from(n), 0.0);
-        caster.render(ctx, scene, &cam, settings, target, ..)?;
+        caster.render(ctx, scene, &camera.turntable(f, n), settings, target, ..)?;
         let rgba = target.read_image_blocking(ctx)?;
         let out = dir.join(format!("frame_{f:04}.png"));
         image::save_buffer(

@@ -143,8 +143,7 @@ pub fn read_bytes_blocking(
 }
 
 /// Native only: the texels of `texture` (a box of `size` from its origin, `bytes_per_texel`
-/// each) as tightly packed rows, x fastest, blocking. Rows are copied at wgpu's 256-byte row
-/// alignment and unpadded here.
+/// each) as tightly packed rows, x fastest, blocking.
 #[cfg(not(target_arch = "wasm32"))]
 pub fn read_texture_blocking(
     ctx: &GpuContext,
@@ -152,37 +151,88 @@ pub fn read_texture_blocking(
     size: [u32; 3],
     bytes_per_texel: u32,
 ) -> Result<Vec<u8>, ReadbackError> {
-    let [w, h, d] = size;
-    let row = w * bytes_per_texel;
-    let padded =
-        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let bytes = u64::from(padded) * u64::from(h) * u64::from(d);
-    let read =
-        PendingRead::start_with(ctx, bytes.max(4), "texture readback", |encoder, staging| {
-            encoder.copy_texture_to_buffer(
-                texture.as_image_copy(),
-                wgpu::TexelCopyBufferInfo {
-                    buffer: staging,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(padded),
-                        rows_per_image: Some(h),
+    PendingTexture::start(ctx, texture, size, bytes_per_texel).wait(ctx)
+}
+
+/// The texels of a texture being read back (a box of `size` from its origin), polled per
+/// frame like [`PendingRead`]. Rows are copied at wgpu's 256-byte row alignment and unpadded
+/// when they arrive: the result is tightly packed rows, x fastest.
+pub struct PendingTexture {
+    read: PendingRead,
+    /// Bytes of one row as wanted, and as copied (padded).
+    row: usize,
+    padded: usize,
+    rows: usize,
+}
+
+impl PendingTexture {
+    /// Records and submits the copy of `size` texels of `texture` (which needs `COPY_SRC`),
+    /// `bytes_per_texel` each, and starts mapping them.
+    pub fn start(
+        ctx: &GpuContext,
+        texture: &wgpu::Texture,
+        size: [u32; 3],
+        bytes_per_texel: u32,
+    ) -> Self {
+        let [w, h, d] = size;
+        let row = w * bytes_per_texel;
+        let padded =
+            row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let bytes = u64::from(padded) * u64::from(h) * u64::from(d);
+        let read =
+            PendingRead::start_with(ctx, bytes.max(4), "texture readback", |encoder, staging| {
+                encoder.copy_texture_to_buffer(
+                    texture.as_image_copy(),
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: staging,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(padded),
+                            rows_per_image: Some(h),
+                        },
                     },
-                },
-                wgpu::Extent3d {
-                    width: w,
-                    height: h,
-                    depth_or_array_layers: d,
-                },
-            );
-        });
-    let padded_bytes = read.wait(ctx)?;
-    Ok(padded_bytes
-        .chunks(padded as usize)
-        .take(h as usize * d as usize)
-        .flat_map(|r| &r[..(row as usize).min(r.len())])
+                    wgpu::Extent3d {
+                        width: w,
+                        height: h,
+                        depth_or_array_layers: d,
+                    },
+                );
+            });
+        Self {
+            read,
+            row: row as usize,
+            padded: padded.max(1) as usize,
+            rows: h as usize * d as usize,
+        }
+    }
+
+    /// The texels once mapped, `None` while the GPU is still busy (never blocks).
+    pub fn poll(&mut self, ctx: &GpuContext) -> Option<Result<Vec<u8>, ReadbackError>> {
+        let bytes = self.read.poll(ctx)?;
+        Some(bytes.map(|b| self.unpad(&b)))
+    }
+
+    /// Native only: waits for the texels.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn wait(self, ctx: &GpuContext) -> Result<Vec<u8>, ReadbackError> {
+        let (row, padded, rows) = (self.row, self.padded, self.rows);
+        let bytes = self.read.wait(ctx)?;
+        Ok(unpad(&bytes, row, padded, rows))
+    }
+
+    fn unpad(&self, bytes: &[u8]) -> Vec<u8> {
+        unpad(bytes, self.row, self.padded, self.rows)
+    }
+}
+
+/// The first `row` bytes of each of the first `rows` rows of `padded` bytes.
+fn unpad(bytes: &[u8], row: usize, padded: usize, rows: usize) -> Vec<u8> {
+    bytes
+        .chunks(padded)
+        .take(rows)
+        .flat_map(|r| &r[..row.min(r.len())])
         .copied()
-        .collect())
+        .collect()
 }
 
 /// Native only: reads an f32 buffer back, blocking.

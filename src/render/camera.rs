@@ -275,6 +275,14 @@ impl Camera {
             (DQuat::from_axis_angle(right, -pitch_deg.to_radians()) * self.rotation).normalize();
     }
 
+    /// Frame `frame` of a turntable of `frames`: this view turned by `360 frame / frames`
+    /// degrees about the screen's up axis (frame 0 is this view; `shapecast render
+    /// --turntable` and the viewer's "Save movie").
+    pub fn turntable(mut self, frame: u32, frames: u32) -> Self {
+        self.orbit(360.0 * f64::from(frame) / f64::from(frames.max(1)), 0.0);
+        self
+    }
+
     /// A preset view turned by [`Self::orbit`]`(yaw_deg, pitch_deg)`.
     pub fn with_orbit(mut self, preset: ViewPreset, yaw_deg: f64, pitch_deg: f64) -> Self {
         self.set_preset(preset);

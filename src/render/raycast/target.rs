@@ -5,7 +5,7 @@
 use glam::{DVec2, DVec3};
 
 use crate::gpu::GpuContext;
-use crate::gpu::readback::{PendingRead, ReadbackError};
+use crate::gpu::readback::{PendingRead, PendingTexture, ReadbackError};
 use crate::gpu::volume_texture::FeatureTexture;
 use crate::render::camera::Camera;
 use crate::render::output_texture;
@@ -188,16 +188,18 @@ impl RaycastTarget {
             .map_or(Ok(None), |pending| pending.wait())
     }
 
+    /// Starts reading the whole image back (the last frame, or the rows drawn so far): poll it
+    /// once per frame; it gives tightly packed RGBA8 rows, top row first. Frames rendered into
+    /// this target after this call do not change what it reads (the copy is queued first).
+    pub fn start_image_read(&self, ctx: &GpuContext) -> PendingTexture {
+        let [w, h] = self.size;
+        PendingTexture::start(ctx, &self.texture, [w, h, 1], 4)
+    }
+
     /// Native only: the whole image as tightly packed RGBA8 rows, top row first.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_image_blocking(&self, ctx: &GpuContext) -> Result<Vec<u8>, RaycastError> {
-        let [w, h] = self.size;
-        Ok(crate::gpu::readback::read_texture_blocking(
-            ctx,
-            &self.texture,
-            [w, h, 1],
-            4,
-        )?)
+        Ok(self.start_image_read(ctx).wait(ctx)?)
     }
 
     /// Native only: every pixel's `(depth, channel code)` (tests).

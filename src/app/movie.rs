@@ -1,0 +1,431 @@
+//! "Save movie": a full turn of the MIP as an animated PNG (APNG, which every browser plays),
+//! `shapecast-rotation.png`. Frame `f` of `N` is the pane's view turned by `360 f / N` degrees
+//! about the screen's up axis ([`Camera::turntable`], as `shapecast render --turntable` does),
+//! drawn off-screen by the pane's own ray caster at the pane's full resolution with its
+//! settings (window, channels and gains, slab) as they were when asked.
+//!
+//! Nothing waits: each app frame draws a band of rows within the pane's GPU budget (the
+//! progressive frames' [`FrameCost`]), a finished frame is copied back with `map_async`
+//! ([`PendingTexture`], polled in later frames, a few in flight) and encoded into the APNG as
+//! it arrives. The status bar shows the progress and a Cancel; a new volume stops it; features
+//! that arrive meanwhile (or another display mode) start it again from the first frame. Then the file is handed on as "Save picture" does (a download in the page,
+//! the pictures' folder natively).
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+
+use super::ShapecastApp;
+use crate::gpu::readback::PendingTexture;
+use crate::gpu::volume_texture::FeatureTexture;
+use crate::render::camera::Camera;
+use crate::render::raycast::{FrameCost, RaycastTarget, RenderSettings};
+
+/// Frames of the menu's movie: one every 10 degrees.
+pub const MOVIE_FRAMES: u32 = 36;
+/// The file's name.
+pub const MOVIE_NAME: &str = "shapecast-rotation.png";
+/// Frames per second the APNG plays at (36 frames: a turn in 3 s).
+const FPS: u16 = 12;
+/// Finished frames being read back at once.
+const READS_IN_FLIGHT: usize = 3;
+
+/// A movie made: its file name, APNG bytes, frame count and size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Movie {
+    pub name: String,
+    pub png: Vec<u8>,
+    pub frames: u32,
+    pub size: [u32; 2],
+}
+
+/// The APNG being written: the encoder writes into a buffer shared with us, since `png`'s
+/// writer does not give its output back.
+#[derive(Clone, Default)]
+struct SharedBytes(Arc<Mutex<Vec<u8>>>);
+
+impl std::io::Write for SharedBytes {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0
+            .lock()
+            .map_err(|_| std::io::Error::other("the movie's buffer is poisoned"))?
+            .extend_from_slice(buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// An APNG of `frames` RGBA8 frames of `size`, encoded frame by frame.
+pub struct ApngWriter {
+    writer: png::Writer<SharedBytes>,
+    bytes: SharedBytes,
+    frames: u32,
+    written: u32,
+    size: [u32; 2],
+}
+
+impl ApngWriter {
+    /// Writes the header of an APNG of `frames` frames of `size` that loops for ever at `fps`.
+    pub fn new(size: [u32; 2], frames: u32, fps: u16) -> Result<Self, String> {
+        let bytes = SharedBytes::default();
+        let mut encoder = png::Encoder::new(bytes.clone(), size[0], size[1]);
+        encoder.set_color(png::ColorType::Rgba);
+        encoder.set_depth(png::BitDepth::Eight);
+        // Fast: a frame is encoded within one app frame.
+        encoder.set_compression(png::Compression::Fast);
+        let e = |e: png::EncodingError| format!("encoding the movie: {e}");
+        encoder.set_animated(frames, 0).map_err(e)?;
+        encoder.set_frame_delay(1, fps.max(1)).map_err(e)?;
+        let writer = encoder.write_header().map_err(e)?;
+        Ok(Self {
+            writer,
+            bytes,
+            frames,
+            written: 0,
+            size,
+        })
+    }
+
+    /// Adds the next frame (tightly packed RGBA8 rows, top first).
+    pub fn push(&mut self, rgba: &[u8]) -> Result<(), String> {
+        let want = self.size[0] as usize * self.size[1] as usize * 4;
+        if rgba.len() != want || self.written >= self.frames {
+            return Err(format!(
+                "movie frame {} of {}: {} bytes, expected {want}",
+                self.written + 1,
+                self.frames,
+                rgba.len()
+            ));
+        }
+        // Opaque whatever the frame holds (the ray caster writes alpha 1; the pane is opaque).
+        let opaque: Vec<u8> = rgba
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2], 255])
+            .collect();
+        self.writer
+            .write_image_data(&opaque)
+            .map_err(|e| format!("encoding movie frame {}: {e}", self.written + 1))?;
+        self.written += 1;
+        Ok(())
+    }
+
+    /// The APNG's bytes, once every frame is in.
+    pub fn finish(self) -> Result<Vec<u8>, String> {
+        // `png` would close an APNG that announces more frames than it holds.
+        if self.written != self.frames {
+            return Err(format!(
+                "the movie has {} of its {} frames",
+                self.written, self.frames
+            ));
+        }
+        let bytes = self.bytes.clone();
+        self.writer
+            .finish()
+            .map_err(|e| format!("finishing the movie: {e}"))?;
+        let out = bytes
+            .0
+            .lock()
+            .map_err(|_| "the movie's buffer is poisoned".to_owned())?
+            .clone();
+        Ok(out)
+    }
+}
+
+/// A movie being made.
+struct Making {
+    frames: u32,
+    camera: Camera,
+    settings: RenderSettings,
+    /// The textures it shows: another volume stops the movie, other features restart it.
+    volume: wgpu::Texture,
+    features: Option<wgpu::Texture>,
+    target: RaycastTarget,
+    /// The frame being drawn, the first row not drawn yet and what its rows cost.
+    frame: u32,
+    next_row: u32,
+    cost: Option<FrameCost>,
+    /// The pane's frame count when the movie last drew (whether the pane drew since).
+    pane_frames: u64,
+    /// Finished frames being read back, oldest first.
+    reads: VecDeque<PendingTexture>,
+    writer: ApngWriter,
+}
+
+impl Making {
+    fn encoded(&self) -> u32 {
+        self.writer.written
+    }
+}
+
+/// "Save movie": the movie being made, the one asked for and the last made.
+#[derive(Default)]
+pub(super) struct MovieState {
+    making: Option<Making>,
+    /// Frames asked for, started in the next frame (once the pane has drawn).
+    requested: Option<u32>,
+    last: Option<Movie>,
+}
+
+impl ShapecastApp {
+    /// Asks for a movie of `frames` frames of a full turn of the MIP pane's view.
+    pub fn save_movie(&mut self, ctx: &egui::Context, frames: u32) {
+        self.movie.requested = Some(frames.clamp(1, 3600));
+        ctx.request_repaint();
+    }
+
+    /// Stops the movie being made (nothing is saved).
+    pub fn cancel_movie(&mut self) {
+        if self.movie.making.take().is_some() {
+            self.notes.push("Save movie: cancelled".to_owned());
+        }
+        self.movie.requested = None;
+    }
+
+    /// `(frames encoded, frames)` of the movie being made.
+    pub fn movie_progress(&self) -> Option<(u32, u32)> {
+        if let Some(m) = &self.movie.making {
+            return Some((m.encoded(), m.frames));
+        }
+        self.movie.requested.map(|n| (0, n))
+    }
+
+    /// The size of the MIP pane's full-resolution frame, pixels: a movie's frame size.
+    pub fn mip_frame_size(&self) -> Option<[u32; 2]> {
+        self.mip_view.full_size()
+    }
+
+    /// The last movie made (tests; the page downloads it, natively it is written to a file).
+    pub fn last_movie(&self) -> Option<&Movie> {
+        self.movie.last.as_ref()
+    }
+
+    /// Starts, advances and finishes the movie (once per frame, after the panes).
+    pub(super) fn advance_movie(&mut self, ctx: &egui::Context) {
+        if let Some(frames) = self.movie.requested.take()
+            && let Err(e) = self.start_movie(frames)
+        {
+            self.error(format!("Save movie: {e}"));
+        }
+        if self.movie.making.is_none() {
+            return;
+        }
+        ctx.request_repaint();
+        match self.step_movie() {
+            Ok(true) => {}
+            Ok(false) => self.finish_movie(),
+            Err(e) => {
+                self.movie.making = None;
+                self.error(format!("Save movie: {e}"));
+            }
+        }
+    }
+
+    fn start_movie(&mut self, frames: u32) -> Result<(), String> {
+        let (Some(gpu), Some(scene)) = (&self.gpu, &self.scene) else {
+            return Err("no volume is shown".to_owned());
+        };
+        let size = self
+            .mip_view
+            .full_size()
+            .ok_or("the MIP pane has not been drawn yet; show it first")?;
+        let features = self.shown_features().map(|f| f.texture.clone());
+        let target = RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?;
+        self.movie.making = Some(Making {
+            frames,
+            camera: self.mip_view.camera,
+            settings: self.mip_view.frame_settings(),
+            volume: scene.render.intensity.clone(),
+            features,
+            target,
+            frame: 0,
+            next_row: 0,
+            cost: None,
+            pane_frames: self.mip_view.frames_rendered(),
+            reads: VecDeque::new(),
+            writer: ApngWriter::new(size, frames, FPS)?,
+        });
+        Ok(())
+    }
+
+    /// The feature texture the MIP pane shows.
+    fn shown_features(&self) -> Option<&FeatureTexture> {
+        self.mip_view.mode.as_ref()?;
+        Some(&self.displayed_entry()?.texture)
+    }
+
+    /// One step: frames that arrived are encoded, then a band of rows is drawn. `Ok(false)`
+    /// once every frame is in.
+    fn step_movie(&mut self) -> Result<bool, String> {
+        let (Some(gpu), Some(scene)) = (&self.gpu, &self.scene) else {
+            return Err("the volume was closed".to_owned());
+        };
+        let request = self.mip_view.mode.as_ref().and(self.displayed_request());
+        let features = request
+            .and_then(|r| self.features.find(&r))
+            .map(|e| &e.texture);
+        let Some(m) = &mut self.movie.making else {
+            return Ok(false);
+        };
+        if m.volume != scene.render.intensity {
+            return Err("stopped: another volume is shown".to_owned());
+        }
+        if m.features.as_ref() != features.map(|f| &f.texture) {
+            // The features arrived (asked for before they were computed) or another mode is
+            // shown: start again, so that every frame shows the same.
+            m.features = features.map(|f| f.texture.clone());
+            m.frame = 0;
+            m.next_row = 0;
+            m.cost = None;
+            m.reads.clear();
+            m.writer = ApngWriter::new(m.target.size, m.frames, FPS)?;
+        }
+        while let Some(read) = m.reads.front_mut() {
+            match read.poll(gpu) {
+                None => break,
+                Some(Ok(rgba)) => {
+                    m.reads.pop_front();
+                    m.writer.push(&rgba)?;
+                }
+                Some(Err(e)) => return Err(format!("reading frame {} back: {e}", m.encoded() + 1)),
+            }
+        }
+        if m.encoded() == m.frames {
+            return Ok(false);
+        }
+        if m.frame < m.frames && m.reads.len() < READS_IN_FLIGHT {
+            let camera = m.camera.turntable(m.frame, m.frames);
+            let size = m.target.size;
+            let cost = m
+                .cost
+                .get_or_insert_with(|| FrameCost::of(&scene.render, &camera, &m.settings, size));
+            // The pane's budget, half of it when the pane drew a frame too.
+            let pane_frames = self.mip_view.frames_rendered();
+            let share = if pane_frames == m.pane_frames {
+                1.0
+            } else {
+                0.5
+            };
+            m.pane_frames = pane_frames;
+            let budget = share * self.mip_view.pacer.budget_samples();
+            let end = cost.band_within(m.next_row, budget);
+            let rows = m.next_row..end;
+            let samples = cost.rows(rows.clone());
+            self.mip_view.render_offscreen(
+                gpu,
+                &scene.render,
+                features,
+                &camera,
+                &m.settings,
+                &mut m.target,
+                rows,
+                samples,
+            )?;
+            m.next_row = end;
+            if end >= size[1] {
+                m.reads.push_back(m.target.start_image_read(gpu));
+                m.frame += 1;
+                m.next_row = 0;
+                m.cost = None;
+            }
+        }
+        Ok(true)
+    }
+
+    fn finish_movie(&mut self) {
+        let Some(m) = self.movie.making.take() else {
+            return;
+        };
+        let (frames, size) = (m.frames, m.target.size);
+        let png = match m.writer.finish() {
+            Ok(png) => png,
+            Err(e) => return self.error(format!("Save movie: {e}")),
+        };
+        let movie = Movie {
+            name: MOVIE_NAME.to_owned(),
+            png,
+            frames,
+            size,
+        };
+        match self.deliver(&movie.name, &movie.png) {
+            Ok(place) => self.notes.push(format!(
+                "movie saved: {place} ({frames} frames of {}x{}, an animated PNG)",
+                size[0], size[1]
+            )),
+            Err(e) => self.error(format!("Save movie: {e}")),
+        }
+        self.movie.last = Some(movie);
+    }
+
+    /// The "Save movie" button (beside "Save picture").
+    pub(super) fn save_movie_ui(&mut self, ui: &mut egui::Ui) {
+        let r = ui
+            .add_enabled(
+                self.scene.is_some() && self.movie_progress().is_none(),
+                egui::Button::new("Save movie"),
+            )
+            .on_hover_text(format!(
+                "a full turn of the MIP as an animated PNG, {MOVIE_FRAMES} frames (M)"
+            ));
+        self.control("save-movie", r.rect);
+        if r.clicked() {
+            let ctx = ui.ctx().clone();
+            self.save_movie(&ctx, MOVIE_FRAMES);
+        }
+    }
+
+    /// The status bar's progress of the movie being made, with its Cancel.
+    pub(super) fn movie_progress_ui(&mut self, ui: &mut egui::Ui) {
+        let Some((done, frames)) = self.movie_progress() else {
+            return;
+        };
+        ui.add(
+            egui::ProgressBar::new(done as f32 / frames.max(1) as f32)
+                .desired_width(200.0)
+                .text(format!("saving the movie: frame {done} of {frames}")),
+        );
+        let r = ui
+            .small_button("Cancel")
+            .on_hover_text("stop making the movie");
+        self.control("cancel-movie", r.rect);
+        if r.clicked() {
+            self.cancel_movie();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn apng_has_its_frames_in_order() {
+        let size = [3, 2];
+        let mut w = ApngWriter::new(size, 3, 12).expect("header");
+        for f in 0..3u8 {
+            let rgba: Vec<u8> = (0..6).flat_map(|p| [f * 50, p * 10, 7, 0]).collect();
+            w.push(&rgba).expect("frame");
+        }
+        assert!(w.push(&[0; 24]).is_err(), "one frame too many");
+        assert!(w.push(&[0; 5]).is_err(), "wrong size");
+        let png = w.finish().expect("finish");
+        let mut reader = png::Decoder::new(std::io::Cursor::new(png))
+            .read_info()
+            .expect("header");
+        let control = reader.info().animation_control().expect("animated");
+        assert_eq!((control.num_frames, control.num_plays), (3, 0));
+        let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+        for f in 0..3u8 {
+            reader.next_frame(&mut buf).expect("frame");
+            assert_eq!(&buf[4..8], &[f * 50, 10, 7, 255], "frame {f}");
+        }
+    }
+
+    #[test]
+    fn too_few_frames_is_an_error() {
+        let mut w = ApngWriter::new([2, 2], 2, 12).expect("header");
+        w.push(&[0; 16]).expect("frame");
+        assert!(w.finish().is_err());
+    }
+}
