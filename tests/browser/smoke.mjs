@@ -118,19 +118,6 @@ async function withBrowser(args, fn) {
   }
 }
 
-/** The frame count an APNG announces (its acTL chunk's num_frames), or 0 for a still PNG. */
-function apngFrames(bytes) {
-  let at = 8; // the PNG signature
-  while (at + 8 <= bytes.length) {
-    const length = bytes.readUInt32BE(at);
-    const type = bytes.toString('latin1', at + 4, at + 8);
-    if (type === 'acTL') return bytes.readUInt32BE(at + 8);
-    if (type === 'IDAT' || type === 'IEND') return 0;
-    at += 12 + length;
-  }
-  return 0;
-}
-
 function screenshotStats(buffer) {
   const png = PNG.sync.read(buffer);
   const colours = new Set();
@@ -301,29 +288,6 @@ try {
       check('save picture: the axial pane as a PNG download', false, `no pane:axial in ${JSON.stringify(status?.controls)}`);
     }
 
-    // 3e: "Save movie": M downloads a full turn of the MIP as an animated PNG (36 frames: the
-    // acTL chunk's num_frames), made over many frames while the page stays live.
-    {
-      let detail = '';
-      let ok = false;
-      try {
-        const [download] = await Promise.all([
-          page.waitForEvent('download', { timeout: 180000 }),
-          page.keyboard.press('m'),
-        ]);
-        const file = path.join(outDir, download.suggestedFilename());
-        await download.saveAs(file);
-        const bytes = fs.readFileSync(file);
-        const frames = apngFrames(bytes);
-        const png = PNG.sync.read(bytes);
-        ok = download.suggestedFilename() === 'shapecast-rotation.png' && frames === 36
-          && png.width > 50 && png.height > 50;
-        detail = `${download.suggestedFilename()} ${png.width}x${png.height}, ${frames} frames, ${bytes.length} bytes (${file})`;
-      } catch (e) {
-        detail = e.message.split('\n')[0];
-      }
-      check('save movie: a full turn of the MIP as an animated PNG download', ok, detail);
-    }
   });
 
   // 4: a browser without WebGPU.
