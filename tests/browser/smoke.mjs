@@ -287,7 +287,6 @@ try {
     } else {
       check('save picture: the axial pane as a PNG download', false, `no pane:axial in ${JSON.stringify(status?.controls)}`);
     }
-
   });
 
   // 4: a browser without WebGPU.
