@@ -15,9 +15,27 @@ use crate::volume::Volume;
 use std::sync::Arc;
 
 /// GPU seconds of work per feature-job step while the viewer runs (the RST's rays, the
-/// Hessian's passes and its eigenvalue pass; issue "full-size scans", deliver 5: no frame waits
-/// on more than ~100 ms of GPU work).
+/// Hessian's passes, its eigenvalue pass and storing; issue "full-size scans", deliver 5: no
+/// frame waits on more than ~100 ms of GPU work).
 pub const STEP_SECONDS: f64 = 0.1;
+
+/// The most a step may hold on a device whose own frames are slow (see [`step_seconds_for`]).
+pub const MAX_STEP_SECONDS: f64 = 1.0;
+
+/// The step the job may take in a frame that took `frame_s` (between the starts of the last
+/// two frames), of which the last feature step took `step_s` on the GPU: [`STEP_SECONDS`], or,
+/// where the viewer's own frames cost more than that (a software adapter: SwiftShader draws
+/// about two frames a second), as much as a frame costs without the job, up to
+/// [`MAX_STEP_SECONDS`]. A frame then waits at most as long again behind feature work, and the
+/// job keeps about half of a slow device instead of a tenth or less.
+pub fn step_seconds_for(frame_s: f64, step_s: f64) -> f64 {
+    let own = frame_s - step_s;
+    if own.is_finite() {
+        own.clamp(STEP_SECONDS, MAX_STEP_SECONDS)
+    } else {
+        STEP_SECONDS
+    }
+}
 /// What the MIP and the slice overlay show.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DisplayMode {
@@ -329,8 +347,8 @@ impl FeatureManager {
     ) -> Result<(), String> {
         self.cancel();
         // The job reads its slices from the loaded volume itself (no copy per computation).
-        // Its RST and Hessian steps follow the device's speed, so that a frame of the viewer never waits
-        // behind more than `STEP_SECONDS` of feature work.
+        // Its steps follow the device's speed, so that a frame of the viewer never waits behind
+        // more than `STEP_SECONDS` of feature work (more only where its own frames are slower).
         let options = JobOptions {
             step_seconds: Some(STEP_SECONDS),
             ..JobOptions::default()
@@ -365,9 +383,14 @@ impl FeatureManager {
         }
     }
 
-    /// Advances the running job by one step.
-    pub fn step(&mut self, ctx: &GpuContext) -> Option<JobEvent> {
+    /// Advances the running job by one step; `frame_s` is the time between the starts of the
+    /// last two frames (the step follows [`step_seconds_for`]).
+    pub fn step(&mut self, ctx: &GpuContext, frame_s: f64) -> Option<JobEvent> {
         let running = self.running.as_mut()?;
+        if let Some(step_s) = running.job.last_step_seconds() {
+            let seconds = step_seconds_for(frame_s, step_s);
+            running.job.set_step_seconds(Some(seconds));
+        }
         match running.job.step(ctx) {
             Ok(JobState::Running { fraction, stage }) => {
                 running.fraction = fraction;
@@ -588,6 +611,21 @@ pub fn preset_label(p: Preset) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_step_is_100_ms_unless_the_viewers_own_frames_cost_more() {
+        // A fast device: 16 ms frames plus the step.
+        assert_eq!(step_seconds_for(0.116, 0.1), STEP_SECONDS);
+        assert_eq!(step_seconds_for(0.016, 0.0), STEP_SECONDS);
+        // A software adapter: frames of 0.5 s of their own get steps as long.
+        assert!((step_seconds_for(0.6, 0.1) - 0.5).abs() < 1e-12);
+        // Stable: a frame that waited behind such a step asks for the same again.
+        assert!((step_seconds_for(1.0, 0.5) - 0.5).abs() < 1e-12);
+        // Bounded, and sane on odd clocks.
+        assert_eq!(step_seconds_for(30.0, 0.1), MAX_STEP_SECONDS);
+        assert_eq!(step_seconds_for(0.05, 0.3), STEP_SECONDS);
+        assert_eq!(step_seconds_for(f64::NAN, 0.1), STEP_SECONDS);
+    }
 
     #[test]
     fn requests_carry_only_what_the_method_uses() {

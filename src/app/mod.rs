@@ -742,7 +742,7 @@ impl ShapecastApp {
     }
 
     /// Advances loading and computing by one step each.
-    fn advance(&mut self) {
+    fn advance(&mut self, frame_s: f64) {
         if let Some(job) = &mut self.load {
             match job.step() {
                 LoadStep::Working { fraction, what } => {
@@ -770,12 +770,8 @@ impl ShapecastApp {
                 }
             }
         }
-        // While the MIP refines a frame drawn coarse first, its bands go before feature work:
-        // a sharp picture first (on a slow device the two compete for the same GPU time, and
-        // the coarse picture stayed for minutes).
-        let mip_first = self.mip_view.refining();
-        if let Some(gpu) = self.gpu.as_ref().filter(|_| !mip_first) {
-            match self.features.step(gpu) {
+        if let Some(gpu) = &self.gpu {
+            match self.features.step(gpu, frame_s) {
                 Some(JobEvent::Finished { method, notes }) => {
                     for n in notes {
                         self.notes
@@ -1212,7 +1208,10 @@ impl eframe::App for ShapecastApp {
         self.start_once(&ctx);
         self.take_external_files(&ctx);
         self.pacs_frame(&ctx);
-        self.advance();
+        // The time between the starts of the last two frames (the feature job's step follows it
+        // where the device's own frames are slow).
+        let frame_s = f64::from(ctx.input(|i| i.unstable_dt));
+        self.advance(frame_s);
         self.status.frames += 1;
 
         egui::Panel::top("top").show(ui, |ui| self.top_bar_ui(ui));

@@ -290,6 +290,8 @@ pub struct FeatureJob {
     pending: Option<(PendingRead, ReadFor)>,
     /// Steps that recorded and submitted work (a step may only find the GPU still busy).
     submissions: usize,
+    /// GPU seconds of the last step whose completion was seen.
+    last_step_s: Option<f64>,
     components: Option<Components3>,
     notes: Vec<String>,
     stage: String,
@@ -489,6 +491,7 @@ impl FeatureJob {
             busy: None,
             pending: None,
             submissions: 0,
+            last_step_s: None,
             components,
             notes,
             stage: "starting".to_owned(),
@@ -499,6 +502,24 @@ impl FeatureJob {
     /// Steps so far that recorded and submitted work.
     pub fn submissions(&self) -> usize {
         self.submissions
+    }
+
+    /// GPU seconds (submission to the queue's completion callback) of the last step seen done.
+    pub fn last_step_seconds(&self) -> Option<f64> {
+        self.last_step_s
+    }
+
+    /// Changes [`JobOptions::step_seconds`] from the next step on (the viewer follows its own
+    /// frame time); `None` makes the next steps whole.
+    pub fn set_step_seconds(&mut self, seconds: Option<f64>) {
+        for pace in [
+            &mut self.rst_pace,
+            &mut self.conv_pace,
+            &mut self.eigen_pace,
+            &mut self.pack_pace,
+        ] {
+            pace.seconds = seconds;
+        }
     }
 
     /// Number of bricks the volume is processed in.
@@ -567,6 +588,7 @@ impl FeatureJob {
             }
             self.busy = None;
             let secs = micros as f64 * 1e-6;
+            self.last_step_s = Some(secs);
             self.rst_pace.finished(secs);
             self.conv_pace.finished(secs);
             self.eigen_pace.finished(secs);
