@@ -31,13 +31,28 @@ struct Params {
     radius: u32,
     // convolve_block3: how many of dst, dst1, dst2 to write (1..3).
     outputs: u32,
-    // The part of the slab this dispatch computes: lines cut_lo .. cut_hi across the pass
-    // (z for the x and y passes, y for the z pass; `cut_axis` in src/compute/gaussian.rs).
-    // Every output depends only on its own line, so parts give the whole pass's bits.
-    cut_lo: u32,
-    cut_hi: u32,
+    // The box of outputs this dispatch computes: lo <= (i, j, k) < hi (hi <= dims). A pass
+    // may be cut into parts across its lines (the feature job's paced steps), and restricted to
+    // the outputs the next pass reads (a brick's halo is only read, not needed as output, by
+    // later passes). Every output depends only on its own line, so parts give the whole pass's
+    // bits; the block kernels keep their blocks aligned to the line, so a box gives the bits of
+    // the whole slab's pass inside it.
+    lo_x: u32,
+    lo_y: u32,
+    lo_z: u32,
+    hi_x: u32,
+    hi_y: u32,
+    hi_z: u32,
     // Sum of each kernel's taps (x: the only kernel of `convolve` and `convolve_block`).
     tap_sum: vec4<f32>,
+}
+
+fn box_lo(axis: u32) -> u32 {
+    return select(select(params.lo_z, params.lo_y, axis == 1u), params.lo_x, axis == 0u);
+}
+
+fn box_hi(axis: u32) -> u32 {
+    return select(select(params.hi_z, params.hi_y, axis == 1u), params.hi_x, axis == 0u);
 }
 
 // Outputs per invocation of convolve_block (4 vec4 windows) and convolve_block3 (3 vec4
@@ -63,18 +78,10 @@ struct UniformTaps {
 @compute @workgroup_size(8, 8, 1)
 fn convolve(@builtin(global_invocation_id) id: vec3<u32>) {
     let dims = params.dims;
-    // The dispatch spans the part's lines only: offset the cut coordinate.
-    var gid = id;
-    if params.axis == 2u {
-        gid.y = id.y + params.cut_lo;
-        if gid.y >= params.cut_hi {
-            return;
-        }
-    } else {
-        gid.z = id.z + params.cut_lo;
-        if gid.z >= params.cut_hi {
-            return;
-        }
+    // The dispatch spans the box only.
+    let gid = id + vec3<u32>(params.lo_x, params.lo_y, params.lo_z);
+    if gid.x >= params.hi_x || gid.y >= params.hi_y || gid.z >= params.hi_z {
+        return;
     }
     if gid.x >= dims.x || gid.y >= dims.y || gid.z >= dims.z {
         return;
@@ -110,14 +117,20 @@ struct Line {
     stride: u32,
     n: u32,
     start: u32,
+    // Outputs lo .. hi of the line are stored (the box along the pass axis).
+    lo: u32,
+    hi: u32,
     ok: bool,
 }
 
-// The block kernels run over (a, b, block): a and b the two other axes (a the faster one), the
-// block along the pass axis; b is the cut axis, offset by cut_lo.
+// The block kernels run over (a, b, block) of the box: a and b the two other axes (a the
+// faster one), the blocks along the pass axis from the block boundary at or below the box's
+// start (the same blocks, so the same bits, as a pass over the whole line).
 fn line_of(gid: vec3<u32>, block: u32) -> Line {
     let d = params.dims;
     var l: Line;
+    var ax = 0u;
+    var bx = 1u;
     var na = d.x;
     var nb = d.y;
     var sa = 1u;
@@ -125,6 +138,8 @@ fn line_of(gid: vec3<u32>, block: u32) -> Line {
     l.stride = d.x * d.y;
     l.n = d.z;
     if params.axis == 0u {
+        ax = 1u;
+        bx = 2u;
         na = d.y;
         nb = d.z;
         sa = d.x;
@@ -132,6 +147,8 @@ fn line_of(gid: vec3<u32>, block: u32) -> Line {
         l.stride = 1u;
         l.n = d.x;
     } else if params.axis == 1u {
+        ax = 0u;
+        bx = 2u;
         na = d.x;
         nb = d.z;
         sa = 1u;
@@ -139,11 +156,18 @@ fn line_of(gid: vec3<u32>, block: u32) -> Line {
         l.stride = d.x;
         l.n = d.y;
     }
-    let b = gid.y + params.cut_lo;
-    l.base = gid.x * sa + b * sb;
-    l.start = gid.z * block;
-    l.ok = gid.x < na && b < nb && b < params.cut_hi && l.start < l.n;
+    let a = gid.x + box_lo(ax);
+    let b = gid.y + box_lo(bx);
+    l.base = a * sa + b * sb;
+    l.lo = box_lo(params.axis);
+    l.hi = min(box_hi(params.axis), l.n);
+    l.start = (l.lo / block) * block + gid.z * block;
+    l.ok = a < na && a < box_hi(ax) && b < nb && b < box_hi(bx) && l.start < l.hi;
     return l;
+}
+
+fn stored(l: Line, p: u32) -> bool {
+    return p >= l.lo && p < l.hi;
 }
 
 // The input at position p of the line, borders replicated, minus v_ref.
@@ -159,16 +183,16 @@ fn window4(l: Line, p: i32, vref: f32) -> vec4<f32> {
 fn store4(l: Line, m: u32, v: vec4<f32>) {
     let p = l.start + m;
     let i = l.base + p * l.stride;
-    if p < l.n {
+    if stored(l, p) {
         dst[i] = v.x;
     }
-    if p + 1u < l.n {
+    if stored(l, p + 1u) {
         dst[i + l.stride] = v.y;
     }
-    if p + 2u < l.n {
+    if stored(l, p + 2u) {
         dst[i + 2u * l.stride] = v.z;
     }
-    if p + 3u < l.n {
+    if stored(l, p + 3u) {
         dst[i + 3u * l.stride] = v.w;
     }
 }
@@ -176,16 +200,16 @@ fn store4(l: Line, m: u32, v: vec4<f32>) {
 fn store4_1(l: Line, m: u32, v: vec4<f32>) {
     let p = l.start + m;
     let i = l.base + p * l.stride;
-    if p < l.n {
+    if stored(l, p) {
         dst1[i] = v.x;
     }
-    if p + 1u < l.n {
+    if stored(l, p + 1u) {
         dst1[i + l.stride] = v.y;
     }
-    if p + 2u < l.n {
+    if stored(l, p + 2u) {
         dst1[i + 2u * l.stride] = v.z;
     }
-    if p + 3u < l.n {
+    if stored(l, p + 3u) {
         dst1[i + 3u * l.stride] = v.w;
     }
 }
@@ -193,16 +217,16 @@ fn store4_1(l: Line, m: u32, v: vec4<f32>) {
 fn store4_2(l: Line, m: u32, v: vec4<f32>) {
     let p = l.start + m;
     let i = l.base + p * l.stride;
-    if p < l.n {
+    if stored(l, p) {
         dst2[i] = v.x;
     }
-    if p + 1u < l.n {
+    if stored(l, p + 1u) {
         dst2[i + l.stride] = v.y;
     }
-    if p + 2u < l.n {
+    if stored(l, p + 2u) {
         dst2[i + 2u * l.stride] = v.z;
     }
-    if p + 3u < l.n {
+    if stored(l, p + 3u) {
         dst2[i + 3u * l.stride] = v.w;
     }
 }

@@ -964,3 +964,105 @@ fn record_refuses_wrong_buffers() {
     ));
     submit(&ctx, enc);
 }
+
+/// The Hessian's passes over a brick's core only (each pass computes what the next reads:
+/// `hessian::pass_region`) give, inside the core, the bits of the passes over the whole slab,
+/// for a core that starts and ends off the kernels' block boundaries and in several paced parts;
+/// outside the core's rows and slices the components are not computed.
+#[test]
+fn passes_over_a_core_give_the_whole_slabs_bits_there() {
+    use shapecast::compute::hessian::{self, PASSES};
+    let Some(ctx) = test_context() else { return };
+    let (grid, values) = phantom_at([SPACING[0], SPACING[1], 0.5]);
+    let sg = slab_grid(&grid);
+    let n = values.len();
+    let [nx, ny, nz] = sg.dims;
+    let sigma = 0.8;
+    let whole = gpu_hessian(&ctx, &sg, grid.spacing_mm, &values, sigma);
+    let whole: Vec<Vec<f32>> = whole.iter().map(|b| read(&ctx, b, n)).collect();
+    let core = [0..nx, 3..ny - 5, 7..nz - 6];
+    let hessian_pass = Hessian::new(&ctx).expect("shader");
+    let kernels = HessianKernels::new(&ctx, sigma, grid.spacing_mm, true);
+    let input = upload(&ctx, &values);
+    let tmp = buffer(&ctx, n);
+    // NaN marks what no pass wrote.
+    let out: Vec<wgpu::Buffer> = (0..6).map(|_| upload(&ctx, &vec![f32::NAN; n])).collect();
+    let mut enc = encoder(&ctx);
+    let mut computed = 0u64;
+    for pass in 0..PASSES {
+        let lines = hessian::pass_lines(&sg, &core, pass);
+        computed += hessian::pass_voxels(&sg, &core, pass);
+        // Three parts per pass, the last possibly empty.
+        let step = (lines.end - lines.start).div_ceil(3).max(1);
+        let mut at = lines.start;
+        while at < lines.end {
+            let end = (at + step).min(lines.end);
+            hessian_pass
+                .record_pass(
+                    &ctx,
+                    &mut enc,
+                    &sg,
+                    &kernels,
+                    &input,
+                    &tmp,
+                    std::array::from_fn(|c| &out[c]),
+                    pass,
+                    &core,
+                    at..end,
+                )
+                .expect("record");
+            at = end;
+        }
+    }
+    submit(&ctx, enc);
+    let (mut inside, mut outside_unwritten, mut outside) = (0usize, 0usize, 0usize);
+    for (c, buf) in out.iter().enumerate() {
+        let got = read(&ctx, buf, n);
+        for k in 0..nz as usize {
+            for j in 0..ny as usize {
+                for i in 0..nx as usize {
+                    let v = i + nx as usize * (j + ny as usize * k);
+                    let in_core = core[1].contains(&(j as u32)) && core[2].contains(&(k as u32));
+                    if in_core {
+                        assert_eq!(
+                            got[v].to_bits(),
+                            whole[c][v].to_bits(),
+                            "component {c} at ({i}, {j}, {k}): {} vs {}",
+                            got[v],
+                            whole[c][v]
+                        );
+                        inside += 1;
+                    } else {
+                        outside += 1;
+                        outside_unwritten += usize::from(got[v].is_nan());
+                    }
+                }
+            }
+        }
+    }
+    let work = computed as f64 / (PASSES as u64 * n as u64) as f64;
+    eprintln!(
+        "core {core:?} of {:?}: {inside} component voxels bit-identical; {outside_unwritten} of {outside} outside left unwritten; the passes computed {work:.2} of the whole slab's outputs",
+        sg.dims
+    );
+    assert_eq!(inside, 6 * (core[1].len() * core[2].len()) * nx as usize);
+    // The final x passes write only the core; what lies outside it in some components is an
+    // intermediate parked there (z and y passes over the halo rows they must cover).
+    assert!(outside_unwritten > outside / 3, "{outside_unwritten} of {outside}");
+    assert!(work < 0.6, "the passes over the core computed {work:.2} of the slab's");
+    // A part outside the pass's lines is refused.
+    let mut enc = encoder(&ctx);
+    let err = hessian_pass.record_pass(
+        &ctx,
+        &mut enc,
+        &sg,
+        &kernels,
+        &input,
+        &tmp,
+        std::array::from_fn(|c| &out[c]),
+        1,
+        &core,
+        0..nz,
+    );
+    assert!(err.is_err(), "a part beyond the core's slices was recorded");
+}

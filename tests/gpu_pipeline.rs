@@ -477,8 +477,9 @@ fn hessian_passes_paced_to_the_device_give_the_same_features() {
     // Whole passes (the CLI's way).
     let (whole, whole_steps) = run_counting_steps(&ctx, &volume, &req, capped(None), "Hessian");
     assert!(whole.slabs >= 2, "{} bricks", whole.slabs);
-    // One line per step: each convolution pass cut into its lines (rows for the z pass,
-    // slices for the others), the eigenvalue pass into core slices.
+    // One line per step: each convolution pass cut into its lines (the slab's rows for the z
+    // pass, the core's slices for the others, which compute only what the core needs), the
+    // eigenvalue pass into core slices.
     let (lines, line_steps) =
         run_counting_steps(&ctx, &volume, &req, capped(Some(1e-12)), "Hessian");
     // From one line, growing at most twofold per step.
@@ -489,8 +490,8 @@ fn hessian_passes_paced_to_the_device_give_the_same_features() {
         .bricks
         .iter()
         .map(|b| {
-            let (ny, nz) = (b.slab_c[1].len(), b.slab_c[2].len());
-            scales * (ny + (hessian::PASSES - 1) * nz + b.core_c[2].len())
+            let (ny, core_nz) = (b.slab_c[1].len(), b.core_c[2].len());
+            scales * (ny + hessian::PASSES * core_nz)
         })
         .sum();
     eprintln!(

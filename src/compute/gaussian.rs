@@ -29,16 +29,25 @@ struct Params {
     axis: u32,
     radius: u32,
     outputs: u32,
-    cut_lo: u32,
-    cut_hi: u32,
+    lo: [u32; 3],
+    hi: [u32; 3],
     tap_sum: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 48);
+const _: () = assert!(std::mem::size_of::<Params>() == 64);
+
+/// A box of a slab's voxels, `[x, y, z]` ranges: the outputs one dispatch of a pass computes.
+pub type Region = [Range<u32>; 3];
+
+/// The whole slab `grid`.
+pub fn whole(grid: &SlabGrid) -> Region {
+    grid.dims.map(|n| 0..n)
+}
 
 /// The axis across which a pass along `axis` may be cut into parts (z for the x and y passes,
 /// y for the z pass): each part is a range of lines of the pass, whose outputs depend on those
 /// lines only, so a pass recorded in parts gives the same bits as in one dispatch (the feature
-/// job's paced steps).
+/// job's paced steps). Any [`Region`] of a pass gives the bits of the whole slab's pass inside
+/// it: the block kernels keep their blocks aligned to the line.
 pub fn cut_axis(axis: usize) -> usize {
     if axis == 2 { 1 } else { 2 }
 }
@@ -264,14 +273,14 @@ impl Gaussian {
         ctx: &GpuContext,
         grid: &SlabGrid,
         axis: usize,
-        cut: &Range<u32>,
+        region: &Region,
         src: &wgpu::Buffer,
         dst: &[&wgpu::Buffer],
     ) -> Result<(), RecordError> {
         if axis > 2 {
             return Err(RecordError::Invalid("axis must be 0, 1 or 2"));
         }
-        if cut.start > cut.end || cut.end > grid.dims[cut_axis(axis)] {
+        if (0..3).any(|a| region[a].start > region[a].end || region[a].end > grid.dims[a]) {
             return Err(RecordError::Invalid(
                 "a convolution's part must lie within the slab",
             ));
@@ -302,7 +311,7 @@ impl Gaussian {
         encoder: &mut wgpu::CommandEncoder,
         grid: &SlabGrid,
         axis: usize,
-        cut: &Range<u32>,
+        region: &Region,
         taps: &PassTaps<'_>,
         src: &wgpu::Buffer,
         dst: &[&wgpu::Buffer],
@@ -312,20 +321,22 @@ impl Gaussian {
             axis: axis as u32,
             radius: taps.radius,
             outputs: dst.len() as u32,
-            cut_lo: cut.start,
-            cut_hi: cut.end,
+            lo: region.clone().map(|r| r.start),
+            hi: region.clone().map(|r| r.end),
             tap_sum: taps.sums,
         };
         let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "gaussian params", &params);
-        // The dispatch spans the part's lines of the cut axis only.
-        let mut d = grid.dims;
-        d[cut_axis(axis)] = cut.end - cut.start;
+        // The dispatch spans the box only.
+        let d: [u32; 3] = std::array::from_fn(|a| region[a].len() as u32);
         // (a, b) = the other two axes, the faster first (b is the cut axis).
         let (a, b) = match axis {
             0 => (d[1], d[2]),
             1 => (d[0], d[2]),
             _ => (d[0], d[1]),
         };
+        // Blocks along the pass axis start at the block boundary at or below the box's start.
+        let along =
+            |block: u32| (region[axis].end - region[axis].start / block * block).div_ceil(block);
         let (pipeline, entries, groups) = match (taps.uniform, dst) {
             (Some(u), [d0, more @ ..]) => {
                 let mut entries = vec![
@@ -338,7 +349,7 @@ impl Gaussian {
                     [] => (
                         &self.block,
                         entries,
-                        [a.div_ceil(8), b.div_ceil(8), d[axis].div_ceil(BLOCK)],
+                        [a.div_ceil(8), b.div_ceil(8), along(BLOCK)],
                     ),
                     [d1, rest @ ..] => {
                         entries.push(checks::entry(5, d1));
@@ -347,7 +358,7 @@ impl Gaussian {
                         (
                             &self.block3,
                             entries,
-                            [a.div_ceil(8), b.div_ceil(8), d[axis].div_ceil(BLOCK3)],
+                            [a.div_ceil(8), b.div_ceil(8), along(BLOCK3)],
                         )
                     }
                 }
@@ -394,12 +405,11 @@ impl Gaussian {
         src: &wgpu::Buffer,
         dst: &wgpu::Buffer,
     ) -> Result<(), RecordError> {
-        let all = 0..grid.dims[cut_axis(axis)];
-        self.record_axis_part(ctx, encoder, grid, axis, all, taps, src, dst)
+        self.record_axis_part(ctx, encoder, grid, axis, &whole(grid), taps, src, dst)
     }
 
-    /// [`Self::record_axis`] for the lines `cut` of [`cut_axis`]`(axis)` only (the rest of
-    /// `dst` is left as it is).
+    /// [`Self::record_axis`] for the outputs in `region` only (the rest of `dst` is left as it
+    /// is; the inputs are read wherever the kernel reaches).
     #[allow(clippy::too_many_arguments)]
     pub fn record_axis_part(
         &self,
@@ -407,13 +417,13 @@ impl Gaussian {
         encoder: &mut wgpu::CommandEncoder,
         grid: &SlabGrid,
         axis: usize,
-        cut: Range<u32>,
+        region: &Region,
         taps: &AxisTaps,
         src: &wgpu::Buffer,
         dst: &wgpu::Buffer,
     ) -> Result<(), RecordError> {
-        Self::check_pass(ctx, grid, axis, &cut, src, &[dst])?;
-        if grid.is_empty() || cut.is_empty() {
+        Self::check_pass(ctx, grid, axis, region, src, &[dst])?;
+        if grid.is_empty() || region.iter().any(|r| r.is_empty()) {
             return Ok(());
         }
         let pass = PassTaps {
@@ -422,7 +432,7 @@ impl Gaussian {
             radius: taps.radius,
             sums: [taps.sum, 0.0, 0.0, 0.0],
         };
-        self.dispatch(ctx, encoder, grid, axis, &cut, &pass, src, &[dst])
+        self.dispatch(ctx, encoder, grid, axis, region, &pass, src, &[dst])
     }
 
     /// Records `dst[o] = src (*) taps of order o` along `axis` for `o < dst.len()` (one to three
@@ -439,11 +449,10 @@ impl Gaussian {
         src: &wgpu::Buffer,
         dst: &[&wgpu::Buffer],
     ) -> Result<(), RecordError> {
-        let all = 0..grid.dims[cut_axis(axis)];
-        self.record_axis_multi_part(ctx, encoder, grid, axis, all, taps, src, dst)
+        self.record_axis_multi_part(ctx, encoder, grid, axis, &whole(grid), taps, src, dst)
     }
 
-    /// [`Self::record_axis_multi`] for the lines `cut` of [`cut_axis`]`(axis)` only.
+    /// [`Self::record_axis_multi`] for the outputs in `region` only.
     #[allow(clippy::too_many_arguments)]
     pub fn record_axis_multi_part(
         &self,
@@ -451,7 +460,7 @@ impl Gaussian {
         encoder: &mut wgpu::CommandEncoder,
         grid: &SlabGrid,
         axis: usize,
-        cut: Range<u32>,
+        region: &Region,
         taps: &AxisTapSet,
         src: &wgpu::Buffer,
         dst: &[&wgpu::Buffer],
@@ -461,8 +470,8 @@ impl Gaussian {
                 "gaussian: one to three outputs per pass",
             ));
         }
-        Self::check_pass(ctx, grid, axis, &cut, src, dst)?;
-        if grid.is_empty() || cut.is_empty() {
+        Self::check_pass(ctx, grid, axis, region, src, dst)?;
+        if grid.is_empty() || region.iter().any(|r| r.is_empty()) {
             return Ok(());
         }
         match (&taps.packed, dst) {
@@ -473,13 +482,13 @@ impl Gaussian {
                     radius: taps.radius,
                     sums: [taps.sums[0], taps.sums[1], taps.sums[2], 0.0],
                 };
-                self.dispatch(ctx, encoder, grid, axis, &cut, &pass, src, dst)
+                self.dispatch(ctx, encoder, grid, axis, region, &pass, src, dst)
             }
             // One output, or kernels too long for the uniform array: one pass per order.
             _ => {
                 for (o, d) in dst.iter().enumerate() {
                     let taps = &taps.orders[o];
-                    self.record_axis_part(ctx, encoder, grid, axis, cut.clone(), taps, src, d)?;
+                    self.record_axis_part(ctx, encoder, grid, axis, region, taps, src, d)?;
                 }
                 Ok(())
             }

@@ -8,7 +8,7 @@
 //! input). The sigma^2 normalisation is folded into the x taps. Intermediate results are parked
 //! in output buffers not yet written, so the working set is one temporary plus the six outputs.
 
-use crate::compute::gaussian::{AxisTapSet, Gaussian, cut_axis};
+use crate::compute::gaussian::{AxisTapSet, Gaussian, Region, cut_axis, whole};
 use crate::gpu::checks::RecordError;
 use crate::gpu::kernel::SlabGrid;
 use crate::gpu::{GpuContext, shaders};
@@ -92,17 +92,22 @@ impl Hessian {
         tmp: &wgpu::Buffer,
         out: [&wgpu::Buffer; 6],
     ) -> Result<(), RecordError> {
+        let core = whole(grid);
         (0..PASSES).try_for_each(|pass| {
-            let all = 0..cut_lines(grid, pass);
-            self.record_pass(ctx, encoder, grid, kernels, input, tmp, out, pass, all)
+            let all = pass_lines(grid, &core, pass);
+            self.record_pass(
+                ctx, encoder, grid, kernels, input, tmp, out, pass, &core, all,
+            )
         })
     }
 
-    /// Records pass `pass` (of [`PASSES`], in order) of [`Self::record`] for the lines `cut`
-    /// of its cut axis ([`cut_lines`]): the passes may go in separate submissions, and a pass
-    /// in parts (the feature job's paced steps), since every intermediate lives in `tmp` and
-    /// `out` and each output depends on its own line only. A pass's parts must all be recorded
-    /// before the next pass.
+    /// Records pass `pass` (of [`PASSES`], in order) of [`Self::record`], computing only what
+    /// the components need in `core` (a brick's core; its halo is read, not delivered:
+    /// [`pass_region`]), for the lines `cut` of its cut axis (within [`pass_lines`]): the
+    /// passes may go in separate submissions, and a pass in parts (the feature job's paced
+    /// steps), since every intermediate lives in `tmp` and `out` and each output depends on its
+    /// own line only. A pass's parts must all be recorded before the next pass. Inside `core`
+    /// the components have the bits of the whole slab's passes.
     #[allow(clippy::too_many_arguments)]
     pub fn record_pass(
         &self,
@@ -114,8 +119,21 @@ impl Hessian {
         tmp: &wgpu::Buffer,
         out: [&wgpu::Buffer; 6],
         pass: usize,
+        core: &Region,
         cut: Range<u32>,
     ) -> Result<(), RecordError> {
+        if pass >= PASSES {
+            return Err(RecordError::Invalid("Hessian: no such pass"));
+        }
+        let mut region = pass_region(grid, core, pass);
+        let across = cut_axis(PASS_AXIS_OUTPUTS[pass].0);
+        if cut.start < region[across].start || cut.end > region[across].end {
+            return Err(RecordError::Invalid(
+                "Hessian: a pass's part must lie within its lines",
+            ));
+        }
+        region[across] = cut;
+        let region = &region;
         let all: [&wgpu::Buffer; 8] = [input, tmp, out[0], out[1], out[2], out[3], out[4], out[5]];
         for (n, a) in all.iter().enumerate() {
             if all[n + 1..].contains(a) {
@@ -135,14 +153,14 @@ impl Hessian {
                      src: &wgpu::Buffer,
                      dst: &[&wgpu::Buffer]| {
             let taps = [x, y, z][axis];
-            g.record_axis_multi_part(ctx, encoder, grid, axis, cut.clone(), taps, src, dst)
+            g.record_axis_multi_part(ctx, encoder, grid, axis, region, taps, src, dst)
         };
         let single = |encoder: &mut wgpu::CommandEncoder,
                       order: usize,
                       src: &wgpu::Buffer,
                       dst: &wgpu::Buffer| {
             let taps = x.order(order);
-            g.record_axis_part(ctx, encoder, grid, 0, cut.clone(), taps, src, dst)
+            g.record_axis_part(ctx, encoder, grid, 0, region, taps, src, dst)
         };
         // z orders 0, 1, 2 of the input, parked in outputs written last.
         let (z0, z1, z2) = (yz, xz, xy);
@@ -185,11 +203,32 @@ const PASS_AXIS_OUTPUTS: [(usize, usize); PASSES] = [
     (0, 1),
 ];
 
-/// Lines of pass `pass` that [`Hessian::record_pass`] may be cut into: slices (z) for the x
-/// and y passes, rows (y) for the z pass.
-pub fn cut_lines(grid: &SlabGrid, pass: usize) -> u32 {
+/// The outputs pass `pass` computes for the components to be right in `core`: the z pass
+/// (first) over the core slices only, the y passes over the core's rows of those, the x passes
+/// over the core (the later passes read the earlier ones' outputs across the halo of their own
+/// axis only). A whole-slab `core` gives the whole slab.
+pub fn pass_region(grid: &SlabGrid, core: &Region, pass: usize) -> Region {
     let axis = PASS_AXIS_OUTPUTS.get(pass).map_or(0, |p| p.0);
-    grid.dims[cut_axis(axis)]
+    let mut r = whole(grid);
+    for a in axis..3 {
+        r[a] = core[a].start.min(grid.dims[a])..core[a].end.min(grid.dims[a]);
+    }
+    r
+}
+
+/// Lines of pass `pass` that [`Hessian::record_pass`] may be cut into: slices (z) for the x
+/// and y passes, rows (y) for the z pass, within [`pass_region`].
+pub fn pass_lines(grid: &SlabGrid, core: &Region, pass: usize) -> Range<u32> {
+    let axis = PASS_AXIS_OUTPUTS.get(pass).map_or(0, |p| p.0);
+    pass_region(grid, core, pass)[cut_axis(axis)].clone()
+}
+
+/// Output voxels of pass `pass` for `core` ([`pass_region`]).
+pub fn pass_voxels(grid: &SlabGrid, core: &Region, pass: usize) -> u64 {
+    pass_region(grid, core, pass)
+        .iter()
+        .map(|r| u64::from(r.end - r.start))
+        .product()
 }
 
 /// Storage loads and stores per voxel of pass `pass` with `kernels` (its relative cost, for

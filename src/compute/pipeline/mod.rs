@@ -372,12 +372,6 @@ impl FeatureJob {
         } else {
             Vec::new()
         };
-        if slabs.len() > 1 {
-            notes.push(format!(
-                "{} bricks, halo overhead {overhead:.2} (computed / delivered voxels)",
-                slabs.len()
-            ));
-        }
         let Resolved {
             sigmas_mm,
             rays,
@@ -386,6 +380,20 @@ impl FeatureJob {
             ..
         } = resolved;
         let kernels = Kernels::new(ctx, &req, &compute, &sigmas_mm, options.exact_rst)?;
+        // The Hessian's passes compute only what the core needs: their halo costs less than
+        // the bricks hold.
+        let held = overhead;
+        let overhead = if kernels.hessian_kernels.is_empty() {
+            held
+        } else {
+            hessian_work_overhead(&compute, &slabs, &kernels.hessian_kernels)
+        };
+        if slabs.len() > 1 {
+            notes.push(format!(
+                "{} bricks, halo overhead {overhead:.2} (computed / delivered voxels; the bricks hold {held:.2})",
+                slabs.len()
+            ));
+        }
         let mut tasks = VecDeque::new();
         let tf = if req.method == Method::Rst {
             req.tf
@@ -1024,19 +1032,27 @@ impl FeatureJob {
     ) -> Result<bool, PipelineError> {
         let slab = &self.slabs[s];
         let grid = box_grid(&self.compute, &slab.slab_c);
-        let (core, _) = core_in_slab(slab);
+        let (core, rows) = core_in_slab(slab);
+        let core_box = [
+            0..grid.dims[0],
+            rows.0..rows.0 + rows.1,
+            core.0..core.0 + core.1,
+        ];
         let conv = pass < hessian::PASSES;
-        let (lines, per_line) = if conv {
-            let lines = hessian::cut_lines(&grid, pass);
+        let (first, lines, per_line) = if conv {
+            let lines = hessian::pass_lines(&grid, &core_box, pass);
+            let n = lines.end - lines.start;
             let accesses =
                 hessian::pass_accesses_per_voxel(&self.kernels.hessian_kernels[part], pass);
+            let voxels = hessian::pass_voxels(&grid, &core_box, pass);
             (
-                lines,
-                grid.len() as f64 / f64::from(lines.max(1)) * accesses,
+                lines.start,
+                n,
+                voxels as f64 / f64::from(n.max(1)) * accesses,
             )
         } else {
             let plane = u64::from(grid.dims[0]) * u64::from(grid.dims[1]);
-            (core.1, plane as f64)
+            (0, core.1, plane as f64)
         };
         let done = self.pass_cursor.min(lines);
         let left = lines - done;
@@ -1067,7 +1083,8 @@ impl FeatureJob {
                 &b.tmp[0],
                 out,
                 pass,
-                cut.clone(),
+                &core_box,
+                first + cut.start..first + cut.end,
             )?;
         } else {
             self.record_features_of_tensor(ctx, encoder, &grid, 0, core, cut.clone(), part)?;
@@ -1389,4 +1406,32 @@ impl FeatureJob {
             (finished && self.options.export).then_some((features, bytes, ReadFor::Export(s)));
         Ok((read, finished))
     }
+}
+/// Convolution work of the Hessian's passes over `slabs` (each pass over [`hessian::pass_region`]
+/// of its brick's core, weighed by its storage accesses) over the same work if every brick were
+/// its core alone: the halo overhead of the Hessian methods.
+fn hessian_work_overhead(
+    compute: &Grid,
+    slabs: &[Brick],
+    kernels: &[hessian::HessianKernels],
+) -> f64 {
+    let (mut done, mut needed) = (0.0, 0.0);
+    for slab in slabs {
+        let grid = box_grid(compute, &slab.slab_c);
+        let (core, rows) = core_in_slab(slab);
+        let core_box = [
+            0..grid.dims[0],
+            rows.0..rows.0 + rows.1,
+            core.0..core.0 + core.1,
+        ];
+        let core_voxels = slab.core_len() as f64;
+        for k in kernels {
+            for pass in 0..hessian::PASSES {
+                let a = hessian::pass_accesses_per_voxel(k, pass);
+                done += hessian::pass_voxels(&grid, &core_box, pass) as f64 * a;
+                needed += core_voxels * a;
+            }
+        }
+    }
+    if needed > 0.0 { done / needed } else { 1.0 }
 }
