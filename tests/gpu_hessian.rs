@@ -1048,8 +1048,14 @@ fn passes_over_a_core_give_the_whole_slabs_bits_there() {
     assert_eq!(inside, 6 * (core[1].len() * core[2].len()) * nx as usize);
     // The final x passes write only the core; what lies outside it in some components is an
     // intermediate parked there (z and y passes over the halo rows they must cover).
-    assert!(outside_unwritten > outside / 3, "{outside_unwritten} of {outside}");
-    assert!(work < 0.6, "the passes over the core computed {work:.2} of the slab's");
+    assert!(
+        outside_unwritten > outside / 3,
+        "{outside_unwritten} of {outside}"
+    );
+    assert!(
+        work < 0.6,
+        "the passes over the core computed {work:.2} of the slab's"
+    );
     // A part outside the pass's lines is refused.
     let mut enc = encoder(&ctx);
     let err = hessian_pass.record_pass(

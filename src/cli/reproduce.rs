@@ -100,7 +100,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
         started.elapsed().as_secs_f64()
     );
     section_timing(&mut md);
-    real_ct::section_real_ct(&mut md, &args.data);
+    real_ct::section_real_ct(&mut md, &args.data, &img_dir);
     eprintln!("real CT done ({:.0} s)", started.elapsed().as_secs_f64());
     section_skimage(&mut md, &img_dir);
     let _ = writeln!(
