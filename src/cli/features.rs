@@ -169,7 +169,8 @@ pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
     for n in &loaded.notes {
         eprintln!("note: {n}");
     }
-    let volume = loaded.volume;
+    // Shared with the feature job: one copy of the voxels.
+    let volume = std::sync::Arc::new(loaded.volume);
     for w in &volume.warnings {
         eprintln!("warning: {w}");
     }
@@ -182,7 +183,7 @@ pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
                 exact_rst: args.exact_rst,
                 ..JobOptions::default()
             };
-            let mut job = FeatureJob::with_options(&ctx, &volume, &req, options)?;
+            let mut job = FeatureJob::shared(&ctx, std::sync::Arc::clone(&volume), &req, options)?;
             eprintln!(
                 "GPU: {} ({} brick{}, halo overhead {:.2})",
                 ctx.adapter_label(),

@@ -186,7 +186,7 @@ pub fn default_window(volume: &Volume, preset: Preset) -> (f32, f32) {
 /// Runs the feature job to the end, printing its progress to stderr.
 pub fn compute_features(
     ctx: &GpuContext,
-    volume: &Volume,
+    volume: &std::sync::Arc<Volume>,
     request: &Request,
     webgpu_limits: bool,
 ) -> anyhow::Result<FeatureTexture> {
@@ -194,7 +194,7 @@ pub fn compute_features(
         limits: webgpu_limits.then(wgpu::Limits::default),
         ..Default::default()
     };
-    let mut job = FeatureJob::with_options(ctx, volume, request, options)?;
+    let mut job = FeatureJob::shared(ctx, std::sync::Arc::clone(volume), request, options)?;
     eprintln!(
         "{} brick(s), halo overhead {:.2}",
         job.slab_count(),
@@ -271,6 +271,8 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             loaded.volume
         }
     };
+    // Shared with the feature job: one copy of the voxels.
+    let volume = std::sync::Arc::new(volume);
     let ctx = pollster::block_on(GpuContext::new_headless())?;
     let render_volume = RenderVolume::upload(&ctx, &volume)?;
     let features = match method(args.method) {

@@ -183,6 +183,8 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
     let mut volume: Volume = super::bench::tile_along_z(&loaded, opts.slices.max(1));
     drop(loaded);
     volume.spacing_mm[2] = WHOLE_BODY_SLICE_MM;
+    // Shared with the feature job, as the viewer does: one copy of the voxels.
+    let volume = std::sync::Arc::new(volume);
     let load_s = t0.elapsed().as_secs_f64();
     println!(
         "volume: {:?} voxels ({:.0} M, {} MB as stored) from {} ({source_dims:?}) tiled along z at {WHOLE_BODY_SLICE_MM} mm",
@@ -253,7 +255,12 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
         ..JobOptions::default()
     };
     let t = Instant::now();
-    let mut job = FeatureJob::with_options(&ctx, &volume, &request, options)?;
+    let mut job = FeatureJob::shared(&ctx, std::sync::Arc::clone(&volume), &request, options)?;
+    let rss = || super::bench::rss_mb().unwrap_or(f64::NAN);
+    println!("feature job created: resident memory {:.0} MB", rss());
+    // Resident memory as the job goes (what holds memory: the texture, the bricks' buffers).
+    let mut trace = Vec::new();
+    let mut next_trace = 0.0;
     // Step by step as the viewer does, each step waited for: a step is what a frame of the
     // viewer may wait behind while the job runs (issue "full-size scans", deliver 5).
     let mut steps_ms = Vec::new();
@@ -267,7 +274,11 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
         let ms = t.elapsed().as_secs_f64() * 1e3;
         match state {
             JobState::Done => break,
-            JobState::Running { stage, .. } => {
+            JobState::Running { stage, fraction } => {
+                if f64::from(fraction) >= next_trace {
+                    trace.push(format!("{:.0}% {:.0} MB", 100.0 * fraction, rss()));
+                    next_trace += 0.1;
+                }
                 if ms > largest.0 {
                     largest = (ms, stage);
                 }
@@ -292,6 +303,7 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
         largest.0,
         largest.1
     );
+    println!("resident memory while the job ran: {}", trace.join(", "));
     let (bricks_n, overhead) = (job.slab_count(), job.overhead());
     let features: FeatureTexture = job.finish().context("the feature job did not finish")?;
     let secs = t.elapsed().as_secs_f64();
