@@ -67,7 +67,10 @@ struct UniformTaps {
     w: array<vec4<f32>, MAX_TAPS>,
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
+// A read-only storage buffer, not a uniform: lavapipe (Mesa 22.3) specialises a shader on the
+// uniforms its loops and branches read, compiling and keeping a variant at every dispatch
+// (~1.3 ms and ~260 KB each, never freed while the pipeline lives: 2 GB over a whole-body job).
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
 @group(0) @binding(2) var<storage, read> taps: array<f32>;
 @group(0) @binding(3) var<storage, read_write> dst: array<f32>;

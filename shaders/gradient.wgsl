@@ -15,7 +15,8 @@ struct Params {
     _pad1: f32,
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
+// Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants).
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read> intensity: array<f32>;
 @group(0) @binding(2) var<storage, read_write> gx: array<f32>;
 @group(0) @binding(3) var<storage, read_write> gy: array<f32>;

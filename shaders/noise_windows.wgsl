@@ -16,7 +16,8 @@ struct Params {
     _pad1: u32,
 }
 
-@group(0) @binding(0) var<uniform> p: Params;
+// Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants).
+@group(0) @binding(0) var<storage, read> p: Params;
 @group(0) @binding(1) var<storage, read> smoothed: array<f32>;
 @group(0) @binding(2) var<storage, read_write> sigmas: array<f32>; // nwx * nwy * nz
 

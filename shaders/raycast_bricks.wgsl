@@ -22,7 +22,8 @@ struct Slices {
 
 @group(0) @binding(0) var source: texture_3d<f32>;
 @group(0) @binding(1) var bricks: texture_storage_3d<rgba16float, write>;
-@group(0) @binding(2) var<uniform> slices: Slices;
+// Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants).
+@group(0) @binding(2) var<storage, read> slices: Slices;
 
 fn voxel_range(b: vec3<u32>) -> array<vec3<u32>, 2> {
     let n = textureDimensions(source);

@@ -20,7 +20,8 @@ struct Tap {
     _pad0: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
+// Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants).
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
 @group(0) @binding(2) var<storage, read> taps: array<Tap>;
 @group(0) @binding(3) var<storage, read_write> dst: array<f32>;

@@ -71,7 +71,8 @@ override HARDWARE_FILTERING: bool = false;
 // weights are coarser than lavapipe's.
 override EMULATED_WEIGHT_STEPS: f32 = 0.0;
 
-@group(0) @binding(0) var<uniform> params: Params;
+// Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants).
+@group(0) @binding(0) var<storage, read> params: Params;
 // (I, gx, gy, gz) per voxel of the slab (one load gives all four, several times faster than four
 // storage-buffer loads on lavapipe, and cached in 3D on GPUs).
 @group(0) @binding(1) var volume: texture_3d<f32>;

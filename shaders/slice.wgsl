@@ -21,7 +21,8 @@ struct Params {
     scale: vec4<f32>,
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
+// Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants).
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var intensity: texture_3d<f32>;
 @group(0) @binding(2) var features: texture_3d<f32>;
 @group(0) @binding(3) var image: texture_storage_2d<rgba8unorm, write>;

@@ -13,7 +13,8 @@ struct Params {
     _pad2: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
+// Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants).
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read> g_x: array<f32>;
 @group(0) @binding(2) var<storage, read> g_y: array<f32>;
 @group(0) @binding(3) var<storage, read> g_z: array<f32>;

@@ -325,7 +325,7 @@ impl Gaussian {
             hi: region.clone().map(|r| r.end),
             tap_sum: taps.sums,
         };
-        let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "gaussian params", &params);
+        let params = crate::gpu::kernel::params_buffer(&ctx.device, "gaussian params", &params);
         // The dispatch spans the box only.
         let d: [u32; 3] = std::array::from_fn(|a| region[a].len() as u32);
         // (a, b) = the other two axes, the faster first (b is the cut axis).

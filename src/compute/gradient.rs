@@ -7,7 +7,7 @@
 //! Also holds what the RST and gradient kernels share: [`RecordError`] and the checks that make
 //! a bad size an error instead of a wgpu validation panic.
 
-use crate::gpu::kernel::{SlabGrid, WORKGROUP, uniform_buffer};
+use crate::gpu::kernel::{SlabGrid, WORKGROUP, params_buffer};
 use crate::gpu::{GpuContext, shaders};
 
 use crate::gpu::checks::RecordError;
@@ -197,7 +197,7 @@ impl Gradient {
             two_spacing: grid.spacing_mm.map(|s| 2.0 * s),
             _pad1: 0.0,
         };
-        uniform_buffer(&ctx.device, "gradient params", &params)
+        params_buffer(&ctx.device, "gradient params", &params)
     }
 
     /// Records the gradient of the smoothed `intensity` of `grid` (every voxel of the slab; the

@@ -4,7 +4,7 @@
 //! the CPU over the whole volume ([`crate::cpu::tf::median`]).
 
 use crate::cpu::tf::{NOISE_WINDOW, noise_window_counts};
-use crate::gpu::kernel::{self, SlabGrid, uniform_buffer};
+use crate::gpu::kernel::{self, SlabGrid, params_buffer};
 use crate::gpu::{GpuContext, checks, shaders};
 
 /// Mirrors `Params` in noise_windows.wgsl.
@@ -59,7 +59,7 @@ impl NoiseWindows {
         if nwx == 0 || nwy == 0 || nz == 0 {
             return;
         }
-        let params = uniform_buffer(
+        let params = params_buffer(
             &ctx.device,
             "noise params",
             &Params {

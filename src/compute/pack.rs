@@ -4,7 +4,7 @@
 //! CPU twin is [`crate::gpu::volume_texture::encode_rgb9e5`], as
 //! [`crate::gpu::volume_texture::FeatureTexture::from_components`] uses it.
 
-use crate::gpu::kernel::{self, SlabGrid, WORKGROUP, uniform_buffer};
+use crate::gpu::kernel::{self, SlabGrid, WORKGROUP, params_buffer};
 use crate::gpu::volume_texture::{
     FEATURE_TEXEL_BYTES, FeatureTexture, HISTOGRAM_BINS, histogram_quantile,
 };
@@ -57,6 +57,9 @@ pub struct Pack {
     pipeline: wgpu::ComputePipeline,
     /// Three u32 (float bits of the non-negative maxima), `COPY_SRC` for readback.
     pub maxima: wgpu::Buffer,
+    /// The staging buffer, kept and reused by every chunk (grown when a box needs more) instead
+    /// of one made per paced step (thousands of steps in a whole-body job).
+    staging: std::sync::Mutex<Option<wgpu::Buffer>>,
 }
 
 impl Pack {
@@ -71,7 +74,11 @@ impl Pack {
                 | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        Ok(Self { pipeline, maxima })
+        Ok(Self {
+            pipeline,
+            maxima,
+            staging: std::sync::Mutex::new(None),
+        })
     }
 
     /// Records: the box `at` of the block `src` (3 components, component-major) into `dst`.
@@ -111,12 +118,44 @@ impl Pack {
             .min(ctx.limits.max_buffer_size);
         let slice_bytes = u64::from(row_bytes) * u64::from(ny);
         let chunk = (limit / slice_bytes.max(1)).clamp(1, u64::from(nz.max(1))) as u32;
+        // One staging buffer for the whole box's chunks (wgpu orders the copy before the next
+        // chunk's writes), sized for the largest chunk a box of this size can take.
+        let box_chunk = (limit / slice_bytes.max(1)).clamp(1, u64::from(at.src_dims[2].max(1)));
+        let staging = self.staging(ctx, (slice_bytes * box_chunk).max(4));
         let mut src_z0 = slices.start;
         while src_z0 < nz {
             let dims = [nx, ny, chunk.min(nz - src_z0)];
-            // Slices src_z0.. of the box: encoded into a staging buffer, then copied.
-            self.record_chunk(ctx, encoder, (src, at), dst, (dims, src_z0, pitch));
+            // Slices src_z0.. of the box: encoded into the staging buffer, then copied.
+            self.record_chunk(
+                ctx,
+                encoder,
+                (src, at),
+                dst,
+                &staging,
+                (dims, src_z0, pitch),
+            );
             src_z0 += dims[2];
+        }
+    }
+
+    /// The kept staging buffer, at least `bytes` long.
+    fn staging(&self, ctx: &GpuContext, bytes: u64) -> wgpu::Buffer {
+        let mut kept = self
+            .staging
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        match kept.as_ref() {
+            Some(b) if b.size() >= bytes => b.clone(),
+            _ => {
+                let b = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("pack staging"),
+                    size: bytes,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                });
+                *kept = Some(b.clone());
+                b
+            }
         }
     }
 
@@ -126,18 +165,13 @@ impl Pack {
         encoder: &mut wgpu::CommandEncoder,
         (src, at): (&wgpu::Buffer, PackBox),
         dst: &FeatureTexture,
+        staging: &wgpu::Buffer,
         (dims, src_z0, pitch): ([u32; 3], u32, u32),
     ) {
         let block = SlabGrid::new(dims, [1.0; 3]);
         let [nx, ny, nz] = dims;
         let row_bytes = pitch * FEATURE_TEXEL_BYTES;
-        let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("pack staging"),
-            size: (u64::from(row_bytes) * u64::from(ny) * u64::from(nz)).max(4),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let params = uniform_buffer(
+        let params = params_buffer(
             &ctx.device,
             "pack params",
             &Params {
@@ -166,7 +200,7 @@ impl Pack {
         checks::dispatch(encoder, "pack", &self.pipeline, &bind, groups);
         encoder.copy_buffer_to_texture(
             wgpu::TexelCopyBufferInfo {
-                buffer: &staging,
+                buffer: staging,
                 layout: wgpu::TexelCopyBufferLayout {
                     offset: 0,
                     bytes_per_row: Some(row_bytes),

@@ -186,7 +186,7 @@ impl Resample {
             dst_dims,
             _pad: 0,
         };
-        let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "resample params", &params);
+        let params = crate::gpu::kernel::params_buffer(&ctx.device, "resample params", &params);
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("resample"),
             layout: &self.pipeline.get_bind_group_layout(0),

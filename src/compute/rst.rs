@@ -44,7 +44,7 @@ use crate::compute::gradient::{
 use crate::cpu::rst::{ALPHA_STOP, opacity_length_mm};
 use crate::cpu::{FeatureMap, OpacityRule, RstParams};
 use crate::gpu::checks::RecordError;
-use crate::gpu::kernel::{SlabGrid, uniform_buffer};
+use crate::gpu::kernel::{SlabGrid, params_buffer};
 use crate::gpu::{GpuContext, shaders};
 
 /// Mirrors `Params` in rst.wgsl (keep in sync).
@@ -391,7 +391,7 @@ impl Rst {
             count: None,
         };
         let entries = [
-            buffer(0, wgpu::BufferBindingType::Uniform),
+            buffer(0, wgpu::BufferBindingType::Storage { read_only: true }),
             wgpu::BindGroupLayoutEntry {
                 binding: 1,
                 visibility,
@@ -550,7 +550,7 @@ impl Rst {
             n_rows,
             _pad: [0; 2],
         };
-        let params_buf = uniform_buffer(&ctx.device, "rst params", &gpu_params);
+        let params_buf = params_buffer(&ctx.device, "rst params", &gpu_params);
         let ray_bytes = u64::from(rays.n_rays) * std::mem::size_of::<GpuRay>() as u64;
         let view = inputs
             .volume

@@ -86,7 +86,7 @@ impl StructureTensor {
                 b,
                 _pad: [0; 3],
             };
-            let params = crate::gpu::kernel::uniform_buffer(&ctx.device, "gg^T params", &params);
+            let params = crate::gpu::kernel::params_buffer(&ctx.device, "gg^T params", &params);
             let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("outer product"),
                 layout: &layout,

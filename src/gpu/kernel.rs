@@ -92,6 +92,22 @@ pub fn storage_buffer_init<T: bytemuck::Pod>(
     })
 }
 
+/// A read-only storage buffer holding one `#[repr(C)]` parameter struct, for kernels whose
+/// loops or branches depend on it (`var<storage, read> params`): lavapipe compiles and keeps a
+/// new shader variant per dispatch for such uniforms (see shaders/gaussian.wgsl).
+pub fn params_buffer<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    label: &str,
+    value: &T,
+) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt as _;
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: bytemuck::bytes_of(value),
+        usage: wgpu::BufferUsages::STORAGE,
+    })
+}
+
 /// A uniform buffer holding one `#[repr(C)]` parameter struct.
 pub fn uniform_buffer<T: bytemuck::Pod>(
     device: &wgpu::Device,

@@ -10,7 +10,7 @@
 //! slice `index` of the `fixed` axis (no flips; the pane flips for patient orientation).
 
 use crate::cpu::Components3;
-use crate::gpu::kernel::{bind_group, uniform_buffer};
+use crate::gpu::kernel::{bind_group, params_buffer};
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::gpu::{GpuContext, checks, shaders};
 use crate::render::{no_features_view, output_texture, submit_dispatch};
@@ -169,7 +169,7 @@ impl SliceRenderer {
             window_hi: request.window.1,
             scale,
         };
-        let params_buf = uniform_buffer(&ctx.device, "slice params", &params);
+        let params_buf = params_buffer(&ctx.device, "slice params", &params);
         let feature_view = features.map_or(&self.no_features, |f| &f.view);
         let bind_group = bind_group(
             &ctx.device,

@@ -2,7 +2,7 @@
 //! compute pass per texture) and its CPU twin [`cpu_bricks`].
 
 use crate::gpu::GpuContext;
-use crate::gpu::kernel::{bind_group, uniform_buffer};
+use crate::gpu::kernel::{bind_group, params_buffer};
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 use crate::render::{output_texture, submit_dispatch};
 
@@ -92,7 +92,7 @@ impl Bricks {
         } else {
             &caster.bricks_intensity
         };
-        let range = uniform_buffer(
+        let range = params_buffer(
             &ctx.device,
             "raycast brick slices",
             &Slices {

@@ -126,7 +126,8 @@ impl RaycastTarget {
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("raycast params"),
             size: std::mem::size_of::<Params>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            // Storage, not uniform: see `kernel::params_buffer`.
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         Ok(Self {
