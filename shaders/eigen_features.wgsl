@@ -41,7 +41,9 @@ struct Params {
     _pad1: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
+// Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants). Each
+// entry point binds 8 storage buffers with it, WebGPU's default limit per stage.
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read> t_xx: array<f32>;
 @group(0) @binding(2) var<storage, read> t_yy: array<f32>;
 @group(0) @binding(3) var<storage, read> t_zz: array<f32>;

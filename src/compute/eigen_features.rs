@@ -231,7 +231,7 @@ impl EigenFeatures {
                 let mut params = Self::params(grid, out_z, what, accumulate);
                 params.part = [part.start, part.len() as u32];
                 let params =
-                    crate::gpu::kernel::uniform_buffer(&ctx.device, "eigen params", &params);
+                    crate::gpu::kernel::params_buffer(&ctx.device, "eigen params", &params);
                 (
                     "eigen_features",
                     &self.features,
@@ -245,7 +245,7 @@ impl EigenFeatures {
                 params.rows = rows.unwrap_or([0, 0]);
                 params.part = [part.start, part.len() as u32];
                 let params =
-                    crate::gpu::kernel::uniform_buffer(&ctx.device, "norm params", &params);
+                    crate::gpu::kernel::params_buffer(&ctx.device, "norm params", &params);
                 let norm = wgpu::BindGroupEntry {
                     binding: 8,
                     resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
