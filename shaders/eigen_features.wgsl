@@ -32,7 +32,7 @@ struct Params {
     accumulate: u32,
     frangi_c: f32,
     negate: u32,
-    // max_norm only: the rows row0 .. row0 + n_rows count (a brick's core; n_rows 0 = all).
+    // Only the rows row0 .. row0 + n_rows are computed (a brick's core; n_rows 0 = all).
     row0: u32,
     n_rows: u32,
     part_k0: u32,
@@ -57,6 +57,10 @@ fn inside(gid: vec3<u32>) -> bool {
     return gid.x < params.dims.x && gid.y < params.dims.y && gid.z < params.part_nk;
 }
 
+fn in_rows(gid: vec3<u32>) -> bool {
+    return params.n_rows == 0u || (gid.y >= params.row0 && gid.y - params.row0 < params.n_rows);
+}
+
 fn slab_index(gid: vec3<u32>) -> u32 {
     return linear_index(gid.x, gid.y, params.out_z0 + params.part_k0 + gid.z, params.dims);
 }
@@ -71,7 +75,7 @@ fn offdiag(idx: u32) -> vec3<f32> {
 
 @compute @workgroup_size(8, 8, 1)
 fn eigen_features(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if !inside(gid) {
+    if !inside(gid) || !in_rows(gid) {
         return;
     }
     let idx = slab_index(gid);
@@ -117,9 +121,7 @@ fn max_norm(
         atomicStore(&wg_max, 0u);
     }
     workgroupBarrier();
-    let in_rows = params.n_rows == 0u
-        || (gid.y >= params.row0 && gid.y - params.row0 < params.n_rows);
-    if inside(gid) && in_rows {
+    if inside(gid) && in_rows(gid) {
         let idx = slab_index(gid);
         let norm = sym_frobenius(diag(idx), offdiag(idx));
         // NaN fails the test (its bits would beat every number).

@@ -210,6 +210,23 @@ impl EigenFeatures {
         part: Range<u32>,
         pass: EigenPass<'_>,
     ) -> Result<(), RecordError> {
+        self.record_part_rows(ctx, encoder, grid, tensor, out_z, part, None, pass)
+    }
+
+    /// [`Self::record_part`] computing `EigenPass::Output` only on the rows `rows = [row0,
+    /// n_rows]` when given (a brick's core: the halo rows of the block are left as they are).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_part_rows(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        grid: &SlabGrid,
+        tensor: [&wgpu::Buffer; 6],
+        out_z: (u32, u32),
+        part: Range<u32>,
+        rows: Option<[u32; 2]>,
+        pass: EigenPass<'_>,
+    ) -> Result<(), RecordError> {
         let groups = Self::check(ctx, grid, &tensor, out_z, &part)?;
         if grid.is_empty() || part.is_empty() {
             return Ok(());
@@ -230,6 +247,7 @@ impl EigenFeatures {
                 }
                 let mut params = Self::params(grid, out_z, what, accumulate);
                 params.part = [part.start, part.len() as u32];
+                params.rows = rows.unwrap_or([0, 0]);
                 let params =
                     crate::gpu::kernel::params_buffer(&ctx.device, "eigen params", &params);
                 (
@@ -244,8 +262,7 @@ impl EigenFeatures {
                 let mut params = Self::params(grid, out_z, TensorOutput::Eigen, false);
                 params.rows = rows.unwrap_or([0, 0]);
                 params.part = [part.start, part.len() as u32];
-                let params =
-                    crate::gpu::kernel::params_buffer(&ctx.device, "norm params", &params);
+                let params = crate::gpu::kernel::params_buffer(&ctx.device, "norm params", &params);
                 let norm = wgpu::BindGroupEntry {
                     binding: 8,
                     resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {

@@ -121,7 +121,8 @@ impl Pack {
         // One staging buffer for the whole box's chunks (wgpu orders the copy before the next
         // chunk's writes), sized for the largest chunk a box of this size can take.
         let box_chunk = (limit / slice_bytes.max(1)).clamp(1, u64::from(at.src_dims[2].max(1)));
-        let staging = self.staging(ctx, (slice_bytes * box_chunk).max(4));
+        // Kept only within the binding limit (a slice larger than it is the only one refused).
+        let staging = self.staging(ctx, (slice_bytes * box_chunk).max(4), limit);
         let mut src_z0 = slices.start;
         while src_z0 < nz {
             let dims = [nx, ny, chunk.min(nz - src_z0)];
@@ -138,8 +139,9 @@ impl Pack {
         }
     }
 
-    /// The kept staging buffer, at least `bytes` long.
-    fn staging(&self, ctx: &GpuContext, bytes: u64) -> wgpu::Buffer {
+    /// The kept staging buffer, at least `bytes` long (one longer than `limit` is made for this
+    /// use and not kept).
+    fn staging(&self, ctx: &GpuContext, bytes: u64, limit: u64) -> wgpu::Buffer {
         let mut kept = self
             .staging
             .lock()
@@ -153,7 +155,9 @@ impl Pack {
                     usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                     mapped_at_creation: false,
                 });
-                *kept = Some(b.clone());
+                if bytes <= limit {
+                    *kept = Some(b.clone());
+                }
                 b
             }
         }

@@ -1051,7 +1051,8 @@ impl FeatureJob {
                 voxels as f64 / f64::from(n.max(1)) * accesses,
             )
         } else {
-            let plane = u64::from(grid.dims[0]) * u64::from(grid.dims[1]);
+            // The eigenvalues of the core's rows.
+            let plane = u64::from(grid.dims[0]) * u64::from(rows.1);
             (0, core.1, plane as f64)
         };
         let done = self.pass_cursor.min(lines);
@@ -1087,7 +1088,15 @@ impl FeatureJob {
                 first + cut.start..first + cut.end,
             )?;
         } else {
-            self.record_features_of_tensor(ctx, encoder, &grid, 0, core, cut.clone(), part)?;
+            self.record_features_of_tensor(
+                ctx,
+                encoder,
+                &grid,
+                0,
+                (core, rows),
+                cut.clone(),
+                part,
+            )?;
         }
         let finished = cut.end >= lines;
         self.pass_cursor = if finished { 0 } else { cut.end };
@@ -1117,7 +1126,7 @@ impl FeatureJob {
         encoder: &mut wgpu::CommandEncoder,
         grid: &SlabGrid,
         first: usize,
-        core: (u32, u32),
+        (core, rows): ((u32, u32), (u32, u32)),
         slices: std::ops::Range<u32>,
         part: usize,
     ) -> Result<(), PipelineError> {
@@ -1125,13 +1134,14 @@ impl FeatureJob {
         let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[first + c]);
         self.kernels
             .eigen
-            .record_part(
+            .record_part_rows(
                 ctx,
                 encoder,
                 grid,
                 tensor,
                 core,
                 slices,
+                Some([rows.0, rows.1]),
                 EigenPass::Output {
                     what: self.tensor_output(part),
                     accumulate: part > 0,
@@ -1175,7 +1185,16 @@ impl FeatureJob {
                     [&b.tmp[0], &b.tmp[1]],
                     tensor,
                 )?;
-                self.record_features_of_tensor(ctx, encoder, &grid, 4, core, 0..core.1, part)?;
+                let rows = core_in_slab(&slab).1;
+                self.record_features_of_tensor(
+                    ctx,
+                    encoder,
+                    &grid,
+                    4,
+                    (core, rows),
+                    0..core.1,
+                    part,
+                )?;
             }
             // Their steps are `Task::HessianPass` and `Task::Rst`.
             Method::Hessian | Method::Li | Method::Frangi | Method::Rst => {
