@@ -1,5 +1,5 @@
 //! What every compute kernel module shares: the grid of the slab it works on, storage buffers of
-//! `f32` and tables, uniforms, textures, bind groups, and workgroup counts.
+//! `f32` and tables, parameter structs, textures, bind groups, and workgroup counts.
 //!
 //! Conventions every kernel follows (ARCHITECTURE.md, "GPU kernels"):
 //! - A volume on the GPU is a storage buffer of `f32`, voxel `i` fastest
@@ -105,20 +105,6 @@ pub fn params_buffer<T: bytemuck::Pod>(
         label: Some(label),
         contents: bytemuck::bytes_of(value),
         usage: wgpu::BufferUsages::STORAGE,
-    })
-}
-
-/// A uniform buffer holding one `#[repr(C)]` parameter struct.
-pub fn uniform_buffer<T: bytemuck::Pod>(
-    device: &wgpu::Device,
-    label: &str,
-    value: &T,
-) -> wgpu::Buffer {
-    use wgpu::util::DeviceExt as _;
-    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some(label),
-        contents: bytemuck::bytes_of(value),
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
     })
 }
 
