@@ -622,10 +622,7 @@ fn frangi_default_c_matches_cpu() {
                 &sg,
                 refs(&h),
                 z,
-                EigenPass::MaxNorm {
-                    rows: None,
-                    norm_bits: &bits,
-                },
+                EigenPass::MaxNorm { norm_bits: &bits },
             )
             .expect("record");
         }
@@ -648,10 +645,7 @@ fn frangi_default_c_matches_cpu() {
                 &sg,
                 refs(&h),
                 z,
-                EigenPass::MaxNorm {
-                    rows: None,
-                    norm_bits: &one,
-                },
+                EigenPass::MaxNorm { norm_bits: &one },
             )
             .expect("record");
             submit(&ctx, enc);

@@ -213,8 +213,8 @@ impl EigenFeatures {
         self.record_part_rows(ctx, encoder, grid, tensor, out_z, part, None, pass)
     }
 
-    /// [`Self::record_part`] computing `EigenPass::Output` only on the rows `rows = [row0,
-    /// n_rows]` when given (a brick's core: the halo rows of the block are left as they are).
+    /// [`Self::record_part`] only on the rows `rows = [row0, n_rows]` when given (a brick's
+    /// core: `Output` leaves the block's halo rows as they are, `MaxNorm` ignores them).
     #[allow(clippy::too_many_arguments)]
     pub fn record_part_rows(
         &self,
@@ -231,7 +231,7 @@ impl EigenFeatures {
         if grid.is_empty() || part.is_empty() {
             return Ok(());
         }
-        let (label, pipeline, params, last) = match pass {
+        let (label, pipeline, mut params, last) = match pass {
             EigenPass::Output {
                 what,
                 accumulate,
@@ -245,24 +245,16 @@ impl EigenFeatures {
                         "eigen_features: the output cannot be a tensor component",
                     ));
                 }
-                let mut params = Self::params(grid, out_z, what, accumulate);
-                params.part = [part.start, part.len() as u32];
-                params.rows = rows.unwrap_or([0, 0]);
-                let params =
-                    crate::gpu::kernel::params_buffer(&ctx.device, "eigen params", &params);
                 (
                     "eigen_features",
                     &self.features,
-                    params,
+                    Self::params(grid, out_z, what, accumulate),
                     checks::entry(7, out),
                 )
             }
-            EigenPass::MaxNorm { rows, norm_bits } => {
+            EigenPass::MaxNorm { norm_bits } => {
                 checks::buffer(ctx, "largest norm", norm_bits, 4)?;
-                let mut params = Self::params(grid, out_z, TensorOutput::Eigen, false);
-                params.rows = rows.unwrap_or([0, 0]);
-                params.part = [part.start, part.len() as u32];
-                let params = crate::gpu::kernel::params_buffer(&ctx.device, "norm params", &params);
+                let params = Self::params(grid, out_z, TensorOutput::Eigen, false);
                 let norm = wgpu::BindGroupEntry {
                     binding: 8,
                     resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -274,6 +266,9 @@ impl EigenFeatures {
                 ("max_norm", &self.max_norm, params, norm)
             }
         };
+        params.part = [part.start, part.len() as u32];
+        params.rows = rows.unwrap_or([0, 0]);
+        let params = crate::gpu::kernel::params_buffer(&ctx.device, label, &params);
         let mut entries = vec![checks::entry(0, &params)];
         entries.extend((0..6).map(|c| checks::entry(c as u32 + 1, tensor[c])));
         entries.push(last);
@@ -302,11 +297,8 @@ pub enum EigenPass<'a> {
         accumulate: bool,
         out: &'a wgpu::Buffer,
     },
-    /// `norm_bits = max(norm_bits, bits of the largest Frobenius norm over the output slices)`,
-    /// only over the rows `rows = [row0, n_rows]` when given (a brick's core); `norm_bits` is a
-    /// 4-byte buffer (e.g. [`norm_buffer`]), cleared once before the first brick.
-    MaxNorm {
-        rows: Option<[u32; 2]>,
-        norm_bits: &'a wgpu::Buffer,
-    },
+    /// `norm_bits = max(norm_bits, bits of the largest Frobenius norm over the output slices)`
+    /// (of the rows [`EigenFeatures::record_part_rows`] is given); `norm_bits` is a 4-byte buffer
+    /// (e.g. [`norm_buffer`]), cleared once before the first brick.
+    MaxNorm { norm_bits: &'a wgpu::Buffer },
 }

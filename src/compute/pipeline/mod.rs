@@ -947,16 +947,15 @@ impl FeatureJob {
                 let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
                 self.kernels.eigen.record_clear_norm(encoder, &b.norm);
                 let (z, y) = core_in_slab(&slab);
-                self.kernels.eigen.record(
+                self.kernels.eigen.record_part_rows(
                     ctx,
                     encoder,
                     &grid,
                     tensor,
                     z,
-                    EigenPass::MaxNorm {
-                        rows: Some([y.0, y.1]),
-                        norm_bits: &b.norm,
-                    },
+                    0..z.1,
+                    Some([y.0, y.1]),
+                    EigenPass::MaxNorm { norm_bits: &b.norm },
                 )?;
                 Ok(Some((b.norm.clone(), 4, ReadFor::FrangiC(scale))))
             }
