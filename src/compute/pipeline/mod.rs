@@ -111,7 +111,7 @@ pub struct JobOptions {
 impl Default for JobOptions {
     fn default() -> Self {
         Self {
-            memory_budget_bytes: 768 << 20,
+            memory_budget_bytes: 384 << 20,
             max_slab_voxels: None,
             limits: None,
             export: false,
