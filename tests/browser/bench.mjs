@@ -177,8 +177,25 @@ const server2 = await chromium.launchServer({
 const browserPid = server2.process().pid;
 const browser = await chromium.connect(server2.wsEndpoint());
 const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
-page.on('console', (msg) => { if (msg.type() === 'error') console.log(`  [page error] ${msg.text().slice(0, 300)}`); });
+page.on('console', (msg) => {
+  if (msg.type() === 'error') console.log(`  [page error] ${msg.text().slice(0, 300)}`);
+  else if (process.env.BENCH_LOG && msg.text().includes(process.env.BENCH_LOG)) console.log(`  [page] ${msg.text().slice(0, 400)}`);
+});
 page.on('pageerror', (err) => console.log(`  [page exception] ${err}`));
+// The viewer's frame intervals, seen from the page: a 10 ms timer notes when the status's
+// frame count moves (the main thread is free while the GPU works), with the features' state.
+await page.addInitScript(() => {
+  const log = [];
+  window.__frameLog = log;
+  let last = -1;
+  setInterval(() => {
+    const s = window.shapecastStatus;
+    if (s && s.frames !== last) {
+      last = s.frames;
+      log.push([performance.now(), s.frames, s.features?.state ?? null, s.features?.fraction ?? 0]);
+    }
+  }, 10);
+});
 
 const t0 = Date.now();
 const at = () => (Date.now() - t0) / 1000;
@@ -233,6 +250,24 @@ for (;;) {
 }
 const end = memoryOf(browserPid);
 clearInterval(sampler);
+// Frame intervals while the feature job ran (an interval spanning k frames counts as k equal ones).
+const frameLog = await page.evaluate(() => window.__frameLog).catch(() => []);
+const jobIntervals = [];
+for (let i = 1; i < frameLog.length; i += 1) {
+  const [t0f, f0, state0] = frameLog[i - 1];
+  const [t1f, f1] = frameLog[i];
+  if (state0 !== 'running' || f1 <= f0) continue;
+  for (let k = 0; k < f1 - f0; k += 1) jobIntervals.push((t1f - t0f) / (f1 - f0) / 1000);
+}
+jobIntervals.sort((a, b) => a - b);
+const q = (p) => (jobIntervals.length ? jobIntervals[Math.min(jobIntervals.length - 1, Math.floor(p * jobIntervals.length))] : null);
+const frameStats = {
+  frames: jobIntervals.length,
+  median_s: q(0.5),
+  p95_s: q(0.95),
+  max_s: jobIntervals.length ? jobIntervals[jobIntervals.length - 1] : null,
+  over_1s: jobIntervals.filter((x) => x > 1).length,
+};
 const shot = path.join(outDir, `bench-${depth}.png`);
 await page.screenshot({ path: shot }).catch(() => {});
 await browser.close();
@@ -253,6 +288,8 @@ const result = {
   peak_largest_process: peak.largest,
   end_pss_bytes: end.pss,
   notice: last?.notice ?? null,
+  features_fraction_at_end: last?.features?.fraction ?? null,
+  frames_while_job_ran: frameStats,
   error,
   memory_samples: samples.filter((_, i) => i % 4 === 0),
 };
@@ -262,6 +299,7 @@ console.log(`loaded (download + read): ${events.loaded?.toFixed(1)} s`);
 console.log(`first MIP frame: ${events.first_frame?.toFixed(1)} s`);
 console.log(`features (${result.method}, ${result.preset}): started ${events.features_started?.toFixed(1)} s, done ${events.features_done?.toFixed(1)} s`);
 console.log(`memory of the browser's processes (PSS): peak ${gb(peak.pss)} GB at ${peak.at.toFixed(0)} s (largest: ${peak.largest?.type} ${gb(peak.largest?.pss ?? 0)} GB), at the end ${gb(end.pss)} GB; voxels ${gb(result.voxel_bytes)} GB`);
+console.log(`frames while the job ran: ${frameStats.frames}, interval median ${frameStats.median_s?.toFixed(2)} s, 95th percentile ${frameStats.p95_s?.toFixed(2)} s, max ${frameStats.max_s?.toFixed(2)} s, ${frameStats.over_1s} over 1 s; features at the end ${((last?.features?.fraction ?? 0) * 100).toFixed(1)}%`);
 if (result.notice) console.log(`notice: ${result.notice}`);
 console.log(`screenshot: ${shot}`);
 if (error) {
