@@ -350,16 +350,13 @@ impl FeatureManager {
         // Its steps follow the device's speed, so that a frame of the viewer never waits behind
         // more than `STEP_SECONDS` of feature work (more only where its own frames are slower).
         //
-        // In the browser the queue's completion callback arrives with the page's next task, a
-        // frame later, so a step's measured time is at least a frame (paced by it, a step on a
-        // slow device never grew past its first line: bench.mjs on SwiftShader, the Li job at
-        // 0.3% after 420 s against 7.5% with whole passes); there the steps follow the frame
-        // intervals (`FramePace`).
+        // Not in the browser: there the queue's completion callback arrives with the page's
+        // next task, a frame later, so a step's measured time is at least a frame and a paced
+        // step on a slow device never grew past its first line (bench.mjs on SwiftShader: the
+        // Li job at 0.3% after 420 s against 7.5% with whole passes). The page keeps whole
+        // passes (and fixed ray chunks) until a step can be timed there.
         let options = JobOptions {
-            step_seconds: Some(STEP_SECONDS),
-            // In the browser a step's completion is seen a frame late: the steps follow the
-            // frame intervals instead.
-            frame_paced: cfg!(target_arch = "wasm32"),
+            step_seconds: (!cfg!(target_arch = "wasm32")).then_some(STEP_SECONDS),
             ..JobOptions::default()
         };
         let job = FeatureJob::shared(ctx, Arc::clone(volume), &request, options);
@@ -396,7 +393,6 @@ impl FeatureManager {
     /// last two frames (the step follows [`step_seconds_for`]).
     pub fn step(&mut self, ctx: &GpuContext, frame_s: f64) -> Option<JobEvent> {
         let running = self.running.as_mut()?;
-        running.job.frame(frame_s);
         if let Some(step_s) = running.job.last_step_seconds()
             && !cfg!(target_arch = "wasm32")
         {

@@ -23,9 +23,6 @@
 
 mod buffers;
 mod kernels;
-mod pace;
-
-pub use pace::FramePace;
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -51,7 +48,6 @@ use crate::volume::Volume;
 
 use buffers::{Buffers, box_grid, bytes_per_voxel, core_in_slab, halo_of, starts, to_u32};
 use kernels::Kernels;
-use pace::StepPace;
 
 /// Why a feature computation failed.
 #[derive(Debug, thiserror::Error)]
@@ -110,10 +106,6 @@ pub struct JobOptions {
     /// trilinear interpolation, instead of one hardware-filtered fetch (the default where the
     /// device filters f32 textures: ~1.9x faster on lavapipe, within a tolerance of the twin).
     pub exact_rst: bool,
-    /// Steps follow the viewer's frame intervals ([`FeatureJob::frame`], [`FramePace`])
-    /// instead of the queue's completion times (the browser, where those arrive a frame
-    /// late); needs [`Self::step_seconds`].
-    pub frame_paced: bool,
 }
 
 impl Default for JobOptions {
@@ -126,8 +118,66 @@ impl Default for JobOptions {
             rst_voxels_per_step: None,
             step_seconds: None,
             exact_rst: false,
-            frame_paced: false,
         }
+    }
+}
+
+/// Paces a kind of step to [`JobOptions::step_seconds`] of GPU time: the first step holds the
+/// least work allowed; each finished step measures the device's work per second, from the
+/// submission to the queue's completion callback (work of the viewer's frames queued before it
+/// counts too, which errs towards smaller steps); the step follows a slower rate at once and a
+/// faster one at most doubling per step. Work is counted in a unit of the step's kind: ray
+/// voxels for the RST, storage accesses for the Hessian's convolutions, voxels for the
+/// eigenvalue pass.
+struct StepPace {
+    seconds: Option<f64>,
+    /// Work per second, once measured.
+    rate: Option<f64>,
+    /// Work of the step in flight.
+    in_flight: Option<f64>,
+    /// The last step's work.
+    last: f64,
+}
+
+impl StepPace {
+    fn new(seconds: Option<f64>) -> Self {
+        Self {
+            seconds,
+            rate: None,
+            in_flight: None,
+            last: 0.0,
+        }
+    }
+
+    /// Work for the next step: `max` without pacing; with it, what the measured rate does in
+    /// the step's seconds, between `min` (the smallest step there is) and `max`.
+    fn work(&self, min: f64, max: f64) -> f64 {
+        let Some(seconds) = self.seconds else {
+            return max;
+        };
+        let want = match self.rate {
+            None => min,
+            Some(rate) => (rate * seconds).min(2.0 * self.last),
+        };
+        want.clamp(min.min(max), max)
+    }
+
+    fn submitted(&mut self, work: f64) {
+        self.last = work;
+        self.in_flight = self.seconds.map(|_| work);
+    }
+
+    /// The step in flight, if it was this kind's, took `secs` from its submission to the
+    /// queue's completion callback.
+    fn finished(&mut self, secs: f64) {
+        let Some(work) = self.in_flight.take() else {
+            return;
+        };
+        let rate = work / secs.max(1e-4);
+        self.rate = Some(match self.rate {
+            Some(old) if rate > old => old + 0.5 * (rate - old),
+            _ => rate,
+        });
     }
 }
 
@@ -228,8 +278,6 @@ pub struct FeatureJob {
     conv_pace: StepPace,
     eigen_pace: StepPace,
     pack_pace: StepPace,
-    /// With [`JobOptions::frame_paced`], what the viewer's frames say of the steps.
-    frames: Option<FramePace>,
     /// Lines of the current Hessian pass already recorded (its cut axis; core slices for the
     /// eigenvalue pass), or slices of the brick being stored.
     pass_cursor: u32,
@@ -377,7 +425,6 @@ impl FeatureJob {
         );
         let rst_slices_per_step = ((per_step / core_plane.max(1)) as usize).max(1);
         let step_seconds = options.step_seconds;
-        let frames = (options.frame_paced && step_seconds.is_some()).then(FramePace::new);
         let buffers = Buffers::new(
             ctx,
             &slabs,
@@ -447,7 +494,6 @@ impl FeatureJob {
             conv_pace: StepPace::new(step_seconds),
             eigen_pace: StepPace::new(step_seconds),
             pack_pace: StepPace::new(step_seconds),
-            frames,
             pass_cursor: 0,
             packed: None,
             busy: None,
@@ -481,14 +527,6 @@ impl FeatureJob {
             &mut self.pack_pace,
         ] {
             pace.seconds = seconds;
-        }
-    }
-
-    /// A frame of the viewer started `frame_s` after the last (with [`JobOptions::frame_paced`]
-    /// the steps follow these intervals; otherwise nothing).
-    pub fn frame(&mut self, frame_s: f64) {
-        if let Some(frames) = &mut self.frames {
-            frames.frame(frame_s);
         }
     }
 
@@ -559,18 +597,10 @@ impl FeatureJob {
             self.busy = None;
             let secs = micros as f64 * 1e-6;
             self.last_step_s = Some(secs);
-            let paces = [
-                &mut self.rst_pace,
-                &mut self.conv_pace,
-                &mut self.eigen_pace,
-                &mut self.pack_pace,
-            ];
-            if let Some(frames) = &mut self.frames {
-                let over = frames.completed();
-                paces.into_iter().for_each(|p| p.finished_by_frames(over));
-            } else {
-                paces.into_iter().for_each(|p| p.finished(secs));
-            }
+            self.rst_pace.finished(secs);
+            self.conv_pace.finished(secs);
+            self.eigen_pace.finished(secs);
+            self.pack_pace.finished(secs);
         }
         if let Some((read, what)) = &mut self.pending {
             match read.poll(ctx) {
@@ -587,14 +617,6 @@ impl FeatureJob {
                     self.take_read(what, &bytes);
                 }
             }
-        }
-        if self
-            .frames
-            .as_ref()
-            .is_some_and(FramePace::wants_idle_frame)
-            && !self.tasks.is_empty()
-        {
-            return Ok(self.state());
         }
         let Some(task) = self.tasks.pop_front() else {
             self.done = true;
@@ -621,9 +643,6 @@ impl FeatureJob {
                 f.store(micros.min(u64::MAX - 1), Ordering::Release);
             });
             self.busy = Some(flag);
-            if let Some(frames) = &mut self.frames {
-                frames.submitted();
-            }
         }
         Ok(self.state())
     }
