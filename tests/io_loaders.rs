@@ -596,6 +596,45 @@ fn dicom_series_list_names_each_series_and_loads_the_one_chosen() {
         assert!(chosen.volume == alone.volume, "{label}: volume differs");
         assert_eq!(chosen.volume.dims[2], entries[i].images, "{label}");
     }
+    // Read file by file (the browser's folders): the same list in one pass, and each entry
+    // loaded from its own files, decoded as they come, equals the list's load.
+    let mut reader = io::FolderReader::new(limits);
+    for f in &files {
+        if f.name.ends_with(".txt") {
+            reader.ignore(f.name.clone());
+        } else {
+            reader.push(f.clone()).expect("pushed");
+        }
+    }
+    let io::FolderRead::List(streamed) = reader.finish().expect("read") else {
+        panic!("three series read as one volume");
+    };
+    assert_eq!(streamed.entries(), entries);
+    assert_eq!(streamed.default_choice(), i_head);
+    for i in [i_liver, i_head, i_mr] {
+        let want = list.load(&files, i, &limits).expect("loads");
+        let got = io::load_entry(&streamed, i, &limits, |k| Ok(files[k].clone())).expect("loads");
+        assert!(got.volume == want.volume, "entry {i}: volume differs");
+        assert_eq!(got.patient, want.patient, "entry {i}");
+        let sorted = |mut v: Vec<String>| {
+            v.sort();
+            v
+        };
+        assert_eq!(sorted(got.notes), sorted(want.notes), "entry {i}");
+    }
+    // One series read file by file is decoded in the same pass: the file loader's volume.
+    let liver_files = series_inputs(&[dirs[0]]);
+    let mut reader = io::FolderReader::new(limits);
+    for f in &liver_files {
+        reader.push(f.clone()).expect("pushed");
+    }
+    assert!(reader.decoding());
+    let io::FolderRead::Loaded(one) = reader.finish().expect("read") else {
+        panic!("one series listed");
+    };
+    let alone = io::load(&liver_files).expect("liver");
+    assert!(one.volume == alone.volume, "liver: volume differs");
+    assert_eq!(one.notes, alone.notes);
     // The list does not depend on the order the files came in.
     let reversed: Vec<InputFile> = files.iter().rev().cloned().collect();
     let again = io::list_series(&reversed, &limits)

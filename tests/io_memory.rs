@@ -520,6 +520,39 @@ fn a_dicom_series_read_from_files_peaks_within_one_and_a_half_times_the_voxels()
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 
+/// The browser's folders: each file is read whole (here: made) and handed to a
+/// `FolderReader`, which decodes it at once and drops it, so the peak is the voxels and a
+/// file, not all the files and the voxels (what reading them all first, then loading, costs).
+#[test]
+fn a_dicom_folder_read_file_by_file_peaks_within_one_and_a_half_times_the_voxels() {
+    let slice = DIMS[0] * DIMS[1];
+    let limits = io::Limits::default();
+    let (r, peak) = peak_during(|| {
+        let mut reader = io::FolderReader::new(limits);
+        reader.expect_files(DIMS[2]);
+        for z in 0..DIMS[2] {
+            reader.push(InputFile::new(
+                format!("s{z:03}.dcm"),
+                dicom(z, 1, z * slice),
+            ))?;
+        }
+        reader.finish()
+    });
+    let v = match r.unwrap_or_else(|e| panic!("{e}")) {
+        io::FolderRead::Loaded(l) => l.volume,
+        io::FolderRead::List(list) => panic!("one series listed as {:?}", list.entries()),
+    };
+    check_values("DICOM folder read file by file", &v, "i16");
+    let voxel_bytes = v.voxels.byte_len();
+    let files_bytes: usize = (0..DIMS[2]).map(|z| dicom(z, 1, z * slice).len()).sum();
+    eprintln!(
+        "DICOM folder read file by file: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x; the files are {files_bytes} bytes)",
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+    assert!(peak < voxel_bytes + files_bytes / 2, "peak {peak} bytes");
+}
+
 #[test]
 fn a_multi_frame_dicom_peaks_within_one_and_a_half_times_the_voxels() {
     // One file of DIMS[2] frames: its native samples are read where they lie in the file, a

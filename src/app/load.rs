@@ -1,9 +1,10 @@
 //! Getting a volume into the app without freezing it: a [`LoadJob`] reads and decodes in steps,
 //! one per frame. Natively it reads dropped or given paths (files and folders) a bounded number
 //! of bytes per step and hands the loaders files read on demand, as the command line does (the
-//! file bytes are never held beside the voxels); in the browser the files arrive already read (asynchronously, by
-//! `web_files`), and the job only decodes. Decoding is one step, announced a frame before it
-//! starts so the progress bar says what is being decoded.
+//! file bytes are never held beside the voxels); in the browser the files arrive already read
+//! (asynchronously, by `web_files`), and the job only decodes (a DICOM set is decoded by
+//! `web_files` as it is read and never reaches a job). Decoding is one step, announced a frame
+//! before it starts so the progress bar says what is being decoded.
 //!
 //! Files holding several DICOM series load the default one ([`crate::io::SeriesList`]) and keep
 //! a [`SeriesSet`], so that another series is one more job ([`LoadSource::Series`]) without the
@@ -21,7 +22,7 @@ use crate::volume::Volume;
 #[derive(Clone, Debug)]
 pub struct SeriesSet {
     pub list: Arc<SeriesList>,
-    files: Arc<Vec<InputFile>>,
+    files: SetFiles,
     /// The entry loaded (or being loaded).
     pub chosen: usize,
 }
@@ -62,7 +63,37 @@ impl LoadSource {
     }
 }
 
+/// Where a [`SeriesSet`]'s files are.
+#[derive(Clone, Debug)]
+enum SetFiles {
+    /// In memory, or natively read on demand from their paths.
+    Inputs(Arc<Vec<InputFile>>),
+    /// The page's `File`s (the browser): read again, whole and one at a time, when a series
+    /// is chosen (`web_files::load_series`), never held as bytes.
+    #[cfg(target_arch = "wasm32")]
+    Web(std::rc::Rc<Vec<web_sys::File>>),
+}
+
 impl SeriesSet {
+    /// The series of the page's `files` (by index into `list`'s files), `chosen` loaded.
+    #[cfg(target_arch = "wasm32")]
+    pub fn of_web_files(list: SeriesList, files: Vec<web_sys::File>, chosen: usize) -> Self {
+        Self {
+            list: Arc::new(list),
+            files: SetFiles::Web(std::rc::Rc::new(files)),
+            chosen,
+        }
+    }
+
+    /// The page's files of a set read in the browser, when it is one.
+    #[cfg(target_arch = "wasm32")]
+    pub fn web_files(&self) -> Option<&[web_sys::File]> {
+        match &self.files {
+            SetFiles::Web(files) => Some(files),
+            SetFiles::Inputs(_) => None,
+        }
+    }
+
     /// The same files with entry `index` chosen.
     pub fn with_chosen(&self, index: usize) -> Self {
         Self {
@@ -256,7 +287,7 @@ impl LoadJob {
                                 list: Arc::new(list),
                                 // Natively, files from paths are already read on demand
                                 // (only their first bytes in memory).
-                                files: Arc::new(files),
+                                files: SetFiles::Inputs(Arc::new(files)),
                                 chosen,
                             });
                         }
@@ -290,7 +321,17 @@ impl LoadJob {
                     };
                 }
                 let limits = crate::io::Limits::default();
-                match set.list.load(&set.files, set.chosen, &limits) {
+                let loaded = match &set.files {
+                    SetFiles::Inputs(files) => set.list.load(files, set.chosen, &limits),
+                    // Read asynchronously by `web_files::load_series`, not by a job.
+                    #[cfg(target_arch = "wasm32")]
+                    SetFiles::Web(_) => {
+                        return LoadStep::Failed(
+                            "internal: a series of the page's files is read by the page".to_owned(),
+                        );
+                    }
+                };
+                match loaded {
                     Ok(loaded) => {
                         self.series = Some(set);
                         LoadStep::Done(Box::new(loaded))

@@ -727,8 +727,25 @@ impl ShapecastApp {
                     } => {
                         self.open_from(LoadSource::Files { label, files }, Some(origin));
                     }
+                    web_files::WebEvent::Loaded {
+                        loaded,
+                        series,
+                        origin,
+                    } => {
+                        self.load_progress = None;
+                        self.series.loading = None;
+                        // Another series of the files shown came from where they did.
+                        self.loading_origin =
+                            origin.or_else(|| self.scene.as_ref().and_then(|s| s.origin.clone()));
+                        let before = self.generation;
+                        self.install(*loaded);
+                        if self.generation != before {
+                            self.series.set = series;
+                        }
+                    }
                     web_files::WebEvent::Failed { message } => {
                         self.load_progress = None;
+                        self.series.loading = None;
                         self.error(message);
                     }
                     web_files::WebEvent::Cancelled { label } => {

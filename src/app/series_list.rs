@@ -116,6 +116,15 @@ impl ShapecastApp {
         if index >= set.list.entries().len() {
             return;
         }
+        #[cfg(target_arch = "wasm32")]
+        if set.web_files().is_some() {
+            // The page's files: read again by the page, one at a time.
+            let set = set.with_chosen(index);
+            self.load_progress = Some((0.0, format!("opening {}", set.label())));
+            super::web_files::load_series(set);
+            self.series.loading = Some(index);
+            return;
+        }
         let origin = self.scene.as_ref().and_then(|s| s.origin.clone());
         self.open_from(LoadSource::Series(set.with_chosen(index)), origin);
         self.series.loading = Some(index);

@@ -43,6 +43,14 @@ pub enum WebEvent {
         files: Vec<InputFile>,
         origin: ViewSource,
     },
+    /// A DICOM set decoded as it was read (`FolderReader`): the volume, and the series list
+    /// when the files held several. `origin` is how a link names the files (`None` for another
+    /// series of the set shown: its origin stays).
+    Loaded {
+        loaded: Box<crate::io::Loaded>,
+        series: Option<super::load::SeriesSet>,
+        origin: Option<ViewSource>,
+    },
     /// Reading failed; the message names the file.
     Failed { message: String },
     /// The user cancelled a download.
@@ -340,7 +348,45 @@ async fn walk(entries: Vec<web_sys::FileSystemEntry>) -> Result<Vec<Named>, Stri
     Ok(out)
 }
 
-/// Reads every file (in order), reporting progress, then queues them as one load.
+/// A file's bytes, read whole.
+async fn read_file(f: &Named) -> Result<Vec<u8>, String> {
+    match JsFuture::from(f.file.array_buffer()).await {
+        Ok(buffer) => Ok(js_sys::Uint8Array::new(&buffer).to_vec()),
+        Err(e) => Err(format!("{}: cannot read: {}", f.name, js_error(&e))),
+    }
+}
+
+/// The first bytes of a file (enough to tell its format: `io::sniff`).
+async fn read_head(f: &Named) -> Result<Vec<u8>, String> {
+    let end = f.file.size().min(crate::io::HEAD_BYTES as f64);
+    let blob = f
+        .file
+        .slice_with_f64_and_f64(0.0, end)
+        .map_err(|e| format!("{}: cannot read: {}", f.name, js_error(&e)))?;
+    match JsFuture::from(blob.array_buffer()).await {
+        Ok(buffer) => Ok(js_sys::Uint8Array::new(&buffer).to_vec()),
+        Err(e) => Err(format!("{}: cannot read: {}", f.name, js_error(&e))),
+    }
+}
+
+/// Whether several files are a DICOM set to decode as it is read: the first file is DICOM
+/// and no archive is among them (an archive is unpacked by the loader first).
+async fn is_dicom_set(files: &[Named]) -> bool {
+    if files.len() < 2
+        || files
+            .iter()
+            .any(|f| f.name.to_ascii_lowercase().ends_with(".zip"))
+    {
+        return false;
+    }
+    match read_head(&files[0]).await {
+        Ok(head) => crate::io::sniff(&files[0].name, &head) == crate::io::Format::Dicom,
+        Err(_) => false,
+    }
+}
+
+/// Reads every file (in order), reporting progress, then queues them as one load; a DICOM
+/// set is decoded as it is read instead ([`read_dicom_set`]).
 async fn read_all(files: Vec<Named>) {
     let label = match files.as_slice() {
         [one] => one.name.clone(),
@@ -357,6 +403,9 @@ async fn read_all(files: Vec<Named>) {
         }
     };
     let total: f64 = files.iter().map(|f| f.file.size()).sum();
+    if is_dicom_set(&files).await && read_dicom_set(&files, &label, total).await {
+        return;
+    }
     let mut done = 0.0;
     let mut out = Vec::with_capacity(files.len());
     for f in files {
@@ -389,6 +438,124 @@ async fn read_all(files: Vec<Named>) {
         files: out,
         origin,
     });
+}
+
+/// Decodes a DICOM set as it is read (`io::FolderReader`): each file read whole, decoded and
+/// dropped, so the page holds one file and the voxels, not every file and the voxels. Files of
+/// an unrecognised format are ignored (noted), as the loader does in a DICOM set. Returns
+/// false, having queued nothing, when another format is among the files (the caller reads the
+/// set the usual way); every other outcome is queued as an event.
+async fn read_dicom_set(files: &[Named], label: &str, total: f64) -> bool {
+    use crate::io::{FolderRead, FolderReader, Format, InputFile, Limits};
+    let limits = Limits::default();
+    let mut reader = FolderReader::new(limits);
+    reader.expect_files(files.len());
+    let mut done = 0.0;
+    for f in files {
+        push(WebEvent::Progress {
+            verb: "reading",
+            label: label.to_owned(),
+            done,
+            total,
+        });
+        let bytes = match read_file(f).await {
+            Ok(b) => b,
+            Err(message) => {
+                push(WebEvent::Failed { message });
+                return true;
+            }
+        };
+        done += f.file.size();
+        match crate::io::sniff(&f.name, &bytes) {
+            Format::Dicom => {
+                if let Err(e) = reader.push(InputFile::new(f.name.clone(), bytes)) {
+                    push(WebEvent::Failed {
+                        message: e.to_string(),
+                    });
+                    return true;
+                }
+            }
+            Format::Unknown => reader.ignore(f.name.clone()),
+            _ => return false,
+        }
+    }
+    let origin = ViewSource::Dropped {
+        name: label.to_owned(),
+        bytes: total as u64,
+    };
+    match reader.finish() {
+        Ok(FolderRead::Loaded(loaded)) => push(WebEvent::Loaded {
+            loaded,
+            series: None,
+            origin: Some(origin),
+        }),
+        Ok(FolderRead::List(list)) => {
+            let chosen = list.default_choice();
+            let handles = files.iter().map(|f| f.file.clone()).collect();
+            let set = super::load::SeriesSet::of_web_files(list, handles, chosen);
+            read_series(set, Some(origin)).await;
+        }
+        Err(e) => push(WebEvent::Failed {
+            message: e.to_string(),
+        }),
+    }
+    true
+}
+
+/// Loads the chosen series of a set of the page's files (a click in the series list): its
+/// files read again one at a time and decoded as they come.
+pub fn load_series(set: super::load::SeriesSet) {
+    wasm_bindgen_futures::spawn_local(read_series(set, None));
+}
+
+async fn read_series(set: super::load::SeriesSet, origin: Option<ViewSource>) {
+    let Some(files) = set.web_files() else {
+        return;
+    };
+    let limits = crate::io::Limits::default();
+    let members = set.list.members(set.chosen);
+    let label = set.label();
+    let total: f64 = members
+        .iter()
+        .filter_map(|&i| files.get(i))
+        .map(|f| f.size())
+        .sum();
+    let mut builder = crate::io::entry_builder(members.len(), &limits);
+    let mut done = 0.0;
+    for &i in &members {
+        let Some(file) = files.get(i) else { continue };
+        push(WebEvent::Progress {
+            verb: "reading",
+            label: label.clone(),
+            done,
+            total,
+        });
+        let named = Named {
+            name: set.list.file_name(i).to_owned(),
+            file: file.clone(),
+        };
+        let pushed = match read_file(&named).await {
+            Ok(bytes) => builder
+                .push(crate::io::InputFile::new(named.name, bytes))
+                .map_err(|e| e.to_string()),
+            Err(message) => Err(message),
+        };
+        if let Err(message) = pushed {
+            push(WebEvent::Failed { message });
+            return;
+        }
+        done += file.size();
+    }
+    match crate::io::finish_entry(&set.list, builder) {
+        Ok(loaded) => push(WebEvent::Loaded {
+            loaded: Box::new(loaded),
+            series: Some(set),
+            origin,
+        }),
+        Err(e) => push(WebEvent::Failed {
+            message: e.to_string(),
+        }),
+    }
 }
 
 /// Fetches the demo CT (a static file next to the page).

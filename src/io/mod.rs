@@ -18,7 +18,8 @@ mod raw;
 pub mod zip;
 
 pub use dicom::{
-    SeriesBuilder, SeriesEntry, SeriesList, SliceOrientation, decodable_transfer_syntaxes,
+    FolderRead, FolderReader, SeriesBuilder, SeriesEntry, SeriesList, SliceOrientation,
+    decodable_transfer_syntaxes, entry_builder, finish_entry, load_entry,
 };
 pub use error::LoadError;
 pub use input::{FileSource, HEAD_BYTES, InputFile, MemorySource};

@@ -7,7 +7,8 @@
 //     names it and keeps the volume; a DICOM folder (the "Open folder" input), and one holding
 //     two series (both listed, one click on the other loads it); a detached-header
 //     NRRD with its data file dropped together; "Save picture" (key P over a pane) downloads a
-//     PNG of that pane,
+//     PNG of that pane; "Save movie" (key M) downloads a 36-frame animated PNG of a turn of the
+//     MIP, with its progress in the status,
 //  4. a browser without WebGPU gets a plain-words message instead of a blank canvas.
 //
 // The page is opened with ?method=li: the Hessian (Li map) features finish in seconds even where
@@ -116,6 +117,24 @@ async function withBrowser(args, fn) {
     await context.close();
     fs.rmSync(userDataDir, { recursive: true, force: true });
   }
+}
+
+// The chunks of an animated PNG that say what it holds: IHDR's size, acTL's frame count, each
+// fcTL's frame size, and the number of fdAT chunks (frames after the first).
+function apngFrames(buf) {
+  const out = { width: 0, height: 0, frames: 0, fctl: [], fdat: 0 };
+  let at = 8;
+  while (at + 8 <= buf.length) {
+    const len = buf.readUInt32BE(at);
+    const type = buf.toString('latin1', at + 4, at + 8);
+    const body = at + 8;
+    if (type === 'IHDR') { out.width = buf.readUInt32BE(body); out.height = buf.readUInt32BE(body + 4); }
+    if (type === 'acTL') out.frames = buf.readUInt32BE(body);
+    if (type === 'fcTL') out.fctl.push([buf.readUInt32BE(body + 4), buf.readUInt32BE(body + 8)]);
+    if (type === 'fdAT') out.fdat += 1;
+    at = body + len + 4;
+  }
+  return out;
 }
 
 function screenshotStats(buffer) {
@@ -286,6 +305,42 @@ try {
       check('save picture: the axial pane as a PNG download', ok, detail);
     } else {
       check('save picture: the axial pane as a PNG download', false, `no pane:axial in ${JSON.stringify(status?.controls)}`);
+    }
+
+    // 3e: "Save movie": M downloads a full turn of the MIP as an animated PNG (issue 17): 36
+    // frames (acTL, one fcTL each, the rest in fdAT chunks), each the size of the MIP pane's
+    // picture, and the status's task says how far it is while it runs.
+    {
+      let detail = '';
+      let ok = false;
+      const tasks = new Set();
+      const watch = setInterval(() => {
+        page.evaluate(() => window.shapecastStatus?.task ?? null)
+          .then((t) => { if (t) tasks.add(t.replace(/frame \d+/, 'frame N')); })
+          .catch(() => {});
+      }, 200);
+      try {
+        const mip = status?.controls?.['pane:mip'] ?? null;
+        const [download] = await Promise.all([
+          page.waitForEvent('download', { timeout: 240000 }),
+          page.keyboard.press('m'),
+        ]);
+        const file = path.join(outDir, download.suggestedFilename());
+        await download.saveAs(file);
+        const apng = apngFrames(fs.readFileSync(file));
+        const sameSize = apng.fctl.every(([w, h]) => w === apng.width && h === apng.height);
+        ok = download.suggestedFilename() === 'shapecast-rotation.png' && apng.frames === 36
+          && apng.fctl.length === 36 && apng.fdat > 0 && sameSize && apng.width > 50 && apng.height > 50
+          && (!mip || (apng.width <= mip[2] * 2 && apng.height <= mip[3] * 2))
+          && [...tasks].some((t) => /movie: frame N of 36/.test(t));
+        detail = `${download.suggestedFilename()}: ${apng.frames} frames announced, ${apng.fctl.length} fcTL, `
+          + `${apng.fdat} fdAT, ${apng.width}x${apng.height} (MIP pane ${mip ? `${mip[2]}x${mip[3]}` : '?'}), `
+          + `tasks seen ${JSON.stringify([...tasks])} (${file})`;
+      } catch (e) {
+        detail = e.message.split('\n')[0];
+      }
+      clearInterval(watch);
+      check('save movie: a full turn of the MIP as an animated PNG download', ok, detail);
     }
   });
 

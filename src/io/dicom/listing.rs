@@ -144,53 +144,79 @@ pub(crate) fn list_series(
             series::no_image_error(&names)
         }));
     }
-    let named: Vec<(&str, &FileHeader)> = headers
-        .iter()
-        .map(|(i, h)| (files[*i].name.as_str(), h))
-        .collect();
-    let stacks = series::group_stacks(&named);
-    let entries = stacks
-        .iter()
-        .map(|s| {
-            let member = |m: usize| &headers[m].1;
-            // A stack is never empty (`group_stacks` makes one per image met).
-            let first = s.members.first().map(|&m| member(m));
-            let frame_value = |get: fn(&super::FrameInfo) -> Option<f64>| {
-                s.members
-                    .iter()
-                    .flat_map(|&m| member(m).frames.iter())
-                    .find_map(get)
-            };
-            let same_series = stacks
-                .iter()
-                .filter(|o| (&o.series_uid, o.rows, o.cols) == (&s.series_uid, s.rows, s.cols))
-                .count();
-            SeriesEntry {
-                series_uid: s.series_uid.clone(),
-                number: first.and_then(|h| h.series_number),
-                modality: first.map_or_else(String::new, |h| h.modality_name.clone()),
-                description: first.map_or_else(String::new, |h| h.series_description.clone()),
-                images: s.frames,
-                files: s.members.len(),
-                rows: s.rows,
-                cols: s.cols,
-                slice_thickness_mm: frame_value(|f| f.thickness),
-                spacing_between_slices_mm: frame_value(|f| f.spacing_between),
-                orientation: SliceOrientation::from_orientation(s.orientation),
-                part: (s.stack, same_series),
-            }
-        })
-        .collect();
-    Ok(SeriesList {
-        entries,
-        notes,
-        headers,
-        stacks,
-        names: files.iter().map(|f| f.name.clone()).collect(),
-    })
+    let names = files.iter().map(|f| f.name.clone()).collect();
+    Ok(SeriesList::from_headers(names, headers, notes))
 }
 
 impl SeriesList {
+    /// The list of files named `names` whose headers (by index into `names`) are `headers`;
+    /// `notes` (files ignored or skipped) are kept with it.
+    pub(super) fn from_headers(
+        names: Vec<String>,
+        headers: Vec<(usize, FileHeader)>,
+        notes: Vec<String>,
+    ) -> Self {
+        let named: Vec<(&str, &FileHeader)> = headers
+            .iter()
+            .map(|(i, h)| (names.get(*i).map_or("", String::as_str), h))
+            .collect();
+        let stacks = series::group_stacks(&named);
+        let entries = stacks
+            .iter()
+            .map(|s| {
+                let member = |m: usize| &headers[m].1;
+                // A stack is never empty (`group_stacks` makes one per image met).
+                let first = s.members.first().map(|&m| member(m));
+                let frame_value = |get: fn(&super::FrameInfo) -> Option<f64>| {
+                    s.members
+                        .iter()
+                        .flat_map(|&m| member(m).frames.iter())
+                        .find_map(get)
+                };
+                let same_series = stacks
+                    .iter()
+                    .filter(|o| (&o.series_uid, o.rows, o.cols) == (&s.series_uid, s.rows, s.cols))
+                    .count();
+                SeriesEntry {
+                    series_uid: s.series_uid.clone(),
+                    number: first.and_then(|h| h.series_number),
+                    modality: first.map_or_else(String::new, |h| h.modality_name.clone()),
+                    description: first.map_or_else(String::new, |h| h.series_description.clone()),
+                    images: s.frames,
+                    files: s.members.len(),
+                    rows: s.rows,
+                    cols: s.cols,
+                    slice_thickness_mm: frame_value(|f| f.thickness),
+                    spacing_between_slices_mm: frame_value(|f| f.spacing_between),
+                    orientation: SliceOrientation::from_orientation(s.orientation),
+                    part: (s.stack, same_series),
+                }
+            })
+            .collect();
+        Self {
+            entries,
+            notes,
+            headers,
+            stacks,
+            names,
+        }
+    }
+
+    /// The name of file `index` of the files listed ("" beyond them).
+    pub fn file_name(&self, index: usize) -> &str {
+        self.names.get(index).map_or("", String::as_str)
+    }
+
+    /// The indices (into the files listed) of the files that hold entry `index`'s images.
+    pub fn members(&self, index: usize) -> Vec<usize> {
+        self.stacks.get(index).map_or_else(Vec::new, |s| {
+            s.members
+                .iter()
+                .filter_map(|&m| self.headers.get(m).map(|(i, _)| *i))
+                .collect()
+        })
+    }
+
     /// The stacks, sorted by series UID, image size and orientation (so that the list does not
     /// depend on the order the files came in).
     pub fn entries(&self) -> &[SeriesEntry] {

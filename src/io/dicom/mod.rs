@@ -3,6 +3,7 @@
 //! frames of one series into a volume.
 
 mod encapsulated;
+mod folder;
 mod listing;
 mod series;
 mod stream;
@@ -10,6 +11,7 @@ mod stream;
 pub(crate) mod synth;
 mod validate;
 
+pub use folder::{FolderRead, FolderReader, entry_builder, finish_entry, load_entry};
 pub(crate) use listing::list_series;
 pub use listing::{SeriesEntry, SeriesList, SliceOrientation};
 pub use stream::SeriesBuilder;
