@@ -314,15 +314,25 @@ try {
       let detail = '';
       let ok = false;
       const tasks = new Set();
+      let last = null;
       const watch = setInterval(() => {
-        page.evaluate(() => window.shapecastStatus?.task ?? null)
-          .then((t) => { if (t) tasks.add(t.replace(/frame \d+/, 'frame N')); })
+        page.evaluate(() => ({ task: window.shapecastStatus?.task ?? null, error: window.shapecastStatus?.error ?? null }))
+          .then((s) => {
+            last = s;
+            if (s.task) tasks.add(s.task.replace(/frame \d+/, 'frame N'));
+          })
           .catch(() => {});
       }, 200);
       try {
-        const mip = status?.controls?.['pane:mip'] ?? null;
+        // A small window keeps the movie's 36 full-resolution frames to a few minutes on
+        // SwiftShader (a frame is drawn in bands within the viewer's frame budget).
+        await page.setViewportSize({ width: 720, height: 480 });
+        await page.waitForTimeout(2000);
+        const mip = await page.evaluate(() => window.shapecastStatus?.controls?.['pane:mip'] ?? null);
+        if (mip) await page.mouse.move(mip[0] + mip[2] / 2, mip[1] + mip[3] / 2);
+        await page.waitForTimeout(500);
         const [download] = await Promise.all([
-          page.waitForEvent('download', { timeout: 240000 }),
+          page.waitForEvent('download', { timeout: 300000 }),
           page.keyboard.press('m'),
         ]);
         const file = path.join(outDir, download.suggestedFilename());
@@ -337,9 +347,10 @@ try {
           + `${apng.fdat} fdAT, ${apng.width}x${apng.height} (MIP pane ${mip ? `${mip[2]}x${mip[3]}` : '?'}), `
           + `tasks seen ${JSON.stringify([...tasks])} (${file})`;
       } catch (e) {
-        detail = e.message.split('\n')[0];
+        detail = `${e.message.split('\n')[0]}; tasks seen ${JSON.stringify([...tasks])}; last status ${JSON.stringify(last)}`;
       }
       clearInterval(watch);
+      await page.setViewportSize({ width: 1280, height: 800 });
       check('save movie: a full turn of the MIP as an animated PNG download', ok, detail);
     }
   });
