@@ -73,6 +73,24 @@ pub struct BenchArgs {
     /// With --whole-body: write the feature MIP here.
     #[arg(long)]
     pub png: Option<PathBuf>,
+    /// With --pipeline or --whole-body: the feature job's memory budget for its bricks, MiB
+    /// (default: the app's, `JobOptions::default`).
+    #[arg(long)]
+    pub budget_mib: Option<u64>,
+}
+
+/// The feature job's options for a benchmark: WebGPU's default limits if asked for, the
+/// memory budget if given.
+pub(crate) fn job_options(
+    webgpu_limits: bool,
+    budget_mib: Option<u64>,
+) -> crate::compute::pipeline::JobOptions {
+    let defaults = crate::compute::pipeline::JobOptions::default();
+    crate::compute::pipeline::JobOptions {
+        limits: webgpu_limits.then(wgpu::Limits::default),
+        memory_budget_bytes: budget_mib.map_or(defaults.memory_budget_bytes, |m| m << 20),
+        ..defaults
+    }
 }
 
 /// `volume` with its slices repeated back and forth along z to `nz` slices (no seam; compact
@@ -133,13 +151,9 @@ fn time_job(
     ctx: &GpuContext,
     volume: &Volume,
     req: &crate::cpu::pipeline::Request,
-    webgpu_limits: bool,
+    options: crate::compute::pipeline::JobOptions,
 ) -> anyhow::Result<(f64, usize, f64)> {
-    use crate::compute::pipeline::{FeatureJob, JobOptions};
-    let options = JobOptions {
-        limits: webgpu_limits.then(wgpu::Limits::default),
-        ..JobOptions::default()
-    };
+    use crate::compute::pipeline::FeatureJob;
     let t = Instant::now();
     let mut job = FeatureJob::with_options(ctx, volume, req, options)?;
     job.run_blocking(ctx)?;
@@ -184,7 +198,8 @@ fn pipeline_bench(args: &BenchArgs, preset: Preset) -> anyhow::Result<()> {
         inputs.push((path.display().to_string(), volume));
     }
     for (name, volume) in &inputs {
-        let (secs, bricks, overhead) = time_job(&ctx, volume, &req, args.webgpu_limits)?;
+        let options = job_options(args.webgpu_limits, args.budget_mib);
+        let (secs, bricks, overhead) = time_job(&ctx, volume, &req, options)?;
         let n = volume.dims.iter().product::<usize>() as f64;
         // Voxels of the grid the method computes on (the Hessian refines thick axes).
         let n_c = req
@@ -295,6 +310,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             method,
             preset,
             webgpu_limits: args.webgpu_limits,
+            budget_mib: args.budget_mib,
             size: [768, 768],
             png: args.png.as_deref(),
         });

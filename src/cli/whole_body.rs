@@ -42,6 +42,7 @@ pub struct Options<'a> {
     pub method: Method,
     pub preset: Preset,
     pub webgpu_limits: bool,
+    pub budget_mib: Option<u64>,
     pub size: [u32; 2],
     pub png: Option<&'a Path>,
 }
@@ -250,9 +251,8 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
     request.preset = opts.preset;
     // Paced as the viewer paces its steps.
     let options = JobOptions {
-        limits: opts.webgpu_limits.then(wgpu::Limits::default),
         step_seconds: Some(crate::app::features::STEP_SECONDS),
-        ..JobOptions::default()
+        ..super::bench::job_options(opts.webgpu_limits, opts.budget_mib)
     };
     let t = Instant::now();
     let mut job = FeatureJob::shared(&ctx, std::sync::Arc::clone(&volume), &request, options)?;
