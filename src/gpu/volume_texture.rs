@@ -198,6 +198,10 @@ impl RenderVolume {
                 nz,
                 bytemuck::cast_slice(&halves[..n]),
             );
+            // Each slab goes now: the queue's staging for writes not yet submitted would
+            // otherwise hold a second copy of the whole volume until the next submit (in the
+            // browser in the page's and the GPU process's shared memory both).
+            ctx.queue.submit(std::iter::empty());
             z0 += nz;
         }
         let intensity_view = intensity.create_view(&wgpu::TextureViewDescriptor::default());
