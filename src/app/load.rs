@@ -283,11 +283,15 @@ impl LoadJob {
                         let chosen = list.default_choice();
                         let loaded = list.load(&files, chosen, &limits);
                         if loaded.is_ok() {
+                            // In the browser the files hold JavaScript objects (their bytes,
+                            // read on demand), which are not `Send`; it has one thread.
+                            #[allow(clippy::arc_with_non_send_sync)]
+                            let files = Arc::new(files);
                             self.series = Some(SeriesSet {
                                 list: Arc::new(list),
                                 // Natively, files from paths are already read on demand
                                 // (only their first bytes in memory).
-                                files: SetFiles::Inputs(Arc::new(files)),
+                                files: SetFiles::Inputs(files),
                                 chosen,
                             });
                         }

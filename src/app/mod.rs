@@ -8,6 +8,8 @@
 
 pub mod demo;
 pub mod features;
+#[cfg(target_arch = "wasm32")]
+mod js_bytes;
 mod keys;
 pub mod load;
 pub mod measure;

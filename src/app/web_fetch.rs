@@ -16,6 +16,7 @@ use wasm_bindgen::JsValue;
 use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
+use super::js_bytes::{self, JsBytes, JsChunk};
 use super::view_link::{ViewSource, host_of};
 use super::web_files::{WebEvent, js_error, push};
 use crate::io::InputFile;
@@ -141,8 +142,8 @@ async fn download_all(
             name.clone()
         };
         let bytes = download(url, &label, controller, max_download_bytes() - total_bytes).await?;
-        total_bytes += bytes.len() as u64;
-        files.push(InputFile::new(name, bytes));
+        total_bytes += bytes.len();
+        files.push(js_bytes::into_input(bytes, name).map_err(Failure::Message)?);
     }
     Ok(files)
 }
@@ -231,7 +232,7 @@ async fn download(
     label: &str,
     controller: &web_sys::AbortController,
     room: u64,
-) -> Result<Vec<u8>, Failure> {
+) -> Result<JsBytes, Failure> {
     let fail = |m: String| Failure::Message(m);
     let signal = controller.signal();
     let window = web_sys::window().ok_or_else(|| fail("no window object".to_owned()))?;
@@ -291,19 +292,15 @@ async fn download(
         controller.abort();
         return Err(fail(too_large(url, n)));
     }
-    let mut bytes: Vec<u8> = Vec::new();
-    if let Some(n) = length.filter(|_| !encoded)
-        && bytes.try_reserve_exact(n as usize).is_err()
-    {
-        controller.abort();
-        return Err(fail(too_large(url, n)));
-    }
+    // The chunks stay JavaScript's as they arrive: the loader reads them on demand, so the
+    // wasm memory never holds the file besides its voxels.
+    let mut bytes = JsBytes::default();
     let Some(body) = response.body() else {
         return Ok(bytes);
     };
     let reader: web_sys::ReadableStreamDefaultReader = body.get_reader().unchecked_into();
     let total = length.map_or(0.0, |n| n as f64);
-    let mut last_report = 0usize;
+    let mut last_report = 0u64;
     loop {
         let chunk = match JsFuture::from(reader.read()).await {
             Ok(c) => c,
@@ -329,19 +326,12 @@ async fn download(
         let Ok(array) = value.dyn_into::<js_sys::Uint8Array>() else {
             continue;
         };
-        let n = array.length() as usize;
-        let new_len = bytes.len() + n;
-        if new_len as u64 > room {
+        let new_len = bytes.len() + u64::from(array.length());
+        if new_len > room {
             controller.abort();
-            return Err(fail(too_large(url, new_len as u64)));
+            return Err(fail(too_large(url, new_len)));
         }
-        if bytes.try_reserve(n).is_err() {
-            controller.abort();
-            return Err(fail(too_large(url, new_len as u64)));
-        }
-        let start = bytes.len();
-        bytes.resize(new_len, 0);
-        array.copy_to(&mut bytes[start..]);
+        bytes.push(JsChunk(array));
         // A progress event per ~256 KB is plenty (chunks are often 16-64 KB).
         if bytes.len() - last_report >= 256 << 10 {
             last_report = bytes.len();
@@ -353,7 +343,7 @@ async fn download(
             });
         }
     }
-    if looks_like_html(&bytes) {
+    if looks_like_html(&bytes.head(1024)) {
         return Err(fail(html_message(url)));
     }
     Ok(bytes)

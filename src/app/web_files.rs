@@ -7,7 +7,8 @@
 //! eframe's own drop handling is bypassed: it does not walk folders. Our listeners sit on the
 //! window in the capture phase and stop the drag events there, walk dropped folders with
 //! `webkitGetAsEntry` and `FileSystemDirectoryReader`, and read every file with
-//! `Blob.arrayBuffer()`.
+//! `Blob.arrayBuffer()`. A file's bytes stay JavaScript's (`JsBytes`) and the loader reads them
+//! on demand; a DICOM set is decoded file by file as it is read.
 
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -17,6 +18,7 @@ use wasm_bindgen::JsValue;
 use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
+use super::js_bytes::{self, JsBytes, JsChunk};
 use super::view_link::ViewSource;
 use crate::io::InputFile;
 
@@ -348,12 +350,22 @@ async fn walk(entries: Vec<web_sys::FileSystemEntry>) -> Result<Vec<Named>, Stri
     Ok(out)
 }
 
-/// A file's bytes, read whole.
-async fn read_file(f: &Named) -> Result<Vec<u8>, String> {
-    match JsFuture::from(f.file.array_buffer()).await {
-        Ok(buffer) => Ok(js_sys::Uint8Array::new(&buffer).to_vec()),
-        Err(e) => Err(format!("{}: cannot read: {}", f.name, js_error(&e))),
+/// Why a file could not be read, naming it.
+fn cannot_read(f: &Named, e: &JsValue) -> String {
+    format!("{}: cannot read: {}", f.name, js_error(e))
+}
+
+/// A blob's bytes as JavaScript holds them (not copied into the wasm memory).
+async fn read_js(f: &Named, blob: &web_sys::Blob) -> Result<js_sys::Uint8Array, String> {
+    match JsFuture::from(blob.array_buffer()).await {
+        Ok(buffer) => Ok(js_sys::Uint8Array::new(&buffer)),
+        Err(e) => Err(cannot_read(f, &e)),
     }
+}
+
+/// A file's bytes, read whole into the wasm memory (one DICOM image at a time).
+async fn read_file(f: &Named) -> Result<Vec<u8>, String> {
+    Ok(read_js(f, &f.file).await?.to_vec())
 }
 
 /// The first bytes of a file (enough to tell its format: `io::sniff`).
@@ -362,11 +374,8 @@ async fn read_head(f: &Named) -> Result<Vec<u8>, String> {
     let blob = f
         .file
         .slice_with_f64_and_f64(0.0, end)
-        .map_err(|e| format!("{}: cannot read: {}", f.name, js_error(&e)))?;
-    match JsFuture::from(blob.array_buffer()).await {
-        Ok(buffer) => Ok(js_sys::Uint8Array::new(&buffer).to_vec()),
-        Err(e) => Err(format!("{}: cannot read: {}", f.name, js_error(&e))),
-    }
+        .map_err(|e| cannot_read(f, &e))?;
+    Ok(read_js(f, &blob).await?.to_vec())
 }
 
 /// Whether several files are a DICOM set to decode as it is read: the first file is DICOM
@@ -415,16 +424,18 @@ async fn read_all(files: Vec<Named>) {
             done,
             total,
         });
-        match JsFuture::from(f.file.array_buffer()).await {
-            Ok(buffer) => {
-                let bytes = js_sys::Uint8Array::new(&buffer).to_vec();
+        // The bytes stay JavaScript's; the loader reads them on demand into the voxels.
+        let read = match read_js(&f, &f.file).await {
+            Ok(bytes) => js_bytes::into_input(JsBytes::whole(JsChunk(bytes)), f.name),
+            Err(e) => Err(e),
+        };
+        match read {
+            Ok(file) => {
                 done += f.file.size();
-                out.push(InputFile::new(f.name, bytes));
+                out.push(file);
             }
-            Err(e) => {
-                push(WebEvent::Failed {
-                    message: format!("{}: cannot read: {}", f.name, js_error(&e)),
-                });
+            Err(message) => {
+                push(WebEvent::Failed { message });
                 return;
             }
         }

@@ -9,9 +9,23 @@ use std::sync::Arc;
 
 use super::LoadError;
 
+/// What a [`FileSource`] must be besides: `Send + Sync` natively, where a loader runs on a thread
+/// of its own; nothing in the browser, which has one thread and whose sources hold JavaScript
+/// objects (the page's file bytes, kept out of the wasm memory: `app::web_files`).
+#[cfg(not(target_arch = "wasm32"))]
+pub trait SourceBounds: Send + Sync {}
+#[cfg(not(target_arch = "wasm32"))]
+impl<T: Send + Sync + ?Sized> SourceBounds for T {}
+/// What a [`FileSource`] must be besides: nothing in the browser (see the native definition).
+#[cfg(target_arch = "wasm32")]
+pub trait SourceBounds {}
+#[cfg(target_arch = "wasm32")]
+impl<T: ?Sized> SourceBounds for T {}
+
 /// A file's content, read on demand. `src/io` never opens a file itself: the native code gives
-/// it this (`crate::files`), and tests give it bytes.
-pub trait FileSource: Send + Sync + std::fmt::Debug {
+/// it this (`crate::files`), the browser its files' bytes held by JavaScript, and tests give it
+/// bytes.
+pub trait FileSource: SourceBounds + std::fmt::Debug {
     /// The file's length in bytes.
     fn len(&self) -> u64;
 
@@ -242,5 +256,192 @@ impl FileSource for MemorySource {
             })?;
         buf.copy_from_slice(src);
         Ok(())
+    }
+}
+
+/// One piece of a [`Chunked`] file: in the browser a JavaScript `Uint8Array` (a file's
+/// `ArrayBuffer`, a download's chunk), in tests a `Vec<u8>`.
+pub trait Chunk {
+    /// Its length in bytes.
+    fn len(&self) -> u64;
+
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Copies its bytes from `from` on into `out` (the caller keeps within the chunk).
+    fn copy_to(&self, from: u64, out: &mut [u8]);
+}
+
+impl Chunk for Vec<u8> {
+    fn len(&self) -> u64 {
+        self.as_slice().len() as u64
+    }
+
+    fn copy_to(&self, from: u64, out: &mut [u8]) {
+        let from = from as usize;
+        out.copy_from_slice(&self[from..from + out.len()]);
+    }
+}
+
+/// A file as chunks in order, read on demand across them: the browser keeps a file's bytes
+/// (or a download's chunks as they came) in JavaScript's memory this way and the loaders read
+/// them into the voxels, so the wasm memory does not hold the file too.
+pub struct Chunked<C> {
+    /// Each chunk with its offset in the file; none is empty, so the offsets increase.
+    chunks: Vec<(u64, C)>,
+    len: u64,
+}
+
+impl<C> Default for Chunked<C> {
+    fn default() -> Self {
+        Self {
+            chunks: Vec::new(),
+            len: 0,
+        }
+    }
+}
+
+impl<C> std::fmt::Debug for Chunked<C> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Chunked")
+            .field("chunks", &self.chunks.len())
+            .field("len", &self.len)
+            .finish()
+    }
+}
+
+impl<C: Chunk> Chunked<C> {
+    /// One chunk: a whole file.
+    pub fn whole(bytes: C) -> Self {
+        let mut c = Self::default();
+        c.push(bytes);
+        c
+    }
+
+    /// Appends the next chunk (kept, not copied).
+    pub fn push(&mut self, chunk: C) {
+        let n = chunk.len();
+        if n > 0 {
+            self.chunks.push((self.len, chunk));
+            self.len += n;
+        }
+    }
+
+    /// The bytes so far.
+    pub fn len(&self) -> u64 {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The first `n` bytes (all of them when there are fewer), copied.
+    pub fn head(&self, n: usize) -> Vec<u8> {
+        let mut v = vec![0u8; n.min(usize::try_from(self.len).unwrap_or(usize::MAX))];
+        match self.read_at(0, &mut v) {
+            Ok(()) => v,
+            Err(_) => Vec::new(),
+        }
+    }
+
+    fn read_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()> {
+        let want = buf.len();
+        let short = || {
+            std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!(
+                    "{want} bytes at {offset} asked of a file of {} bytes",
+                    self.len
+                ),
+            )
+        };
+        if offset.saturating_add(want as u64) > self.len {
+            return Err(short());
+        }
+        // The chunk holding `offset`: the last one starting at or before it.
+        let mut i = self
+            .chunks
+            .partition_point(|(start, _)| *start <= offset)
+            .saturating_sub(1);
+        let mut at = offset;
+        let mut done = 0usize;
+        while done < want {
+            let (start, chunk) = self.chunks.get(i).ok_or_else(short)?;
+            let from = at - start;
+            let n = chunk.len().saturating_sub(from).min((want - done) as u64) as usize;
+            if n == 0 {
+                return Err(short());
+            }
+            chunk.copy_to(from, &mut buf[done..done + n]);
+            done += n;
+            at += n as u64;
+            i += 1;
+        }
+        Ok(())
+    }
+}
+
+impl<C: Chunk + std::fmt::Debug> FileSource for Chunked<C>
+where
+    Chunked<C>: SourceBounds,
+{
+    fn len(&self) -> u64 {
+        self.len
+    }
+
+    fn read_exact_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()> {
+        self.read_at(offset, buf)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+
+    /// Every read of a file cut into chunks of uneven sizes gives the file's bytes, and a read
+    /// past the end is an error, never a panic.
+    #[test]
+    fn chunked_reads_cross_chunks_as_the_file_reads() {
+        let file: Vec<u8> = (0..1000u32).map(|i| (i * 7 + i / 3) as u8).collect();
+        for cuts in [
+            vec![1000],
+            vec![1, 999],
+            vec![300, 0, 1, 1, 698],
+            vec![17; 58],
+        ] {
+            let mut c = Chunked::default();
+            let mut at = 0;
+            for n in cuts {
+                let n = n.min(file.len() - at);
+                c.push(file[at..at + n].to_vec());
+                at += n;
+            }
+            c.push(file[at..].to_vec());
+            assert_eq!(c.len(), 1000);
+            for (offset, len) in [
+                (0, 1000),
+                (0, 0),
+                (299, 3),
+                (500, 17),
+                (999, 1),
+                (16, 35),
+                (1000, 0),
+            ] {
+                let mut buf = vec![0u8; len];
+                c.read_exact_at(offset as u64, &mut buf).unwrap();
+                assert_eq!(buf, file[offset..offset + len]);
+            }
+            let mut buf = vec![0u8; 2];
+            assert!(c.read_exact_at(999, &mut buf).is_err());
+            assert!(c.read_exact_at(u64::MAX, &mut buf).is_err());
+            assert_eq!(c.head(5), file[..5]);
+        }
+        let empty: Chunked<Vec<u8>> = Chunked::default();
+        assert_eq!(empty.head(4), Vec::<u8>::new());
+        let input = InputFile::on_demand("f", Arc::new(Chunked::whole(vec![1u8, 2, 3]))).unwrap();
+        assert_eq!(input.contents().unwrap().as_ref(), &[1, 2, 3]);
     }
 }

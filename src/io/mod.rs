@@ -22,7 +22,7 @@ pub use dicom::{
     decodable_transfer_syntaxes, entry_builder, finish_entry, load_entry,
 };
 pub use error::LoadError;
-pub use input::{FileSource, HEAD_BYTES, InputFile, MemorySource};
+pub use input::{Chunk, Chunked, FileSource, HEAD_BYTES, InputFile, MemorySource};
 
 use crate::volume::Volume;
 

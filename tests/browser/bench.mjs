@@ -8,7 +8,14 @@
 //   once; also the largest process), sampled every 250 ms, peak and at the end.
 // It is a benchmark, not a test: it fails only when the page errors or never becomes ready.
 //
-//   node tests/browser/bench.mjs [DEPTH] [--method li|hessian|rst|...] [--timeout-s N] [--json out.json]
+//   node tests/browser/bench.mjs [DEPTH] [--method li|hessian|rst|...] [--via link|file]
+//                                [--load-only] [--timeout-s N] [--json out.json]
+//
+// --via file opens the volume through the page's file input instead of a link, --via folder
+// writes it as a DICOM series (one explicit-VR file per slice, the same voxels) and opens the
+// folder through the page's folder input; --load-only stops
+// 5 s after the first MIP frame (what reading costs, before any feature). The wasm memory's size
+// (it never shrinks: its high-water mark) is reported beside the processes' memory.
 //
 // Default DEPTH 256, method li (the Hessian family: the RST of a 512-wide volume takes hours on
 // SwiftShader). Results: target/browser/bench-DEPTH.json and a screenshot beside it.
@@ -32,10 +39,14 @@ let depth = 256;
 let timeoutS = 3600;
 let jsonOut = null;
 let method = 'li';
+let via = 'link';
+let loadOnly = false;
 for (let i = 0; i < args.length; i += 1) {
   if (args[i] === '--timeout-s') timeoutS = Number(args[++i]);
   else if (args[i] === '--method') method = args[++i];
   else if (args[i] === '--json') jsonOut = args[++i];
+  else if (args[i] === '--via') via = args[++i];
+  else if (args[i] === '--load-only') loadOnly = true;
   else depth = Number(args[i]);
 }
 if (!Number.isInteger(depth) || depth < 1 || depth > 4000) {
@@ -98,6 +109,72 @@ const volumeFile = path.join(tmp, 'wholebody.nrrd');
   fs.closeSync(fd);
 }
 const fileBytes = fs.statSync(volumeFile).size;
+
+// The same voxels as a DICOM series: one file per slice, explicit VR little endian, HU stored
+// as signed 16-bit pixels (the writer of src/io/dicom/synth.rs, in JavaScript).
+function dicomElement(tag, vr, value) {
+  let v = Buffer.from(value);
+  if (v.length % 2 === 1) v = Buffer.concat([v, Buffer.from([vr === 'UI' || vr === 'OB' ? 0 : 0x20])]);
+  const long = ['OB', 'OW', 'SQ', 'UN', 'UT'].includes(vr);
+  const head = Buffer.alloc(long ? 12 : 8);
+  head.writeUInt16LE(tag[0], 0);
+  head.writeUInt16LE(tag[1], 2);
+  head.write(vr, 4, 'latin1');
+  if (long) head.writeUInt32LE(v.length, 8);
+  else head.writeUInt16LE(v.length, 6);
+  return Buffer.concat([head, v]);
+}
+function dicomSlice(k, pixels, origin) {
+  const us = (n) => { const b = Buffer.alloc(2); b.writeUInt16LE(n); return b; };
+  const ct = '1.2.840.10008.5.1.4.1.1.2';
+  const series = '2.25.1234567890123';
+  const sop = `${series}.${k + 1}`;
+  const data = Buffer.concat([
+    dicomElement([0x0008, 0x0016], 'UI', ct),
+    dicomElement([0x0008, 0x0018], 'UI', sop),
+    dicomElement([0x0008, 0x0060], 'CS', 'CT'),
+    dicomElement([0x0010, 0x0010], 'PN', 'Bench^Wholebody'),
+    dicomElement([0x0020, 0x000D], 'UI', '2.25.1234567890'),
+    dicomElement([0x0020, 0x000E], 'UI', series),
+    dicomElement([0x0020, 0x0013], 'IS', String(k + 1)),
+    dicomElement([0x0020, 0x0032], 'DS', `${origin[0]}\\${origin[1]}\\${(origin[2] + 0.8 * k).toFixed(2)}`),
+    dicomElement([0x0020, 0x0037], 'DS', '1\\0\\0\\0\\1\\0'),
+    dicomElement([0x0028, 0x0002], 'US', us(1)),
+    dicomElement([0x0028, 0x0004], 'CS', 'MONOCHROME2'),
+    dicomElement([0x0028, 0x0010], 'US', us(ny)),
+    dicomElement([0x0028, 0x0011], 'US', us(nx)),
+    dicomElement([0x0028, 0x0030], 'DS', '0.626953\\0.626953'),
+    dicomElement([0x0028, 0x0100], 'US', us(16)),
+    dicomElement([0x0028, 0x0101], 'US', us(16)),
+    dicomElement([0x0028, 0x0102], 'US', us(15)),
+    dicomElement([0x0028, 0x0103], 'US', us(1)),
+    dicomElement([0x0028, 0x1052], 'DS', '0'),
+    dicomElement([0x0028, 0x1053], 'DS', '1'),
+    dicomElement([0x7FE0, 0x0010], 'OW', pixels),
+  ]);
+  const group = Buffer.concat([
+    dicomElement([0x0002, 0x0001], 'OB', Buffer.from([0, 1])),
+    dicomElement([0x0002, 0x0002], 'UI', ct),
+    dicomElement([0x0002, 0x0003], 'UI', sop),
+    dicomElement([0x0002, 0x0010], 'UI', '1.2.840.10008.1.2.1'),
+  ]);
+  const len = Buffer.alloc(4);
+  len.writeUInt32LE(group.length);
+  return Buffer.concat([Buffer.alloc(128), Buffer.from('DICM'), dicomElement([0x0002, 0x0000], 'UL', len), group, data]);
+}
+const folder = path.join(tmp, 'wholebody');
+if (via === 'folder') {
+  fs.mkdirSync(folder);
+  const origin = (src.origin ?? '(0,0,0)').replace(/[()]/g, '').split(',').map(Number);
+  for (let k = 0; k < depth; k += 1) {
+    const period = 2 * nz;
+    const m = k % period;
+    const s = m < nz ? m : period - 1 - m;
+    const pixels = src.voxels.subarray(s * slice, (s + 1) * slice);
+    fs.writeFileSync(path.join(folder, `IM${String(k + 1).padStart(5, '0')}.dcm`), dicomSlice(k, pixels, origin));
+  }
+  console.log(`  the same as ${depth} DICOM files in ${folder}`);
+}
 console.log(`volume: ${nx} x ${ny} x ${depth} (lung2's ${nz} slices back and forth, 0.8 mm), ${(fileBytes / 2 ** 20).toFixed(0)} MiB raw NRRD`);
 
 // ---- Server ---------------------------------------------------------------------------------
@@ -147,19 +224,20 @@ function memoryOf(rootPid) {
   const todo = [rootPid];
   let pss = 0;
   let largest = { pss: 0, type: '' };
+  const byType = {};
   while (todo.length) {
     const pid = todo.pop();
     todo.push(...(kids.get(pid) ?? []));
     try {
       const p = kbField(fs.readFileSync(`/proc/${pid}/smaps_rollup`, 'latin1'), 'Pss');
       pss += p;
-      if (p > largest.pss) {
-        const cmd = fs.readFileSync(`/proc/${pid}/cmdline`, 'latin1');
-        largest = { pss: p, type: cmd.match(/--type=([a-z-]+)/)?.[1] ?? 'browser' };
-      }
+      const cmd = fs.readFileSync(`/proc/${pid}/cmdline`, 'latin1');
+      const type = cmd.match(/--type=([a-z-]+)/)?.[1] ?? 'browser';
+      byType[type] = (byType[type] ?? 0) + p;
+      if (p > largest.pss) largest = { pss: p, type };
     } catch { /* gone */ }
   }
-  return { pss, largest };
+  return { pss, largest, byType };
 }
 
 // ---- The run -------------------------------------------------------------------------------
@@ -182,6 +260,18 @@ page.on('console', (msg) => {
   else if (process.env.BENCH_LOG && msg.text().includes(process.env.BENCH_LOG)) console.log(`  [page] ${msg.text().slice(0, 400)}`);
 });
 page.on('pageerror', (err) => console.log(`  [page exception] ${err}`));
+// The wasm memory, caught as the module is instantiated (any build, no app support needed).
+await page.addInitScript(() => {
+  for (const name of ['instantiateStreaming', 'instantiate']) {
+    const orig = WebAssembly[name];
+    WebAssembly[name] = async (...a) => {
+      const r = await orig.apply(WebAssembly, a);
+      const exports = (r.instance ?? r).exports;
+      if (exports?.memory) window.__wasmMemory = exports.memory;
+      return r;
+    };
+  }
+});
 // The viewer's frame intervals, seen from the page: a 10 ms timer notes when the status's
 // frame count moves (the main thread is free while the GPU works), with the features' state.
 await page.addInitScript(() => {
@@ -204,18 +294,34 @@ const samples = [];
 const sampler = setInterval(() => {
   const m = memoryOf(browserPid);
   samples.push([at(), m.pss]);
-  if (m.pss > peak.pss) peak = { pss: m.pss, at: at(), largest: m.largest };
+  if (m.pss > peak.pss) peak = { pss: m.pss, at: at(), largest: m.largest, byType: m.byType };
 }, 250);
 
-await page.goto(`${origin}/?url=${encodeURIComponent('/gen/wholebody.nrrd')}&method=${encodeURIComponent(method)}`, { waitUntil: 'commit' });
-console.log(`  ${at().toFixed(1)} s: page requested`);
+if (via === 'link') {
+  await page.goto(`${origin}/?url=${encodeURIComponent('/gen/wholebody.nrrd')}&method=${encodeURIComponent(method)}`, { waitUntil: 'commit' });
+  console.log(`  ${at().toFixed(1)} s: page requested`);
+} else {
+  // A small phantom first (not the demo CT and its features); the file replaces it.
+  await page.goto(`${origin}/?phantom=sphere&method=${encodeURIComponent(method)}`);
+  await page.waitForFunction(() => window.shapecastStatus?.volume, null, { timeout: 120000 });
+  if (via === 'folder') await page.setInputFiles('#shapecast_open_folder', folder);
+  else await page.setInputFiles('#shapecast_open_files', volumeFile);
+  console.log(`  ${at().toFixed(1)} s: file chosen`);
+}
+let wasmPeak = 0;
+let wasmAtLoad = null;
+let memoryAtLoad = null;
 const events = {};
 let last = null;
 let error = null;
 let lastPrint = 0;
 const deadline = t0 + timeoutS * 1000;
 for (;;) {
-  const s = await page.evaluate(() => window.shapecastStatus).catch(() => null);
+  const s = await page.evaluate(() => {
+    const st = window.shapecastStatus;
+    return st ? { ...st, wasm_bytes: window.__wasmMemory?.buffer.byteLength ?? 0 } : null;
+  }).catch(() => null);
+  if (s) wasmPeak = Math.max(wasmPeak, s.wasm_bytes);
   if (Date.now() - lastPrint > 10000) {
     lastPrint = Date.now();
     const f = s?.features;
@@ -224,8 +330,14 @@ for (;;) {
   }
   if (s) {
     last = s;
-    if (s.volume && events.loaded === undefined) events.loaded = at();
-    if (s.volume && s.frames > 0 && events.first_frame === undefined) events.first_frame = at();
+    const ours = s.volume && (via === 'link' || s.volume.dims[2] === depth);
+    if (ours && events.loaded === undefined) {
+      events.loaded = at();
+      wasmAtLoad = s.wasm_bytes;
+      memoryAtLoad = memoryOf(browserPid);
+    }
+    if (ours && s.frames > 0 && events.first_frame === undefined) events.first_frame = at();
+    if (loadOnly && events.first_frame !== undefined && at() > events.first_frame + 5) break;
     const f = s.features;
     if (f && f.state === 'running' && events.features_started === undefined) events.features_started = at();
     if (f && f.state === 'done' && events.features_done === undefined) {
@@ -286,7 +398,12 @@ const result = {
   peak_pss_bytes: peak.pss,
   peak_at_s: peak.at,
   peak_largest_process: peak.largest,
+  peak_by_process_type: peak.byType,
+  pss_at_load_by_process_type: memoryAtLoad?.byType ?? null,
   end_pss_bytes: end.pss,
+  via,
+  wasm_memory_bytes_at_load: wasmAtLoad,
+  wasm_memory_bytes_peak: wasmPeak,
   notice: last?.notice ?? null,
   features_fraction_at_end: last?.features?.fraction ?? null,
   frames_while_job_ran: frameStats,
@@ -299,6 +416,9 @@ console.log(`loaded (download + read): ${events.loaded?.toFixed(1)} s`);
 console.log(`first MIP frame: ${events.first_frame?.toFixed(1)} s`);
 console.log(`features (${result.method}, ${result.preset}): started ${events.features_started?.toFixed(1)} s, done ${events.features_done?.toFixed(1)} s`);
 console.log(`memory of the browser's processes (PSS): peak ${gb(peak.pss)} GB at ${peak.at.toFixed(0)} s (largest: ${peak.largest?.type} ${gb(peak.largest?.pss ?? 0)} GB), at the end ${gb(end.pss)} GB; voxels ${gb(result.voxel_bytes)} GB`);
+const types = (m) => Object.entries(m ?? {}).map(([t, b]) => `${t} ${gb(b)}`).join(', ');
+console.log(`by process: when loaded ${types(memoryAtLoad?.byType)}; at the peak ${types(peak.byType)}; at the end ${types(end.byType)}`);
+console.log(`wasm memory (its high-water mark): ${gb(wasmAtLoad ?? 0)} GB when loaded, ${gb(wasmPeak)} GB at most; opened by ${via}`);
 console.log(`frames while the job ran: ${frameStats.frames}, interval median ${frameStats.median_s?.toFixed(2)} s, 95th percentile ${frameStats.p95_s?.toFixed(2)} s, max ${frameStats.max_s?.toFixed(2)} s, ${frameStats.over_1s} over 1 s; features at the end ${((last?.features?.fraction ?? 0) * 100).toFixed(1)}%`);
 if (result.notice) console.log(`notice: ${result.notice}`);
 console.log(`screenshot: ${shot}`);
