@@ -520,6 +520,55 @@ fn a_dicom_series_read_from_files_peaks_within_one_and_a_half_times_the_voxels()
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 
+/// A zipped DICOM series (deflated, as a PACS export or a web server hands it out): the archive
+/// is read where it lies and its entries inflated one at a time as the loader reads them, so the
+/// peak is the voxels and a slice or two, not every slice as well (the entries were unpacked
+/// whole before: about 2x). From disk (on demand) and from memory (the browser: the archive is
+/// JavaScript's, the wasm side adds only this).
+#[test]
+fn a_zipped_dicom_series_peaks_within_one_and_a_half_times_the_voxels() {
+    let slice = DIMS[0] * DIMS[1];
+    let zip = {
+        let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        let options = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Deflated);
+        for z in 0..DIMS[2] {
+            w.start_file(format!("study/series/s{z:03}.dcm"), options)
+                .expect("entry");
+            w.write_all(&dicom(z, 1, z * slice)).expect("write");
+        }
+        w.finish().expect("zip").into_inner()
+    };
+    let dir = temp_dir("zip");
+    std::fs::write(dir.join("series.zip"), &zip).expect("write");
+    let limits = io::Limits::default();
+    let load = |inputs: Vec<InputFile>| {
+        let (files, _) = io::zip::expand(inputs, &limits)?;
+        io::load(&files)
+    };
+    let (r, peak) = peak_during(|| {
+        let (inputs, _) = shapecast::files::read_all(std::slice::from_ref(&dir.join("series.zip")))
+            .expect("lists");
+        load(inputs)
+    });
+    let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    check_values("zipped DICOM series", &v, "i16");
+    let voxel_bytes = v.voxels.byte_len();
+    eprintln!(
+        "zipped DICOM series of {} files from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+        DIMS[2],
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+
+    let input = InputFile::new("series.zip", zip);
+    let (r, peak) = peak_during(|| load(vec![input]));
+    assert_eq!(r.expect("loads").volume.voxels, v.voxels);
+    eprintln!("zipped DICOM series in memory: input + {peak} bytes");
+    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
 /// The browser's folders: each file is read whole (here: made) and handed to a
 /// `FolderReader`, which decodes it at once and drops it, so the peak is the voxels and a
 /// file, not all the files and the voxels (what reading them all first, then loading, costs).

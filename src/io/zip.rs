@@ -8,10 +8,19 @@
 //! before anything is allocated, and an entry is read at most to its declared size + 1 byte, so
 //! a lying header is an error rather than an allocation. The CRC-32 of every entry is checked
 //! (by the `zip` crate, at the end of each entry). Archives inside archives are not opened.
+//!
+//! The archive is read where it lies (on demand natively, JavaScript's bytes in the browser)
+//! and its entries are on-demand files: their first 4 KiB are inflated when listed, the whole of
+//! one when the loader reads it, and only the last entry read whole is kept. So a zipped DICOM
+//! series costs the voxels and one slice, not every slice as well.
+
+// In the browser an archive's bytes are JavaScript's, which are not `Send`; it has one thread.
+#![cfg_attr(target_arch = "wasm32", allow(clippy::arc_with_non_send_sync))]
 
 use std::io::Read as _;
+use std::sync::{Arc, Mutex};
 
-use super::{InputFile, Limits, LoadError, base_name};
+use super::{FileSource, InputFile, Limits, LoadError, base_name};
 
 /// At most this many entries per archive (a whole-body CT series has a few thousand slices).
 pub const MAX_ENTRIES: usize = 200_000;
@@ -37,7 +46,7 @@ pub fn expand(
     let mut budget = limits.max_decompressed_bytes;
     for file in files {
         if is_zip(&file.bytes) {
-            unpack(&file, &mut budget, &mut out, &mut notes)?;
+            unpack(file, &mut budget, &mut out, &mut notes)?;
         } else {
             out.push(file);
         }
@@ -90,15 +99,149 @@ fn is_clutter(path: &str) -> bool {
         .any(|part| part == "__MACOSX" || part.starts_with('.'))
 }
 
+/// Reads an archive where it lies (in memory, or on demand from the file), for `ZipArchive`.
+struct ArchiveReader {
+    file: Arc<InputFile>,
+    pos: u64,
+}
+
+impl std::io::Read for ArchiveReader {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let data = self.file.data();
+        let n = data.len().saturating_sub(self.pos).min(buf.len() as u64) as usize;
+        data.read_at(&self.file.name, self.pos, &mut buf[..n])
+            .map_err(|e| std::io::Error::other(e.to_string()))?;
+        self.pos += n as u64;
+        Ok(n)
+    }
+}
+
+impl std::io::Seek for ArchiveReader {
+    fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+        let len = self.file.len();
+        let pos = match to {
+            std::io::SeekFrom::Start(p) => Some(p),
+            std::io::SeekFrom::End(d) => len.checked_add_signed(d),
+            std::io::SeekFrom::Current(d) => self.pos.checked_add_signed(d),
+        };
+        self.pos = pos.ok_or_else(|| {
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, "seek before the start")
+        })?;
+        Ok(self.pos)
+    }
+}
+
+type Archive = ::zip::ZipArchive<std::io::BufReader<ArchiveReader>>;
+
+/// One archive's state that its entries share: the archive, and the one entry last inflated
+/// whole (a loader reads an entry's head, then all of it once; keeping one entry bounds the
+/// memory whatever the archive holds).
+struct Shared {
+    archive: Archive,
+    last: Option<(usize, Vec<u8>)>,
+}
+
+/// An entry of an archive, inflated when read: reads within its first [`PREFIX_READ`] bytes
+/// inflate only that far; a longer read inflates it whole (its size and CRC-32 checked) and
+/// keeps it until another entry is read whole.
+struct EntrySource {
+    shared: Arc<Mutex<Shared>>,
+    index: usize,
+    size: u64,
+}
+
+/// Reads ending within this many bytes of an entry inflate only its start (sniffing and header
+/// listing read 4 KiB of every file).
+const PREFIX_READ: u64 = 64 << 10;
+
+impl std::fmt::Debug for EntrySource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EntrySource")
+            .field("index", &self.index)
+            .field("size", &self.size)
+            .finish()
+    }
+}
+
+impl FileSource for EntrySource {
+    fn len(&self) -> u64 {
+        self.size
+    }
+
+    fn read_exact_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()> {
+        let end = offset
+            .checked_add(buf.len() as u64)
+            .filter(|&e| e <= self.size)
+            .ok_or_else(|| {
+                std::io::Error::new(
+                    std::io::ErrorKind::UnexpectedEof,
+                    format!("read past the entry's {} bytes", self.size),
+                )
+            })?;
+        let mut shared = self
+            .shared
+            .lock()
+            .map_err(|_| std::io::Error::other("the archive failed while being read"))?;
+        let shared = &mut *shared;
+        let from = offset as usize;
+        if let Some((i, bytes)) = &shared.last
+            && *i == self.index
+        {
+            buf.copy_from_slice(&bytes[from..from + buf.len()]);
+            return Ok(());
+        }
+        let mut entry = shared
+            .archive
+            .by_index(self.index)
+            .map_err(std::io::Error::other)?;
+        if end <= PREFIX_READ.min(self.size.saturating_sub(1)) {
+            // Only the start, not kept: the CRC is checked when the entry is read whole.
+            let mut head = vec![0u8; end as usize];
+            entry.read_exact(&mut head)?;
+            buf.copy_from_slice(&head[from..]);
+            return Ok(());
+        }
+        let size = self.size as usize;
+        let mut bytes = Vec::new();
+        bytes
+            .try_reserve_exact(size)
+            .map_err(|_| std::io::Error::other(format!("no memory for {size} bytes")))?;
+        // One byte more than declared: an entry that inflates past its declared size is an
+        // error; reading to the end checks the CRC-32.
+        (&mut entry)
+            .take(self.size.saturating_add(1))
+            .read_to_end(&mut bytes)?;
+        if bytes.len() != size {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "the archive declares {size} bytes but the entry holds {}{}",
+                    if bytes.len() > size { "more than " } else { "" },
+                    bytes.len().min(size)
+                ),
+            ));
+        }
+        drop(entry);
+        buf.copy_from_slice(&bytes[from..from + buf.len()]);
+        shared.last = Some((self.index, bytes));
+        Ok(())
+    }
+}
+
 fn unpack(
-    archive_file: &InputFile,
+    archive_file: InputFile,
     budget: &mut u64,
     out: &mut Vec<InputFile>,
     notes: &mut Vec<String>,
 ) -> Result<(), LoadError> {
-    let name = archive_file.name.as_str();
-    let mut archive = ::zip::ZipArchive::new(std::io::Cursor::new(archive_file.contents()?))
-        .map_err(|e| zip_error(name, None, e))?;
+    let archive_file = Arc::new(archive_file);
+    let name = archive_file.name.clone();
+    let name = name.as_str();
+    let reader = std::io::BufReader::new(ArchiveReader {
+        file: Arc::clone(&archive_file),
+        pos: 0,
+    });
+    let mut archive = ::zip::ZipArchive::new(reader).map_err(|e| zip_error(name, None, e))?;
     if archive.len() > MAX_ENTRIES {
         return Err(LoadError::TooLarge {
             file: name.to_owned(),
@@ -126,10 +269,12 @@ fn unpack(
             limit: *budget,
         });
     }
-    let before = out.len();
+    // The entries to read: opened once each here (so that an unsupported codec or encryption
+    // is refused now), inflated when the loader reads them.
+    let mut entries = Vec::new();
     let mut skipped = 0usize;
     for i in 0..archive.len() {
-        let mut entry = archive.by_index(i).map_err(|e| zip_error(name, None, e))?;
+        let entry = archive.by_index(i).map_err(|e| zip_error(name, None, e))?;
         let inner = entry
             .name()
             .map(|n| n.replace('\\', "/"))
@@ -148,59 +293,30 @@ fn unpack(
                 "encrypted; unpack it and drop the files",
             ));
         }
-        let declared = entry.size();
-        if declared > *budget {
-            return Err(LoadError::TooLarge {
-                file: format!("{name}/{inner}"),
-                what: "unpacking this entry".to_owned(),
-                bytes: declared,
-                limit: *budget,
-            });
-        }
-        let capacity = usize::try_from(declared).map_err(|_| LoadError::TooLarge {
-            file: format!("{name}/{inner}"),
-            what: "unpacking this entry".to_owned(),
-            bytes: declared,
-            limit: usize::MAX as u64,
-        })?;
-        let mut bytes = Vec::new();
-        bytes
-            .try_reserve_exact(capacity)
-            .map_err(|_| LoadError::OutOfMemory {
-                file: format!("{name}/{inner}"),
-                what: "the unpacked entry".to_owned(),
-                bytes: declared,
-            })?;
-        // One byte more than declared: an entry that inflates past its declared size is an error.
-        (&mut entry)
-            .take(declared.saturating_add(1))
-            .read_to_end(&mut bytes)
-            .map_err(|e| LoadError::Decompress {
-                file: format!("{name}/{inner}"),
-                message: e.to_string(),
-            })?;
-        if bytes.len() as u64 != declared {
-            return Err(LoadError::Decompress {
-                file: format!("{name}/{inner}"),
-                message: format!(
-                    "the archive declares {declared} bytes but the entry holds {}{}",
-                    if bytes.len() as u64 > declared {
-                        "more than "
-                    } else {
-                        ""
-                    },
-                    bytes.len().min(capacity)
-                ),
-            });
-        }
-        *budget -= declared;
-        if is_zip(&bytes) {
+        entries.push((i, inner, entry.size()));
+    }
+    let shared = Arc::new(Mutex::new(Shared {
+        archive,
+        last: None,
+    }));
+    let before = out.len();
+    for (index, inner, size) in entries {
+        let file = format!("{name}/{inner}");
+        let source = EntrySource {
+            shared: Arc::clone(&shared),
+            index,
+            size,
+        };
+        let input = InputFile::on_demand(file.clone(), Arc::new(source))
+            .map_err(|e| super::input::read_error(&file, 0, &e))?;
+        *budget -= size;
+        if is_zip(&input.bytes) {
             notes.push(format!(
-                "{name}/{inner}: an archive inside the archive, not opened (unpack it first)"
+                "{file}: an archive inside the archive, not opened (unpack it first)"
             ));
             continue;
         }
-        out.push(InputFile::new(format!("{name}/{inner}"), bytes));
+        out.push(input);
     }
     if skipped > 0 {
         notes.push(format!(
@@ -253,7 +369,9 @@ mod tests {
             names,
             ["x.nhdr", "s.zip/series/a.dcm", "s.zip/series/b.dcm"]
         );
-        assert_eq!(out[2].bytes, vec![7u8; 5000]);
+        // Read on demand: the head now, the whole entry when asked.
+        assert_eq!(out[2].bytes.len(), crate::io::HEAD_BYTES);
+        assert_eq!(out[2].contents().unwrap().as_ref(), vec![7u8; 5000]);
         assert!(notes.iter().any(|n| n.contains("2 hidden")), "{notes:?}");
     }
 
