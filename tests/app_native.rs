@@ -579,6 +579,42 @@ fn a_folder_of_several_series_lists_them_and_loads_the_one_clicked() {
     let line = app.patient_line().unwrap_or_default();
     assert!(line.contains("study 1971-07-14"), "{line}");
 
+    // A link to this view names the MR: opened on the same folder, the MR is loaded (not the
+    // default head CT) and the link's view applied to it.
+    let view = app.view_state();
+    let key = view
+        .choice
+        .clone()
+        .expect("the link names the series shown");
+    assert!(
+        view.fragment().contains(&format!("choice={key}")),
+        "{}",
+        view.fragment()
+    );
+    let (read, problems) = shapecast::app::ViewState::from_fragment(&view.fragment());
+    assert!(problems.is_empty(), "{problems:?}");
+    assert_eq!(read.choice.as_deref(), Some(key.as_str()));
+    let mut options = intensity_only(StartWith::Paths(vec![folder.clone()]));
+    options.apply_link(read);
+    let Some(mut opened) = self::harness(options) else {
+        return;
+    };
+    run_until(&mut opened, "the link's series loaded", 60, |app| {
+        app.volume().is_some_and(|v| v.dims == alone.volume.dims)
+            && app
+                .status()
+                .series
+                .iter()
+                .any(|r| r.chosen && r.modality == "MR")
+    });
+    opened.run_steps(2);
+    assert_eq!(
+        opened.state().view_state().choice.as_deref(),
+        Some(key.as_str())
+    );
+    assert_eq!(opened.state().crosshair_lps_mm(), app.crosshair_lps_mm());
+    drop(opened);
+
     // A file of another format has no list.
     harness
         .state_mut()

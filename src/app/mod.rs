@@ -383,7 +383,7 @@ impl ShapecastApp {
         }
         let mut errors = options.link_problems.clone();
         errors.truncate(5);
-        let pending_view = options.view.clone().map(|view| share::PendingView { view });
+        let pending_view = options.view.clone().map(share::PendingView::new);
         let preset = options.preset.unwrap_or(match options.start {
             StartWith::DemoCt => Preset::Vessels,
             _ => Preset::default(),
@@ -537,7 +537,7 @@ impl ShapecastApp {
         let origin = match &source {
             LoadSource::Files { label, files } => Some(ViewSource::Dropped {
                 name: label.clone(),
-                bytes: files.iter().map(|f| f.bytes.len() as u64).sum(),
+                bytes: files.iter().map(crate::io::InputFile::len).sum(),
             }),
             LoadSource::Phantom(name) => Some(ViewSource::Phantom(name.clone())),
             #[cfg(not(target_arch = "wasm32"))]
@@ -739,11 +739,7 @@ impl ShapecastApp {
                         // Another series of the files shown came from where they did.
                         self.loading_origin =
                             origin.or_else(|| self.scene.as_ref().and_then(|s| s.origin.clone()));
-                        let before = self.generation;
-                        self.install(*loaded);
-                        if self.generation != before {
-                            self.series.set = series;
-                        }
+                        self.install(*loaded, series);
                     }
                     web_files::WebEvent::Failed { message } => {
                         self.load_progress = None;
@@ -772,13 +768,7 @@ impl ShapecastApp {
                     self.series.loading = None;
                     self.load = None;
                     self.load_progress = None;
-                    let before = self.generation;
-                    self.install(*loaded);
-                    // The list goes with the volume shown: files with one series (or another
-                    // format, a phantom) have none, and a volume the GPU refused changes nothing.
-                    if self.generation != before {
-                        self.series.set = series;
-                    }
+                    self.install(*loaded, series);
                 }
                 LoadStep::Failed(message) => {
                     self.series.loading = None;
@@ -806,8 +796,10 @@ impl ShapecastApp {
         }
     }
 
-    /// Makes a loaded volume the displayed one (or says why it cannot be shown).
-    fn install(&mut self, loaded: crate::io::Loaded) {
+    /// Makes a loaded volume the displayed one (or says why it cannot be shown), with the
+    /// series list of the files it came from (`None`: files of one series, another format, a
+    /// phantom, an archive's retrieval). A volume the GPU refused changes nothing.
+    fn install(&mut self, loaded: crate::io::Loaded, series: Option<load::SeriesSet>) {
         let Some(gpu) = &self.gpu else { return };
         let patient = loaded.patient;
         let mut volume = loaded.volume;
@@ -865,7 +857,10 @@ impl ShapecastApp {
         });
         self.pacs.patient = patient;
         self.pending_camera = None;
-        // A link's view for this volume replaces the defaults it just got.
+        // The list goes with the volume shown.
+        self.series.set = series;
+        // A link's view for this volume replaces the defaults it just got (after loading the
+        // series it names, when that is another of these files).
         self.apply_pending_view();
         if self.options.compute_on_load {
             self.ensure_features();

@@ -50,6 +50,21 @@ pub(super) fn row_description(e: &SeriesEntry) -> String {
     }
 }
 
+/// How a link names an entry of a list: its SeriesInstanceUID, with `:k` for stack k of a
+/// series split in several.
+pub(super) fn entry_key(e: &SeriesEntry) -> String {
+    if e.part.1 > 1 {
+        format!("{}:{}", e.series_uid, e.part.0)
+    } else {
+        e.series_uid.clone()
+    }
+}
+
+/// The entry of `set` a link's `key` names.
+pub(super) fn find_entry(set: &SeriesSet, key: &str) -> Option<usize> {
+    set.list.entries().iter().position(|e| entry_key(e) == key)
+}
+
 /// What `window.shapecastStatus.series` shows of a list.
 pub(super) fn status_of(state: &SeriesState) -> Vec<SeriesStatus> {
     let Some(set) = &state.set else {
@@ -112,7 +127,7 @@ impl ShapecastApp {
     }
 
     /// Loads entry `index` of `set`; the volume shown and the list stay until it is loaded.
-    fn open_series(&mut self, set: &SeriesSet, index: usize) {
+    pub(super) fn open_series(&mut self, set: &SeriesSet, index: usize) {
         if index >= set.list.entries().len() {
             return;
         }

@@ -10,6 +10,18 @@ use super::{Layout, ShapecastApp, slices::SliceKind};
 /// A link's view that waits for its volume.
 pub(super) struct PendingView {
     pub view: ViewState,
+    /// The series the link names has been asked for once already (it is not asked again if
+    /// its load fails or gives another).
+    pub series_asked: bool,
+}
+
+impl PendingView {
+    pub fn new(view: ViewState) -> Self {
+        Self {
+            view,
+            series_asked: false,
+        }
+    }
 }
 
 impl ShapecastApp {
@@ -38,6 +50,46 @@ impl ShapecastApp {
             measurements: scene
                 .filter(|_| !self.measure.list.is_empty())
                 .map(|_| self.measure.measurements()),
+            choice: self
+                .series
+                .set
+                .as_ref()
+                .filter(|_| {
+                    !matches!(
+                        scene.and_then(|s| s.origin.as_ref()),
+                        Some(ViewSource::DicomWeb { .. })
+                    )
+                })
+                .and_then(|set| set.list.entries().get(set.chosen))
+                .map(super::series_list::entry_key),
+        }
+    }
+
+    /// When `pending` names another series of the files shown than the one loaded: asks for
+    /// it (once) and keeps the view pending until it is installed. Returns the view when it
+    /// is to be applied now. A series the files do not hold is said in a note.
+    fn series_first(&mut self, mut pending: PendingView) -> Option<PendingView> {
+        let Some(key) = pending.view.choice.clone() else {
+            return Some(pending);
+        };
+        let Some(set) = self.series.set.clone() else {
+            return Some(pending);
+        };
+        match super::series_list::find_entry(&set, &key) {
+            Some(i) if i == set.chosen => Some(pending),
+            Some(i) if !pending.series_asked => {
+                pending.series_asked = true;
+                self.pending_view = Some(pending);
+                self.open_series(&set, i);
+                None
+            }
+            Some(_) => Some(pending),
+            None => {
+                self.notes.push(format!(
+                    "the link's series {key} is not among these files: its view is shown on the series loaded"
+                ));
+                Some(pending)
+            }
         }
     }
 
@@ -57,10 +109,12 @@ impl ShapecastApp {
     pub fn apply_view(&mut self, view: ViewState) {
         let shown = self.scene.as_ref().and_then(|s| s.origin.clone());
         if self.scene.is_some() && (view.source.is_none() || view.source == shown) {
-            self.apply_view_to_scene(&view);
-            self.ensure_features();
+            if let Some(pending) = self.series_first(PendingView::new(view)) {
+                self.apply_view_to_scene(&pending.view);
+                self.ensure_features();
+            }
         } else {
-            self.pending_view = Some(PendingView { view });
+            self.pending_view = Some(PendingView::new(view));
         }
     }
 
@@ -75,7 +129,7 @@ impl ShapecastApp {
         let shown = self.scene.as_ref().and_then(|s| s.origin.clone());
         match view.source.clone() {
             Some(source) if Some(&source) != shown.as_ref() => {
-                self.pending_view = Some(PendingView { view });
+                self.pending_view = Some(PendingView::new(view));
                 match source {
                     ViewSource::Urls(urls) => self.open_urls(urls),
                     ViewSource::Phantom(name) => self.open(super::LoadSource::Phantom(name)),
@@ -105,9 +159,15 @@ impl ShapecastApp {
         };
         let shown = self.scene.as_ref().and_then(|s| s.origin.clone());
         match (&pending.view.source, &shown) {
-            (None, _) => self.apply_view_to_scene(&pending.view),
+            (None, _) => {
+                if let Some(pending) = self.series_first(pending) {
+                    self.apply_view_to_scene(&pending.view);
+                }
+            }
             (Some(wanted), Some(got)) if wanted == got => {
-                self.apply_view_to_scene(&pending.view);
+                if let Some(pending) = self.series_first(pending) {
+                    self.apply_view_to_scene(&pending.view);
+                }
             }
             (Some(ViewSource::Dropped { name, bytes }), got) => {
                 self.notes.push(format!(

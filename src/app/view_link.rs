@@ -103,6 +103,10 @@ pub struct ViewState {
     pub layout: Option<Layout>,
     /// The measurements on the slices (rulers and ellipses, points in LPS mm).
     pub measurements: Option<Vec<Measurement>>,
+    /// Which series of the source's files is shown, when they hold several (a folder or an
+    /// archive): its SeriesInstanceUID, with `:k` for stack k of a series split in several
+    /// (`series_list::entry_key`). A DICOMweb source names its series itself.
+    pub choice: Option<String>,
 }
 
 /// One field's value, written the same way into the fragment and the JSON.
@@ -164,6 +168,9 @@ impl ViewState {
                 f.push(("series", Value::Text(series.clone())));
             }
             None => {}
+        }
+        if let Some(c) = &self.choice {
+            f.push(("choice", Value::Text(c.clone())));
         }
         if let Some(m) = self.mode {
             f.push(("mode", Value::Text(m.name().to_owned())));
@@ -397,6 +404,12 @@ impl ViewState {
                 matches!(d, "1" | "true" | "ct").then_some(ViewSource::Demo)
             });
         }
+
+        v.choice = f
+            .get("choice")
+            .map(str::trim)
+            .filter(|c| !c.is_empty())
+            .map(str::to_owned);
 
         v.mode = f.read(
             "mode",
@@ -733,6 +746,7 @@ mod tests {
                     b_mm: DVec3::new(-8.0, 14.125, -3.0),
                 },
             ]),
+            choice: Some("1.2.840.113619.2.55.3.604688119:1".to_owned()),
         }
     }
 

@@ -473,7 +473,7 @@ impl ShapecastApp {
                                 study: target.study,
                                 series: target.series.unwrap_or_default(),
                             });
-                            self.install(loaded);
+                            self.install(loaded, None);
                         }
                         Err(e) => self.pacs_fail(e),
                     }
