@@ -237,10 +237,14 @@ fn unpack(
     let archive_file = Arc::new(archive_file);
     let name = archive_file.name.clone();
     let name = name.as_str();
-    let reader = std::io::BufReader::new(ArchiveReader {
-        file: Arc::clone(&archive_file),
-        pos: 0,
-    });
+    // 64 KiB reads: in the browser each read of the archive crosses into JavaScript.
+    let reader = std::io::BufReader::with_capacity(
+        64 << 10,
+        ArchiveReader {
+            file: Arc::clone(&archive_file),
+            pos: 0,
+        },
+    );
     let mut archive = ::zip::ZipArchive::new(reader).map_err(|e| zip_error(name, None, e))?;
     if archive.len() > MAX_ENTRIES {
         return Err(LoadError::TooLarge {

@@ -13,7 +13,7 @@
 //
 // --via file opens the volume through the page's file input instead of a link, --via folder
 // writes it as a DICOM series (one explicit-VR file per slice, the same voxels) and opens the
-// folder through the page's folder input; --load-only stops
+// folder through the page's folder input, --via zip opens that folder zipped (deflated) by link; --load-only stops
 // 5 s after the first MIP frame (what reading costs, before any feature). The wasm memory's size
 // (it never shrinks: its high-water mark) is reported beside the processes' memory.
 //
@@ -26,6 +26,7 @@ import os from 'node:os';
 import path from 'node:path';
 import zlib from 'node:zlib';
 import { fileURLToPath } from 'node:url';
+import { zipFolder } from './zip.mjs';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const root = path.resolve(here, '..', '..');
@@ -41,12 +42,14 @@ let jsonOut = null;
 let method = 'li';
 let via = 'link';
 let loadOnly = false;
+let settleS = 5;
 for (let i = 0; i < args.length; i += 1) {
   if (args[i] === '--timeout-s') timeoutS = Number(args[++i]);
   else if (args[i] === '--method') method = args[++i];
   else if (args[i] === '--json') jsonOut = args[++i];
   else if (args[i] === '--via') via = args[++i];
   else if (args[i] === '--load-only') loadOnly = true;
+  else if (args[i] === '--settle-s') settleS = Number(args[++i]);
   else depth = Number(args[i]);
 }
 if (!Number.isInteger(depth) || depth < 1 || depth > 4000) {
@@ -163,7 +166,7 @@ function dicomSlice(k, pixels, origin) {
   return Buffer.concat([Buffer.alloc(128), Buffer.from('DICM'), dicomElement([0x0002, 0x0000], 'UL', len), group, data]);
 }
 const folder = path.join(tmp, 'wholebody');
-if (via === 'folder') {
+if (via === 'folder' || via === 'zip') {
   fs.mkdirSync(folder);
   const origin = (src.origin ?? '(0,0,0)').replace(/[()]/g, '').split(',').map(Number);
   for (let k = 0; k < depth; k += 1) {
@@ -175,6 +178,11 @@ if (via === 'folder') {
   }
   console.log(`  the same as ${depth} DICOM files in ${folder}`);
 }
+let zipBytes = null;
+if (via === 'zip') {
+  zipBytes = zipFolder(folder, 'wholebody');
+  console.log(`  zipped: ${(zipBytes.length / 2 ** 20).toFixed(0)} MiB`);
+}
 console.log(`volume: ${nx} x ${ny} x ${depth} (lung2's ${nz} slices back and forth, 0.8 mm), ${(fileBytes / 2 ** 20).toFixed(0)} MiB raw NRRD`);
 
 // ---- Server ---------------------------------------------------------------------------------
@@ -182,6 +190,11 @@ console.log(`volume: ${nx} x ${ny} x ${depth} (lung2's ${nz} slices back and for
 const mime = { '.html': 'text/html; charset=utf-8', '.js': 'text/javascript', '.wasm': 'application/wasm', '.css': 'text/css' };
 const server = http.createServer((req, res) => {
   const p = decodeURIComponent(new URL(req.url, 'http://127.0.0.1').pathname);
+  if (p === '/gen/wholebody.zip' && zipBytes) {
+    res.writeHead(200, { 'content-type': 'application/zip', 'content-length': zipBytes.length });
+    res.end(zipBytes);
+    return;
+  }
   if (p === '/gen/wholebody.nrrd') {
     res.writeHead(200, { 'content-type': 'application/octet-stream', 'content-length': fileBytes });
     fs.createReadStream(volumeFile).pipe(res);
@@ -297,8 +310,9 @@ const sampler = setInterval(() => {
   if (m.pss > peak.pss) peak = { pss: m.pss, at: at(), largest: m.largest, byType: m.byType };
 }, 250);
 
-if (via === 'link') {
-  await page.goto(`${origin}/?url=${encodeURIComponent('/gen/wholebody.nrrd')}&method=${encodeURIComponent(method)}`, { waitUntil: 'commit' });
+if (via === 'link' || via === 'zip') {
+  const file = via === 'zip' ? '/gen/wholebody.zip' : '/gen/wholebody.nrrd';
+  await page.goto(`${origin}/?url=${encodeURIComponent(file)}&method=${encodeURIComponent(method)}`, { waitUntil: 'commit' });
   console.log(`  ${at().toFixed(1)} s: page requested`);
 } else {
   // A small phantom first (not the demo CT and its features); the file replaces it.
@@ -330,14 +344,14 @@ for (;;) {
   }
   if (s) {
     last = s;
-    const ours = s.volume && (via === 'link' || s.volume.dims[2] === depth);
+    const ours = s.volume && s.volume.dims[2] === depth;
     if (ours && events.loaded === undefined) {
       events.loaded = at();
       wasmAtLoad = s.wasm_bytes;
       memoryAtLoad = memoryOf(browserPid);
     }
     if (ours && s.frames > 0 && events.first_frame === undefined) events.first_frame = at();
-    if (loadOnly && events.first_frame !== undefined && at() > events.first_frame + 5) break;
+    if (loadOnly && events.first_frame !== undefined && at() > events.first_frame + settleS) break;
     const f = s.features;
     if (f && f.state === 'running' && events.features_started === undefined) events.features_started = at();
     if (f && f.state === 'done' && events.features_done === undefined) {
