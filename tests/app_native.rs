@@ -739,3 +739,50 @@ fn a_link_restores_the_view() {
     assert!(errors.contains("opacity=\"7\""), "{errors}");
     assert!(!errors.contains("future"), "{errors}");
 }
+
+/// A large volume's texture is written over several frames, a slab at a time: the viewer keeps
+/// showing the volume it had, the status says "uploading", and the new volume is installed once
+/// the last slab is in (a whole-body CT would otherwise stop the window for seconds).
+#[test]
+fn a_large_volume_is_uploaded_over_frames() {
+    use shapecast::volume::Volume;
+    let Some(mut harness) = harness(intensity_only(StartWith::Phantom("sphere".into()))) else {
+        return;
+    };
+    let before = harness.state().volume().expect("the phantom").dims;
+    // 512 x 512 x 256: four slabs of 32 MiB as half floats.
+    let dims = [512, 512, 256];
+    let values: Vec<f32> = (0..dims.iter().product::<usize>())
+        .map(|i| ((i * 7) % 2000) as f32 - 1000.0)
+        .collect();
+    let volume = Volume::from_f32(dims, [0.7, 0.7, 0.8], values);
+    let bytes = shapecast::io::nifti::write_volume("big.nii", &volume).expect("NIfTI");
+    drop(volume);
+    harness.state_mut().open(LoadSource::Files {
+        label: "big.nii".into(),
+        files: vec![shapecast::io::InputFile::new("big.nii", bytes)],
+    });
+    let uploading = std::cell::Cell::new(0usize);
+    run_until(&mut harness, "the large volume installed", 200, |app| {
+        let s = app.status();
+        if s.task.as_deref().is_some_and(|t| t.contains("uploading")) {
+            assert_eq!(s.phase, Phase::Loading);
+            assert_eq!(
+                app.volume().map(|v| v.dims),
+                Some(before),
+                "the volume shown stays while the next one uploads"
+            );
+            uploading.set(uploading.get() + 1);
+        }
+        app.volume().is_some_and(|v| v.dims == dims)
+    });
+    assert!(
+        uploading.get() >= 1,
+        "no frame was drawn while the texture was written"
+    );
+    harness.run_steps(2);
+    let s = harness.state().status();
+    assert_eq!(s.phase, Phase::Ready, "{s:?}");
+    assert_eq!(s.error, None);
+    eprintln!("frames drawn while uploading: {}", uploading.get());
+}

@@ -37,7 +37,7 @@ use crate::gpu::volume_texture::FeatureTexture;
 use crate::cpu::pipeline::Request;
 use crate::cpu::tf::Preset;
 use crate::gpu::GpuContext;
-use crate::gpu::volume_texture::RenderVolume;
+use crate::gpu::volume_texture::{IntensityUpload, RenderVolume};
 use crate::render::slice::{Overlay, SliceRenderer};
 use crate::status::{
     AdapterStatus, AppStatus, CrosshairStatus, FeatureStatus, Phase, VolumeStatus,
@@ -282,6 +282,22 @@ struct Scene {
     origin: Option<ViewSource>,
 }
 
+/// A loaded volume whose intensity texture is being written, slab by slab over frames (a
+/// whole-body CT is 1 GB: seconds of uploading in one frame would stop the viewer); it is
+/// installed, and the volume shown replaced, once the last slab is in.
+struct Uploading {
+    patient: Option<crate::io::Patient>,
+    notes: Vec<String>,
+    volume: Volume,
+    series: Option<load::SeriesSet>,
+    origin: Option<ViewSource>,
+    render: RenderVolume,
+    upload: IntensityUpload,
+}
+
+/// Upload slabs a frame may write, in seconds (at least one slab per frame).
+const UPLOAD_SECONDS_PER_FRAME: f64 = 0.05;
+
 pub struct ShapecastApp {
     gpu: Option<GpuContext>,
     options: AppOptions,
@@ -290,6 +306,7 @@ pub struct ShapecastApp {
     started: bool,
 
     load: Option<LoadJob>,
+    uploading: Option<Uploading>,
     /// (fraction, what) of the load in progress, including the browser's file reads.
     load_progress: Option<(f32, String)>,
     scene: Option<Scene>,
@@ -404,6 +421,7 @@ impl ShapecastApp {
             published: None,
             started: false,
             load: None,
+            uploading: None,
             load_progress: None,
             scene: None,
             generation: 0,
@@ -756,8 +774,11 @@ impl ShapecastApp {
         }
     }
 
-    /// Advances loading and computing by one step each.
+    /// Advances loading, uploading and computing by one step each.
     fn advance(&mut self, frame_s: f64) {
+        if self.uploading.is_some() {
+            self.advance_upload();
+        }
         if let Some(job) = &mut self.load {
             match job.step() {
                 LoadStep::Working { fraction, what } => {
@@ -798,7 +819,8 @@ impl ShapecastApp {
 
     /// Makes a loaded volume the displayed one (or says why it cannot be shown), with the
     /// series list of the files it came from (`None`: files of one series, another format, a
-    /// phantom, an archive's retrieval). A volume the GPU refused changes nothing.
+    /// phantom, an archive's retrieval). A volume the GPU refused changes nothing. Its texture
+    /// is written over frames (`Uploading`); a small volume is installed in this frame.
     fn install(&mut self, loaded: crate::io::Loaded, series: Option<load::SeriesSet>) {
         let Some(gpu) = &self.gpu else { return };
         let patient = loaded.patient;
@@ -816,13 +838,66 @@ impl ShapecastApp {
                 volume.dims
             ));
         }
-        let render = match RenderVolume::upload(gpu, &volume) {
+        let (render, upload) = match RenderVolume::create(gpu, &volume) {
             Ok(r) => r,
             Err(e) => {
                 self.loading_origin = None;
                 return self.error(format!("{}: {e}", volume.source));
             }
         };
+        self.uploading = Some(Uploading {
+            patient,
+            notes,
+            volume,
+            series,
+            origin: self.loading_origin.take(),
+            render,
+            upload,
+        });
+        self.advance_upload();
+    }
+
+    /// Writes the next slabs of the volume being uploaded (about `UPLOAD_SECONDS_PER_FRAME`),
+    /// and installs it after the last.
+    fn advance_upload(&mut self) {
+        let (Some(gpu), Some(up)) = (&self.gpu, &mut self.uploading) else {
+            return;
+        };
+        let started = web_time::Instant::now();
+        loop {
+            if up.upload.step(gpu, &up.volume, &up.render) {
+                if let Some(up) = self.uploading.take() {
+                    self.load_progress = None;
+                    self.finish_install(up);
+                }
+                return;
+            }
+            if started.elapsed().as_secs_f64() >= UPLOAD_SECONDS_PER_FRAME {
+                break;
+            }
+        }
+        let fraction = up.upload.fraction(&up.render);
+        self.load_progress = Some((
+            fraction,
+            format!(
+                "uploading {} to the GPU ({:.0}%)",
+                up.volume.source,
+                100.0 * fraction
+            ),
+        ));
+    }
+
+    /// Makes an uploaded volume the displayed one.
+    fn finish_install(&mut self, up: Uploading) {
+        let Uploading {
+            patient,
+            notes,
+            volume,
+            series,
+            origin,
+            render,
+            upload: _,
+        } = up;
         self.generation += 1;
         self.window = window_level::default_window(&volume);
         self.crosshair = volume.dims.map(|d| d / 2);
@@ -853,7 +928,7 @@ impl ShapecastApp {
             volume: Arc::new(volume),
             render,
             generation: self.generation,
-            origin: self.loading_origin.take(),
+            origin,
         });
         self.pacs.patient = patient;
         self.pending_camera = None;
@@ -1257,6 +1332,7 @@ impl eframe::App for ShapecastApp {
             self.published = Some(self.status.clone());
         }
         if self.load.is_some()
+            || self.uploading.is_some()
             || self.load_progress.is_some()
             || self.features.running_request().is_some()
             || self.probe.busy()

@@ -166,6 +166,17 @@ pub struct RenderVolume {
 impl RenderVolume {
     /// Uploads `volume` slab by slab (the CPU never holds a second full-size copy).
     pub fn upload(ctx: &GpuContext, volume: &Volume) -> Result<Self, RenderVolumeError> {
+        let (render, mut upload) = Self::create(ctx, volume)?;
+        while !upload.step(ctx, volume, &render) {}
+        Ok(render)
+    }
+
+    /// The texture for `volume`, not yet written, and the upload that writes it a slab per
+    /// [`IntensityUpload::step`] (the viewer spreads a large volume's upload over frames).
+    pub fn create(
+        ctx: &GpuContext,
+        volume: &Volume,
+    ) -> Result<(Self, IntensityUpload), RenderVolumeError> {
         let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
         check_dims(ctx, dims)?;
         let intensity = texture_3d(
@@ -177,42 +188,68 @@ impl RenderVolume {
                 | wgpu::TextureUsages::COPY_DST
                 | wgpu::TextureUsages::COPY_SRC,
         );
-        let per = slices_per_chunk(dims, 2);
-        let slice = dims[0] as usize * dims[1] as usize;
-        let mut values = vec![0f32; slice * per as usize];
-        let mut halves: Vec<half::f16> = vec![half::f16::ZERO; values.len()];
-        let mut z0 = 0;
-        while z0 < dims[2] {
-            let nz = per.min(dims[2] - z0);
-            let n = slice * nz as usize;
-            volume.values_into(z0 as usize * slice, &mut values[..n]);
-            for (h, v) in halves[..n].iter_mut().zip(&values[..n]) {
-                *h = half::f16::from_f32(*v);
-            }
-            write_slices(
-                ctx,
-                &intensity,
-                dims,
-                2,
-                z0,
-                nz,
-                bytemuck::cast_slice(&halves[..n]),
-            );
-            // Each slab goes now: the queue's staging for writes not yet submitted would
-            // otherwise hold a second copy of the whole volume until the next submit (in the
-            // browser in the page's and the GPU process's shared memory both).
-            ctx.queue.submit(std::iter::empty());
-            z0 += nz;
-        }
         let intensity_view = intensity.create_view(&wgpu::TextureViewDescriptor::default());
-        Ok(Self {
+        let render = Self {
             dims,
             spacing_mm: volume.spacing_mm.map(|s| s as f32),
             world_from_voxel: volume.world_from_voxel(),
             intensity,
             intensity_view,
             value_range: volume.value_range().unwrap_or((0.0, 1.0)),
-        })
+        };
+        let upload = IntensityUpload {
+            next_z: 0,
+            per: slices_per_chunk(dims, 2),
+        };
+        Ok((render, upload))
+    }
+}
+
+/// Writing a [`RenderVolume`]'s intensity, one slab of at most 32 MiB per step.
+#[derive(Debug)]
+pub struct IntensityUpload {
+    next_z: u32,
+    per: u32,
+}
+
+impl IntensityUpload {
+    /// The fraction written so far.
+    pub fn fraction(&self, render: &RenderVolume) -> f32 {
+        self.next_z as f32 / render.dims[2].max(1) as f32
+    }
+
+    /// Writes the next slab of `volume` (the volume `render` was created for); true once the
+    /// last one is written.
+    pub fn step(&mut self, ctx: &GpuContext, volume: &Volume, render: &RenderVolume) -> bool {
+        let dims = render.dims;
+        if self.next_z >= dims[2] {
+            return true;
+        }
+        let z0 = self.next_z;
+        let nz = self.per.min(dims[2] - z0);
+        let n = dims[0] as usize * dims[1] as usize * nz as usize;
+        let mut values = vec![0f32; n];
+        volume.values_into(
+            z0 as usize * dims[0] as usize * dims[1] as usize,
+            &mut values,
+        );
+        let halves: Vec<half::f16> = values.iter().map(|&v| half::f16::from_f32(v)).collect();
+        drop(values);
+        write_slices(
+            ctx,
+            &render.intensity,
+            dims,
+            2,
+            z0,
+            nz,
+            bytemuck::cast_slice(&halves),
+        );
+        // Each slab goes now: the queue's staging for writes not yet submitted would
+        // otherwise hold a second copy of the whole volume until the next submit (in the
+        // browser in the page's and the GPU process's shared memory both).
+        ctx.queue.submit(std::iter::empty());
+        self.next_z += nz;
+        self.next_z >= dims[2]
     }
 }
 
