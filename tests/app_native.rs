@@ -750,7 +750,7 @@ fn a_large_volume_is_uploaded_over_frames() {
         return;
     };
     let before = harness.state().volume().expect("the phantom").dims;
-    // 512 x 512 x 256: four slabs of 32 MiB as half floats.
+    // 512 x 512 x 256: eight slabs of 16 MiB as half floats.
     let dims = [512, 512, 256];
     let values: Vec<f32> = (0..dims.iter().product::<usize>())
         .map(|i| ((i * 7) % 2000) as f32 - 1000.0)

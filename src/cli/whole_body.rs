@@ -201,15 +201,28 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
 
     let ctx = pollster::block_on(GpuContext::new_headless())?;
     println!("adapter: {}", ctx.adapter_label());
+    // Slab by slab, as the viewer spreads it over frames (each slab waited for, so that its
+    // time is the GPU's too).
     let t = Instant::now();
-    let render_volume = RenderVolume::upload(&ctx, &volume)?;
+    let (render_volume, mut upload) = RenderVolume::create(&ctx, &volume)?;
+    let (mut slabs, mut largest_s) = (0usize, 0f64);
+    loop {
+        let step = Instant::now();
+        let done = upload.step(&ctx, &volume, &render_volume);
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .context("waiting for the GPU")?;
+        slabs += 1;
+        largest_s = largest_s.max(step.elapsed().as_secs_f64());
+        if done {
+            break;
+        }
+    }
     let caster = Raycaster::new(&ctx)?;
-    ctx.device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .context("waiting for the GPU")?;
     println!(
-        "upload (R16Float texture): {:.1} s; peak resident memory {:.0} MB",
+        "upload (R16Float texture): {:.1} s in {slabs} slabs of at most 16 MiB, largest {:.0} ms; peak resident memory {:.0} MB",
         t.elapsed().as_secs_f64(),
+        largest_s * 1e3,
         peak_rss_mb()
     );
     let mut pacer = FramePacer::new(Some(crate::app::mip_view::MipView::FRAME_BUDGET_S));

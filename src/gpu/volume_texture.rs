@@ -145,11 +145,15 @@ fn write_slices(
     );
 }
 
-/// Slices per CPU->GPU upload step (bounds the temporary CPU copy).
-fn slices_per_chunk(dims: [u32; 3], bytes_per_texel: u32) -> u32 {
+/// Slices per CPU->GPU upload step of at most `bytes` (bounds the temporary CPU copy).
+fn slices_per_chunk(dims: [u32; 3], bytes_per_texel: u32, bytes: u64) -> u32 {
     let slice = u64::from(dims[0]) * u64::from(dims[1]) * u64::from(bytes_per_texel);
-    ((32u64 << 20) / slice.max(1)).clamp(1, u64::from(dims[2])) as u32
+    (bytes / slice.max(1)).clamp(1, u64::from(dims[2])) as u32
 }
+
+/// Texture bytes per step of an intensity upload: 16 MiB, about 0.2 s on lavapipe (the viewer
+/// writes one or more per frame).
+const UPLOAD_SLAB_BYTES: u64 = 16 << 20;
 
 /// The intensity of a volume as a 3D texture, with the geometry the ray caster needs.
 pub struct RenderVolume {
@@ -199,13 +203,13 @@ impl RenderVolume {
         };
         let upload = IntensityUpload {
             next_z: 0,
-            per: slices_per_chunk(dims, 2),
+            per: slices_per_chunk(dims, 2, UPLOAD_SLAB_BYTES),
         };
         Ok((render, upload))
     }
 }
 
-/// Writing a [`RenderVolume`]'s intensity, one slab of at most 32 MiB per step.
+/// Writing a [`RenderVolume`]'s intensity, one slab of at most 16 MiB per step.
 #[derive(Debug)]
 pub struct IntensityUpload {
     next_z: u32,
@@ -374,7 +378,7 @@ impl FeatureTexture {
         if let Some(c) = components.iter().find(|c| c.len() != want) {
             return Err(RenderVolumeError::Length { got: c.len(), want });
         }
-        let per = slices_per_chunk(dims, FEATURE_TEXEL_BYTES);
+        let per = slices_per_chunk(dims, FEATURE_TEXEL_BYTES, 32 << 20);
         let slice = dims[0] as usize * dims[1] as usize;
         let mut texels: Vec<u32> = Vec::with_capacity(slice * per as usize);
         let mut z0 = 0;
