@@ -363,7 +363,7 @@ for (;;) {
       break;
     }
     if (events.features_done !== undefined && s.frames >= events.frames_at_features_done + 30) break;
-    if (f && (f.state === 'failed' || f.state === 'none') && events.first_frame !== undefined && at() > events.first_frame + 20) {
+    if (!loadOnly && f && (f.state === 'failed' || f.state === 'none') && events.first_frame !== undefined && at() > events.first_frame + 20) {
       error = `features ${f.state}: ${s.error ?? s.notice ?? ''}`;
       break;
     }
