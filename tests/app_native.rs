@@ -758,10 +758,11 @@ fn a_large_volume_is_uploaded_over_frames() {
     let volume = Volume::from_f32(dims, [0.7, 0.7, 0.8], values);
     let bytes = shapecast::io::nifti::write_volume("big.nii", &volume).expect("NIfTI");
     drop(volume);
-    harness.state_mut().open(LoadSource::Files {
+    let big = || LoadSource::Files {
         label: "big.nii".into(),
-        files: vec![shapecast::io::InputFile::new("big.nii", bytes)],
-    });
+        files: vec![shapecast::io::InputFile::new("big.nii", bytes.clone())],
+    };
+    harness.state_mut().open(big());
     let uploading = std::cell::Cell::new(0usize);
     run_until(&mut harness, "the large volume installed", 200, |app| {
         let s = app.status();
@@ -785,4 +786,23 @@ fn a_large_volume_is_uploaded_over_frames() {
     assert_eq!(s.phase, Phase::Ready, "{s:?}");
     assert_eq!(s.error, None);
     eprintln!("frames drawn while uploading: {}", uploading.get());
+
+    // A newer load while one uploads: the upload stops, and the newer volume is the one
+    // installed (the older never replaces it afterwards).
+    harness.state_mut().open(big());
+    run_until(&mut harness, "uploading again", 200, |app| {
+        app.status()
+            .task
+            .as_deref()
+            .is_some_and(|t| t.contains("uploading"))
+    });
+    harness
+        .state_mut()
+        .open(LoadSource::Phantom("sphere".into()));
+    run_until(&mut harness, "the phantom installed", 200, |app| {
+        app.volume().is_some_and(|v| v.dims == before)
+    });
+    harness.run_steps(12);
+    assert_eq!(harness.state().volume().map(|v| v.dims), Some(before));
+    assert_eq!(harness.state().status().phase, Phase::Ready);
 }

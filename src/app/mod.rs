@@ -568,6 +568,7 @@ impl ShapecastApp {
 
     /// Starts loading a volume that a link names by `origin`.
     pub fn open_from(&mut self, source: LoadSource, origin: Option<ViewSource>) {
+        self.cancel_upload();
         self.load_progress = Some((0.0, format!("opening {}", source.label())));
         self.loading_origin = origin;
         self.load = Some(LoadJob::new(source));
@@ -652,6 +653,7 @@ impl ShapecastApp {
             StartWith::DemoCt => {
                 #[cfg(target_arch = "wasm32")]
                 {
+                    self.cancel_upload();
                     self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
                     web_files::fetch_demo();
                 }
@@ -671,6 +673,7 @@ impl ShapecastApp {
     pub fn open_urls(&mut self, urls: Vec<String>) {
         #[cfg(target_arch = "wasm32")]
         {
+            self.cancel_upload();
             self.load_progress = Some((0.0, format!("downloading {}", urls.join(", "))));
             web_fetch::fetch_urls(urls);
         }
@@ -722,6 +725,8 @@ impl ShapecastApp {
                         done,
                         total,
                     } => {
+                        // Files being read or downloaded: a newer load than one uploading.
+                        self.cancel_upload();
                         let f = if total > 0.0 {
                             (done / total) as f32
                         } else {
@@ -762,7 +767,7 @@ impl ShapecastApp {
                     web_files::WebEvent::Failed { message } => {
                         self.load_progress = None;
                         self.series.loading = None;
-                        self.error(message);
+                        self.load_failed(message);
                     }
                     web_files::WebEvent::Cancelled { label } => {
                         self.load_progress = None;
@@ -796,7 +801,7 @@ impl ShapecastApp {
                     self.load = None;
                     self.load_progress = None;
                     self.loading_origin = None;
-                    self.error(message);
+                    self.load_failed(message);
                 }
             }
         }
@@ -842,7 +847,7 @@ impl ShapecastApp {
             Ok(r) => r,
             Err(e) => {
                 self.loading_origin = None;
-                return self.error(format!("{}: {e}", volume.source));
+                return self.load_failed(format!("{}: {e}", volume.source));
             }
         };
         self.uploading = Some(Uploading {
@@ -855,6 +860,25 @@ impl ShapecastApp {
             upload,
         });
         self.advance_upload();
+    }
+
+    /// Stops uploading a volume when another load begins: the newer one is what the user asked
+    /// for last, and a link's view waits for it, not for the older one.
+    pub(super) fn cancel_upload(&mut self) {
+        if self.uploading.take().is_some() {
+            self.load_progress = None;
+        }
+    }
+
+    /// A load failed: a link's view that waited for the series it named (asked for once
+    /// already) is dropped with a note rather than applied later to another series.
+    fn load_failed(&mut self, message: String) {
+        if self.pending_view.as_ref().is_some_and(|p| p.series_asked) {
+            self.pending_view = None;
+            self.notes
+                .push("the link's series did not load, so its view was not applied".to_owned());
+        }
+        self.error(message);
     }
 
     /// Writes the next slabs of the volume being uploaded (about `UPLOAD_SECONDS_PER_FRAME`),

@@ -135,6 +135,7 @@ impl ShapecastApp {
         if set.web_files().is_some() {
             // The page's files: read again by the page, one at a time.
             let set = set.with_chosen(index);
+            self.cancel_upload();
             self.load_progress = Some((0.0, format!("opening {}", set.label())));
             super::web_files::load_series(set);
             self.series.loading = Some(index);

@@ -355,8 +355,17 @@ fn cannot_read(f: &Named, e: &JsValue) -> String {
     format!("{}: cannot read: {}", f.name, js_error(e))
 }
 
-/// A blob's bytes as JavaScript holds them (not copied into the wasm memory).
+/// A blob's bytes as JavaScript holds them (not copied into the wasm memory). A blob of 4 GiB
+/// or more is refused: a `Uint8Array`'s length is 32-bit here, and the page's limits (1.5 GiB
+/// of voxels, 2 GiB per decompression) hold less anyway.
 async fn read_js(f: &Named, blob: &web_sys::Blob) -> Result<js_sys::Uint8Array, String> {
+    if blob.size() > f64::from(u32::MAX) {
+        return Err(format!(
+            "{}: {:.1} GB is more than a browser tab can read as one file (4 GiB at most)",
+            f.name,
+            blob.size() / 1e9
+        ));
+    }
     match JsFuture::from(blob.array_buffer()).await {
         Ok(buffer) => Ok(js_sys::Uint8Array::new(&buffer)),
         Err(e) => Err(cannot_read(f, &e)),

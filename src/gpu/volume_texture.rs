@@ -151,8 +151,8 @@ fn slices_per_chunk(dims: [u32; 3], bytes_per_texel: u32, bytes: u64) -> u32 {
     (bytes / slice.max(1)).clamp(1, u64::from(dims[2])) as u32
 }
 
-/// Texture bytes per step of an intensity upload: 16 MiB, about 0.2 s on lavapipe (the viewer
-/// writes one or more per frame).
+/// Texture bytes per step of an intensity upload: 16 MiB, about 90 ms on lavapipe (the viewer
+/// writes one or more per frame: one there).
 const UPLOAD_SLAB_BYTES: u64 = 16 << 20;
 
 /// The intensity of a volume as a 3D texture, with the geometry the ray caster needs.

@@ -325,6 +325,7 @@ impl ShapecastApp {
         let what = format!("asking {} for study {}", base.as_str(), target.study);
         self.pacs.busy = Some(what.clone());
         if auto_open {
+            self.cancel_upload();
             self.load_progress = Some((0.0, what));
         }
         self.pacs.retrieving = auto_open;
@@ -351,6 +352,7 @@ impl ShapecastApp {
         let what = format!("retrieving series {series} from {}", base.as_str());
         self.pacs.busy = Some(what.clone());
         self.pacs.retrieving = true;
+        self.cancel_upload();
         self.load_progress = Some((0.0, what));
         self.pacs.running = Some(backend::retrieve(
             base,
