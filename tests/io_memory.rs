@@ -374,6 +374,48 @@ fn a_file_read_on_demand_loads_what_the_same_bytes_in_memory_load() {
     }
 }
 
+/// The browser's files are chunks (`io::Chunked`) that the loader lets go as it reads a
+/// payload for the last time, so that the page holds the file's bytes or the voxels, not both.
+/// Every format loads the same from chunks as from memory (a read of a chunk already let go
+/// would be an error), and each file whose payload is decoded (not ascii) is let go whole.
+#[test]
+fn chunks_let_go_as_the_payload_is_read_load_what_memory_loads() {
+    const CHUNK: usize = 100_003;
+    for (label, files, _) in cases() {
+        let in_memory: Vec<InputFile> = files
+            .iter()
+            .map(|(n, b)| InputFile::new(n.clone(), b.clone()))
+            .collect();
+        let sources: Vec<std::sync::Arc<io::Chunked<Vec<u8>>>> = files
+            .iter()
+            .map(|(_, b)| {
+                let mut c = io::Chunked::default();
+                b.chunks(CHUNK).for_each(|piece| c.push(piece.to_vec()));
+                std::sync::Arc::new(c)
+            })
+            .collect();
+        let chunked: Vec<InputFile> = files
+            .iter()
+            .zip(&sources)
+            .map(|((n, _), c)| InputFile::on_demand(n.clone(), c.clone()).expect("head"))
+            .collect();
+        let a = io::load(&in_memory).unwrap_or_else(|e| panic!("{label}: {e}"));
+        let b = io::load(&chunked).unwrap_or_else(|e| panic!("{label}: {e}"));
+        assert_eq!(a.volume, b.volume, "{label}");
+        assert_eq!(a.notes, b.notes, "{label}");
+        // The payload's file: the largest.
+        let Some(payload) = sources.iter().max_by_key(|c| c.len()) else {
+            continue;
+        };
+        let released = payload.released();
+        if label.contains("ascii") {
+            assert_eq!(released, 0, "{label}: an ascii payload is not let go");
+        } else {
+            assert_eq!(released, payload.len(), "{label}: bytes let go");
+        }
+    }
+}
+
 #[test]
 fn a_data_file_shorter_than_its_header_says_is_refused_by_name_on_demand_too() {
     let mut raw = samples("i16", false);

@@ -888,7 +888,9 @@ impl ShapecastApp {
             return;
         };
         let started = web_time::Instant::now();
-        loop {
+        // Slabs while the frame's time lasts and the GPU keeps up (`ready`: a bounded number
+        // in flight, so a slow device does not queue the whole volume in shared memory).
+        while up.upload.ready() {
             if up.upload.step(gpu, &up.volume, &up.render) {
                 if let Some(up) = self.uploading.take() {
                     self.load_progress = None;

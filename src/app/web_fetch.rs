@@ -16,7 +16,7 @@ use wasm_bindgen::JsValue;
 use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
-use super::js_bytes::{self, JsBytes, JsChunk};
+use super::js_bytes::{self, Gathered, JsBytes};
 use super::view_link::{ViewSource, host_of};
 use super::web_files::{WebEvent, js_error, push};
 use crate::io::InputFile;
@@ -292,11 +292,12 @@ async fn download(
         controller.abort();
         return Err(fail(too_large(url, n)));
     }
-    // The chunks stay JavaScript's as they arrive: the loader reads them on demand, so the
-    // wasm memory never holds the file besides its voxels.
-    let mut bytes = JsBytes::default();
+    // The chunks stay JavaScript's, gathered into 16 MiB buffers as they arrive: the loader
+    // reads them on demand and lets each go once read, so the wasm memory never holds the file
+    // besides its voxels and the page holds the file shrinking as the voxels grow.
+    let mut bytes = Gathered::default();
     let Some(body) = response.body() else {
-        return Ok(bytes);
+        return Ok(JsBytes::default());
     };
     let reader: web_sys::ReadableStreamDefaultReader = body.get_reader().unchecked_into();
     let total = length.map_or(0.0, |n| n as f64);
@@ -331,7 +332,7 @@ async fn download(
             controller.abort();
             return Err(fail(too_large(url, new_len)));
         }
-        bytes.push(JsChunk(array));
+        bytes.push(&array);
         // A progress event per ~256 KB is plenty (chunks are often 16-64 KB).
         if bytes.len() - last_report >= 256 << 10 {
             last_report = bytes.len();
@@ -343,6 +344,7 @@ async fn download(
             });
         }
     }
+    let bytes = bytes.finish();
     if looks_like_html(&bytes.head(1024)) {
         return Err(fail(html_message(url)));
     }

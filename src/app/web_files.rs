@@ -359,17 +359,51 @@ fn cannot_read(f: &Named, e: &JsValue) -> String {
 /// or more is refused: a `Uint8Array`'s length is 32-bit here, and the page's limits (1.5 GiB
 /// of voxels, 2 GiB per decompression) hold less anyway.
 async fn read_js(f: &Named, blob: &web_sys::Blob) -> Result<js_sys::Uint8Array, String> {
-    if blob.size() > f64::from(u32::MAX) {
-        return Err(format!(
-            "{}: {:.1} GB is more than a browser tab can read as one file (4 GiB at most)",
-            f.name,
-            blob.size() / 1e9
-        ));
-    }
+    too_large(f, blob.size())?;
     match JsFuture::from(blob.array_buffer()).await {
         Ok(buffer) => Ok(js_sys::Uint8Array::new(&buffer)),
         Err(e) => Err(cannot_read(f, &e)),
     }
+}
+
+/// Refuses a file or blob of 4 GiB or more ([`read_js`]).
+fn too_large(f: &Named, size: f64) -> Result<(), String> {
+    if size > f64::from(u32::MAX) {
+        return Err(format!(
+            "{}: {:.1} GB is more than a browser tab can read as one file (4 GiB at most)",
+            f.name,
+            size / 1e9
+        ));
+    }
+    Ok(())
+}
+
+/// Bytes of a file read at a time into one JavaScript chunk ([`read_chunked`]).
+const READ_CHUNK_BYTES: f64 = (16 << 20) as f64;
+
+/// A file's bytes as JavaScript chunks of [`READ_CHUNK_BYTES`] (`Blob.slice`), which the loader
+/// lets go one by one as it reads them into the voxels (`io::FileSource::release_before`),
+/// reporting progress (`done` of `total` bytes read before this file).
+async fn read_chunked(f: &Named, label: &str, done: f64, total: f64) -> Result<JsBytes, String> {
+    too_large(f, f.file.size())?;
+    let mut bytes = JsBytes::default();
+    let mut at = 0.0;
+    while at < f.file.size() {
+        let end = (at + READ_CHUNK_BYTES).min(f.file.size());
+        let blob = f
+            .file
+            .slice_with_f64_and_f64(at, end)
+            .map_err(|e| cannot_read(f, &e))?;
+        bytes.push(JsChunk(read_js(f, &blob).await?));
+        at = end;
+        push(WebEvent::Progress {
+            verb: "reading",
+            label: label.to_owned(),
+            done: done + at,
+            total,
+        });
+    }
+    Ok(bytes)
 }
 
 /// A file's bytes, read whole into the wasm memory (one DICOM image at a time).
@@ -433,9 +467,10 @@ async fn read_all(files: Vec<Named>) {
             done,
             total,
         });
-        // The bytes stay JavaScript's; the loader reads them on demand into the voxels.
-        let read = match read_js(&f, &f.file).await {
-            Ok(bytes) => js_bytes::into_input(JsBytes::whole(JsChunk(bytes)), f.name),
+        // The bytes stay JavaScript's, in chunks that the loader lets go as it reads them
+        // into the voxels.
+        let read = match read_chunked(&f, &label, done, total).await {
+            Ok(bytes) => js_bytes::into_input(bytes, f.name),
             Err(e) => Err(e),
         };
         match read {

@@ -18,6 +18,9 @@
 //!
 //! Both are on the volume's own voxel grid (the input grid), whatever grid features used.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
+
 use crate::cpu::Components3;
 use crate::gpu::GpuContext;
 use crate::volume::Volume;
@@ -188,9 +191,14 @@ impl RenderVolume {
             "intensity",
             dims,
             INTENSITY_FORMAT,
+            // RENDER_ATTACHMENT, though nothing renders into it: the first slab written
+            // initialises the whole texture, and a browser (Dawn) clears a renderable texture
+            // with render passes, where otherwise it fills a staging buffer as large as the
+            // texture with zeros (1 GB more in the GPU process at 2000 slices, measured).
             wgpu::TextureUsages::TEXTURE_BINDING
                 | wgpu::TextureUsages::COPY_DST
-                | wgpu::TextureUsages::COPY_SRC,
+                | wgpu::TextureUsages::COPY_SRC
+                | wgpu::TextureUsages::RENDER_ATTACHMENT,
         );
         let intensity_view = intensity.create_view(&wgpu::TextureViewDescriptor::default());
         let render = Self {
@@ -204,6 +212,7 @@ impl RenderVolume {
         let upload = IntensityUpload {
             next_z: 0,
             per: slices_per_chunk(dims, 2, UPLOAD_SLAB_BYTES),
+            in_flight: Arc::new(AtomicU32::new(0)),
         };
         Ok((render, upload))
     }
@@ -214,9 +223,23 @@ impl RenderVolume {
 pub struct IntensityUpload {
     next_z: u32,
     per: u32,
+    /// Slabs submitted that the GPU has not finished (counted down by the queue's callback).
+    in_flight: Arc<AtomicU32>,
 }
 
+/// Slabs an upload paced by [`IntensityUpload::ready`] keeps in flight at most (64 MiB): in the
+/// browser a write returns before the GPU process has taken it, so without this bound the
+/// page's and the GPU process's shared memory both queue up to the whole volume while a slow
+/// device catches up.
+pub const UPLOAD_SLABS_IN_FLIGHT: u32 = 4;
+
 impl IntensityUpload {
+    /// Whether the GPU has finished all but fewer than [`UPLOAD_SLABS_IN_FLIGHT`] slabs, so that
+    /// the next may be written (the viewer stops writing for the frame when it has not).
+    pub fn ready(&self) -> bool {
+        self.in_flight.load(Ordering::Acquire) < UPLOAD_SLABS_IN_FLIGHT
+    }
+
     /// The fraction written so far.
     pub fn fraction(&self, render: &RenderVolume) -> f32 {
         self.next_z as f32 / render.dims[2].max(1) as f32
@@ -252,6 +275,11 @@ impl IntensityUpload {
         // otherwise hold a second copy of the whole volume until the next submit (in the
         // browser in the page's and the GPU process's shared memory both).
         ctx.queue.submit(std::iter::empty());
+        self.in_flight.fetch_add(1, Ordering::AcqRel);
+        let in_flight = Arc::clone(&self.in_flight);
+        ctx.queue.on_submitted_work_done(move || {
+            in_flight.fetch_sub(1, Ordering::AcqRel);
+        });
         self.next_z += nz;
         self.next_z >= dims[2]
     }

@@ -6,6 +6,7 @@
 
 use std::borrow::Cow;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::LoadError;
 
@@ -37,6 +38,12 @@ pub trait FileSource: SourceBounds + std::fmt::Debug {
     /// Fills `buf` with the bytes at `offset`; an error when the file holds fewer (it changed
     /// since it was listed) or cannot be read.
     fn read_exact_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()>;
+
+    /// Says that the loader has read what lies before `offset` for the last time: a source may
+    /// let those bytes go (the browser's chunks, so that a file's bytes shrink as its voxels
+    /// grow). Reading them again is then an error. Only the final pass over a payload says so
+    /// (`raw::read_pieces`, `raw::inflate_voxels`); a file on disk ignores it.
+    fn release_before(&self, _offset: u64) {}
 }
 
 /// Bytes of a file read on demand that stay in memory for sniffing (`io::sniff`): enough for
@@ -207,6 +214,13 @@ impl<'a> Data<'a> {
         }
     }
 
+    /// [`FileSource::release_before`] at `offset` within the range (nothing for bytes in memory).
+    pub(crate) fn release_before(&self, offset: u64) {
+        if let Self::Source { source, start, len } = *self {
+            source.release_before(start.saturating_add(offset.min(len)));
+        }
+    }
+
     /// The bytes after the first `lines` line ends (NRRD "line skip"), `None` when the data
     /// hold fewer lines.
     pub(crate) fn skip_lines(self, file: &str, lines: usize) -> Result<Option<Self>, LoadError> {
@@ -271,6 +285,10 @@ pub trait Chunk {
 
     /// Copies its bytes from `from` on into `out` (the caller keeps within the chunk).
     fn copy_to(&self, from: u64, out: &mut [u8]);
+
+    /// Lets its bytes go, if it can (the browser detaches the `ArrayBuffer`, freeing it
+    /// before the garbage collector would); it is never read again.
+    fn release(&self) {}
 }
 
 impl Chunk for Vec<u8> {
@@ -291,6 +309,8 @@ pub struct Chunked<C> {
     /// Each chunk with its offset in the file; none is empty, so the offsets increase.
     chunks: Vec<(u64, C)>,
     len: u64,
+    /// The bytes before this were let go ([`FileSource::release_before`]).
+    released: AtomicU64,
 }
 
 impl<C> Default for Chunked<C> {
@@ -298,6 +318,7 @@ impl<C> Default for Chunked<C> {
         Self {
             chunks: Vec::new(),
             len: 0,
+            released: AtomicU64::new(0),
         }
     }
 }
@@ -307,6 +328,7 @@ impl<C> std::fmt::Debug for Chunked<C> {
         f.debug_struct("Chunked")
             .field("chunks", &self.chunks.len())
             .field("len", &self.len)
+            .field("released", &self.released.load(Ordering::Relaxed))
             .finish()
     }
 }
@@ -337,6 +359,11 @@ impl<C: Chunk> Chunked<C> {
         self.len == 0
     }
 
+    /// How many bytes from the start have been let go.
+    pub fn released(&self) -> u64 {
+        self.released.load(Ordering::Relaxed)
+    }
+
     /// The first `n` bytes (all of them when there are fewer), copied.
     pub fn head(&self, n: usize) -> Vec<u8> {
         let mut v = vec![0u8; n.min(usize::try_from(self.len).unwrap_or(usize::MAX))];
@@ -359,6 +386,12 @@ impl<C: Chunk> Chunked<C> {
         };
         if offset.saturating_add(want as u64) > self.len {
             return Err(short());
+        }
+        if want > 0 && offset < self.released() {
+            return Err(std::io::Error::other(format!(
+                "bytes at {offset} were read before and let go (released up to {})",
+                self.released()
+            )));
         }
         // The chunk holding `offset`: the last one starting at or before it.
         let mut i = self
@@ -393,6 +426,24 @@ where
 
     fn read_exact_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()> {
         self.read_at(offset, buf)
+    }
+
+    /// Lets go every chunk that ends at or before `offset`.
+    fn release_before(&self, offset: u64) {
+        let offset = offset.min(self.len);
+        let before = self.released.fetch_max(offset, Ordering::Relaxed);
+        if offset <= before {
+            return;
+        }
+        for (start, chunk) in &self.chunks {
+            let end = start + chunk.len();
+            if end > offset {
+                break;
+            }
+            if end > before {
+                chunk.release();
+            }
+        }
     }
 }
 

@@ -160,7 +160,7 @@ pub(crate) fn gunzip_prefix(
 ) -> Result<(Vec<u8>, bool), LoadError> {
     read_capped(
         file,
-        Members::new(file, Compression::Gzip, Data::Memory(bytes)),
+        Members::new(file, Compression::Gzip, Data::Memory(bytes), false),
         max_out,
         "gzip",
     )
@@ -175,7 +175,7 @@ pub(crate) fn gunzip_prefix_data(
 ) -> Result<(Vec<u8>, bool), LoadError> {
     read_capped(
         file,
-        Members::new(file, Compression::Gzip, data),
+        Members::new(file, Compression::Gzip, data, false),
         max_out,
         "gzip",
     )
@@ -213,16 +213,20 @@ struct Input<'a> {
     buf: Vec<u8>,
     /// Position of `buf[0]` in `data`.
     buf_start: u64,
+    /// Whether the bytes before the position are let go as it reads on
+    /// ([`Data::release_before`]): the stream's last pass.
+    release: bool,
 }
 
 impl<'a> Input<'a> {
-    fn new(file: &'a str, data: Data<'a>) -> Self {
+    fn new(file: &'a str, data: Data<'a>, release: bool) -> Self {
         Self {
             file,
             data,
             pos: 0,
             buf: Vec::new(),
             buf_start: 0,
+            release,
         }
     }
 
@@ -278,6 +282,9 @@ impl std::io::BufRead for Input<'_> {
             Data::Source { .. } => {
                 let end = self.buf_start + self.buf.len() as u64;
                 if self.pos < self.buf_start || self.pos >= end {
+                    if self.release {
+                        self.data.release_before(self.pos);
+                    }
                     let n = self.remaining().min(64 << 10) as usize;
                     self.buf.resize(n, 0);
                     self.data
@@ -310,8 +317,9 @@ enum Decoder<'a> {
 }
 
 impl<'a> Members<'a> {
-    fn new(file: &'a str, kind: Compression, data: Data<'a>) -> Self {
-        let input = Input::new(file, data);
+    /// The stream of `data`; `release`: the last pass, which lets the bytes read go.
+    fn new(file: &'a str, kind: Compression, data: Data<'a>, release: bool) -> Self {
+        let input = Input::new(file, data, release);
         let decoder = match kind {
             Compression::Gzip => Decoder::Gzip(flate2::bufread::GzDecoder::new(input)),
             Compression::Zlib => Decoder::Zlib(flate2::bufread::ZlibDecoder::new(input)),
@@ -433,15 +441,16 @@ pub(crate) fn inflate_voxels(
     };
     let err = |e: std::io::Error| stream.error(&e);
     let truncated = |got: u64| stream.truncated(got);
-    let mut reader =
-        std::io::BufReader::with_capacity(64 << 10, Members::new(file, kind, compressed));
-    if !skip_bytes(&mut reader, skip).map_err(err)? {
-        return Err(truncated(skip));
-    }
     let wide = matches!(
         layout.ty,
         SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64
     );
+    // The last pass over the stream lets the compressed bytes go as it reads them.
+    let mut reader =
+        std::io::BufReader::with_capacity(64 << 10, Members::new(file, kind, compressed, !wide));
+    if !skip_bytes(&mut reader, skip).map_err(err)? {
+        return Err(truncated(skip));
+    }
     // Wide integers become i16, u16 or f32 by their range: a first pass finds the range (and
     // reads the stream to its end for its checksums), a second inflates again and converts,
     // so that no buffer of the stored bytes is ever held.
@@ -473,8 +482,10 @@ pub(crate) fn inflate_voxels(
     let voxels = match (voxels, range) {
         (Some(v), _) => v,
         (None, range) => {
-            let mut again =
-                std::io::BufReader::with_capacity(64 << 10, Members::new(file, kind, compressed));
+            let mut again = std::io::BufReader::with_capacity(
+                64 << 10,
+                Members::new(file, kind, compressed, true),
+            );
             if !skip_bytes(&mut again, skip).map_err(err)? {
                 return Err(truncated(skip));
             }
@@ -483,6 +494,7 @@ pub(crate) fn inflate_voxels(
             compact_wide(file, layout.count, range, |i| samples.value(i))?
         }
     };
+    compressed.release_before(compressed.len());
     Ok((voxels, needed + rest))
 }
 
@@ -874,29 +886,25 @@ fn decode_source(
     if layout.stride_samples == 1 || n <= 1 {
         match layout.ty {
             SampleType::U8 => {
-                let mut v = try_vec::<u8>(file, "voxels", n)?;
-                data.read_at(file, offset, &mut v)?;
+                let v = read_pieces::<u8>(file, data, offset, n)?;
                 return Ok(Voxels::U8(v));
             }
             SampleType::I16 => {
-                let mut v = try_vec::<i16>(file, "voxels", n)?;
-                data.read_at(file, offset, bytemuck::cast_slice_mut(&mut v))?;
+                let mut v = read_pieces::<i16>(file, data, offset, n)?;
                 if swap {
                     v.iter_mut().for_each(|x| *x = x.swap_bytes());
                 }
                 return Ok(Voxels::I16(v));
             }
             SampleType::U16 => {
-                let mut v = try_vec::<u16>(file, "voxels", n)?;
-                data.read_at(file, offset, bytemuck::cast_slice_mut(&mut v))?;
+                let mut v = read_pieces::<u16>(file, data, offset, n)?;
                 if swap {
                     v.iter_mut().for_each(|x| *x = x.swap_bytes());
                 }
                 return Ok(Voxels::U16(v));
             }
             SampleType::F32 => {
-                let mut v = try_vec::<f32>(file, "voxels", n)?;
-                data.read_at(file, offset, bytemuck::cast_slice_mut(&mut v))?;
+                let mut v = read_pieces::<f32>(file, data, offset, n)?;
                 if swap {
                     v.iter_mut()
                         .for_each(|x| *x = f32::from_bits(x.to_bits().swap_bytes()));
@@ -906,6 +914,12 @@ fn decode_source(
             _ => {}
         }
     }
+    // Read in order, each chunk let go once passed; wide integers are read twice (range, then
+    // values), so only the second pass lets go.
+    let wide = matches!(
+        layout.ty,
+        SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64
+    );
     let mut chunks = SourceChunks {
         file,
         data,
@@ -913,8 +927,9 @@ fn decode_source(
         buf: Vec::new(),
         first: 0,
         held: 0,
+        release: !wide,
     };
-    Ok(match layout.ty {
+    let voxels = match layout.ty {
         SampleType::U8 => Voxels::U8(collect(file, n, |i| Ok(chunks.value(i)? as u8))?),
         SampleType::I8 | SampleType::I16 => {
             Voxels::I16(collect(file, n, |i| Ok(chunks.value(i)? as i16))?)
@@ -926,9 +941,39 @@ fn decode_source(
         SampleType::U32 | SampleType::I32 | SampleType::U64 | SampleType::I64 => {
             // One pass for the range decides the compact type; a second reads again and converts.
             let range = value_range(n, |i| chunks.value(i))?;
+            chunks.release = true;
             compact_wide(file, n, range, |i| chunks.value(i))?
         }
-    })
+    };
+    data.release_before(data.len());
+    Ok(voxels)
+}
+
+/// Values read at a time by [`read_pieces`] (16 MiB).
+const PIECE_BYTES: usize = 16 << 20;
+
+/// `n` values of `T` stored as they lie at `offset` of `data`: the buffer is reserved once and
+/// filled a piece at a time, each piece's bytes then let go ([`Data::release_before`]), so a
+/// source that frees them (the browser's chunks) shrinks as the voxels grow, and the voxels'
+/// memory is touched only as it is filled.
+fn read_pieces<T: bytemuck::Pod>(
+    file: &str,
+    data: Data<'_>,
+    offset: u64,
+    n: usize,
+) -> Result<Vec<T>, LoadError> {
+    let mut v = reserve::<T>(file, "voxels", n)?;
+    let per = (PIECE_BYTES / std::mem::size_of::<T>().max(1)).max(1);
+    let mut at = offset;
+    while v.len() < n {
+        let from = v.len();
+        v.resize(from + per.min(n - from), T::zeroed());
+        let piece: &mut [u8] = bytemuck::cast_slice_mut(&mut v[from..]);
+        data.read_at(file, at, piece)?;
+        at += piece.len() as u64;
+        data.release_before(at);
+    }
+    Ok(v)
 }
 
 /// The samples of a layout in data read on demand, a chunk at a time.
@@ -940,6 +985,8 @@ struct SourceChunks<'a> {
     /// Index of the first sample in `buf`, and how many it holds.
     first: usize,
     held: usize,
+    /// Whether the bytes before each new chunk are let go ([`Data::release_before`]).
+    release: bool,
 }
 
 impl SourceChunks<'_> {
@@ -953,6 +1000,9 @@ impl SourceChunks<'_> {
             let bytes = (c - 1).saturating_mul(step).saturating_add(size);
             let at =
                 (self.layout.offset as u64).saturating_add((i as u64).saturating_mul(step as u64));
+            if self.release {
+                self.data.release_before(at);
+            }
             self.buf.resize(bytes, 0);
             self.data.read_at(self.file, at, &mut self.buf)?;
             (self.first, self.held) = (i, c);

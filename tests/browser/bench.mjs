@@ -304,9 +304,15 @@ const t0 = Date.now();
 const at = () => (Date.now() - t0) / 1000;
 let peak = { pss: 0, at: 0, largest: null };
 const samples = [];
+const typePeaks = {};
 const sampler = setInterval(() => {
   const m = memoryOf(browserPid);
   samples.push([at(), m.pss]);
+  // BENCH_TRACE=1: each second's memory by process type (where a peak comes from).
+  if (process.env.BENCH_TRACE && samples.length % 4 === 0) {
+    console.log(`  [memory ${at().toFixed(1)} s] ${Object.entries(m.byType).map(([k, v]) => `${k} ${(v / 1e9).toFixed(2)}`).join(', ')}`);
+  }
+  for (const [k, v] of Object.entries(m.byType)) typePeaks[k] = Math.max(typePeaks[k] ?? 0, v);
   if (m.pss > peak.pss) peak = { pss: m.pss, at: at(), largest: m.largest, byType: m.byType };
 }, 250);
 
@@ -413,6 +419,7 @@ const result = {
   peak_at_s: peak.at,
   peak_largest_process: peak.largest,
   peak_by_process_type: peak.byType,
+  peak_of_each_process_type: typePeaks,
   pss_at_load_by_process_type: memoryAtLoad?.byType ?? null,
   end_pss_bytes: end.pss,
   via,
@@ -431,6 +438,7 @@ console.log(`first MIP frame: ${events.first_frame?.toFixed(1)} s`);
 console.log(`features (${result.method}, ${result.preset}): started ${events.features_started?.toFixed(1)} s, done ${events.features_done?.toFixed(1)} s`);
 console.log(`memory of the browser's processes (PSS): peak ${gb(peak.pss)} GB at ${peak.at.toFixed(0)} s (largest: ${peak.largest?.type} ${gb(peak.largest?.pss ?? 0)} GB), at the end ${gb(end.pss)} GB; voxels ${gb(result.voxel_bytes)} GB`);
 const types = (m) => Object.entries(m ?? {}).map(([t, b]) => `${t} ${gb(b)}`).join(', ');
+console.log(`each process type's own peak: ${types(typePeaks)}`);
 console.log(`by process: when loaded ${types(memoryAtLoad?.byType)}; at the peak ${types(peak.byType)}; at the end ${types(end.byType)}`);
 console.log(`wasm memory (its high-water mark): ${gb(wasmAtLoad ?? 0)} GB when loaded, ${gb(wasmPeak)} GB at most; opened by ${via}`);
 console.log(`frames while the job ran: ${frameStats.frames}, interval median ${frameStats.median_s?.toFixed(2)} s, 95th percentile ${frameStats.p95_s?.toFixed(2)} s, max ${frameStats.max_s?.toFixed(2)} s, ${frameStats.over_1s} over 1 s; features at the end ${((last?.features?.fraction ?? 0) * 100).toFixed(1)}%`);
