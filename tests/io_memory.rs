@@ -1077,3 +1077,108 @@ fn the_viewers_load_of_a_large_volume_from_disk_peaks_within_one_and_a_half_time
     assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
+
+/// A file's bytes that count how many are read (the largest offset reached).
+#[derive(Debug)]
+struct CountedSource {
+    bytes: Vec<u8>,
+    reached: std::sync::atomic::AtomicU64,
+}
+
+impl io::FileSource for CountedSource {
+    fn len(&self) -> u64 {
+        self.bytes.len() as u64
+    }
+
+    fn read_exact_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()> {
+        let end = offset as usize + buf.len();
+        buf.copy_from_slice(self.bytes.get(offset as usize..end).ok_or_else(|| {
+            std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "past the end")
+        })?);
+        self.reached
+            .fetch_max(end as u64, std::sync::atomic::Ordering::Relaxed);
+        Ok(())
+    }
+}
+
+/// Listing a DICOM series read on demand (from disk, a zip's entries, the browser's files)
+/// reads each file's first 64 KiB, not the whole file, and lists what the whole files list;
+/// implicit-VR files too. A header longer than that is read whole.
+#[test]
+fn listing_a_dicom_series_on_demand_reads_only_the_headers() {
+    let slice = DIMS[0] * DIMS[1];
+    for (label, make) in [
+        ("explicit", (|b: Vec<u8>| b) as fn(Vec<u8>) -> Vec<u8>),
+        ("implicit", |b: Vec<u8>| implicit(&b)),
+    ] {
+        let bytes: Vec<Vec<u8>> = (0..DIMS[2]).map(|z| make(dicom(z, 1, z * slice))).collect();
+        let whole: Vec<InputFile> = bytes
+            .iter()
+            .enumerate()
+            .map(|(z, b)| InputFile::new(format!("s{z:03}.dcm"), b.clone()))
+            .collect();
+        let sources: Vec<std::sync::Arc<CountedSource>> = bytes
+            .into_iter()
+            .map(|b| {
+                std::sync::Arc::new(CountedSource {
+                    bytes: b,
+                    reached: Default::default(),
+                })
+            })
+            .collect();
+        let on_demand: Vec<InputFile> = sources
+            .iter()
+            .enumerate()
+            .map(|(z, s)| InputFile::on_demand(format!("s{z:03}.dcm"), s.clone()).expect("head"))
+            .collect();
+        let limits = io::Limits::default();
+        let want = io::list_series(&whole, &limits)
+            .expect("lists")
+            .expect("a series");
+        let got = io::list_series(&on_demand, &limits)
+            .expect("lists")
+            .expect("a series");
+        assert_eq!(format!("{want:?}"), format!("{got:?}"), "{label}");
+        for s in &sources {
+            let reached = s.reached.load(std::sync::atomic::Ordering::Relaxed);
+            assert!(
+                reached <= 64 << 10 && (s.bytes.len() as u64) > 2 * reached,
+                "{label}: {reached} of {} bytes read to list the file",
+                s.bytes.len()
+            );
+        }
+        // The volume read from the same on-demand files is the one read from memory.
+        let a = io::load(&whole).expect("loads").volume;
+        let b = io::load(&on_demand).expect("loads").volume;
+        assert_eq!(a.voxels, b.voxels, "{label}");
+    }
+    // A header longer than the prefix (a 100 kB private element before the pixels) still
+    // lists and loads, read whole.
+    let long = dicom_with_long_header(100_000);
+    let f = InputFile::on_demand(
+        "long.dcm",
+        std::sync::Arc::new(CountedSource {
+            bytes: long.clone(),
+            reached: Default::default(),
+        }),
+    )
+    .expect("head");
+    let limits = io::Limits::default();
+    let want = io::list_series(&[InputFile::new("long.dcm", long)], &limits).expect("lists");
+    let got = io::list_series(&[f], &limits).expect("lists");
+    assert_eq!(format!("{want:?}"), format!("{got:?}"));
+}
+
+/// [`dicom`] of one slice with a private element of `n` bytes before the series attributes.
+fn dicom_with_long_header(n: usize) -> Vec<u8> {
+    let mut f = dicom(0, 1, 0);
+    let needle = [0x20, 0x00, 0x0E, 0x00, b'U', b'I'];
+    let at = f
+        .windows(needle.len())
+        .position(|w| w == needle)
+        .expect("SeriesInstanceUID");
+    let mut private = Vec::new();
+    element(&mut private, (0x0009, 0x1010), b"OB", &vec![7u8; n]);
+    f.splice(at..at, private);
+    f
+}

@@ -61,17 +61,50 @@ pub(super) fn open_located(
     file: &InputFile,
     headers_only: bool,
     limits: &Limits,
-) -> Result<(DefaultDicomObject, Option<(u64, u64)>), LoadError> {
+) -> Result<Located, LoadError> {
+    if headers_only && file.is_on_demand() && file.len() > HEADER_PREFIX_BYTES as u64 {
+        // A file read on demand (from disk, a zip entry, the browser's bytes): its header is
+        // nearly always in its first bytes, so only those are read (a zip entry inflated that
+        // far), where the whole file would be read to list it. Anything the prefix cannot
+        // settle, an error included, is decided on the whole file as before.
+        let prefix = file.prefix(HEADER_PREFIX_BYTES)?;
+        if let Ok(Some(found)) = parse_located(file, &prefix, true, limits, true) {
+            return Ok(found);
+        }
+    }
     let contents = file.contents()?;
-    let bytes: &[u8] = &contents;
+    parse_located(file, &contents, headers_only, limits, false)?.ok_or_else(|| LoadError::Dicom {
+        file: file.name.clone(),
+        message: "internal: a whole file's header read gave no result".to_owned(),
+    })
+}
+
+/// A parsed file and where its native PixelData lies ([`open_located`]).
+type Located = (DefaultDicomObject, Option<(u64, u64)>);
+
+/// Bytes of a file read on demand that a header-only read tries first ([`open_located`]).
+const HEADER_PREFIX_BYTES: usize = 64 << 10;
+
+/// [`open_located`] on `bytes` (the whole file, or with `prefix_only` its first bytes, when
+/// `None` says the prefix did not reach PixelData).
+fn parse_located(
+    file: &InputFile,
+    bytes: &[u8],
+    headers_only: bool,
+    limits: &Limits,
+    prefix_only: bool,
+) -> Result<Option<Located>, LoadError> {
     let preamble = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
         128
     } else {
         0
     };
     let body = &bytes[preamble..];
-    let pixel_data = validate::check_lengths(&file.name, body, limits, headers_only)?
-        .map(|(at, len)| (at + preamble as u64, len));
+    let (pixel_data, stopped) = validate::check_lengths(&file.name, body, limits, headers_only)?;
+    if prefix_only && !stopped {
+        return Ok(None);
+    }
+    let pixel_data = pixel_data.map(|(at, len)| (at + preamble as u64, len));
     let mut options = OpenFileOptions::new().read_preamble(dicom_object::file::ReadPreamble::Never);
     if headers_only {
         options = options.read_until(tags::PIXEL_DATA);
@@ -93,7 +126,7 @@ pub(super) fn open_located(
             message: chain(&e),
         }
     })?;
-    Ok((obj, pixel_data))
+    Ok(Some((obj, pixel_data)))
 }
 
 /// The Transfer Syntax UID (0002,0010) read straight from the file meta group, which is always

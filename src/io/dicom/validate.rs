@@ -43,14 +43,18 @@ const INFLATE_CHUNK: usize = 64 << 10;
 /// Returns where a top-level PixelData of defined length starts in `body` and how long it is
 /// declared (not checked to be present when `until_pixel_data`), for a data set that is not
 /// deflated: its native samples can then be read where they lie.
+///
+/// Also says whether a walk `until_pixel_data` stopped at PixelData (or the first top-level tag
+/// after it) in a data set that is not deflated: then `body` holds every element a header-only
+/// read needs, so a file's first bytes can stand for it.
 pub(super) fn check_lengths(
     file: &str,
     body: &[u8],
     limits: &Limits,
     until_pixel_data: bool,
-) -> Result<Option<(u64, u64)>, LoadError> {
+) -> Result<(Option<(u64, u64)>, bool), LoadError> {
     let Some(rest) = body.strip_prefix(b"DICM") else {
-        return Ok(None); // dicom-rs reports the missing magic itself
+        return Ok((None, false)); // dicom-rs reports the missing magic itself
     };
     // The meta group is always explicit VR little endian; it ends where group 0002 ends.
     let mut walker = Walker {
@@ -72,7 +76,7 @@ pub(super) fn check_lengths(
         pos: Rc::clone(&pos),
     };
     let Ok(meta) = FileMetaTable::from_reader(&mut source) else {
-        return Ok(None);
+        return Ok((None, false));
     };
     let ts = meta.transfer_syntax().trim_end_matches(['\0', ' ']);
     let data = body.get(pos.get()..).unwrap_or_default();
@@ -82,12 +86,13 @@ pub(super) fn check_lengths(
         limits,
         until_pixel_data,
         pixel_data: Cell::new(None),
+        stopped: Cell::new(false),
     };
     if ts == DEFLATED_EXPLICIT_LE {
         // dicom-rs inflates the data set and reads it as explicit VR little endian; so does the
         // walk, holding only a window of the inflated bytes.
         let Some(syntax) = TransferSyntaxRegistry.get(EXPLICIT_LE) else {
-            return Ok(None);
+            return Ok((None, false));
         };
         let inflater = Rc::new(RefCell::new(Inflater::new(
             file,
@@ -105,10 +110,10 @@ pub(super) fn check_lengths(
         if let Some(e) = inflater.borrow_mut().failure.take() {
             return Err(e);
         }
-        return result.map(|()| None);
+        return result.map(|()| (None, false));
     }
     let Some(syntax) = TransferSyntaxRegistry.get(ts) else {
-        return Ok(None); // dicom-rs names the unknown transfer syntax itself
+        return Ok((None, false)); // dicom-rs names the unknown transfer syntax itself
     };
     let pos = Rc::new(Cell::new(0));
     let source = CountingReader {
@@ -119,10 +124,11 @@ pub(super) fn check_lengths(
     walk.tokens(source, syntax, &pos, |at, _| {
         Ok(total.saturating_sub(at as u64))
     })?;
-    Ok(walk
+    let pixel_data = walk
         .pixel_data
         .get()
-        .map(|(at, len)| (data_start + at as u64, len)))
+        .map(|(at, len)| (data_start + at as u64, len));
+    Ok((pixel_data, walk.stopped.get()))
 }
 
 /// A byte source that tells how far it has been read.
@@ -297,6 +303,9 @@ struct Walk<'a> {
     until_pixel_data: bool,
     /// Where the top-level PixelData's value starts (in the data set) and its declared length.
     pixel_data: Cell<Option<(usize, u64)>>,
+    /// Whether the walk stopped at the first top-level tag at or after PixelData (with
+    /// `until_pixel_data`), rather than at the end of the bytes.
+    stopped: Cell<bool>,
 }
 
 impl Walk<'_> {
@@ -329,6 +338,7 @@ impl Walk<'_> {
             let declared = match token {
                 DataToken::SequenceStart { tag, .. } => {
                     if depth == 0 && self.until_pixel_data && tag >= pixel_tag() {
+                        self.stopped.set(true);
                         return Ok(());
                     }
                     depth += 1;
@@ -347,6 +357,7 @@ impl Walk<'_> {
                 }
                 DataToken::PixelSequenceStart => {
                     if depth == 0 && self.until_pixel_data {
+                        self.stopped.set(true);
                         return Ok(());
                     }
                     depth += 1;
@@ -367,6 +378,7 @@ impl Walk<'_> {
                             self.pixel_data.set(Some((pos.get(), u64::from(len))));
                         }
                         if self.until_pixel_data && tag >= pixel_tag() {
+                            self.stopped.set(true);
                             return Ok(());
                         }
                     }
