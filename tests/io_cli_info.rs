@@ -133,3 +133,52 @@ fn info_of_a_folder_skips_fifos_device_links_and_loops() {
     }
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
+
+/// A zipped DICOM folder (what a PACS export or a web server hands out) reads in every
+/// subcommand as the viewer reads it: `info` of the zip says what `info` of the folder says.
+#[test]
+fn info_of_a_zipped_folder_is_info_of_the_folder() {
+    use std::io::Write as _;
+    let dir = common::test_data("dicom/ct-head-64px");
+    let zip_path = std::env::temp_dir().join(format!("shapecast-info-{}.zip", std::process::id()));
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
+        .expect("the folder")
+        .map(|e| e.expect("an entry").path())
+        .collect();
+    names.sort();
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&zip_path).expect("a temp file"));
+    for p in &names {
+        let name = format!("ct/{}", p.file_name().expect("a name").to_string_lossy());
+        zip.start_file(
+            name,
+            zip::write::SimpleFileOptions::default()
+                .compression_method(zip::CompressionMethod::Deflated),
+        )
+        .expect("an entry");
+        zip.write_all(&std::fs::read(p).expect("the file"))
+            .expect("written");
+    }
+    zip.finish().expect("the archive");
+    let json_of = |path: &std::path::Path| {
+        let out = shapecast()
+            .arg("info")
+            .arg(path)
+            .arg("--json")
+            .output()
+            .expect("run shapecast");
+        assert!(
+            out.status.success(),
+            "{}: {}",
+            path.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mut json: serde_json::Value =
+            serde_json::from_slice(&out.stdout).expect("one JSON object");
+        json["source"] = serde_json::Value::Null;
+        json
+    };
+    let (folder, zipped) = (json_of(&dir), json_of(&zip_path));
+    let _ = std::fs::remove_file(&zip_path);
+    assert_eq!(folder["dims"], serde_json::json!([64, 64, 6]));
+    assert_eq!(folder, zipped);
+}

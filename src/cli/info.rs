@@ -22,11 +22,16 @@ pub struct InfoArgs {
 
 /// Reads files and (recursively) folders into `InputFile`s named by their path, sorted by name
 /// within each folder so that the output does not depend on directory order (see
-/// `crate::files`: regular files only, what is skipped is said on stderr).
+/// `crate::files`: regular files only, what is skipped is said on stderr). A zip archive is
+/// replaced by the files it holds, as the viewer does (`io::zip::expand`).
 pub fn read_inputs(paths: &[PathBuf]) -> anyhow::Result<Vec<InputFile>> {
     let (files, skipped) = crate::files::read_all(paths)?;
     for s in &skipped {
         eprintln!("warning: {s}");
+    }
+    let (files, unpacked) = io::zip::expand(files, &io::Limits::default())?;
+    for n in &unpacked {
+        eprintln!("note: {n}");
     }
     if files.is_empty() {
         anyhow::bail!(
