@@ -544,12 +544,11 @@ fn a_dicom_series_read_from_files_peaks_within_one_and_a_half_times_the_voxels()
     let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
     check_values("DICOM series", &v, "i16");
     let voxel_bytes = v.voxels.byte_len();
-    eprintln!(
-        "DICOM series of {} files from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
-        DIMS[2],
-        peak as f64 / voxel_bytes as f64
+    check_disk_peak(
+        &format!("DICOM series of {} files from disk", DIMS[2]),
+        peak,
+        voxel_bytes,
     );
-    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
 
     // The same files in memory: the load adds the voxels and a slice or two to the input.
     let inputs: Vec<InputFile> = (0..DIMS[2])
@@ -557,9 +556,31 @@ fn a_dicom_series_read_from_files_peaks_within_one_and_a_half_times_the_voxels()
         .collect();
     let (r, peak) = peak_during(|| io::load(&inputs));
     assert_eq!(r.expect("loads").volume.voxels, v.voxels);
-    eprintln!("DICOM series in memory: input + {peak} bytes");
-    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+    check_memory_peak("DICOM series", peak, voxel_bytes);
     std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+/// Prints a load's peak from disk and checks that it is within 1.5x the voxel bytes (+ a
+/// constant).
+fn check_disk_peak(label: &str, peak: usize, voxel_bytes: usize) {
+    eprintln!(
+        "{label}: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
+        peak as f64 / voxel_bytes as f64
+    );
+    assert!(
+        peak <= voxel_bytes * 3 / 2 + SLACK,
+        "{label}: peak {peak} bytes"
+    );
+}
+
+/// Prints what a load from memory adds to its input and checks that it is at most the voxel
+/// bytes (+ a constant).
+fn check_memory_peak(label: &str, peak: usize, voxel_bytes: usize) {
+    eprintln!("{label} in memory: input + {peak} bytes");
+    assert!(
+        peak <= voxel_bytes + SLACK,
+        "{label} in memory: input + {peak} bytes"
+    );
 }
 
 /// A zipped DICOM series (deflated, as a PACS export or a web server hands it out): the archive
@@ -596,18 +617,16 @@ fn a_zipped_dicom_series_peaks_within_one_and_a_half_times_the_voxels() {
     let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
     check_values("zipped DICOM series", &v, "i16");
     let voxel_bytes = v.voxels.byte_len();
-    eprintln!(
-        "zipped DICOM series of {} files from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
-        DIMS[2],
-        peak as f64 / voxel_bytes as f64
+    check_disk_peak(
+        &format!("zipped DICOM series of {} files from disk", DIMS[2]),
+        peak,
+        voxel_bytes,
     );
-    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
 
     let input = InputFile::new("series.zip", zip);
     let (r, peak) = peak_during(|| load(vec![input]));
     assert_eq!(r.expect("loads").volume.voxels, v.voxels);
-    eprintln!("zipped DICOM series in memory: input + {peak} bytes");
-    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+    check_memory_peak("zipped DICOM series", peak, voxel_bytes);
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 
@@ -658,16 +677,11 @@ fn a_multi_frame_dicom_peaks_within_one_and_a_half_times_the_voxels() {
     let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
     check_values("multi-frame DICOM", &v, "i16");
     let voxel_bytes = v.voxels.byte_len();
-    eprintln!(
-        "multi-frame DICOM from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
-        peak as f64 / voxel_bytes as f64
-    );
-    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
+    check_disk_peak("multi-frame DICOM from disk", peak, voxel_bytes);
     let inputs = [InputFile::new("frames.dcm", dicom(0, DIMS[2], 0))];
     let (r, peak) = peak_during(|| io::load(&inputs));
     assert_eq!(r.expect("loads").volume.voxels, v.voxels);
-    eprintln!("multi-frame DICOM in memory: input + {peak} bytes");
-    assert!(peak <= voxel_bytes + SLACK, "peak {peak} bytes");
+    check_memory_peak("multi-frame DICOM", peak, voxel_bytes);
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 
@@ -763,12 +777,11 @@ fn a_compressed_multi_frame_dicom_is_decoded_a_frame_at_a_time() {
     let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
     check_values("RLE multi-frame DICOM", &v, "i16");
     let voxel_bytes = v.voxels.byte_len();
-    eprintln!(
-        "RLE multi-frame DICOM ({} bytes) from disk: peak {peak} bytes for {voxel_bytes} voxel bytes ({:.3}x)",
-        rle.len(),
-        peak as f64 / voxel_bytes as f64
+    check_disk_peak(
+        &format!("RLE multi-frame DICOM ({} bytes) from disk", rle.len()),
+        peak,
+        voxel_bytes,
     );
-    assert!(peak <= voxel_bytes * 3 / 2 + SLACK, "peak {peak} bytes");
     // In memory: the parsed fragments, one frame and the voxels beside the input.
     let inputs = [InputFile::new("frames-rle.dcm", rle.clone())];
     let (r, peak) = peak_during(|| io::load(&inputs));
