@@ -1,5 +1,6 @@
-//! A file's bytes held by JavaScript (wasm only): the `ArrayBuffer` of a dropped or chosen file,
-//! or a download's chunks as the network gave them (`io::Chunked`). The loaders read them on
+//! A file's bytes held by JavaScript (wasm only): a dropped or chosen file read through its
+//! stream, or a download, its chunks gathered into buffers of up to 16 MiB as they arrive
+//! ([`Gathered`], kept as an `io::Chunked`). The loaders read them on
 //! demand (`io::FileSource`), so an uncompressed payload goes from JavaScript's memory straight
 //! into the voxels and a compressed one through the inflater: the wasm memory, which never
 //! shrinks and is at most 4 GiB, holds the voxels and not the file as well. A payload's chunks
@@ -48,14 +49,40 @@ impl Chunk for JsChunk {
 /// A file's bytes in JavaScript chunks.
 pub type JsBytes = Chunked<JsChunk>;
 
-/// Bytes of each buffer [`Gathered`] fills: 16 MiB, which the browser allocates on pages of
-/// their own and gives back to the system when the buffer is let go (a download's own chunks,
-/// 16 KiB to 2 MiB, come from pools that keep their pages after they are freed).
+/// The next chunk of a stream's reader (`ReadableStreamDefaultReader.read()`), `None` at its
+/// end; a value that is not bytes is skipped. The error is the stream's.
+pub async fn next_chunk(
+    reader: &web_sys::ReadableStreamDefaultReader,
+) -> Result<Option<js_sys::Uint8Array>, wasm_bindgen::JsValue> {
+    use wasm_bindgen::JsCast as _;
+    loop {
+        let chunk = wasm_bindgen_futures::JsFuture::from(reader.read()).await?;
+        let done = js_sys::Reflect::get(&chunk, &"done".into())
+            .ok()
+            .and_then(|d| d.as_bool())
+            .unwrap_or(true);
+        if done {
+            return Ok(None);
+        }
+        let value = js_sys::Reflect::get(&chunk, &"value".into()).unwrap_or_default();
+        if let Ok(array) = value.dyn_into::<js_sys::Uint8Array>() {
+            return Ok(Some(array));
+        }
+    }
+}
+
+/// Bytes of the largest buffers [`Gathered`] fills: 16 MiB, which the browser allocates on
+/// pages of their own and gives back to the system when the buffer is let go (a download's own
+/// chunks, 16 KiB to 2 MiB, come from pools that keep their pages after they are freed).
 const GATHER_BYTES: u32 = 16 << 20;
 
-/// A download's chunks copied, as they arrive, into JavaScript buffers of [`GATHER_BYTES`],
-/// so that the loader letting them go (`io::FileSource::release_before`) frees memory while it
-/// fills the voxels.
+/// The first buffer's size; each next one holds as much as all before it, up to
+/// [`GATHER_BYTES`] (a small file does not cost 16 MiB).
+const FIRST_GATHER_BYTES: u32 = 64 << 10;
+
+/// A stream's chunks (a download, a file read through `Blob.stream()`) copied, as they arrive,
+/// into JavaScript buffers of up to [`GATHER_BYTES`], so that the loader letting them go
+/// (`io::FileSource::release_before`) frees memory while it fills the voxels.
 #[derive(Default)]
 pub struct Gathered {
     full: JsBytes,
@@ -68,14 +95,17 @@ impl Gathered {
     pub fn push(&mut self, chunk: &js_sys::Uint8Array) {
         let mut from = 0u32;
         while from < chunk.length() {
-            let (buffer, fill) = self
-                .open
-                .take()
-                .unwrap_or_else(|| (js_sys::Uint8Array::new_with_length(GATHER_BYTES), 0));
-            let n = (chunk.length() - from).min(GATHER_BYTES - fill);
+            let (buffer, fill) = self.open.take().unwrap_or_else(|| {
+                let size = self
+                    .full
+                    .len()
+                    .clamp(u64::from(FIRST_GATHER_BYTES), u64::from(GATHER_BYTES));
+                (js_sys::Uint8Array::new_with_length(size as u32), 0)
+            });
+            let n = (chunk.length() - from).min(buffer.length() - fill);
             buffer.set(&chunk.subarray(from, from + n), fill);
             from += n;
-            if fill + n == GATHER_BYTES {
+            if fill + n == buffer.length() {
                 self.full.push(JsChunk(buffer));
             } else {
                 self.open = Some((buffer, fill + n));
@@ -88,10 +118,12 @@ impl Gathered {
         self.full.len() + self.open.as_ref().map_or(0, |(_, fill)| u64::from(*fill))
     }
 
-    /// The bytes, the last buffer cut to its length (a copy, so that it too can be let go).
+    /// The bytes, the last buffer cut to its length (a copy, so that it too can be let go; the
+    /// larger original is detached at once).
     pub fn finish(mut self) -> JsBytes {
         if let Some((buffer, fill)) = self.open.take() {
             self.full.push(JsChunk(buffer.slice(0, fill)));
+            JsChunk(buffer).release();
         }
         self.full
     }

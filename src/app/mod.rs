@@ -380,6 +380,11 @@ impl ShapecastApp {
             .as_ref()
             .map(GpuContext::from_render_state);
         let mut status = AppStatus::default();
+        // Asked now, so that the answer is in before the first volume (a link's) is uploaded.
+        #[cfg(target_arch = "wasm32")]
+        if let Some(g) = &gpu {
+            crate::gpu::volume_texture::ask_render_attachment_3d(g);
+        }
         match &gpu {
             Some(g) => {
                 #[cfg(target_arch = "wasm32")]
@@ -887,6 +892,11 @@ impl ShapecastApp {
         let (Some(gpu), Some(up)) = (&self.gpu, &mut self.uploading) else {
             return;
         };
+        // Natively the queue's callbacks (which count the slabs in flight) run only when the
+        // device is polled or something is submitted: poll, so that a frame that ended with
+        // every slab in flight does not wait for ever (in the browser they run by themselves).
+        #[cfg(not(target_arch = "wasm32"))]
+        let _ = gpu.device.poll(wgpu::PollType::Poll);
         let started = web_time::Instant::now();
         // Slabs while the frame's time lasts and the GPU keeps up (`ready`: a bounded number
         // in flight, so a slow device does not queue the whole volume in shared memory).

@@ -12,7 +12,6 @@
 use std::cell::RefCell;
 
 use wasm_bindgen::JsCast as _;
-use wasm_bindgen::JsValue;
 use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
@@ -303,8 +302,9 @@ async fn download(
     let total = length.map_or(0.0, |n| n as f64);
     let mut last_report = 0u64;
     loop {
-        let chunk = match JsFuture::from(reader.read()).await {
-            Ok(c) => c,
+        let array = match js_bytes::next_chunk(&reader).await {
+            Ok(Some(array)) => array,
+            Ok(None) => break,
             Err(_) if signal.aborted() => return Err(Failure::Cancelled),
             Err(e) => {
                 return Err(fail(format!(
@@ -313,19 +313,6 @@ async fn download(
                     js_error(&e)
                 )));
             }
-        };
-        let done = js_sys::Reflect::get(&chunk, &JsValue::from_str("done"))
-            .ok()
-            .and_then(|d| d.as_bool())
-            .unwrap_or(true);
-        if done {
-            break;
-        }
-        let Ok(value) = js_sys::Reflect::get(&chunk, &JsValue::from_str("value")) else {
-            continue;
-        };
-        let Ok(array) = value.dyn_into::<js_sys::Uint8Array>() else {
-            continue;
         };
         let new_len = bytes.len() + u64::from(array.length());
         if new_len > room {

@@ -6,9 +6,10 @@
 //!
 //! eframe's own drop handling is bypassed: it does not walk folders. Our listeners sit on the
 //! window in the capture phase and stop the drag events there, walk dropped folders with
-//! `webkitGetAsEntry` and `FileSystemDirectoryReader`, and read every file with
-//! `Blob.arrayBuffer()`. A file's bytes stay JavaScript's (`JsBytes`) and the loader reads them
-//! on demand; a DICOM set is decoded file by file as it is read.
+//! `webkitGetAsEntry` and `FileSystemDirectoryReader`, and read every file through its stream
+//! (`Blob.stream()`, gathered into buffers of up to 16 MiB) or, a DICOM image, whole. A file's
+//! bytes stay JavaScript's (`JsBytes`) and the loader reads them on demand, letting each buffer
+//! go once read; a DICOM set is decoded file by file as it is read.
 
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -18,7 +19,7 @@ use wasm_bindgen::JsValue;
 use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
-use super::js_bytes::{self, JsBytes, JsChunk};
+use super::js_bytes::{self, JsBytes};
 use super::view_link::ViewSource;
 use crate::io::InputFile;
 
@@ -378,32 +379,32 @@ fn too_large(f: &Named, size: f64) -> Result<(), String> {
     Ok(())
 }
 
-/// Bytes of a file read at a time into one JavaScript chunk ([`read_chunked`]).
-const READ_CHUNK_BYTES: f64 = (16 << 20) as f64;
-
-/// A file's bytes as JavaScript chunks of [`READ_CHUNK_BYTES`] (`Blob.slice`), which the loader
-/// lets go one by one as it reads them into the voxels (`io::FileSource::release_before`),
-/// reporting progress (`done` of `total` bytes read before this file).
+/// A file's bytes as JavaScript chunks, read through its stream (`Blob.stream()`) and gathered
+/// into 16 MiB buffers (`js_bytes::Gathered`, as a download is), which the loader lets go one
+/// by one as it reads them into the voxels (`io::FileSource::release_before`); progress is
+/// reported as `done` (bytes of the files before this one) + this file's of `total`.
 async fn read_chunked(f: &Named, label: &str, done: f64, total: f64) -> Result<JsBytes, String> {
     too_large(f, f.file.size())?;
-    let mut bytes = JsBytes::default();
-    let mut at = 0.0;
-    while at < f.file.size() {
-        let end = (at + READ_CHUNK_BYTES).min(f.file.size());
-        let blob = f
-            .file
-            .slice_with_f64_and_f64(at, end)
-            .map_err(|e| cannot_read(f, &e))?;
-        bytes.push(JsChunk(read_js(f, &blob).await?));
-        at = end;
-        push(WebEvent::Progress {
-            verb: "reading",
-            label: label.to_owned(),
-            done: done + at,
-            total,
-        });
+    let reader: web_sys::ReadableStreamDefaultReader =
+        f.file.stream().get_reader().unchecked_into();
+    let mut bytes = js_bytes::Gathered::default();
+    let mut reported = 0u64;
+    while let Some(chunk) = js_bytes::next_chunk(&reader)
+        .await
+        .map_err(|e| cannot_read(f, &e))?
+    {
+        bytes.push(&chunk);
+        if bytes.len() - reported >= 16 << 20 {
+            reported = bytes.len();
+            push(WebEvent::Progress {
+                verb: "reading",
+                label: label.to_owned(),
+                done: done + reported as f64,
+                total,
+            });
+        }
     }
-    Ok(bytes)
+    Ok(bytes.finish())
 }
 
 /// A file's bytes, read whole into the wasm memory (one DICOM image at a time).

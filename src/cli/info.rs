@@ -29,19 +29,26 @@ pub fn read_inputs(paths: &[PathBuf]) -> anyhow::Result<Vec<InputFile>> {
     for s in &skipped {
         eprintln!("warning: {s}");
     }
-    let (files, unpacked) = io::zip::expand(files, &io::Limits::default())?;
-    for n in &unpacked {
-        eprintln!("note: {n}");
-    }
-    if files.is_empty() {
-        anyhow::bail!(
+    let none_found = || {
+        anyhow::anyhow!(
             "no files found in {}",
             paths
                 .iter()
                 .map(|p| p.display().to_string())
                 .collect::<Vec<_>>()
                 .join(", ")
-        );
+        )
+    };
+    if files.is_empty() {
+        return Err(none_found());
+    }
+    let (files, unpacked) = match io::zip::expand(files, &io::Limits::default()) {
+        Ok(r) => r,
+        Err(io::LoadError::NoFiles) => return Err(none_found()),
+        Err(e) => return Err(e.into()),
+    };
+    for n in &unpacked {
+        eprintln!("note: {n}");
     }
     Ok(files)
 }

@@ -154,6 +154,73 @@ fn slices_per_chunk(dims: [u32; 3], bytes_per_texel: u32, bytes: u64) -> u32 {
     (bytes / slice.max(1)).clamp(1, u64::from(dims[2])) as u32
 }
 
+/// The intensity texture's usages. In the browser also RENDER_ATTACHMENT, though nothing renders
+/// into it: the first slab written initialises the whole texture, and Dawn clears a renderable
+/// texture with render passes where it otherwise fills a staging buffer as large as the texture
+/// with zeros (1 GB more in the GPU process at 2000 slices, measured). Browsers older than the
+/// WebGPU revision that allowed 3D render attachments refuse it, so the first volume is
+/// uploaded without it while a 1-voxel probe finds out ([`probe_render_attachment_3d`]).
+/// Natively wgpu clears a 3D texture by small buffer copies, so it is not asked for.
+fn intensity_usage(ctx: &GpuContext) -> wgpu::TextureUsages {
+    let usage = wgpu::TextureUsages::TEXTURE_BINDING
+        | wgpu::TextureUsages::COPY_DST
+        | wgpu::TextureUsages::COPY_SRC;
+    #[cfg(target_arch = "wasm32")]
+    match RENDER_ATTACHMENT_3D.load(Ordering::Acquire) {
+        PROBE_YES => return usage | wgpu::TextureUsages::RENDER_ATTACHMENT,
+        PROBE_UNKNOWN => probe_render_attachment_3d(ctx),
+        _ => {}
+    }
+    #[cfg(not(target_arch = "wasm32"))]
+    let _ = ctx;
+    usage
+}
+
+/// What the browser said to a 3D render attachment: not asked yet, being asked, yes, no.
+#[cfg(target_arch = "wasm32")]
+static RENDER_ATTACHMENT_3D: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
+#[cfg(target_arch = "wasm32")]
+const PROBE_UNKNOWN: u8 = 0;
+#[cfg(target_arch = "wasm32")]
+const PROBE_ASKING: u8 = 1;
+#[cfg(target_arch = "wasm32")]
+const PROBE_YES: u8 = 2;
+#[cfg(target_arch = "wasm32")]
+const PROBE_NO: u8 = 3;
+
+/// Asks the browser, once, whether a 3D texture may be a render attachment (the viewer asks at
+/// start, so that the answer is in before its first volume; [`intensity_usage`]).
+#[cfg(target_arch = "wasm32")]
+pub fn ask_render_attachment_3d(ctx: &GpuContext) {
+    if RENDER_ATTACHMENT_3D.load(Ordering::Acquire) == PROBE_UNKNOWN {
+        probe_render_attachment_3d(ctx);
+    }
+}
+
+/// Creates a 1-voxel 3D texture with RENDER_ATTACHMENT in an error scope and records, when the
+/// browser answers, whether it was accepted.
+#[cfg(target_arch = "wasm32")]
+fn probe_render_attachment_3d(ctx: &GpuContext) {
+    RENDER_ATTACHMENT_3D.store(PROBE_ASKING, Ordering::Release);
+    let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let texture = texture_3d(
+        ctx,
+        "3D render attachment probe",
+        [1, 1, 1],
+        INTENSITY_FORMAT,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::RENDER_ATTACHMENT,
+    );
+    let answer = scope.pop();
+    wasm_bindgen_futures::spawn_local(async move {
+        let refused = answer.await.is_some();
+        drop(texture);
+        RENDER_ATTACHMENT_3D.store(
+            if refused { PROBE_NO } else { PROBE_YES },
+            Ordering::Release,
+        );
+    });
+}
+
 /// Texture bytes per step of an intensity upload: 16 MiB, about 90 ms on lavapipe (the viewer
 /// writes one or more per frame: one there).
 const UPLOAD_SLAB_BYTES: u64 = 16 << 20;
@@ -191,14 +258,7 @@ impl RenderVolume {
             "intensity",
             dims,
             INTENSITY_FORMAT,
-            // RENDER_ATTACHMENT, though nothing renders into it: the first slab written
-            // initialises the whole texture, and a browser (Dawn) clears a renderable texture
-            // with render passes, where otherwise it fills a staging buffer as large as the
-            // texture with zeros (1 GB more in the GPU process at 2000 slices, measured).
-            wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_DST
-                | wgpu::TextureUsages::COPY_SRC
-                | wgpu::TextureUsages::RENDER_ATTACHMENT,
+            intensity_usage(ctx),
         );
         let intensity_view = intensity.create_view(&wgpu::TextureViewDescriptor::default());
         let render = Self {

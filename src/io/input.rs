@@ -42,9 +42,15 @@ pub trait FileSource: SourceBounds + std::fmt::Debug {
     /// Says that the loader has read what lies before `offset` for the last time: a source may
     /// let those bytes go (the browser's chunks, so that a file's bytes shrink as its voxels
     /// grow). Reading them again is then an error. Only the final pass over a payload says so
-    /// (`raw::read_pieces`, `raw::inflate_voxels`); a file on disk ignores it.
+    /// (`raw::read_pieces`, the on-demand converter in `raw::decode_source`,
+    /// `raw::inflate_voxels`); a file on disk ignores it.
     fn release_before(&self, _offset: u64) {}
 }
+
+/// Bytes of a file read on demand that a DICOM header listing reads first
+/// (`dicom::open_located`); a zip entry inflates only its start for reads within them
+/// (`zip::EntrySource`), so listing a zipped series inflates each entry's start, not all of it.
+pub(crate) const LISTING_PREFIX_BYTES: usize = 64 << 10;
 
 /// Bytes of a file read on demand that stay in memory for sniffing (`io::sniff`): enough for
 /// every format's magic, a NIfTI-2 header and the first kilobyte of a gzip stream.
@@ -428,15 +434,21 @@ where
         self.read_at(offset, buf)
     }
 
-    /// Lets go every chunk that ends at or before `offset`.
+    /// Lets go every chunk that ends at or before `offset` (a chunk's end is the next one's start:
+    /// a released chunk's own length means nothing any more).
     fn release_before(&self, offset: u64) {
         let offset = offset.min(self.len);
         let before = self.released.fetch_max(offset, Ordering::Relaxed);
         if offset <= before {
             return;
         }
-        for (start, chunk) in &self.chunks {
-            let end = start + chunk.len();
+        // From the chunk holding `before` (those ending earlier are released already).
+        let first = self
+            .chunks
+            .partition_point(|(start, _)| *start <= before)
+            .saturating_sub(1);
+        for (i, (_, chunk)) in self.chunks.iter().enumerate().skip(first) {
+            let end = self.chunks.get(i + 1).map_or(self.len, |(next, _)| *next);
             if end > offset {
                 break;
             }
@@ -491,8 +503,61 @@ mod tests {
             assert_eq!(c.head(5), file[..5]);
         }
         let empty: Chunked<Vec<u8>> = Chunked::default();
+        assert_eq!(empty.released(), 0);
         assert_eq!(empty.head(4), Vec::<u8>::new());
         let input = InputFile::on_demand("f", Arc::new(Chunked::whole(vec![1u8, 2, 3]))).unwrap();
         assert_eq!(input.contents().unwrap().as_ref(), &[1, 2, 3]);
+    }
+
+    /// A chunk that records whether it was let go.
+    #[derive(Debug)]
+    struct Recorded(Vec<u8>, std::sync::atomic::AtomicBool);
+
+    impl Chunk for Recorded {
+        fn len(&self) -> u64 {
+            self.0.len() as u64
+        }
+
+        fn copy_to(&self, from: u64, out: &mut [u8]) {
+            self.0.copy_to(from, out);
+        }
+
+        fn release(&self) {
+            assert!(
+                !self.1.swap(true, Ordering::Relaxed),
+                "a chunk is let go once"
+            );
+        }
+    }
+
+    /// `release_before` lets go exactly the chunks that end at or before the mark, each once,
+    /// and reads below the mark are errors while reads above it still work.
+    #[test]
+    fn chunks_are_let_go_once_they_end_before_the_mark() {
+        let mut c = Chunked::default();
+        for n in [300usize, 1, 699, 5] {
+            c.push(Recorded(vec![n as u8; n], Default::default()));
+        }
+        let let_go = |c: &Chunked<Recorded>| -> Vec<bool> {
+            c.chunks
+                .iter()
+                .map(|(_, r)| r.1.load(Ordering::Relaxed))
+                .collect()
+        };
+        c.release_before(299);
+        assert_eq!(let_go(&c), [false; 4]);
+        c.release_before(300);
+        assert_eq!(let_go(&c), [true, false, false, false]);
+        c.release_before(100); // a lower mark changes nothing
+        c.release_before(1000);
+        assert_eq!(let_go(&c), [true, true, true, false]);
+        assert_eq!(c.released(), 1000);
+        let mut b = [0u8; 2];
+        assert!(c.read_exact_at(999, &mut b).is_err());
+        c.read_exact_at(1000, &mut b).unwrap();
+        assert_eq!(b, [5, 5]);
+        c.release_before(u64::MAX);
+        assert_eq!(let_go(&c), [true; 4]);
+        assert_eq!(c.released(), 1005);
     }
 }

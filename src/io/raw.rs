@@ -952,8 +952,9 @@ fn decode_source(
 /// Values read at a time by [`read_pieces`] (16 MiB).
 const PIECE_BYTES: usize = 16 << 20;
 
-/// `n` values of `T` stored as they lie at `offset` of `data`: the buffer is reserved once and
-/// filled a piece at a time, each piece's bytes then let go ([`Data::release_before`]), so a
+/// `n` values of `T` stored as they lie at `offset` of `data` (the payload's last read): the
+/// buffer is reserved once and filled a piece at a time, each piece's bytes then let go
+/// ([`Data::release_before`]; the rest of `data` at the end), so a
 /// source that frees them (the browser's chunks) shrinks as the voxels grow, and the voxels'
 /// memory is touched only as it is filled.
 fn read_pieces<T: bytemuck::Pod>(
@@ -973,6 +974,8 @@ fn read_pieces<T: bytemuck::Pod>(
         at += piece.len() as u64;
         data.release_before(at);
     }
+    // The payload's last pass: whatever follows it (another volume of a 4D file) goes too.
+    data.release_before(data.len());
     Ok(v)
 }
 

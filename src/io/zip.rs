@@ -150,9 +150,9 @@ struct EntrySource {
     size: u64,
 }
 
-/// Reads ending within this many bytes of an entry inflate only its start (sniffing and header
-/// listing read 4 KiB of every file).
-const PREFIX_READ: u64 = 64 << 10;
+/// Reads ending within this many bytes of an entry inflate only its start (sniffing reads 4 KiB
+/// of every file, a DICOM header listing 64 KiB).
+const PREFIX_READ: u64 = super::input::LISTING_PREFIX_BYTES as u64;
 
 impl std::fmt::Debug for EntrySource {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

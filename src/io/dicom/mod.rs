@@ -83,7 +83,7 @@ pub(super) fn open_located(
 type Located = (DefaultDicomObject, Option<(u64, u64)>);
 
 /// Bytes of a file read on demand that a header-only read tries first ([`open_located`]).
-const HEADER_PREFIX_BYTES: usize = 64 << 10;
+const HEADER_PREFIX_BYTES: usize = crate::io::input::LISTING_PREFIX_BYTES;
 
 /// [`open_located`] on `bytes` (the whole file, or with `prefix_only` its first bytes, when
 /// `None` says the prefix did not reach PixelData).
