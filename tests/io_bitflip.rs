@@ -271,6 +271,15 @@ fn adler_blind(file: &InputFile) -> Option<Volume> {
 }
 
 /// Two volumes the same, bit for bit (NaN voxels included).
+/// What a load came to, in a few words.
+fn describe(r: &std::thread::Result<Result<Loaded, io::LoadError>>) -> String {
+    match r {
+        Err(_) => "a panic".to_owned(),
+        Ok(Err(e)) => format!("the error {e}"),
+        Ok(Ok(l)) => format!("a volume of {:?}", l.volume.dims),
+    }
+}
+
 fn identical(a: &Volume, b: &Volume) -> bool {
     let same_voxels = match (&a.voxels, &b.voxels) {
         (Voxels::F32(x), Voxels::F32(y)) => {
@@ -513,7 +522,30 @@ fn single_bit_flips_of_the_shared_files_are_refused_or_explained() {
                 let t = Instant::now();
                 let got = catch_unwind(AssertUnwindSafe(|| io::load(&files)));
                 let took = t.elapsed().as_secs_f64();
+                // The same flipped files read on demand (disk, the browser's bytes: compressed
+                // DICOM frames and raw payloads are then read where they lie) load the same.
+                let on_demand: Vec<InputFile> = files
+                    .iter()
+                    .map(|f| {
+                        InputFile::on_demand(
+                            f.name.clone(),
+                            Arc::new(io::MemorySource(f.bytes.clone())),
+                        )
+                        .expect("reads the head")
+                    })
+                    .collect();
+                let got_on_demand = catch_unwind(AssertUnwindSafe(|| io::load(&on_demand)));
                 watch.started_ms.store(0, Ordering::Relaxed);
+                match (&got, &got_on_demand) {
+                    (Ok(Ok(a)), Ok(Ok(b))) if identical(&a.volume, &b.volume) => {}
+                    (Ok(Err(_)), Ok(Err(_))) => {}
+                    (_, Err(_)) => failures.push(format!("{case}: panicked on demand")),
+                    _ => failures.push(format!(
+                        "{case}: on demand {} where in memory {}",
+                        describe(&got_on_demand),
+                        describe(&got)
+                    )),
+                }
                 files[fi].bytes[byte] ^= 1 << bit;
                 loads += 1;
                 if took > slowest.0 {

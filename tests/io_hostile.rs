@@ -20,6 +20,14 @@ fn load_one(name: &str, bytes: Vec<u8>, limits: &Limits) -> Result<Loaded, LoadE
     io::load_with(&[InputFile::new(name, bytes)], limits)
 }
 
+/// [`load_one`] of a file read on demand (from disk, or the browser's bytes): compressed
+/// frames are then located and read where they lie instead of parsed.
+fn load_on_demand(name: &str, bytes: Vec<u8>, limits: &Limits) -> Result<Loaded, LoadError> {
+    let file = InputFile::on_demand(name, std::sync::Arc::new(io::MemorySource(bytes)))
+        .expect("reads the head");
+    io::load_with(&[file], limits)
+}
+
 fn expect_err(r: Result<Loaded, LoadError>, file: &str, words: &[&str]) -> LoadError {
     let e = match r {
         Ok(l) => panic!("{file}: loaded {:?}", l.volume.dims),
@@ -308,12 +316,14 @@ fn compressed_slices_declaring_a_huge_image_are_refused_before_the_voxel_buffer(
     let mut d = image_attributes(13_000, 13_000, None, 16, 0);
     d.extend_from_slice(&encapsulated(&[&rle]));
     let f = dicom_file(RLE, &d);
-    let (r, peak) = peak_during(|| load_one("rle.dcm", f, &Limits::default()));
-    expect_err(r, "rle.dcm", &["cannot hold"]);
-    assert!(
-        peak < 16 * MIB,
-        "peak {peak} bytes (the voxels alone are 338 MB)"
-    );
+    for load in [load_one, load_on_demand] {
+        let (r, peak) = peak_during(|| load("rle.dcm", f.clone(), &Limits::default()));
+        expect_err(r, "rle.dcm", &["cannot hold"]);
+        assert!(
+            peak < 16 * MIB,
+            "peak {peak} bytes (the voxels alone are 338 MB)"
+        );
+    }
 
     // JPEG 2000: the codestream says 64 x 64.
     let mut j2k = vec![0xFF, 0x4F, 0xFF, 0x51, 0, 41, 0, 0];
@@ -325,11 +335,50 @@ fn compressed_slices_declaring_a_huge_image_are_refused_before_the_voxel_buffer(
     let mut d = image_attributes(13_000, 13_000, None, 16, 0);
     d.extend_from_slice(&encapsulated(&[&j2k]));
     let f = dicom_file(J2K_LOSSLESS, &d);
-    let (r, peak) = peak_during(|| load_one("j2k.dcm", f, &Limits::default()));
-    expect_err(r, "j2k.dcm", &["64x64"]);
+    for load in [load_one, load_on_demand] {
+        let (r, peak) = peak_during(|| load("j2k.dcm", f.clone(), &Limits::default()));
+        expect_err(r, "j2k.dcm", &["64x64"]);
+        assert!(
+            peak < 16 * MIB,
+            "peak {peak} bytes (the voxels alone are 338 MB)"
+        );
+    }
+    // Read on demand, the items are walked in the file: one running past the end, or a tag
+    // that is not an item, is refused by name (the parse refuses the same file in memory).
+    // Two segments (high and low bytes) of 4 zero bytes each: PackBits -3 repeats 4 times.
+    let mut rle = vec![0u8; 64];
+    rle[0] = 2;
+    rle[4] = 64;
+    rle[8] = 66;
+    rle.extend_from_slice(&[0xFD, 0, 0xFD, 0]);
+    let whole = dicom_file(RLE, &{
+        let mut d = image_attributes(2, 2, None, 16, 0);
+        d.extend_from_slice(&encapsulated(&[&rle]));
+        d
+    });
+    let mut cut = whole.clone();
+    cut.truncate(whole.len() - 12);
+    let mut not_item = whole.clone();
+    let at = not_item.len() - 8 - rle.len() - 8;
+    not_item[at + 2] = 0x0D; // (FFFE,E00D): an item end where an item belongs
+    for (name, bytes) in [("cut.dcm", cut), ("notitem.dcm", not_item)] {
+        expect_err(
+            load_on_demand(name, bytes.clone(), &Limits::default()),
+            name,
+            &[],
+        );
+        expect_err(load_one(name, bytes, &Limits::default()), name, &[]);
+    }
+    let v = load_on_demand("whole.dcm", whole.clone(), &Limits::default())
+        .expect("the whole file loads")
+        .volume;
+    assert_eq!(v.dims, [2, 2, 1]);
     assert!(
-        peak < 16 * MIB,
-        "peak {peak} bytes (the voxels alone are 338 MB)"
+        v.voxels
+            == load_one("whole.dcm", whole, &Limits::default())
+                .expect("loads")
+                .volume
+                .voxels
     );
 
     // 1-bit data in RLE: refused by name, before anything is decoded.
@@ -889,6 +938,93 @@ fn a_slice_of_another_orientation_is_not_stacked() {
             "{odd_name}: {notes}"
         );
     }
+}
+
+/// A multi-frame file whose frames all carry its one ImagePositionPatient (no per-frame
+/// positions) and a spacing: stacked from that position along the normal, said in a warning.
+/// Before, every frame sat at one position and all but the first were dropped as duplicates.
+fn shared_position_frames(spacing: Option<(u16, &str)>, inverted_normal: bool) -> Vec<u8> {
+    let attrs = image_attributes(2, 2, Some(4), 16, 0);
+    let split = attrs
+        .windows(4)
+        .position(|w| w == [0x28, 0x00, 0x02, 0x00])
+        .expect("SamplesPerPixel");
+    let mut d = attrs[..split].to_vec();
+    if let Some((tag, value)) = spacing {
+        element(&mut d, (0x0018, tag), b"DS", value.as_bytes(), None);
+    }
+    element(&mut d, (0x0020, 0x0032), b"DS", b"-5\\7\\100", None);
+    let iop: &[u8] = if inverted_normal {
+        b"1\\0\\0\\0\\-1\\0"
+    } else {
+        b"1\\0\\0\\0\\1\\0"
+    };
+    element(&mut d, (0x0020, 0x0037), b"DS", iop, None);
+    d.extend_from_slice(&attrs[split..]);
+    let pixels: Vec<u8> = (0..4u16)
+        .flat_map(|f| (0..4).flat_map(move |_| (100 + f).to_le_bytes()))
+        .collect();
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels, None);
+    dicom_file(EXPLICIT_LE, &d)
+}
+
+#[test]
+fn frames_sharing_the_files_one_position_are_stacked_along_the_normal() {
+    for (spacing, field, step) in [
+        (Some((0x0088, "2.5")), "SpacingBetweenSlices", 2.5),
+        (Some((0x0050, "3")), "SliceThickness", 3.0),
+    ] {
+        let loaded = load_one(
+            "frames.dcm",
+            shared_position_frames(spacing, false),
+            &Limits::default(),
+        )
+        .unwrap_or_else(|e| panic!("{field}: {e}"));
+        let v = &loaded.volume;
+        assert_eq!(v.dims, [2, 2, 4], "{field}: every frame is a slice");
+        assert!(
+            (v.spacing_mm[2] - step).abs() < 1e-9,
+            "{field}: {:?}",
+            v.spacing_mm
+        );
+        for f in 0..4 {
+            assert_eq!(
+                v.value_at(0, 0, f),
+                100.0 + f as f32,
+                "{field}: frame order"
+            );
+        }
+        let said = v.warnings.join("\n");
+        assert!(
+            said.contains("frames.dcm")
+                && said.contains("share one ImagePositionPatient")
+                && said.contains(field),
+            "{field}: {said}"
+        );
+        assert!(!said.contains("share a position"), "{field}: {said}");
+    }
+    // A normal pointing to -z (rows going anterior): the frames still follow the normal.
+    let loaded = load_one(
+        "flipped.dcm",
+        shared_position_frames(Some((0x0088, "2")), true),
+        &Limits::default(),
+    )
+    .expect("loads");
+    assert_eq!(loaded.volume.dims, [2, 2, 4]);
+    // Without a spacing the frames are ordered by number, and the missing spacing is named.
+    let loaded = load_one(
+        "nospacing.dcm",
+        shared_position_frames(None, false),
+        &Limits::default(),
+    )
+    .expect("loads");
+    assert_eq!(loaded.volume.dims, [2, 2, 4]);
+    assert_eq!(loaded.volume.value_at(0, 0, 3), 103.0);
+    let said = loaded.volume.warnings.join("\n");
+    assert!(
+        said.contains("neither SpacingBetweenSlices nor SliceThickness"),
+        "{said}"
+    );
 }
 
 #[test]

@@ -685,6 +685,96 @@ fn a_multi_frame_dicom_peaks_within_one_and_a_half_times_the_voxels() {
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 
+/// A file read on demand from chunks (as the browser holds a file's bytes) that records, at
+/// every read, where it read and how many bytes were still held.
+#[derive(Debug)]
+struct Watched {
+    chunks: std::sync::Arc<io::Chunked<Vec<u8>>>,
+    /// (offset read, bytes not yet let go) of every read.
+    reads: std::sync::Mutex<Vec<(u64, u64)>>,
+}
+
+impl Watched {
+    fn new(bytes: &[u8]) -> std::sync::Arc<Self> {
+        let mut c = io::Chunked::default();
+        bytes.chunks(100_003).for_each(|p| c.push(p.to_vec()));
+        std::sync::Arc::new(Self {
+            chunks: std::sync::Arc::new(c),
+            reads: std::sync::Mutex::new(Vec::new()),
+        })
+    }
+
+    fn held(&self) -> u64 {
+        self.chunks.len() - self.chunks.released()
+    }
+
+    /// The bytes still held at the last read (the last frame's).
+    fn held_at_last_read(&self) -> u64 {
+        let reads = self.reads.lock().expect("not poisoned");
+        reads.last().map_or(u64::MAX, |r| r.1)
+    }
+}
+
+impl io::FileSource for Watched {
+    fn len(&self) -> u64 {
+        self.chunks.len()
+    }
+
+    fn read_exact_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()> {
+        let held = self.held();
+        self.reads
+            .lock()
+            .expect("not poisoned")
+            .push((offset, held));
+        self.chunks.read_exact_at(offset, buf)
+    }
+
+    fn release_before(&self, offset: u64) {
+        self.chunks.release_before(offset);
+    }
+}
+
+/// The browser's single multi-frame file: its bytes are JavaScript's, read on demand, and the
+/// load is their last read, so they are let go frame by frame as the voxels fill (before, the
+/// whole file was held beside the voxels: 2x). A series list kept for choosing again keeps them.
+#[test]
+fn a_multi_frame_dicom_read_on_demand_lets_its_frames_go_as_they_are_decoded() {
+    let bytes = dicom(0, DIMS[2], 0);
+    let frame_bytes = (DIMS[0] * DIMS[1] * 2) as u64;
+    let expected = io::load(&[InputFile::new("frames.dcm", bytes.clone())])
+        .expect("loads from memory")
+        .volume;
+
+    let watched = Watched::new(&bytes);
+    let file = InputFile::on_demand("frames.dcm", watched.clone()).expect("reads the head");
+    let loaded = io::load(&[file]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(loaded.volume, expected);
+    assert_eq!(watched.held(), 0, "the whole file is let go");
+    let held = watched.held_at_last_read();
+    eprintln!(
+        "multi-frame DICOM on demand: {held} of {} bytes held at the last frame's read",
+        bytes.len()
+    );
+    assert!(
+        held <= 2 * frame_bytes + 2 * 100_003,
+        "{held} bytes held at the last frame's read (a frame is {frame_bytes})"
+    );
+
+    // Listed and loaded for a series set (another entry may be chosen later): nothing let go.
+    let watched = Watched::new(&bytes);
+    let files = [InputFile::on_demand("frames.dcm", watched.clone()).expect("reads the head")];
+    let limits = io::Limits::default();
+    let list = io::list_series(&files, &limits)
+        .expect("lists")
+        .expect("a DICOM list");
+    let first = list.load(&files, 0, &limits).expect("loads");
+    assert_eq!(watched.held(), bytes.len() as u64, "kept for another load");
+    let again = list.load_last(&files, 0, &limits).expect("loads again");
+    assert_eq!(first.volume, again.volume);
+    assert_eq!(again.volume, expected);
+    assert_eq!(watched.held(), 0, "the last load lets the file go");
+}
+
 /// PackBits (as RLE Lossless uses it): runs of 2 or more equal bytes as repeats, the rest as
 /// literals of at most 128 bytes.
 fn pack_bits(data: &[u8], out: &mut Vec<u8>) {
@@ -717,12 +807,26 @@ fn pack_bits(data: &[u8], out: &mut Vec<u8>) {
 /// [`dicom`] of `frames` frames re-encoded as RLE Lossless: one fragment per frame (an empty
 /// Basic Offset Table), two segments each (high bytes, then low bytes).
 fn dicom_rle(frames: usize) -> Vec<u8> {
+    dicom_rle_with(frames, false)
+}
+
+/// [`dicom_rle`], with `noise` pixels that hardly compress (the file is about the voxels' size).
+fn dicom_rle_with(frames: usize, noise: bool) -> Vec<u8> {
     let mut f = dicom(0, frames, 0);
     let at = f
         .windows(4)
         .rposition(|w| w == [0xE0, 0x7F, 0x10, 0x00])
         .expect("PixelData");
-    let pixels = f.split_off(at)[12..].to_vec();
+    let mut pixels = f.split_off(at)[12..].to_vec();
+    if noise {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        for b in &mut pixels {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            *b = (x >> 32) as u8;
+        }
+    }
     let ts = b"1.2.840.10008.1.2.1\0";
     let p = f.windows(ts.len()).position(|w| w == ts).expect("syntax");
     f[p..p + ts.len()].copy_from_slice(b"1.2.840.10008.1.2.5\0");
@@ -792,6 +896,54 @@ fn a_compressed_multi_frame_dicom_is_decoded_a_frame_at_a_time() {
         "input + {peak} bytes"
     );
     std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+/// Compressed frames that hardly compress, in one file read on demand: the fragments are read
+/// from where they lie, a frame at a time, so the peak is the voxels and a frame, not the
+/// parsed fragments (the file's size) beside the voxels (~2x here, before); and from chunks
+/// (the browser's bytes) each frame's bytes are let go once decoded.
+#[test]
+fn an_incompressible_rle_multi_frame_dicom_is_read_a_frame_at_a_time_from_the_file() {
+    let rle = dicom_rle_with(DIMS[2], true);
+    let voxel_bytes = N * 2;
+    assert!(rle.len() > voxel_bytes * 9 / 10, "{} bytes", rle.len());
+    let expected = io::load(&[InputFile::new("noise-rle.dcm", rle.clone())])
+        .expect("loads from memory")
+        .volume;
+
+    let dir = temp_dir("rle-noise");
+    let path = dir.join("noise-rle.dcm");
+    std::fs::write(&path, &rle).expect("write");
+    let (r, peak) = peak_during(|| {
+        let (inputs, _) = shapecast::files::read_all(std::slice::from_ref(&path)).expect("lists");
+        io::load(&inputs)
+    });
+    let from_disk = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    assert!(
+        from_disk.voxels == expected.voxels,
+        "the same voxels from disk"
+    );
+    check_disk_peak(
+        &format!(
+            "incompressible RLE multi-frame DICOM ({} bytes) from disk",
+            rle.len()
+        ),
+        peak,
+        voxel_bytes,
+    );
+    std::fs::remove_dir_all(&dir).expect("clean up");
+
+    let watched = Watched::new(&rle);
+    let file = InputFile::on_demand("noise-rle.dcm", watched.clone()).expect("reads the head");
+    let loaded = io::load(&[file]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(loaded.volume == expected, "the same volume from chunks");
+    assert_eq!(watched.held(), 0, "the whole file is let go");
+    let frame_bytes = (DIMS[0] * DIMS[1] * 2) as u64;
+    let held = watched.held_at_last_read();
+    assert!(
+        held <= 3 * frame_bytes + 2 * 100_003,
+        "{held} bytes held at the last frame's read"
+    );
 }
 
 #[test]

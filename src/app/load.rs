@@ -297,7 +297,9 @@ impl LoadJob {
                         }
                         loaded
                     }
-                    Ok(Some(list)) => list.load(&files, list.default_choice(), &limits),
+                    // One series: nothing to choose again, so its files' bytes go as
+                    // they are decoded (a multi-frame file in the browser).
+                    Ok(Some(list)) => list.load_last(&files, list.default_choice(), &limits),
                     Ok(None) => crate::io::load_with(&files, &limits),
                     Err(e) => Err(e),
                 };

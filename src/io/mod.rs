@@ -267,7 +267,9 @@ pub fn load(files: &[InputFile]) -> Result<Loaded, LoadError> {
 
 /// Loads one volume from the given files: a single file, a header and its data file, or a set
 /// of DICOM files (the CT or MR series with the most images is chosen, as
-/// [`SeriesList::default_choice`] says; the others are named in the notes).
+/// [`SeriesList::default_choice`] says; the others are named in the notes). This is the last
+/// read of the files: a source that can let bytes go ([`FileSource::release_before`]) lets the
+/// payload's go as the voxels fill.
 pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadError> {
     if files.is_empty() {
         return Err(LoadError::NoFiles);
@@ -275,7 +277,8 @@ pub fn load_with(files: &[InputFile], limits: &Limits) -> Result<Loaded, LoadErr
     let formats: Vec<Format> = files.iter().map(sniff_file).collect();
     if let Some(list) = list_sniffed(files, &formats, limits)? {
         let chosen = list.default_choice();
-        let mut loaded = list.load(files, chosen, limits)?;
+        // The last read of the files, as for every other format.
+        let mut loaded = list.load_last(files, chosen, limits)?;
         loaded.notes.extend(list.others_not_loaded(chosen));
         return Ok(loaded);
     }

@@ -8,12 +8,13 @@
 //   once; also the largest process), sampled every 250 ms, peak and at the end.
 // It is a benchmark, not a test: it fails only when the page errors or never becomes ready.
 //
-//   node tests/browser/bench.mjs [DEPTH] [--method li|hessian|rst|...] [--via link|file]
+//   node tests/browser/bench.mjs [DEPTH] [--method li|hessian|rst|...] [--via link|file|folder|zip|multiframe]
 //                                [--load-only] [--timeout-s N] [--json out.json]
 //
 // --via file opens the volume through the page's file input instead of a link, --via folder
 // writes it as a DICOM series (one explicit-VR file per slice, the same voxels) and opens the
-// folder through the page's folder input, --via zip opens that folder zipped (deflated) by link; --load-only stops
+// folder through the page's folder input, --via zip opens that folder zipped (deflated) by link,
+// --via multiframe writes it as one multi-frame DICOM file opened by the file input; --load-only stops
 // 5 s after the first MIP frame (what reading costs, before any feature). The wasm memory's size
 // (it never shrinks: its high-water mark) is reported beside the processes' memory.
 //
@@ -178,6 +179,66 @@ if (via === 'folder' || via === 'zip') {
   }
   console.log(`  the same as ${depth} DICOM files in ${folder}`);
 }
+// The same voxels as one multi-frame DICOM file (frames in z order at 0.8 mm, positions from the
+// first frame and the spacing between slices), opened through the file input: the loader reads
+// its frames where they lie in the page's bytes and lets each go once decoded.
+const multiFrameFile = path.join(tmp, 'wholebody-frames.dcm');
+if (via === 'multiframe') {
+  const origin = (src.origin ?? '(0,0,0)').replace(/[()]/g, '').split(',').map(Number);
+  const us = (n) => { const b = Buffer.alloc(2); b.writeUInt16LE(n); return b; };
+  const ct = '1.2.840.10008.5.1.4.1.1.2';
+  const sop = '2.25.1234567890124.1';
+  const data = Buffer.concat([
+    dicomElement([0x0008, 0x0016], 'UI', ct),
+    dicomElement([0x0008, 0x0018], 'UI', sop),
+    dicomElement([0x0008, 0x0060], 'CS', 'CT'),
+    dicomElement([0x0010, 0x0010], 'PN', 'Bench^Wholebody'),
+    dicomElement([0x0018, 0x0050], 'DS', '0.8'),
+    dicomElement([0x0018, 0x0088], 'DS', '0.8'),
+    dicomElement([0x0020, 0x000D], 'UI', '2.25.1234567890'),
+    dicomElement([0x0020, 0x000E], 'UI', '2.25.1234567890124'),
+    dicomElement([0x0020, 0x0013], 'IS', '1'),
+    dicomElement([0x0020, 0x0032], 'DS', `${origin[0]}\\${origin[1]}\\${origin[2]}`),
+    dicomElement([0x0020, 0x0037], 'DS', '1\\0\\0\\0\\1\\0'),
+    dicomElement([0x0028, 0x0002], 'US', us(1)),
+    dicomElement([0x0028, 0x0004], 'CS', 'MONOCHROME2'),
+    dicomElement([0x0028, 0x0008], 'IS', String(depth)),
+    dicomElement([0x0028, 0x0010], 'US', us(ny)),
+    dicomElement([0x0028, 0x0011], 'US', us(nx)),
+    dicomElement([0x0028, 0x0030], 'DS', '0.626953\\0.626953'),
+    dicomElement([0x0028, 0x0100], 'US', us(16)),
+    dicomElement([0x0028, 0x0101], 'US', us(16)),
+    dicomElement([0x0028, 0x0102], 'US', us(15)),
+    dicomElement([0x0028, 0x0103], 'US', us(1)),
+    dicomElement([0x0028, 0x1052], 'DS', '0'),
+    dicomElement([0x0028, 0x1053], 'DS', '1'),
+  ]);
+  const group = Buffer.concat([
+    dicomElement([0x0002, 0x0001], 'OB', Buffer.from([0, 1])),
+    dicomElement([0x0002, 0x0002], 'UI', ct),
+    dicomElement([0x0002, 0x0003], 'UI', sop),
+    dicomElement([0x0002, 0x0010], 'UI', '1.2.840.10008.1.2.1'),
+  ]);
+  const len = Buffer.alloc(4);
+  len.writeUInt32LE(group.length);
+  // PixelData's header by hand (its value is written slice by slice, not built in memory).
+  const pixelHead = Buffer.alloc(12);
+  pixelHead.writeUInt16LE(0x7fe0, 0);
+  pixelHead.writeUInt16LE(0x0010, 2);
+  pixelHead.write('OW', 4, 'latin1');
+  pixelHead.writeUInt32LE(depth * slice, 8);
+  const fd = fs.openSync(multiFrameFile, 'w');
+  for (const b of [Buffer.alloc(128), Buffer.from('DICM'), dicomElement([0x0002, 0x0000], 'UL', len), group, data, pixelHead]) fs.writeSync(fd, b);
+  for (let k = 0; k < depth; k += 1) {
+    const period = 2 * nz;
+    const m = k % period;
+    const s = m < nz ? m : period - 1 - m;
+    const pixels = src.voxels.subarray(s * slice, (s + 1) * slice);
+    fs.writeSync(fd, pixels);
+  }
+  fs.closeSync(fd);
+  console.log(`  the same as one multi-frame DICOM file of ${depth} frames: ${multiFrameFile}`);
+}
 let zipBytes = null;
 if (via === 'zip') {
   zipBytes = zipFolder(folder, 'wholebody');
@@ -325,6 +386,7 @@ if (via === 'link' || via === 'zip') {
   await page.goto(`${origin}/?phantom=sphere&method=${encodeURIComponent(method)}`);
   await page.waitForFunction(() => window.shapecastStatus?.volume, null, { timeout: 120000 });
   if (via === 'folder') await page.setInputFiles('#shapecast_open_folder', folder);
+  else if (via === 'multiframe') await page.setInputFiles('#shapecast_open_files', multiFrameFile);
   else await page.setInputFiles('#shapecast_open_files', volumeFile);
   console.log(`  ${at().toFixed(1)} s: file chosen`);
 }

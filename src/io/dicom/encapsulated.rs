@@ -40,44 +40,154 @@ pub(super) fn frame_fragments(
     frags: &[&[u8]],
     offset_table: &[u32],
 ) -> Option<Vec<std::ops::Range<usize>>> {
+    let lens: Vec<u64> = frags.iter().map(|f| f.len() as u64).collect();
+    frames_of_fragments(transfer_syntax, n_frames, &lens, offset_table, |i| {
+        starts_codestream(frags[i])
+    })
+}
+
+/// [`frame_fragments`] from the fragments' lengths and whether each starts a codestream
+/// (`starts(i)`, asked only when the counts and the offset table do not settle it).
+pub(super) fn frames_of_fragments(
+    transfer_syntax: &str,
+    n_frames: usize,
+    lens: &[u64],
+    offset_table: &[u32],
+    mut starts: impl FnMut(usize) -> bool,
+) -> Option<Vec<std::ops::Range<usize>>> {
+    let n_frags = lens.len();
     let one_each = || Some((0..n_frames).map(|k| k..k + 1).collect());
     if transfer_syntax == RLE_LOSSLESS {
-        return if frags.len() >= n_frames {
+        return if n_frags >= n_frames {
             one_each()
         } else {
             None
         };
     }
-    if n_frames == 0 || frags.is_empty() {
+    if n_frames == 0 || n_frags == 0 {
         return None;
     }
-    if frags.len() == n_frames {
+    if n_frags == n_frames {
         return one_each();
     }
     if n_frames == 1 {
-        return Some(std::iter::once(0..frags.len()).collect());
+        return Some(std::iter::once(0..n_frags).collect());
     }
     if offset_table.len() == n_frames && offset_table[0] == 0 {
         // Offsets are from the first fragment's item header; each item header is 8 bytes.
-        let mut starts = Vec::with_capacity(n_frames);
+        let mut firsts = Vec::with_capacity(n_frames);
         let mut at = 0u64;
         let mut next = 0;
-        for (i, frag) in frags.iter().enumerate() {
+        for (i, len) in lens.iter().enumerate() {
             if next < n_frames && u64::from(offset_table[next]) == at {
-                starts.push(i);
+                firsts.push(i);
                 next += 1;
             }
-            at += frag.len() as u64 + 8;
+            at += len + 8;
         }
-        if starts.len() == n_frames {
-            return Some(ranges_from_starts(&starts, frags.len()));
+        if firsts.len() == n_frames {
+            return Some(ranges_from_starts(&firsts, n_frags));
         }
     }
-    let starts: Vec<usize> = (0..frags.len())
-        .filter(|&i| starts_codestream(frags[i]))
-        .collect();
-    (starts.len() == n_frames && starts.first() == Some(&0))
-        .then(|| ranges_from_starts(&starts, frags.len()))
+    let firsts: Vec<usize> = (0..n_frags).filter(|&i| starts(i)).collect();
+    (firsts.len() == n_frames && firsts.first() == Some(&0))
+        .then(|| ranges_from_starts(&firsts, n_frags))
+}
+
+/// Encapsulated pixel data located in a file rather than parsed into memory: each fragment's
+/// offset and length in the file (the Basic Offset Table's item excluded), and that table.
+#[derive(Debug)]
+pub(super) struct FragmentsInFile {
+    pub fragments: Vec<(u64, u64)>,
+    pub offset_table: Vec<u32>,
+}
+
+/// Walks the items of encapsulated pixel data from `at` (where [`super::FileHeader`] says they
+/// start) to the sequence delimiter, reading only the 8-byte item headers (and the offset
+/// table's item). An item that is not one, a length past the end of the file or a missing
+/// delimiter is an error naming the file.
+pub(super) fn locate_fragments(
+    file: &crate::io::InputFile,
+    at: u64,
+) -> Result<FragmentsInFile, LoadError> {
+    let bad = |message: String| LoadError::Dicom {
+        file: file.name.clone(),
+        message: format!("encapsulated pixel data: {message}"),
+    };
+    let len = file.len();
+    let mut pos = at;
+    let mut items: Vec<(u64, u64)> = Vec::new();
+    loop {
+        let mut head = [0u8; 8];
+        if pos.saturating_add(8) > len {
+            return Err(bad(format!(
+                "no sequence delimiter before the end of the file (byte {pos})"
+            )));
+        }
+        file.data().read_at(&file.name, pos, &mut head)?;
+        let group = u16::from_le_bytes([head[0], head[1]]);
+        let element = u16::from_le_bytes([head[2], head[3]]);
+        let item_len = u64::from(u32::from_le_bytes([head[4], head[5], head[6], head[7]]));
+        match (group, element) {
+            (0xFFFE, 0xE0DD) => break,
+            (0xFFFE, 0xE000) => {
+                let start = pos + 8;
+                if item_len == 0xFFFF_FFFF || start.saturating_add(item_len) > len {
+                    return Err(bad(format!(
+                        "item {} at byte {pos} declares {item_len} bytes; the file has {}",
+                        items.len(),
+                        len.saturating_sub(start)
+                    )));
+                }
+                items.push((start, item_len));
+                pos = start + item_len;
+            }
+            _ => {
+                return Err(bad(format!(
+                    "({group:04X},{element:04X}) at byte {pos} where an item or the sequence delimiter belongs"
+                )));
+            }
+        }
+    }
+    let Some(&(bot_at, bot_len)) = items.first() else {
+        return Err(bad("no Basic Offset Table item".to_owned()));
+    };
+    // The offset table holds one 32-bit offset per frame: a longer one is not read.
+    let offset_table = if bot_len % 4 == 0 && bot_len <= 4 * (super::MAX_FRAMES as u64) {
+        let mut bytes = vec![0u8; bot_len as usize];
+        file.data().read_at(&file.name, bot_at, &mut bytes)?;
+        bytes
+            .chunks_exact(4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    items.remove(0);
+    Ok(FragmentsInFile {
+        fragments: items,
+        offset_table,
+    })
+}
+
+/// Reads `len` bytes of a file at `at` into a new buffer (an error, never a panic, when memory
+/// or the file runs out).
+pub(super) fn read_range(
+    file: &crate::io::InputFile,
+    at: u64,
+    len: u64,
+) -> Result<Vec<u8>, LoadError> {
+    let n = usize::try_from(len).unwrap_or(usize::MAX);
+    let mut buf = Vec::new();
+    buf.try_reserve_exact(n)
+        .map_err(|_| LoadError::OutOfMemory {
+            file: file.name.clone(),
+            what: "a compressed frame".to_owned(),
+            bytes: len,
+        })?;
+    buf.resize(n, 0);
+    file.data().read_at(&file.name, at, &mut buf)?;
+    Ok(buf)
 }
 
 fn ranges_from_starts(starts: &[usize], n_frags: usize) -> Vec<std::ops::Range<usize>> {
@@ -89,7 +199,7 @@ fn ranges_from_starts(starts: &[usize], n_frags: usize) -> Vec<std::ops::Range<u
 }
 
 /// Whether a fragment begins a JPEG (SOI), JPEG 2000 (SOC + SIZ) or JP2 codestream.
-fn starts_codestream(frag: &[u8]) -> bool {
+pub(super) fn starts_codestream(frag: &[u8]) -> bool {
     frag.starts_with(&[0xFF, 0xD8])
         || frag.starts_with(&[0xFF, 0x4F, 0xFF, 0x51])
         || frag.starts_with(&[0, 0, 0, 0x0C, b'j', b'P', b' ', b' '])
@@ -387,8 +497,25 @@ pub(super) fn check_codestreams(
     frags: &[&[u8]],
 ) -> Result<(), LoadError> {
     for (f, frag) in frags.iter().enumerate() {
+        check_codestream(file, h, f, frag)?;
+    }
+    Ok(())
+}
+
+/// Bytes of a fragment's start that [`check_codestream`] reads at most (the JPEG marker walk
+/// stops within the first MiB).
+pub(super) const CODESTREAM_HEAD_BYTES: u64 = (1 << 20) + 16;
+
+/// [`check_codestreams`] of fragment `f` from its first [`CODESTREAM_HEAD_BYTES`].
+pub(super) fn check_codestream(
+    file: &str,
+    h: &FileHeader,
+    f: usize,
+    frag: &[u8],
+) -> Result<(), LoadError> {
+    {
         let Some((rows, cols, bits, components)) = declared_size(frag) else {
-            continue;
+            return Ok(());
         };
         // JPEG 2000 heights can come out as 0 for a zero-height image; treat as a mismatch.
         if rows != h.rows

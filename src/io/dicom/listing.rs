@@ -252,12 +252,37 @@ impl SeriesList {
 
     /// Loads entry `index` from `files`, which must be the files listed (same names, same
     /// order): only that stack's files are read again, for their pixels. The notes are the
-    /// list's.
+    /// list's. The files stay readable, for another entry later ([`Self::load_last`] lets
+    /// them go).
     pub fn load(
         &self,
         files: &[InputFile],
         index: usize,
         limits: &Limits,
+    ) -> Result<Loaded, LoadError> {
+        self.load_entry(files, index, limits, false)
+    }
+
+    /// [`Self::load`] as the last read of `files`: each file's pixel bytes are let go as they
+    /// are decoded ([`crate::io::FileSource::release_before`]), as a single volume file's are,
+    /// so that a multi-frame file's bytes shrink as its voxels grow (the browser's files).
+    /// Nothing is let go for a file on disk or bytes in memory; the chunks of a read-on-demand
+    /// file cannot be read again.
+    pub fn load_last(
+        &self,
+        files: &[InputFile],
+        index: usize,
+        limits: &Limits,
+    ) -> Result<Loaded, LoadError> {
+        self.load_entry(files, index, limits, true)
+    }
+
+    fn load_entry(
+        &self,
+        files: &[InputFile],
+        index: usize,
+        limits: &Limits,
+        release: bool,
     ) -> Result<Loaded, LoadError> {
         let stack = self
             .stacks
@@ -290,7 +315,7 @@ impl SeriesList {
                 message: "no image in this series".to_owned(),
             });
         };
-        let mut volume = series::assemble(&stack.series_uid, &chosen, limits)?;
+        let mut volume = series::assemble(&stack.series_uid, &chosen, limits, release)?;
         volume
             .warnings
             .extend(series::header_warnings(chosen.iter().map(|(_, h)| *h)));

@@ -281,6 +281,10 @@ pub(super) struct FileHeader {
     /// Where native little-endian samples of 8, 16 or 32 bits lie in the file (offset, declared
     /// length): they are then read there, frame by frame, without a parsed copy.
     pub native_pixels: Option<(u64, u64)>,
+    /// Where the items of encapsulated (compressed) pixel data start in the file, when the data
+    /// set is not deflated: a file read on demand then has its fragments read where they lie,
+    /// a frame at a time ([`encapsulated::locate_fragments`]), not parsed into memory.
+    pub encapsulated_pixels: Option<u64>,
 }
 
 fn frame_info(levels: &[Option<&InMemDicomObject>]) -> FrameInfo {
@@ -323,6 +327,54 @@ fn frame_info(levels: &[Option<&InMemDicomObject>]) -> FrameInfo {
         spacing_between,
         slope,
         intercept,
+    }
+}
+
+/// Frames of one file that all carry one ImagePositionPatient and none its own (a multi-frame
+/// file without per-frame positions: its top-level or shared position is the first frame's) are stacked from
+/// it along the slice normal, SpacingBetweenSlices (else SliceThickness) apart, as the NM image
+/// module defines and dcm2niix reads them. Taken as they were, every frame would sit at one
+/// position and all but the first be dropped as duplicates. Without a spacing, only the first
+/// frame keeps the position (the frames are then ordered by number).
+fn stack_shared_position(name: &str, frames: &mut [FrameInfo], warnings: &mut Vec<String>) {
+    let Some(p0) = frames.first().and_then(|f| f.position) else {
+        return;
+    };
+    if frames.len() < 2
+        || frames
+            .iter()
+            .any(|f| f.position.is_none_or(|p| (p - p0).length() > 1e-6))
+    {
+        return;
+    }
+    let normal = frames[0].orientation.map(|o| {
+        DVec3::new(o[0], o[1], o[2])
+            .cross(DVec3::new(o[3], o[4], o[5]))
+            .normalize_or_zero()
+    });
+    let step = frames[0]
+        .spacing_between
+        .map(|s| (s, "SpacingBetweenSlices"))
+        .or(frames[0].thickness.map(|t| (t, "SliceThickness")));
+    match (normal.filter(|n| n.length() > 0.5), step) {
+        (Some(normal), Some((step, field))) => {
+            for (k, f) in frames.iter_mut().enumerate() {
+                f.position = Some(p0 + normal * (step * k as f64));
+            }
+            warnings.push(format!(
+                "{name}: its {} frames share one ImagePositionPatient (no per-frame positions); they are stacked from it along the slice normal, {step} mm apart ({field})",
+                frames.len()
+            ));
+        }
+        _ => {
+            for f in frames.iter_mut().skip(1) {
+                f.position = None;
+            }
+            warnings.push(format!(
+                "{name}: its {} frames share one ImagePositionPatient and neither SpacingBetweenSlices nor SliceThickness says how far apart they are",
+                frames.len()
+            ));
+        }
     }
 }
 
@@ -450,6 +502,17 @@ pub(super) fn read_header(
             None => common.clone(),
         });
     }
+    // Positions of the frames' own (an enhanced image's per-frame groups) are kept as given:
+    // frames at one position there are phases or echoes.
+    let own_positions = per_frame.is_some_and(|items| {
+        items.iter().any(|i| {
+            first_item(i, tags::PLANE_POSITION_SEQUENCE)
+                .is_some_and(|p| p.get(tags::IMAGE_POSITION_PATIENT).is_some())
+        })
+    });
+    if !own_positions {
+        stack_shared_position(name, &mut frames, &mut warnings);
+    }
     let modality_name = elem_str(&obj, tags::MODALITY).unwrap_or_default();
     let modality = match modality_name.as_str() {
         "CT" => Modality::Ct,
@@ -466,12 +529,18 @@ pub(super) fn read_header(
         ));
     }
     let ts_trimmed = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']);
-    let native_pixels = pixel_data.filter(|_| {
-        matches!(ts_trimmed, "1.2.840.10008.1.2" | "1.2.840.10008.1.2.1")
+    let native_pixels = pixel_data.filter(|&(_, len)| {
+        len != validate::UNDEFINED_LENGTH
+            && matches!(ts_trimmed, "1.2.840.10008.1.2" | "1.2.840.10008.1.2.1")
             && matches!(bits_allocated, 8 | 16 | 32)
     });
+    let encapsulated_pixels = pixel_data
+        .filter(|&(_, len)| len == validate::UNDEFINED_LENGTH)
+        .filter(|_| !NATIVE_SYNTAXES.contains(&ts_trimmed))
+        .map(|(at, _)| at);
     Ok(Some(FileHeader {
         native_pixels,
+        encapsulated_pixels,
         series_uid: elem_str(&obj, tags::SERIES_INSTANCE_UID)
             .unwrap_or_else(|| "(no SeriesInstanceUID)".to_owned()),
         series_description: elem_str(&obj, tags::SERIES_DESCRIPTION).unwrap_or_default(),

@@ -11,7 +11,7 @@ use glam::DVec3;
 
 use super::{FileHeader, FrameInfo, NATIVE_SYNTAXES, check_transfer_syntax, encapsulated, open};
 use crate::io::geometry::checked_grid;
-use crate::io::raw::{self, try_vec};
+use crate::io::raw;
 use crate::io::{InputFile, Limits, LoadError};
 use crate::volume::{Volume, Voxels};
 
@@ -197,16 +197,27 @@ pub(super) fn choose_stack(
 }
 
 /// Geometry and voxels of one series.
+///
+/// With `release` this is the last read of the files: each lets its pixel bytes go as they are
+/// decoded ([`crate::io::FileSource::release_before`]; the browser's bytes shrink as the voxels
+/// grow).
 pub(super) fn assemble(
     series: &str,
     files: &[(&InputFile, &FileHeader)],
     limits: &Limits,
+    release: bool,
 ) -> Result<Volume, LoadError> {
     let named: Vec<(&str, &FileHeader)> =
         files.iter().map(|(f, h)| (f.name.as_str(), *h)).collect();
     let mut layout = layout(&named)?;
-    let (voxels, value_slope, value_intercept) =
-        read_pixels(series, files, &layout.frames, limits, &mut layout.warnings)?;
+    let (voxels, value_slope, value_intercept) = read_pixels(
+        series,
+        files,
+        &layout.frames,
+        limits,
+        release,
+        &mut layout.warnings,
+    )?;
     Ok(layout.into_volume(series, &named, voxels, value_slope, value_intercept))
 }
 
@@ -583,6 +594,13 @@ pub(super) enum Pixels<'a> {
         /// The fragments of each frame ([`encapsulated::frame_fragments`]).
         frames: Vec<std::ops::Range<usize>>,
     },
+    /// Encapsulated frames of a file read on demand, their fragments read from where they lie
+    /// (offset, length) one frame at a time.
+    EncodedInFile {
+        file: &'a InputFile,
+        fragments: &'a [(u64, u64)],
+        frames: Vec<std::ops::Range<usize>>,
+    },
 }
 
 /// Pixels converted at a time: a frame's samples go through an i64 scratch in pieces of at most
@@ -605,6 +623,28 @@ impl Pixels<'_> {
         rescale: (f64, f64),
         samples: &mut Vec<i64>,
     ) -> Result<(), String> {
+        if let Self::EncodedInFile {
+            file,
+            fragments,
+            frames,
+        } = self
+        {
+            let parts = frames
+                .get(frame)
+                .and_then(|r| fragments.get(r.clone()))
+                .ok_or_else(|| format!("no fragment holds frame {frame}"))?;
+            let read: Vec<Vec<u8>> = parts
+                .iter()
+                .map(|&(at, len)| encapsulated::read_range(file, at, len))
+                .collect::<Result<_, _>>()
+                .map_err(|e| e.to_string())?;
+            let refs: Vec<&[u8]> = read.iter().map(Vec::as_slice).collect();
+            // The frame's fragments, read: frame 0 of them all.
+            let whole = std::iter::once(0..refs.len()).collect::<Vec<_>>();
+            let decoded = decode_frame(h, &refs, &whole, 0, frame_len)?;
+            return Pixels::Bytes(&decoded)
+                .store(h, 0, 1, frame_len, voxels, dst_start, rescale, samples);
+        }
         if let Self::Encoded { fragments, frames } = self {
             // One frame decoded, stored, and dropped before the next.
             let decoded = decode_frame(h, fragments, frames, frame, frame_len)?;
@@ -623,7 +663,9 @@ impl Pixels<'_> {
         let len = match self {
             Self::Bytes(d) => d.len() as u64,
             Self::InFile { len, .. } => *len,
-            Self::Encoded { .. } => return Err("internal: encoded frames are decoded first".into()),
+            Self::Encoded { .. } | Self::EncodedInFile { .. } => {
+                return Err("internal: encoded frames are decoded first".into());
+            }
         };
         if (frame as u64 + 1) * frame_bytes > len {
             return Err(format!(
@@ -645,6 +687,29 @@ impl Pixels<'_> {
         Ok(())
     }
 
+    /// Lets go the bytes of native samples lying in the file before frame `frame` (frames
+    /// are then read in increasing order, none below `frame` again); nothing for the others.
+    pub(super) fn release_before_frame(&self, h: &FileHeader, frame: usize, frame_len: usize) {
+        match self {
+            Self::InFile { file, offset, .. } if matches!(h.bits_allocated, 8 | 16 | 32) => {
+                let frame_bytes = frame_len as u64 * u64::from(h.bits_allocated / 8);
+                let at = offset.saturating_add((frame as u64).saturating_mul(frame_bytes));
+                file.data().release_before(at);
+            }
+            Self::EncodedInFile {
+                file,
+                fragments,
+                frames,
+            } => {
+                // Up to the item header of the frame's first fragment.
+                if let Some(&(at, _)) = frames.get(frame).and_then(|r| fragments.get(r.start)) {
+                    file.data().release_before(at.saturating_sub(8));
+                }
+            }
+            _ => {}
+        }
+    }
+
     /// [`frame_samples`] of pixels `first..first + count` of frame `frame` of `n_frames`
     /// (the whole frame for 1-bit data).
     #[allow(clippy::too_many_arguments)] // one piece's place: kept explicit rather than bundled
@@ -662,10 +727,12 @@ impl Pixels<'_> {
         if !matches!(h.bits_allocated, 8 | 16 | 32) {
             return match self {
                 Self::Bytes(data) => frame_samples(h, data, frame, n_frames, frame_len, out),
-                Self::InFile { .. } | Self::Encoded { .. } => Err(format!(
-                    "BitsAllocated {} is not read from the file directly",
-                    h.bits_allocated
-                )),
+                Self::InFile { .. } | Self::Encoded { .. } | Self::EncodedInFile { .. } => {
+                    Err(format!(
+                        "BitsAllocated {} is not read from the file directly",
+                        h.bits_allocated
+                    ))
+                }
             };
         }
         let start = (frame as u64 * frame_len as u64 + first as u64) * bytes;
@@ -691,7 +758,9 @@ impl Pixels<'_> {
                     .map_err(|e| e.to_string())?;
                 frame_samples(h, &buf, 0, 1, count, out)
             }
-            Self::Encoded { .. } => Err("internal: encoded frames are decoded first".to_owned()),
+            Self::Encoded { .. } | Self::EncodedInFile { .. } => {
+                Err("internal: encoded frames are decoded first".to_owned())
+            }
         }
     }
 }
@@ -751,10 +820,15 @@ fn decode_frame(
 /// Opens a file, decodes its pixel data once and hands them to `f`. Native little-endian
 /// samples are read where they lie: in memory without a copy, from a file read on demand a
 /// frame at a time (no parsed object holds them); others where the parsed object holds them.
+///
+/// With `release` (the last read of this file: [`crate::io::FileSource::release_before`]),
+/// pixel data parsed into memory lets the file's bytes go once parsed; native samples read
+/// where they lie are let go frame by frame by the caller ([`Pixels::release_before_frame`]).
 pub(super) fn with_pixel_data<R>(
     file: &InputFile,
     header: &FileHeader,
     limits: &Limits,
+    release: bool,
     f: impl FnOnce(&Pixels<'_>) -> Result<R, LoadError>,
 ) -> Result<R, LoadError> {
     if let Some((offset, len)) = header.native_pixels
@@ -770,7 +844,63 @@ pub(super) fn with_pixel_data<R>(
             return f(&Pixels::InFile { file, offset, len });
         }
     }
+    if file.is_on_demand()
+        && let Some(at) = header.encapsulated_pixels
+        && matches!(header.bits_allocated, 8 | 16)
+    {
+        // Compressed frames of a file read on demand: located, checked and then read from the
+        // file a frame at a time, so the fragments are never all in memory (parsed, they were
+        // the file's size again beside the voxels).
+        let ts = header.transfer_syntax.trim_end_matches(['\0', ' ']);
+        let located = encapsulated::locate_fragments(file, at)?;
+        let lens: Vec<u64> = located.fragments.iter().map(|f| f.1).collect();
+        if ts == encapsulated::RLE_LOSSLESS {
+            let total = usize::try_from(lens.iter().sum::<u64>()).unwrap_or(usize::MAX);
+            encapsulated::check_rle_size(&file.name, header, total)?;
+        } else {
+            for (i, &(offset, len)) in located.fragments.iter().enumerate() {
+                let head = encapsulated::read_range(
+                    file,
+                    offset,
+                    len.min(encapsulated::CODESTREAM_HEAD_BYTES),
+                )?;
+                encapsulated::check_codestream(&file.name, header, i, &head)?;
+            }
+        }
+        let mut failed = None;
+        let frames = encapsulated::frames_of_fragments(
+            ts,
+            header.frames.len(),
+            &lens,
+            &located.offset_table,
+            |i| {
+                let (offset, len) = located.fragments[i];
+                match encapsulated::read_range(file, offset, len.min(8)) {
+                    Ok(head) => encapsulated::starts_codestream(&head),
+                    Err(e) => {
+                        failed.get_or_insert(e);
+                        false
+                    }
+                }
+            },
+        );
+        if let Some(e) = failed {
+            return Err(e);
+        }
+        if let Some(frames) = frames {
+            return f(&Pixels::EncodedInFile {
+                file,
+                fragments: &located.fragments,
+                frames,
+            });
+        }
+        // Frames that cannot be told apart are decoded whole, from the parsed file, below.
+    }
     let obj = open(file, false, limits)?;
+    if release {
+        // The object holds its own copy of everything: the file's bytes are not read again.
+        file.data().release_before(file.len());
+    }
     let fragments = encapsulated::fragments(&obj);
     if let Some(frags) = &fragments {
         let ts = header.transfer_syntax.trim_end_matches(['\0', ' ']);
@@ -836,12 +966,14 @@ pub(super) fn with_pixel_data<R>(
     f(&Pixels::Bytes(data))
 }
 
-/// Decodes each file's pixel data once and copies its frames into their slots.
+/// Decodes each file's pixel data once and copies its frames into their slots, reading a
+/// file's frames in the file's order; with `release`, letting each file's bytes go behind.
 fn read_pixels(
     series: &str,
     files: &[(&InputFile, &FileHeader)],
     frames: &[Frame<'_>],
     limits: &Limits,
+    release: bool,
     warnings: &mut Vec<String>,
 ) -> Result<(Voxels, f32, f32), LoadError> {
     let first = files[0].1;
@@ -851,20 +983,23 @@ fn read_pixels(
     let (target, same_rescale) = pixel_target(first, frames, warnings);
     raw::check_voxel_budget(files[0].0.name.as_str(), count, target.bytes(), limits)?;
     let count = count as usize;
+    // Reserved, not filled: the buffer grows as frames are stored ([`fill_to`]), so that its
+    // pages are touched as the file's bytes are let go, not all before the first frame.
     let allocate = || -> Result<Voxels, LoadError> {
-        let name = &files[0].0.name;
-        Ok(match target {
-            Target::U8 => Voxels::U8(try_vec(name, "voxels", count)?),
-            Target::I16 => Voxels::I16(try_vec(name, "voxels", count)?),
-            Target::U16 => Voxels::U16(try_vec(name, "voxels", count)?),
-            Target::F32 => Voxels::F32(try_vec(name, "voxels", count)?),
-        })
+        let mut v = target.empty();
+        reserve_exact(&mut v, count, &files[0].0.name)?;
+        Ok(v)
     };
 
     // Slots of each file's frames, so that every file is opened and decoded once.
     let mut slots_of_file: Vec<Vec<(usize, usize)>> = vec![Vec::new(); files.len()];
     for (slot, f) in frames.iter().enumerate() {
         slots_of_file[f.file].push((f.frame, slot));
+    }
+    // In the file's order (slots are filled in any order), so that what lies behind the frame
+    // being read is never read again.
+    for slots in &mut slots_of_file {
+        slots.sort_unstable();
     }
     // The checks that need no decoding, for every file, before the voxel buffer exists.
     for (fi, slots) in slots_of_file.iter().enumerate() {
@@ -878,12 +1013,15 @@ fn read_pixels(
     // huge image is refused before the buffer is made.
     let mut voxels: Option<Voxels> = None;
     let mut samples = Vec::new();
-    for (fi, slots) in slots_of_file.iter().enumerate() {
-        if slots.is_empty() {
-            continue;
-        }
+    // Files in the order of their first slot, so that the buffer fills from its start.
+    let mut file_order: Vec<usize> = (0..files.len())
+        .filter(|&fi| !slots_of_file[fi].is_empty())
+        .collect();
+    file_order.sort_by_key(|&fi| slots_of_file[fi].iter().map(|s| s.1).min());
+    for fi in file_order {
+        let slots = &slots_of_file[fi];
         let (file, header) = files[fi];
-        with_pixel_data(file, header, limits, |data| {
+        with_pixel_data(file, header, limits, release, |data| {
             let n_frames = header.frames.len();
             if voxels.is_none() {
                 voxels = Some(allocate()?);
@@ -898,6 +1036,10 @@ fn read_pixels(
                     file: file.name.clone(),
                     message,
                 };
+                if release {
+                    data.release_before_frame(header, frame, frame_len);
+                }
+                fill_to(voxels, (slot + 1) * frame_len);
                 let info = frames[slot].info;
                 let rescale = if same_rescale {
                     (1.0, 0.0)
@@ -918,13 +1060,55 @@ fn read_pixels(
             }
             Ok(())
         })?;
+        if release {
+            file.data().release_before(file.len());
+        }
     }
     let (slope, intercept) = volume_rescale(frames, same_rescale);
-    let voxels = match voxels {
+    let mut voxels = match voxels {
         Some(v) => v,
         None => allocate()?,
     };
+    fill_to(&mut voxels, count);
     Ok((voxels, slope, intercept))
+}
+
+/// Reserves room for `count` voxels in all, exactly (growing within it never reallocates).
+pub(super) fn reserve_exact(
+    voxels: &mut Voxels,
+    count: usize,
+    name: &str,
+) -> Result<(), LoadError> {
+    fn go<T>(v: &mut Vec<T>, count: usize, name: &str) -> Result<(), LoadError> {
+        let more = count.saturating_sub(v.len());
+        v.try_reserve_exact(more)
+            .map_err(|_| LoadError::OutOfMemory {
+                file: name.to_owned(),
+                what: "voxels".to_owned(),
+                bytes: (count as u64).saturating_mul(std::mem::size_of::<T>() as u64),
+            })
+    }
+    match voxels {
+        Voxels::U8(v) => go(v, count, name),
+        Voxels::I16(v) => go(v, count, name),
+        Voxels::U16(v) => go(v, count, name),
+        Voxels::F32(v) => go(v, count, name),
+    }
+}
+
+/// Lengthens the buffer with zeros to `len` voxels, within what was reserved (never shortens).
+fn fill_to(voxels: &mut Voxels, len: usize) {
+    fn go<T: Clone + Default>(v: &mut Vec<T>, len: usize) {
+        if len > v.len() {
+            v.resize(len, T::default());
+        }
+    }
+    match voxels {
+        Voxels::U8(v) => go(v, len),
+        Voxels::I16(v) => go(v, len),
+        Voxels::U16(v) => go(v, len),
+        Voxels::F32(v) => go(v, len),
+    }
 }
 
 /// The native PixelData's bytes as the object holds them (little endian), without a copy

@@ -158,8 +158,10 @@ impl SeriesBuilder {
         let start = first_frame * frame_len;
         let end = start + n_frames * frame_len;
         grow(&mut st.voxels, end, &file.name)?;
-        let decoded = series::with_pixel_data(&file, &header, &self.limits, |data| {
+        let decoded = series::with_pixel_data(&file, &header, &self.limits, true, |data| {
             for k in 0..n_frames {
+                // The file is the builder's: what lies behind is never read again.
+                data.release_before_frame(&header, k, frame_len);
                 data.store(
                     &header,
                     k,

@@ -42,7 +42,8 @@ const INFLATE_CHUNK: usize = 64 << 10;
 ///
 /// Returns where a top-level PixelData of defined length starts in `body` and how long it is
 /// declared (not checked to be present when `until_pixel_data`), for a data set that is not
-/// deflated: its native samples can then be read where they lie.
+/// deflated: its native samples can then be read where they lie. For encapsulated pixel data
+/// the length is [`UNDEFINED_LENGTH`] and the offset is where its items start.
 ///
 /// Also says whether a walk `until_pixel_data` stopped at PixelData (or the first top-level tag
 /// after it) in a data set that is not deflated: then `body` holds every element a header-only
@@ -297,11 +298,16 @@ impl ImageSize {
     }
 }
 
+/// The declared length [`check_lengths`] gives an encapsulated PixelData, whose value is a
+/// sequence of items (fragments) of undefined length in all.
+pub(super) const UNDEFINED_LENGTH: u64 = u64::MAX;
+
 struct Walk<'a> {
     file: &'a str,
     limits: &'a Limits,
     until_pixel_data: bool,
-    /// Where the top-level PixelData's value starts (in the data set) and its declared length.
+    /// Where the top-level PixelData's value starts (in the data set) and its declared length
+    /// ([`UNDEFINED_LENGTH`] for encapsulated pixel data: where its first item starts).
     pixel_data: Cell<Option<(usize, u64)>>,
     /// Whether the walk stopped at the first top-level tag at or after PixelData (with
     /// `until_pixel_data`), rather than at the end of the bytes.
@@ -356,6 +362,10 @@ impl Walk<'_> {
                     None
                 }
                 DataToken::PixelSequenceStart => {
+                    if depth == 0 {
+                        // Encapsulated: its items start here (the length is undefined).
+                        self.pixel_data.set(Some((pos.get(), UNDEFINED_LENGTH)));
+                    }
                     if depth == 0 && self.until_pixel_data {
                         self.stopped.set(true);
                         return Ok(());
