@@ -270,7 +270,6 @@ fn adler_blind(file: &InputFile) -> Option<Volume> {
         .map(|l| l.volume)
 }
 
-/// Two volumes the same, bit for bit (NaN voxels included).
 /// What a load came to, in a few words.
 fn describe(r: &std::thread::Result<Result<Loaded, io::LoadError>>) -> String {
     match r {
@@ -280,6 +279,7 @@ fn describe(r: &std::thread::Result<Result<Loaded, io::LoadError>>) -> String {
     }
 }
 
+/// Two volumes the same, bit for bit (NaN voxels included).
 fn identical(a: &Volume, b: &Volume) -> bool {
     let same_voxels = match (&a.voxels, &b.voxels) {
         (Voxels::F32(x), Voxels::F32(y)) => {

@@ -102,10 +102,15 @@ pub(super) struct FragmentsInFile {
     pub offset_table: Vec<u32>,
 }
 
+/// Items (fragments and the offset table) walked at most: four per frame of the largest frame
+/// count accepted, 64 MiB of table.
+const MAX_ITEMS: usize = 4 * super::MAX_FRAMES as usize;
+
 /// Walks the items of encapsulated pixel data from `at` (where [`super::FileHeader`] says they
-/// start) to the sequence delimiter, reading only the 8-byte item headers (and the offset
-/// table's item). An item that is not one, a length past the end of the file or a missing
-/// delimiter is an error naming the file.
+/// start) to the sequence delimiter (or the end of the file, where dicom-rs ends it too),
+/// reading only the 8-byte item headers (and the offset table's item). A tag that is not an
+/// item, a length past the end of the file or more than [`MAX_ITEMS`] items is an error
+/// naming the file.
 pub(super) fn locate_fragments(
     file: &crate::io::InputFile,
     at: u64,
@@ -120,10 +125,20 @@ pub(super) fn locate_fragments(
     loop {
         let mut head = [0u8; 8];
         if pos.saturating_add(8) > len {
+            // Items running to the end of the file without the sequence delimiter: dicom-rs
+            // ends the sequence there too (and loads the file from memory), so do the same.
+            break;
+        }
+        if items.len() >= MAX_ITEMS {
             return Err(bad(format!(
-                "no sequence delimiter before the end of the file (byte {pos})"
+                "more than {MAX_ITEMS} items (fragments); the file is corrupt or crafted"
             )));
         }
+        items.try_reserve(1).map_err(|_| LoadError::OutOfMemory {
+            file: file.name.clone(),
+            what: "the table of compressed fragments".to_owned(),
+            bytes: (items.len() as u64 + 1) * 16,
+        })?;
         file.data().read_at(&file.name, pos, &mut head)?;
         let group = u16::from_le_bytes([head[0], head[1]]);
         let element = u16::from_le_bytes([head[2], head[3]]);

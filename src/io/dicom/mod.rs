@@ -330,8 +330,8 @@ fn frame_info(levels: &[Option<&InMemDicomObject>]) -> FrameInfo {
     }
 }
 
-/// Frames of one file that all carry one ImagePositionPatient and none its own (a multi-frame
-/// file without per-frame positions: its top-level or shared position is the first frame's) are stacked from
+/// Frames of a classic multi-frame file (no functional groups) that all carry its one
+/// ImagePositionPatient (the first frame's) are stacked from
 /// it along the slice normal, SpacingBetweenSlices (else SliceThickness) apart, as the NM image
 /// module defines and dcm2niix reads them. Taken as they were, every frame would sit at one
 /// position and all but the first be dropped as duplicates. Without a spacing, only the first
@@ -356,26 +356,29 @@ fn stack_shared_position(name: &str, frames: &mut [FrameInfo], warnings: &mut Ve
         .spacing_between
         .map(|s| (s, "SpacingBetweenSlices"))
         .or(frames[0].thickness.map(|t| (t, "SliceThickness")));
-    match (normal.filter(|n| n.length() > 0.5), step) {
-        (Some(normal), Some((step, field))) => {
-            for (k, f) in frames.iter_mut().enumerate() {
-                f.position = Some(p0 + normal * (step * k as f64));
-            }
-            warnings.push(format!(
-                "{name}: its {} frames share one ImagePositionPatient (no per-frame positions); they are stacked from it along the slice normal, {step} mm apart ({field})",
-                frames.len()
-            ));
+    let normal = normal.filter(|n| n.length() > 0.5);
+    if let (Some(normal), Some((step, field))) = (normal, step) {
+        for (k, f) in frames.iter_mut().enumerate() {
+            f.position = Some(p0 + normal * (step * k as f64));
         }
-        _ => {
-            for f in frames.iter_mut().skip(1) {
-                f.position = None;
-            }
-            warnings.push(format!(
-                "{name}: its {} frames share one ImagePositionPatient and neither SpacingBetweenSlices nor SliceThickness says how far apart they are",
-                frames.len()
-            ));
-        }
+        warnings.push(format!(
+            "{name}: its {} frames share one ImagePositionPatient (no per-frame positions); they are stacked from it along the slice normal (row x column direction), {step} mm apart ({field})",
+            frames.len()
+        ));
+        return;
     }
+    for f in frames.iter_mut().skip(1) {
+        f.position = None;
+    }
+    let missing = if normal.is_none() {
+        "no ImageOrientationPatient gives the slice normal"
+    } else {
+        "neither SpacingBetweenSlices nor SliceThickness says how far apart they are"
+    };
+    warnings.push(format!(
+        "{name}: its {} frames share one ImagePositionPatient and {missing}; they are ordered by frame number",
+        frames.len()
+    ));
 }
 
 /// Transfer syntaxes whose pixel data are stored as they are (possibly deflated as a whole).
@@ -502,15 +505,10 @@ pub(super) fn read_header(
             None => common.clone(),
         });
     }
-    // Positions of the frames' own (an enhanced image's per-frame groups) are kept as given:
-    // frames at one position there are phases or echoes.
-    let own_positions = per_frame.is_some_and(|items| {
-        items.iter().any(|i| {
-            first_item(i, tags::PLANE_POSITION_SEQUENCE)
-                .is_some_and(|p| p.get(tags::IMAGE_POSITION_PATIENT).is_some())
-        })
-    });
-    if !own_positions {
+    // Only a classic multi-frame file (no functional groups: its one position is the top
+    // level's) is stacked. An enhanced image's frames that share a position, per frame or in
+    // the shared group, are phases, echoes or b-values at one place and stay as given.
+    if per_frame.is_none() && shared.is_none() {
         stack_shared_position(name, &mut frames, &mut warnings);
     }
     let modality_name = elem_str(&obj, tags::MODALITY).unwrap_or_default();

@@ -91,7 +91,9 @@ impl SeriesBuilder {
     }
 
     /// Reads one image's header, decodes its pixels into the stage of its size and type, and
-    /// drops its bytes. A file that is not a readable image is noted and skipped, as the file
+    /// drops its bytes: this is the file's last read, so a source that can let bytes go
+    /// ([`crate::io::FileSource::release_before`]) lets them go as the frames are decoded, and
+    /// a clone of `file` sharing that source cannot be read again. A file that is not a readable image is noted and skipped, as the file
     /// loader does; pixels that cannot be decoded, or more voxels than the limits allow, are an
     /// error.
     pub fn push(&mut self, file: InputFile) -> Result<(), LoadError> {
