@@ -1049,6 +1049,53 @@ fn frames_sharing_the_files_one_position_are_stacked_along_the_normal() {
     );
 }
 
+/// A multi-frame file stored head to feet (per-frame positions going down): its frames are
+/// read in the file's order and put in slice order (ascending along the normal) at the end,
+/// from memory and on demand alike.
+#[test]
+fn frames_stored_head_to_feet_are_put_in_slice_order() {
+    let attrs = image_attributes(2, 2, Some(4), 16, 0);
+    let split = attrs
+        .windows(4)
+        .position(|w| w == [0x28, 0x00, 0x02, 0x00])
+        .expect("SamplesPerPixel");
+    let mut d = attrs[..split].to_vec();
+    element(&mut d, (0x0020, 0x0037), b"DS", b"1\\0\\0\\0\\1\\0", None);
+    d.extend_from_slice(&attrs[split..]);
+    let item = |content: &[u8]| {
+        let mut i = vec![0xFE, 0xFF, 0x00, 0xE0];
+        i.extend_from_slice(&(content.len() as u32).to_le_bytes());
+        i.extend_from_slice(content);
+        i
+    };
+    let mut per_frame = Vec::new();
+    for k in 0..4 {
+        let mut position = Vec::new();
+        let z = format!("0\\0\\{}", 10 - 2 * k);
+        element(&mut position, (0x0020, 0x0032), b"DS", z.as_bytes(), None);
+        let mut plane = Vec::new();
+        element(&mut plane, (0x0020, 0x9113), b"SQ", &item(&position), None);
+        per_frame.extend_from_slice(&item(&plane));
+    }
+    element(&mut d, (0x5200, 0x9230), b"SQ", &per_frame, None);
+    let pixels: Vec<u8> = (0..4u16)
+        .flat_map(|f| (0..4).flat_map(move |_| (100 + f).to_le_bytes()))
+        .collect();
+    element(&mut d, (0x7FE0, 0x0010), b"OW", &pixels, None);
+    let file = dicom_file(EXPLICIT_LE, &d);
+    for load in [load_one, load_on_demand] {
+        let v = load("downward.dcm", file.clone(), &Limits::default())
+            .expect("loads")
+            .volume;
+        assert_eq!(v.dims, [2, 2, 4]);
+        for s in 0..4 {
+            // Slice s (z = 4 + 2s mm) is frame 3 - s.
+            assert_eq!(v.value_at(1, 1, s), 100.0 + (3 - s) as f32, "slice {s}");
+        }
+        assert!((v.spacing_mm[2] - 2.0).abs() < 1e-9, "{:?}", v.spacing_mm);
+    }
+}
+
 #[test]
 fn native_dicom_memory_is_bounded() {
     // 32 frames of 512 x 512 at 16 bits: 16 MiB of pixels in, 16 MiB of voxels out.

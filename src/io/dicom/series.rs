@@ -1013,7 +1013,18 @@ fn read_pixels(
     // huge image is refused before the buffer is made.
     let mut voxels: Option<Voxels> = None;
     let mut samples = Vec::new();
-    // Files in the order of their first slot, so that the buffer fills from its start.
+    // Frames are stored in the order they are read (files in the order of their first slot,
+    // each file's frames in its own order), so that the buffer fills from its start as the
+    // file's bytes are let go, whatever way the frames run; `arrived[a]` is the slot of the
+    // a-th frame stored, and the frames are put in slot order once all are in.
+    let mut arrived: Vec<usize> = Vec::new();
+    arrived
+        .try_reserve_exact(frames.len())
+        .map_err(|_| LoadError::OutOfMemory {
+            file: files[0].0.name.clone(),
+            what: "the table of frames".to_owned(),
+            bytes: frames.len() as u64 * 8,
+        })?;
     let mut file_order: Vec<usize> = (0..files.len())
         .filter(|&fi| !slots_of_file[fi].is_empty())
         .collect();
@@ -1039,7 +1050,8 @@ fn read_pixels(
                 if release {
                     data.release_before_frame(header, frame, frame_len);
                 }
-                fill_to(voxels, (slot + 1) * frame_len);
+                let at = arrived.len();
+                fill_to(voxels, (at + 1) * frame_len);
                 let info = frames[slot].info;
                 let rescale = if same_rescale {
                     (1.0, 0.0)
@@ -1052,11 +1064,12 @@ fn read_pixels(
                     n_frames,
                     frame_len,
                     voxels,
-                    slot * frame_len,
+                    at * frame_len,
                     rescale,
                     &mut samples,
                 )
                 .map_err(slice_error)?;
+                arrived.push(slot);
             }
             Ok(())
         })?;
@@ -1070,6 +1083,14 @@ fn read_pixels(
         None => allocate()?,
     };
     fill_to(&mut voxels, count);
+    if arrived.len() == frames.len() && arrived.iter().enumerate().any(|(a, &s)| a != s) {
+        // Slot s takes the frame stored at position order[s] (one frame of scratch).
+        let mut order = vec![0usize; frames.len()];
+        for (a, &slot) in arrived.iter().enumerate() {
+            order[slot] = a;
+        }
+        super::stream::permute(&mut voxels, &order, frame_len);
+    }
     Ok((voxels, slope, intercept))
 }
 

@@ -374,7 +374,7 @@ fn truncate(voxels: &mut Voxels, len: usize) {
 
 /// Reorders frames in place so that frame `s` becomes the old frame `order[s]`, then drops the
 /// frames no slot uses. `order` holds distinct frame indices. One frame of scratch memory.
-fn permute(voxels: &mut Voxels, order: &[usize], frame_len: usize) {
+pub(super) fn permute(voxels: &mut Voxels, order: &[usize], frame_len: usize) {
     match voxels {
         Voxels::U8(v) => permute_frames(v, order, frame_len),
         Voxels::I16(v) => permute_frames(v, order, frame_len),
