@@ -581,6 +581,74 @@ fn gzip_padding_is_accepted_and_trailing_garbage_refused() {
     expect_err(r, "junk.nii.gz", &["gzip"]);
 }
 
+/// A few MB declaring gigabytes (issue item 4's 4 MB .nii.gz of 1600^3 voxels; a JPEG series of
+/// empty frames; a zip of zeros) is refused as a decompression bomb before anything is
+/// inflated or allocated: it would cost the gigabytes before anything could be shown.
+#[test]
+fn decompression_bombs_of_a_few_mb_are_refused_before_inflating() {
+    // NIfTI: 1600^3 u8 (4.1 GB) of zeros, a consistent stream in 4 MB: gzip members of 64 MiB
+    // of zeros each (every member's CRC-32 and size right), after one holding the header.
+    let total: u64 = 1600 * 1600 * 1600;
+    let zeros = gzip(&vec![0u8; 64 << 20]);
+    let mut head = nifti_u8_header([1600, 1600, 1600]);
+    head.resize(352 + (1 << 20), 0);
+    let mut gz = gzip(&head);
+    let mut left = total - (1 << 20);
+    while left >= 64 << 20 {
+        gz.extend_from_slice(&zeros);
+        left -= 64 << 20;
+    }
+    gz.extend_from_slice(&gzip(&vec![0u8; left as usize]));
+    assert!(gz.len() < 8 << 20, "{} bytes", gz.len());
+    for load in [load_one, load_on_demand] {
+        let t = std::time::Instant::now();
+        let (r, peak) = peak_during(|| load("huge.nii.gz", gz.clone(), &Limits::default()));
+        expect_err(r, "huge.nii.gz", &["decompression bomb"]);
+        assert!(peak < 16 * MIB, "peak {peak} bytes");
+        assert!(t.elapsed().as_secs() < 5, "{:?}", t.elapsed());
+    }
+    // DICOM: 5000 JPEG frames of 512 x 512 (2.6 GB of voxels) in 4-byte fragments.
+    let mut d = image_attributes(512, 512, Some(5000), 16, 0);
+    let frame: &[u8] = &[0xFF, 0xD8, 0xFF, 0xD9];
+    d.extend_from_slice(&encapsulated(&vec![frame; 5000]));
+    let f = dicom_file("1.2.840.10008.1.2.4.50", &d);
+    for load in [load_one, load_on_demand] {
+        let (r, peak) = peak_during(|| load("frames.dcm", f.clone(), &Limits::default()));
+        expect_err(r, "frames.dcm", &["decompression bomb"]);
+        assert!(peak < 16 * MIB, "peak {peak} bytes");
+    }
+    // A zip archive of a 1.1 GiB entry of zeros (about 1 MB deflated).
+    let zip = {
+        let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        let options = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Deflated)
+            .large_file(false);
+        w.start_file("zeros.raw", options).expect("entry");
+        let chunk = vec![0u8; 1 << 20];
+        for _ in 0..1100 {
+            w.write_all(&chunk).expect("write");
+        }
+        w.finish().expect("zip").into_inner()
+    };
+    assert!(zip.len() < 8 << 20, "{} bytes", zip.len());
+    let (r, peak) = peak_during(|| {
+        io::zip::expand(
+            vec![InputFile::new("zeros.zip", zip.clone())],
+            &Limits::default(),
+        )
+    });
+    let e = r.expect_err("refused").to_string();
+    assert!(
+        e.contains("zeros.zip") && e.contains("decompression bomb"),
+        "{e}"
+    );
+    assert!(peak < 16 * MIB, "peak {peak} bytes");
+    // Real compression ratios load: 256^3 u8 of zeros in 16 KB is 1000:1, but only 16 MiB.
+    let mut plain = nifti_u8_header([256, 256, 256]);
+    plain.resize(352 + (1 << 24), 0);
+    assert!(load_one("small.nii.gz", gzip(&plain), &Limits::default()).is_ok());
+}
+
 #[test]
 fn gzip_memory_is_the_voxels_plus_a_constant() {
     // 256^3 u8 = 16 MiB of voxels from a ~16 KB file: it used to cost the inflated buffer and

@@ -74,6 +74,35 @@ pub(crate) fn check_voxel_budget(
     Ok(())
 }
 
+/// Output a compressed file may expand to before [`check_expansion`] asks how much it grows.
+pub(crate) const BOMB_MIN_BYTES: u64 = 1 << 30;
+/// How many times its compressed bytes a compressed file's output of more than
+/// [`BOMB_MIN_BYTES`] may be. Real scans compress 2-5x losslessly (a sparse label map a few
+/// hundred times, at a few hundred MB); a file of a few MB declaring gigabytes is a
+/// decompression bomb, and reading it would cost the gigabytes before anything is seen.
+pub(crate) const BOMB_RATIO: u64 = 128;
+
+/// Refuses `out_bytes` of output (voxels, inflated bytes) from `compressed` bytes of `what`
+/// when that is more than [`BOMB_MIN_BYTES`] and more than [`BOMB_RATIO`] times the compressed
+/// bytes, before anything is allocated or inflated.
+pub(crate) fn check_expansion(
+    file: &str,
+    what: &str,
+    compressed: u64,
+    out_bytes: u64,
+) -> Result<(), LoadError> {
+    if out_bytes > BOMB_MIN_BYTES && out_bytes / BOMB_RATIO > compressed {
+        return Err(LoadError::Decompress {
+            file: file.to_owned(),
+            message: format!(
+                "{what}: {compressed} compressed bytes declare {out_bytes} bytes ({}:1); scans compress far less than {BOMB_RATIO}:1, so this is refused as a decompression bomb",
+                out_bytes / compressed.max(1)
+            ),
+        });
+    }
+    Ok(())
+}
+
 /// A vector of `len` default values, or an error instead of an abort when memory is short
 /// (on wasm32 an allocation failure would otherwise end the page).
 pub(crate) fn try_vec<T: Clone + Default>(
@@ -429,6 +458,12 @@ pub(crate) fn inflate_voxels(
         });
     }
     layout.check_voxel_budget(file, limits)?;
+    check_expansion(
+        file,
+        &format!("{} data", kind.name()),
+        compressed.len(),
+        needed,
+    )?;
     if kind == Compression::Gzip {
         check_gzip_trailer(file, compressed, needed, declared_bytes)?;
     }

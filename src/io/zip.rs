@@ -273,6 +273,7 @@ fn unpack(
             limit: *budget,
         });
     }
+    crate::io::raw::check_expansion(name, "zip archive", archive_file.len(), declared_total)?;
     // The entries to read: opened once each here (so that an unsupported codec or encryption
     // is refused now), inflated when the loader reads them.
     let mut entries = Vec::new();

@@ -982,6 +982,17 @@ fn read_pixels(
     // One rescale for the whole volume keeps the raw type; differing ones need physical floats.
     let (target, same_rescale) = pixel_target(first, frames, warnings);
     raw::check_voxel_budget(files[0].0.name.as_str(), count, target.bytes(), limits)?;
+    // Compressed frames (RLE, JPEG, JPEG 2000, a deflated data set) cannot be far smaller
+    // than the voxels they decode to.
+    let file_bytes = files
+        .iter()
+        .fold(0u64, |n, (f, _)| n.saturating_add(f.len()));
+    raw::check_expansion(
+        files[0].0.name.as_str(),
+        "DICOM pixel data",
+        file_bytes,
+        count.saturating_mul(target.bytes()),
+    )?;
     let count = count as usize;
     // Reserved, not filled: the buffer grows as frames are stored ([`fill_to`]), so that its
     // pages are touched as the file's bytes are let go, not all before the first frame.
