@@ -243,8 +243,10 @@ fn nesting_within_the_limit_loads_and_beyond_it_is_refused() {
 fn deflated_nesting_is_refused_too() {
     let mut f = meta(DEFLATED_LE);
     f.extend_from_slice(&raw_deflate(&native_slice(2, 2, 10_000)));
-    let r = load_one("deep-deflated.dcm", f, &Limits::default());
-    expect_err(r, "deep-deflated.dcm", &["nested more than 64"]);
+    for load in [load_one, load_on_demand] {
+        let r = load("deep-deflated.dcm", f.clone(), &Limits::default());
+        expect_err(r, "deep-deflated.dcm", &["nested more than 64"]);
+    }
 }
 
 #[test]
@@ -260,9 +262,11 @@ fn deflated_length_lies_are_refused_before_allocating() {
     );
     let mut f = meta(DEFLATED_LE);
     f.extend_from_slice(&raw_deflate(&d));
-    let (r, peak) = peak_during(|| load_one("lie.dcm", f, &Limits::default()));
-    expect_err(r, "lie.dcm", &["truncated"]);
-    assert!(peak < 8 * MIB, "peak {peak} bytes");
+    for load in [load_one, load_on_demand] {
+        let (r, peak) = peak_during(|| load("lie.dcm", f.clone(), &Limits::default()));
+        expect_err(r, "lie.dcm", &["truncated"]);
+        assert!(peak < 8 * MIB, "peak {peak} bytes");
+    }
 }
 
 #[test]
@@ -276,9 +280,11 @@ fn deflate_bombs_are_refused_in_bounded_memory() {
     f.extend_from_slice(&raw_deflate(&d));
     drop(d);
     assert!(f.len() < MIB, "{} bytes", f.len());
-    let (r, peak) = peak_during(|| load_one("bomb.dcm", f.clone(), &Limits::default()));
-    expect_err(r, "bomb.dcm", &["PixelData", "far more"]);
-    assert!(peak < 8 * MIB, "peak {peak} bytes");
+    for load in [load_one, load_on_demand] {
+        let (r, peak) = peak_during(|| load("bomb.dcm", f.clone(), &Limits::default()));
+        expect_err(r, "bomb.dcm", &["PixelData", "far more"]);
+        assert!(peak < 8 * MIB, "peak {peak} bytes");
+    }
 
     // The same zeros under a header that agrees (128 frames), beyond a 16 MiB voxel cap: refused
     // at the PixelData header, before the zeros are inflated.
@@ -292,9 +298,11 @@ fn deflate_bombs_are_refused_in_bounded_memory() {
         max_voxel_bytes: 16 * MIB as u64,
         max_decompressed_bytes: 1 << 30,
     };
-    let (r, peak) = peak_during(|| load_one("consistent-bomb.dcm", f, &limits));
-    expect_err(r, "consistent-bomb.dcm", &["limit"]);
-    assert!(peak < 8 * MIB, "peak {peak} bytes");
+    for load in [load_one, load_on_demand] {
+        let (r, peak) = peak_during(|| load("consistent-bomb.dcm", f.clone(), &limits));
+        expect_err(r, "consistent-bomb.dcm", &["limit"]);
+        assert!(peak < 8 * MIB, "peak {peak} bytes");
+    }
 }
 
 #[test]

@@ -946,6 +946,64 @@ fn an_incompressible_rle_multi_frame_dicom_is_read_a_frame_at_a_time_from_the_fi
     );
 }
 
+/// `dicom(..)` with its data set deflated (Deflated Explicit VR Little Endian): the transfer
+/// syntax in the meta group changed (and the group's length), the rest raw-deflated.
+fn deflated_data_set(plain: &[u8]) -> Vec<u8> {
+    let old: &[u8] = b"\x10\x00UI\x14\x001.2.840.10008.1.2.1\0";
+    let at = plain
+        .windows(old.len())
+        .position(|w| w == old)
+        .expect("the transfer syntax");
+    let group_len = u32::from_le_bytes([plain[140], plain[141], plain[142], plain[143]]) as usize;
+    let data_start = 144 + group_len;
+    let mut f = plain[..data_start].to_vec();
+    f.splice(
+        at..at + old.len(),
+        b"\x10\x00UI\x16\x001.2.840.10008.1.2.1.99".iter().copied(),
+    );
+    f[140..144].copy_from_slice(&((group_len + 2) as u32).to_le_bytes());
+    let mut enc = flate2::write::DeflateEncoder::new(f, flate2::Compression::fast());
+    enc.write_all(&plain[data_start..]).expect("deflate");
+    enc.finish().expect("deflate")
+}
+
+/// A deflated data set read on demand: its frames are inflated as they are read, so the peak
+/// is the voxels and a window, not the inflated data set beside the voxels (dicom-rs inflates
+/// it whole: about 2x, and that is still the path for one in memory).
+#[test]
+fn a_deflated_multi_frame_dicom_is_inflated_a_frame_at_a_time_from_the_file() {
+    let deflated = deflated_data_set(&dicom(0, DIMS[2], 0));
+    let expected = io::load(&[InputFile::new("deflated.dcm", deflated.clone())])
+        .expect("loads from memory")
+        .volume;
+    check_values("deflated multi-frame DICOM", &expected, "i16");
+    let voxel_bytes = expected.voxels.byte_len();
+    let dir = temp_dir("deflated");
+    let path = dir.join("deflated.dcm");
+    std::fs::write(&path, &deflated).expect("write");
+    let (r, peak) = peak_during(|| {
+        let (inputs, _) = shapecast::files::read_all(std::slice::from_ref(&path)).expect("lists");
+        io::load(&inputs)
+    });
+    let v = r.unwrap_or_else(|e| panic!("{e}")).volume;
+    assert!(v.voxels == expected.voxels, "the same voxels from disk");
+    check_disk_peak(
+        &format!(
+            "deflated multi-frame DICOM ({} bytes) from disk",
+            deflated.len()
+        ),
+        peak,
+        voxel_bytes,
+    );
+    std::fs::remove_dir_all(&dir).expect("clean up");
+    // A stream cut short is refused by name, on demand as in memory.
+    let cut = deflated[..deflated.len() / 2].to_vec();
+    let f = InputFile::on_demand("cut.dcm", std::sync::Arc::new(io::MemorySource(cut)))
+        .expect("reads the head");
+    let e = io::load(&[f]).expect_err("cut short").to_string();
+    assert!(e.contains("cut.dcm"), "{e}");
+}
+
 #[test]
 fn ascii_numbers_cut_by_a_read_chunk_are_read_whole() {
     // The text is read in 1 MiB chunks: numbers straddling each chunk's end, and the last one

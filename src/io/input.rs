@@ -118,6 +118,11 @@ impl InputFile {
         self.source.is_some()
     }
 
+    /// The source a file read on demand is read from (shared, not copied).
+    pub(crate) fn source(&self) -> Option<Arc<dyn FileSource>> {
+        self.source.clone()
+    }
+
     /// The whole content: borrowed when in memory, else read now (the caller drops it as soon
     /// as it can).
     pub fn contents(&self) -> Result<Cow<'_, [u8]>, LoadError> {

@@ -4,6 +4,7 @@
 
 mod encapsulated;
 mod folder;
+mod inflated;
 mod listing;
 mod series;
 mod stream;

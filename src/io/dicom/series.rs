@@ -817,6 +817,9 @@ fn decode_frame(
     Ok(out)
 }
 
+/// The deflated data set's transfer syntax.
+const DEFLATED_EXPLICIT_LE: &str = "1.2.840.10008.1.2.1.99";
+
 /// Opens a file, decodes its pixel data once and hands them to `f`. Native little-endian
 /// samples are read where they lie: in memory without a copy, from a file read on demand a
 /// frame at a time (no parsed object holds them); others where the parsed object holds them.
@@ -824,6 +827,8 @@ fn decode_frame(
 /// With `release` (the last read of this file: [`crate::io::FileSource::release_before`]),
 /// pixel data parsed into memory lets the file's bytes go once parsed; native samples read
 /// where they lie are let go frame by frame by the caller ([`Pixels::release_before_frame`]).
+/// A deflated data set read on demand has its native samples inflated as they are read
+/// ([`super::inflated`]).
 pub(super) fn with_pixel_data<R>(
     file: &InputFile,
     header: &FileHeader,
@@ -843,6 +848,18 @@ pub(super) fn with_pixel_data<R>(
         } else {
             return f(&Pixels::InFile { file, offset, len });
         }
+    }
+    if file.is_on_demand()
+        && header.transfer_syntax.trim_end_matches(['\0', ' ']) == DEFLATED_EXPLICIT_LE
+        && matches!(header.bits_allocated, 8 | 16 | 32)
+        && let Some((inflated, offset, len)) = super::inflated::open(file, limits)?
+    {
+        // A deflated data set read on demand: its frames are inflated as they are read.
+        return f(&Pixels::InFile {
+            file: &inflated,
+            offset,
+            len,
+        });
     }
     if file.is_on_demand()
         && let Some(at) = header.encapsulated_pixels

@@ -54,8 +54,53 @@ pub(super) fn check_lengths(
     limits: &Limits,
     until_pixel_data: bool,
 ) -> Result<(Option<(u64, u64)>, bool), LoadError> {
+    let found = walk_lengths(file, body, limits, until_pixel_data)?;
+    Ok((
+        found.pixel_data.filter(|_| found.deflated_from.is_none()),
+        found.stopped,
+    ))
+}
+
+/// Where a deflated data set's native PixelData lies: the deflate stream's start in `body`,
+/// then the PixelData value's offset and declared length in the inflated data set (the walk
+/// of [`check_lengths`], up to PixelData, every check included). `None` when the data set is
+/// not deflated or holds no PixelData of defined length before its end.
+pub(super) fn deflated_pixel_data(
+    file: &str,
+    body: &[u8],
+    limits: &Limits,
+) -> Result<Option<(u64, u64, u64)>, LoadError> {
+    let found = walk_lengths(file, body, limits, true)?;
+    Ok(found
+        .deflated_from
+        .zip(found.pixel_data)
+        .filter(|(_, (_, len))| *len != UNDEFINED_LENGTH)
+        .map(|(from, (at, len))| (from, at, len)))
+}
+
+/// What the walk of [`check_lengths`] found.
+struct Found {
+    /// The top-level PixelData's value (offset, declared length): in `body`, or for a deflated
+    /// data set in the inflated data set.
+    pixel_data: Option<(u64, u64)>,
+    stopped: bool,
+    /// Where a deflated data set's deflate stream starts in `body`.
+    deflated_from: Option<u64>,
+}
+
+fn walk_lengths(
+    file: &str,
+    body: &[u8],
+    limits: &Limits,
+    until_pixel_data: bool,
+) -> Result<Found, LoadError> {
+    let nothing = Found {
+        pixel_data: None,
+        stopped: false,
+        deflated_from: None,
+    };
     let Some(rest) = body.strip_prefix(b"DICM") else {
-        return Ok((None, false)); // dicom-rs reports the missing magic itself
+        return Ok(nothing); // dicom-rs reports the missing magic itself
     };
     // The meta group is always explicit VR little endian; it ends where group 0002 ends.
     let mut walker = Walker {
@@ -77,7 +122,7 @@ pub(super) fn check_lengths(
         pos: Rc::clone(&pos),
     };
     let Ok(meta) = FileMetaTable::from_reader(&mut source) else {
-        return Ok((None, false));
+        return Ok(nothing);
     };
     let ts = meta.transfer_syntax().trim_end_matches(['\0', ' ']);
     let data = body.get(pos.get()..).unwrap_or_default();
@@ -93,7 +138,7 @@ pub(super) fn check_lengths(
         // dicom-rs inflates the data set and reads it as explicit VR little endian; so does the
         // walk, holding only a window of the inflated bytes.
         let Some(syntax) = TransferSyntaxRegistry.get(EXPLICIT_LE) else {
-            return Ok((None, false));
+            return Ok(nothing);
         };
         let inflater = Rc::new(RefCell::new(Inflater::new(
             file,
@@ -111,10 +156,15 @@ pub(super) fn check_lengths(
         if let Some(e) = inflater.borrow_mut().failure.take() {
             return Err(e);
         }
-        return result.map(|()| (None, false));
+        result?;
+        return Ok(Found {
+            pixel_data: walk.pixel_data.get().map(|(at, len)| (at as u64, len)),
+            stopped: false,
+            deflated_from: Some(data_start),
+        });
     }
     let Some(syntax) = TransferSyntaxRegistry.get(ts) else {
-        return Ok((None, false)); // dicom-rs names the unknown transfer syntax itself
+        return Ok(nothing); // dicom-rs names the unknown transfer syntax itself
     };
     let pos = Rc::new(Cell::new(0));
     let source = CountingReader {
@@ -129,7 +179,11 @@ pub(super) fn check_lengths(
         .pixel_data
         .get()
         .map(|(at, len)| (data_start + at as u64, len));
-    Ok((pixel_data, walk.stopped.get()))
+    Ok(Found {
+        pixel_data,
+        stopped: walk.stopped.get(),
+        deflated_from: None,
+    })
 }
 
 /// A byte source that tells how far it has been read.
