@@ -20,6 +20,16 @@ fn load_one(name: &str, bytes: Vec<u8>, limits: &Limits) -> Result<Loaded, LoadE
     io::load_with(&[InputFile::new(name, bytes)], limits)
 }
 
+/// Loads `bytes` from memory and read on demand: each refused by an error that names `name`
+/// and says `words`, with less than `peak_limit` bytes allocated (the input's copy included).
+fn refused_both_ways(name: &str, bytes: &[u8], limits: &Limits, words: &[&str], peak_limit: usize) {
+    for load in [load_one, load_on_demand] {
+        let (r, peak) = peak_during(|| load(name, bytes.to_vec(), limits));
+        expect_err(r, name, words);
+        assert!(peak < peak_limit, "{name}: peak {peak} bytes");
+    }
+}
+
 /// [`load_one`] of a file read on demand (from disk, or the browser's bytes): compressed
 /// frames are then located and read where they lie instead of parsed.
 fn load_on_demand(name: &str, bytes: Vec<u8>, limits: &Limits) -> Result<Loaded, LoadError> {
@@ -262,11 +272,7 @@ fn deflated_length_lies_are_refused_before_allocating() {
     );
     let mut f = meta(DEFLATED_LE);
     f.extend_from_slice(&raw_deflate(&d));
-    for load in [load_one, load_on_demand] {
-        let (r, peak) = peak_during(|| load("lie.dcm", f.clone(), &Limits::default()));
-        expect_err(r, "lie.dcm", &["truncated"]);
-        assert!(peak < 8 * MIB, "peak {peak} bytes");
-    }
+    refused_both_ways("lie.dcm", &f, &Limits::default(), &["truncated"], 8 * MIB);
 }
 
 #[test]
@@ -280,11 +286,13 @@ fn deflate_bombs_are_refused_in_bounded_memory() {
     f.extend_from_slice(&raw_deflate(&d));
     drop(d);
     assert!(f.len() < MIB, "{} bytes", f.len());
-    for load in [load_one, load_on_demand] {
-        let (r, peak) = peak_during(|| load("bomb.dcm", f.clone(), &Limits::default()));
-        expect_err(r, "bomb.dcm", &["PixelData", "far more"]);
-        assert!(peak < 8 * MIB, "peak {peak} bytes");
-    }
+    refused_both_ways(
+        "bomb.dcm",
+        &f,
+        &Limits::default(),
+        &["PixelData", "far more"],
+        8 * MIB,
+    );
 
     // The same zeros under a header that agrees (128 frames), beyond a 16 MiB voxel cap: refused
     // at the PixelData header, before the zeros are inflated.
@@ -298,11 +306,7 @@ fn deflate_bombs_are_refused_in_bounded_memory() {
         max_voxel_bytes: 16 * MIB as u64,
         max_decompressed_bytes: 1 << 30,
     };
-    for load in [load_one, load_on_demand] {
-        let (r, peak) = peak_during(|| load("consistent-bomb.dcm", f.clone(), &limits));
-        expect_err(r, "consistent-bomb.dcm", &["limit"]);
-        assert!(peak < 8 * MIB, "peak {peak} bytes");
-    }
+    refused_both_ways("consistent-bomb.dcm", &f, &limits, &["limit"], 8 * MIB);
 }
 
 #[test]
@@ -324,14 +328,13 @@ fn compressed_slices_declaring_a_huge_image_are_refused_before_the_voxel_buffer(
     let mut d = image_attributes(13_000, 13_000, None, 16, 0);
     d.extend_from_slice(&encapsulated(&[&rle]));
     let f = dicom_file(RLE, &d);
-    for load in [load_one, load_on_demand] {
-        let (r, peak) = peak_during(|| load("rle.dcm", f.clone(), &Limits::default()));
-        expect_err(r, "rle.dcm", &["cannot hold"]);
-        assert!(
-            peak < 16 * MIB,
-            "peak {peak} bytes (the voxels alone are 338 MB)"
-        );
-    }
+    refused_both_ways(
+        "rle.dcm",
+        &f,
+        &Limits::default(),
+        &["cannot hold"],
+        16 * MIB,
+    );
 
     // JPEG 2000: the codestream says 64 x 64.
     let mut j2k = vec![0xFF, 0x4F, 0xFF, 0x51, 0, 41, 0, 0];
@@ -343,14 +346,7 @@ fn compressed_slices_declaring_a_huge_image_are_refused_before_the_voxel_buffer(
     let mut d = image_attributes(13_000, 13_000, None, 16, 0);
     d.extend_from_slice(&encapsulated(&[&j2k]));
     let f = dicom_file(J2K_LOSSLESS, &d);
-    for load in [load_one, load_on_demand] {
-        let (r, peak) = peak_during(|| load("j2k.dcm", f.clone(), &Limits::default()));
-        expect_err(r, "j2k.dcm", &["64x64"]);
-        assert!(
-            peak < 16 * MIB,
-            "peak {peak} bytes (the voxels alone are 338 MB)"
-        );
-    }
+    refused_both_ways("j2k.dcm", &f, &Limits::default(), &["64x64"], 16 * MIB);
     // Read on demand, the items are walked in the file: one running past the end, or a tag
     // that is not an item, is refused by name (the parse refuses the same file in memory).
     // Two segments (high and low bytes) of 4 zero bytes each: PackBits -3 repeats 4 times.
@@ -396,20 +392,18 @@ fn compressed_slices_declaring_a_huge_image_are_refused_before_the_voxel_buffer(
     let mut d = image_attributes(13_000, 13_000, None, 16, 0);
     d.extend_from_slice(&encapsulated(&[&jpeg]));
     let f = dicom_file("1.2.840.10008.1.2.4.50", &d);
-    for load in [load_one, load_on_demand] {
-        let (r, peak) = peak_during(|| load("jpeg.dcm", f.clone(), &Limits::default()));
-        expect_err(r, "jpeg.dcm", &["64x64"]);
-        assert!(peak < 16 * MIB, "peak {peak} bytes");
-    }
+    refused_both_ways("jpeg.dcm", &f, &Limits::default(), &["64x64"], 16 * MIB);
     // A transfer syntax without a decoder here (JPEG-LS), refused by name before the voxels.
     let mut d = image_attributes(13_000, 13_000, None, 16, 0);
     d.extend_from_slice(&encapsulated(&[&[0xFF, 0xD8, 0xFF, 0xF7]]));
     let f = dicom_file("1.2.840.10008.1.2.4.80", &d);
-    for load in [load_one, load_on_demand] {
-        let (r, peak) = peak_during(|| load("jpegls.dcm", f.clone(), &Limits::default()));
-        expect_err(r, "jpegls.dcm", &["1.2.840.10008.1.2.4.80"]);
-        assert!(peak < 16 * MIB, "peak {peak} bytes");
-    }
+    refused_both_ways(
+        "jpegls.dcm",
+        &f,
+        &Limits::default(),
+        &["1.2.840.10008.1.2.4.80"],
+        16 * MIB,
+    );
 
     // 1-bit data in RLE: refused by name, before anything is decoded.
     let mut d = image_attributes(13_000, 13_000, None, 1, 0);
@@ -620,11 +614,13 @@ fn decompression_bombs_of_a_few_mb_are_refused_before_inflating() {
     let frame: &[u8] = &[0xFF, 0xD8, 0xFF, 0xD9];
     d.extend_from_slice(&encapsulated(&vec![frame; 5000]));
     let f = dicom_file("1.2.840.10008.1.2.4.50", &d);
-    for load in [load_one, load_on_demand] {
-        let (r, peak) = peak_during(|| load("frames.dcm", f.clone(), &Limits::default()));
-        expect_err(r, "frames.dcm", &["decompression bomb"]);
-        assert!(peak < 16 * MIB, "peak {peak} bytes");
-    }
+    refused_both_ways(
+        "frames.dcm",
+        &f,
+        &Limits::default(),
+        &["decompression bomb"],
+        16 * MIB,
+    );
     // A zip archive of a 1.1 GiB entry of zeros (about 1 MB deflated).
     let zip = {
         let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));

@@ -128,16 +128,29 @@ function dicomElement(tag, vr, value) {
   else head.writeUInt16LE(v.length, 6);
   return Buffer.concat([head, v]);
 }
-function dicomSlice(k, pixels, origin) {
+// Everything of one file up to PixelData's value: slice k of the series (its position 0.8 mm
+// apart), or with `frames` one multi-frame file of that many frames at the first position
+// with SpacingBetweenSlices 0.8 mm. PixelData's header says `pixelBytes`.
+function dicomHead(k, origin, pixelBytes, frames = 0) {
   const us = (n) => { const b = Buffer.alloc(2); b.writeUInt16LE(n); return b; };
   const ct = '1.2.840.10008.5.1.4.1.1.2';
-  const series = '2.25.1234567890123';
+  const series = frames ? '2.25.1234567890124' : '2.25.1234567890123';
   const sop = `${series}.${k + 1}`;
+  const multi = frames ? [
+    dicomElement([0x0018, 0x0050], 'DS', '0.8'),
+    dicomElement([0x0018, 0x0088], 'DS', '0.8'),
+  ] : [];
+  const pixelHead = Buffer.alloc(12);
+  pixelHead.writeUInt16LE(0x7fe0, 0);
+  pixelHead.writeUInt16LE(0x0010, 2);
+  pixelHead.write('OW', 4, 'latin1');
+  pixelHead.writeUInt32LE(pixelBytes, 8);
   const data = Buffer.concat([
     dicomElement([0x0008, 0x0016], 'UI', ct),
     dicomElement([0x0008, 0x0018], 'UI', sop),
     dicomElement([0x0008, 0x0060], 'CS', 'CT'),
     dicomElement([0x0010, 0x0010], 'PN', 'Bench^Wholebody'),
+    ...multi,
     dicomElement([0x0020, 0x000D], 'UI', '2.25.1234567890'),
     dicomElement([0x0020, 0x000E], 'UI', series),
     dicomElement([0x0020, 0x0013], 'IS', String(k + 1)),
@@ -145,6 +158,7 @@ function dicomSlice(k, pixels, origin) {
     dicomElement([0x0020, 0x0037], 'DS', '1\\0\\0\\0\\1\\0'),
     dicomElement([0x0028, 0x0002], 'US', us(1)),
     dicomElement([0x0028, 0x0004], 'CS', 'MONOCHROME2'),
+    ...(frames ? [dicomElement([0x0028, 0x0008], 'IS', String(frames))] : []),
     dicomElement([0x0028, 0x0010], 'US', us(ny)),
     dicomElement([0x0028, 0x0011], 'US', us(nx)),
     dicomElement([0x0028, 0x0030], 'DS', '0.626953\\0.626953'),
@@ -154,7 +168,7 @@ function dicomSlice(k, pixels, origin) {
     dicomElement([0x0028, 0x0103], 'US', us(1)),
     dicomElement([0x0028, 0x1052], 'DS', '0'),
     dicomElement([0x0028, 0x1053], 'DS', '1'),
-    dicomElement([0x7FE0, 0x0010], 'OW', pixels),
+    pixelHead,
   ]);
   const group = Buffer.concat([
     dicomElement([0x0002, 0x0001], 'OB', Buffer.from([0, 1])),
@@ -165,6 +179,9 @@ function dicomSlice(k, pixels, origin) {
   const len = Buffer.alloc(4);
   len.writeUInt32LE(group.length);
   return Buffer.concat([Buffer.alloc(128), Buffer.from('DICM'), dicomElement([0x0002, 0x0000], 'UL', len), group, data]);
+}
+function dicomSlice(k, pixels, origin) {
+  return Buffer.concat([dicomHead(k, origin, pixels.length), pixels]);
 }
 const folder = path.join(tmp, 'wholebody');
 if (via === 'folder' || via === 'zip') {
@@ -185,56 +202,13 @@ if (via === 'folder' || via === 'zip') {
 const multiFrameFile = path.join(tmp, 'wholebody-frames.dcm');
 if (via === 'multiframe') {
   const origin = (src.origin ?? '(0,0,0)').replace(/[()]/g, '').split(',').map(Number);
-  const us = (n) => { const b = Buffer.alloc(2); b.writeUInt16LE(n); return b; };
-  const ct = '1.2.840.10008.5.1.4.1.1.2';
-  const sop = '2.25.1234567890124.1';
-  const data = Buffer.concat([
-    dicomElement([0x0008, 0x0016], 'UI', ct),
-    dicomElement([0x0008, 0x0018], 'UI', sop),
-    dicomElement([0x0008, 0x0060], 'CS', 'CT'),
-    dicomElement([0x0010, 0x0010], 'PN', 'Bench^Wholebody'),
-    dicomElement([0x0018, 0x0050], 'DS', '0.8'),
-    dicomElement([0x0018, 0x0088], 'DS', '0.8'),
-    dicomElement([0x0020, 0x000D], 'UI', '2.25.1234567890'),
-    dicomElement([0x0020, 0x000E], 'UI', '2.25.1234567890124'),
-    dicomElement([0x0020, 0x0013], 'IS', '1'),
-    dicomElement([0x0020, 0x0032], 'DS', `${origin[0]}\\${origin[1]}\\${origin[2]}`),
-    dicomElement([0x0020, 0x0037], 'DS', '1\\0\\0\\0\\1\\0'),
-    dicomElement([0x0028, 0x0002], 'US', us(1)),
-    dicomElement([0x0028, 0x0004], 'CS', 'MONOCHROME2'),
-    dicomElement([0x0028, 0x0008], 'IS', String(depth)),
-    dicomElement([0x0028, 0x0010], 'US', us(ny)),
-    dicomElement([0x0028, 0x0011], 'US', us(nx)),
-    dicomElement([0x0028, 0x0030], 'DS', '0.626953\\0.626953'),
-    dicomElement([0x0028, 0x0100], 'US', us(16)),
-    dicomElement([0x0028, 0x0101], 'US', us(16)),
-    dicomElement([0x0028, 0x0102], 'US', us(15)),
-    dicomElement([0x0028, 0x0103], 'US', us(1)),
-    dicomElement([0x0028, 0x1052], 'DS', '0'),
-    dicomElement([0x0028, 0x1053], 'DS', '1'),
-  ]);
-  const group = Buffer.concat([
-    dicomElement([0x0002, 0x0001], 'OB', Buffer.from([0, 1])),
-    dicomElement([0x0002, 0x0002], 'UI', ct),
-    dicomElement([0x0002, 0x0003], 'UI', sop),
-    dicomElement([0x0002, 0x0010], 'UI', '1.2.840.10008.1.2.1'),
-  ]);
-  const len = Buffer.alloc(4);
-  len.writeUInt32LE(group.length);
-  // PixelData's header by hand (its value is written slice by slice, not built in memory).
-  const pixelHead = Buffer.alloc(12);
-  pixelHead.writeUInt16LE(0x7fe0, 0);
-  pixelHead.writeUInt16LE(0x0010, 2);
-  pixelHead.write('OW', 4, 'latin1');
-  pixelHead.writeUInt32LE(depth * slice, 8);
   const fd = fs.openSync(multiFrameFile, 'w');
-  for (const b of [Buffer.alloc(128), Buffer.from('DICM'), dicomElement([0x0002, 0x0000], 'UL', len), group, data, pixelHead]) fs.writeSync(fd, b);
+  fs.writeSync(fd, dicomHead(0, origin, depth * slice, depth));
   for (let k = 0; k < depth; k += 1) {
     const period = 2 * nz;
     const m = k % period;
     const s = m < nz ? m : period - 1 - m;
-    const pixels = src.voxels.subarray(s * slice, (s + 1) * slice);
-    fs.writeSync(fd, pixels);
+    fs.writeSync(fd, src.voxels.subarray(s * slice, (s + 1) * slice));
   }
   fs.closeSync(fd);
   console.log(`  the same as one multi-frame DICOM file of ${depth} frames: ${multiFrameFile}`);

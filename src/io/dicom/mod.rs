@@ -80,7 +80,8 @@ pub(super) fn open_located(
     })
 }
 
-/// A parsed file and where its native PixelData lies ([`open_located`]).
+/// A parsed file and where its PixelData lies in it ([`open_located`]): native samples' offset
+/// and declared length, or where encapsulated items start with `validate::UNDEFINED_LENGTH`.
 type Located = (DefaultDicomObject, Option<(u64, u64)>);
 
 /// Bytes of a file read on demand that a header-only read tries first ([`open_located`]).
