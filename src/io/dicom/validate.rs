@@ -102,14 +102,30 @@ fn walk_lengths(
     let Some(rest) = body.strip_prefix(b"DICM") else {
         return Ok(nothing); // dicom-rs reports the missing magic itself
     };
-    // The meta group is always explicit VR little endian; it ends where group 0002 ends.
+    // The meta group is always explicit VR little endian. dicom-rs reads it to the length its
+    // (0002,0000) declares, whatever tags it meets there (and reserves what each declares), so
+    // that extent is walked whole, each length checked within it, and must be present (a
+    // fuzzed file declared 33 MB of group in 841 bytes and then a 3.2 GB element). Without a
+    // group length the group ends where group 0002 ends.
+    let group_len = (rest.len() >= 12 && rest[..6] == [2, 0, 0, 0, b'U', b'L'])
+        .then(|| u32::from_le_bytes([rest[8], rest[9], rest[10], rest[11]]) as usize);
+    if let Some(g) = group_len
+        && g > rest.len() - 12
+    {
+        return Err(LoadError::truncated(
+            file,
+            "the DICOM file meta group",
+            g as u64,
+            (rest.len() - 12) as u64,
+        ));
+    }
     let mut walker = Walker {
         file,
-        bytes: rest,
+        bytes: group_len.map_or(rest, |g| &rest[..12 + g]),
         pos: 0,
         explicit: true,
         big_endian: false,
-        stop_after_group2: true,
+        stop_after_group2: group_len.is_none(),
         transfer_syntax: None,
     };
     walker.walk()?;
