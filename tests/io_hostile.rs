@@ -309,6 +309,32 @@ fn deflate_bombs_are_refused_in_bounded_memory() {
     refused_both_ways("consistent-bomb.dcm", &f, &limits, &["limit"], 8 * MIB);
 }
 
+/// The file meta group is read as dicom-rs reads it: elements while fewer bytes than its
+/// (0002,0000) declares have been read. A length a few bytes short (a writer that counted
+/// unpadded UIDs) loads; one beyond the file is refused before anything is reserved.
+#[test]
+fn the_meta_group_is_read_to_its_declared_length() {
+    let good = dicom_file(EXPLICIT_LE, &native_slice(4, 3, 0));
+    let declared = u32::from_le_bytes([good[140], good[141], good[142], good[143]]);
+    let mut short = good.clone();
+    short[140..144].copy_from_slice(&(declared - 2).to_le_bytes());
+    for load in [load_one, load_on_demand] {
+        let v = load("short-group.dcm", short.clone(), &Limits::default())
+            .expect("a group length 2 bytes short loads")
+            .volume;
+        assert_eq!(v.dims, [3, 4, 1]);
+    }
+    let mut long = good;
+    long[140..144].copy_from_slice(&(1u32 << 25).to_le_bytes());
+    refused_both_ways(
+        "long-group.dcm",
+        &long,
+        &Limits::default(),
+        &["meta group"],
+        8 * MIB,
+    );
+}
+
 #[test]
 fn native_pixel_data_far_longer_than_the_image_is_refused() {
     let mut d = image_attributes(4, 4, None, 16, 0);
@@ -621,7 +647,7 @@ fn decompression_bombs_of_a_few_mb_are_refused_before_inflating() {
         &["decompression bomb"],
         16 * MIB,
     );
-    // A zip archive of a 1.1 GiB entry of zeros (about 1 MB deflated).
+    // A zip archive of a 1.6 GiB entry of zeros (about 1.6 MB deflated).
     let zip = {
         let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
         let options = zip::write::SimpleFileOptions::default()
@@ -629,7 +655,7 @@ fn decompression_bombs_of_a_few_mb_are_refused_before_inflating() {
             .large_file(false);
         w.start_file("zeros.raw", options).expect("entry");
         let chunk = vec![0u8; 1 << 20];
-        for _ in 0..1100 {
+        for _ in 0..1600 {
             w.write_all(&chunk).expect("write");
         }
         w.finish().expect("zip").into_inner()

@@ -66,10 +66,16 @@ impl State {
             }
             if self.input_used == self.input.len() {
                 let n = (src.len().saturating_sub(self.in_at)).min(READ_CHUNK as u64) as usize;
-                self.input.resize(n, 0);
-                src.read_exact_at(self.in_at, &mut self.input)?;
-                self.in_at += n as u64;
+                // Emptied first: a failed read leaves no stale window behind.
+                self.input.clear();
                 self.input_used = 0;
+                self.input.resize(n, 0);
+                if let Err(e) = src.read_exact_at(self.in_at, &mut self.input) {
+                    self.input.clear();
+                    self.ended = true;
+                    return Err(e);
+                }
+                self.in_at += n as u64;
             }
             let (before_in, before_out) = (self.inflate.total_in(), self.inflate.total_out());
             let status = self
@@ -87,6 +93,10 @@ impl State {
             self.out_at += made as u64;
             if status == Status::StreamEnd || (used == 0 && made == 0 && self.input.is_empty()) {
                 self.ended = true;
+            } else if used == 0 && made == 0 {
+                // No progress with input left: a stream the inflater cannot go on with.
+                self.ended = true;
+                return Err(std::io::Error::other("the deflate stream does not go on"));
             }
         }
         Ok(())
@@ -109,7 +119,10 @@ impl FileSource for InflatedSource {
         if offset < st.out_at {
             *st = State::new(self.start);
         }
-        let mut scratch = vec![0u8; READ_CHUNK];
+        let mut scratch = Vec::new();
+        if st.out_at < offset {
+            scratch.resize(READ_CHUNK, 0);
+        }
         while st.out_at < offset {
             let n = ((offset - st.out_at) as usize).min(scratch.len());
             st.inflate_into(self.compressed.as_ref(), &mut scratch[..n])?;
@@ -121,7 +134,9 @@ impl FileSource for InflatedSource {
 /// A deflated data set's inflated bytes as a file read on demand, with where its native
 /// PixelData lies in them (offset, declared length), for a file read on demand; `None` when
 /// the file is not one (or its PixelData is not native). The compressed file is read whole
-/// once, for the header walk, and dropped before any voxel exists.
+/// once, for the header walk (every check of the in-memory read up to PixelData), and dropped
+/// before its frames are read. The rest of the stream after the last frame is not read, so
+/// a stream corrupt only there loads on demand where the in-memory parse refuses it.
 pub(super) fn open(
     file: &InputFile,
     limits: &Limits,

@@ -55,6 +55,8 @@ pub struct SeriesBuilder {
     files_seen: usize,
     expected_images: Option<usize>,
     staged_bytes: u64,
+    /// Bytes of the files whose images were staged (the bomb check's compressed side).
+    file_bytes: u64,
     samples: Vec<i64>,
 }
 
@@ -70,6 +72,7 @@ impl SeriesBuilder {
             files_seen: 0,
             expected_images: None,
             staged_bytes: 0,
+            file_bytes: 0,
             samples: Vec::new(),
         }
     }
@@ -142,6 +145,11 @@ impl SeriesBuilder {
             .saturating_mul(n_frames as u64)
             .saturating_mul(target.bytes());
         let total = self.staged_bytes.saturating_add(new_bytes);
+        // Compressed frames cannot be far smaller than their voxels: this file for its own,
+        // and every file so far for all (a folder of tiny JPEG files declaring gigabytes).
+        crate::io::raw::check_expansion(&file.name, "DICOM pixel data", file.len(), new_bytes)?;
+        let seen = self.file_bytes.saturating_add(file.len());
+        crate::io::raw::check_expansion(&file.name, "DICOM pixel data so far", seen, total)?;
         if total > self.limits.max_voxel_bytes {
             return Err(LoadError::TooLarge {
                 file: file.name.clone(),
@@ -187,6 +195,7 @@ impl SeriesBuilder {
         }
         st.frames += n_frames;
         self.staged_bytes = total;
+        self.file_bytes = seen;
         self.arrived.push(Arrived {
             name: file.name,
             header,

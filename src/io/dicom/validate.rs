@@ -102,11 +102,12 @@ fn walk_lengths(
     let Some(rest) = body.strip_prefix(b"DICM") else {
         return Ok(nothing); // dicom-rs reports the missing magic itself
     };
-    // The meta group is always explicit VR little endian. dicom-rs reads it to the length its
-    // (0002,0000) declares, whatever tags it meets there (and reserves what each declares), so
-    // that extent is walked whole, each length checked within it, and must be present (a
-    // fuzzed file declared 33 MB of group in 841 bytes and then a 3.2 GB element). Without a
-    // group length the group ends where group 0002 ends.
+    // The meta group is always explicit VR little endian. dicom-rs reads elements while fewer
+    // bytes than its (0002,0000) declares have been read, whatever tags it meets (and reserves
+    // what each declares, read whole even past the declared end), so the walk does the same,
+    // each length checked against the bytes present, and the declared length must be present
+    // (a fuzzed file declared 33 MB of group in 841 bytes and then a 3.2 GB element). Without
+    // a group length (which dicom-rs refuses) the group ends where group 0002 ends.
     let group_len = (rest.len() >= 12 && rest[..6] == [2, 0, 0, 0, b'U', b'L'])
         .then(|| u32::from_le_bytes([rest[8], rest[9], rest[10], rest[11]]) as usize);
     if let Some(g) = group_len
@@ -121,8 +122,9 @@ fn walk_lengths(
     }
     let mut walker = Walker {
         file,
-        bytes: group_len.map_or(rest, |g| &rest[..12 + g]),
+        bytes: rest,
         pos: 0,
+        end: group_len.map_or(usize::MAX, |g| 12 + g),
         explicit: true,
         big_endian: false,
         stop_after_group2: group_len.is_none(),
@@ -544,6 +546,8 @@ struct Walker<'a> {
     explicit: bool,
     big_endian: bool,
     stop_after_group2: bool,
+    /// No element starts at or after this position (the meta group's declared end).
+    end: usize,
     transfer_syntax: Option<String>,
 }
 
@@ -570,7 +574,7 @@ impl Walker<'_> {
     fn walk(&mut self) -> Result<(), LoadError> {
         // Depth of encapsulated pixel data: its items are fragments (raw bytes), not data sets.
         let mut in_fragments = false;
-        while self.pos + 8 <= self.bytes.len() {
+        while self.pos + 8 <= self.bytes.len() && self.pos < self.end {
             let at = self.pos;
             // Item and delimitation tags are little endian in little endian syntaxes and have
             // no VR in any syntax.
