@@ -647,6 +647,35 @@ fn decompression_bombs_of_a_few_mb_are_refused_before_inflating() {
         &["decompression bomb"],
         16 * MIB,
     );
+    // The same bomb file among native slices (their bytes do not dilute it).
+    let slices: Vec<InputFile> = (0..48)
+        .map(|z| {
+            let mut d = image_attributes(512, 512, None, 16, 0);
+            element(
+                &mut d,
+                (0x0020, 0x0013),
+                b"IS",
+                z.to_string().as_bytes(),
+                None,
+            );
+            element(
+                &mut d,
+                (0x7FE0, 0x0010),
+                b"OW",
+                &vec![0u8; 512 * 512 * 2],
+                None,
+            );
+            InputFile::new(format!("slice{z}.dcm"), dicom_file(EXPLICIT_LE, &d))
+        })
+        .chain(std::iter::once(InputFile::new("frames.dcm", f.clone())))
+        .collect();
+    let (r, peak) = peak_during(|| io::load_with(&slices, &Limits::default()));
+    let listed = r.map(|l| l.volume.dims);
+    // The bomb is its own series entry or is refused within it; either way nothing gigabytes.
+    if let Err(e) = &listed {
+        assert!(e.to_string().contains("frames.dcm"), "{e}");
+    }
+    assert!(peak < 16 * MIB, "peak {peak} bytes: {listed:?}");
     // A zip archive of a 1.6 GiB entry of zeros (about 1.6 MB deflated).
     let zip = {
         let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));

@@ -1010,6 +1010,16 @@ fn read_pixels(
         file_bytes,
         count.saturating_mul(target.bytes()),
     )?;
+    // And each file for its own frames (one bomb among native slices).
+    let frame_bytes = (frame_len as u64).saturating_mul(target.bytes());
+    for (f, h) in files {
+        raw::check_expansion(
+            &f.name,
+            "DICOM pixel data",
+            f.len(),
+            frame_bytes.saturating_mul(h.frames.len() as u64),
+        )?;
+    }
     let count = count as usize;
     // Reserved, not filled: the buffer grows as frames are stored ([`fill_to`]), so that its
     // pages are touched as the file's bytes are let go, not all before the first frame.
