@@ -193,14 +193,7 @@ pub(super) fn read_range(
     len: u64,
 ) -> Result<Vec<u8>, LoadError> {
     let n = usize::try_from(len).unwrap_or(usize::MAX);
-    let mut buf = Vec::new();
-    buf.try_reserve_exact(n)
-        .map_err(|_| LoadError::OutOfMemory {
-            file: file.name.clone(),
-            what: "a compressed frame".to_owned(),
-            bytes: len,
-        })?;
-    buf.resize(n, 0);
+    let mut buf = crate::io::raw::try_vec(&file.name, "a compressed frame", n)?;
     file.data().read_at(&file.name, at, &mut buf)?;
     Ok(buf)
 }

@@ -817,9 +817,6 @@ fn decode_frame(
     Ok(out)
 }
 
-/// The deflated data set's transfer syntax.
-const DEFLATED_EXPLICIT_LE: &str = "1.2.840.10008.1.2.1.99";
-
 /// Opens a file, decodes its pixel data once and hands them to `f`. Native little-endian
 /// samples are read where they lie: in memory without a copy, from a file read on demand a
 /// frame at a time (no parsed object holds them); others where the parsed object holds them.
@@ -850,7 +847,8 @@ pub(super) fn with_pixel_data<R>(
         }
     }
     if file.is_on_demand()
-        && header.transfer_syntax.trim_end_matches(['\0', ' ']) == DEFLATED_EXPLICIT_LE
+        && header.transfer_syntax.trim_end_matches(['\0', ' '])
+            == super::validate::DEFLATED_EXPLICIT_LE
         && matches!(header.bits_allocated, 8 | 16 | 32)
         && let Some((inflated, offset, len)) = super::inflated::open(file, limits)?
     {

@@ -22,7 +22,8 @@ use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
 use crate::io::{Limits, LoadError};
 
 const PIXEL_DATA: (u16, u16) = (0x7FE0, 0x0010);
-const DEFLATED_EXPLICIT_LE: &str = "1.2.840.10008.1.2.1.99";
+/// Deflated Explicit VR Little Endian: the whole data set deflated.
+pub(super) const DEFLATED_EXPLICIT_LE: &str = "1.2.840.10008.1.2.1.99";
 const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
 
 /// Deepest nesting of sequences accepted. Real files stay under 10 levels; dicom-rs builds each
