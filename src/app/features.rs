@@ -3,7 +3,7 @@
 //! computed [`FeatureTexture`]s keyed by method and parameters (switching modes never recomputes
 //! what exists), and the one running [`FeatureJob`], stepped once per frame and cancellable.
 
-use crate::compute::pipeline::{FeatureJob, JobOptions, JobState};
+use crate::compute::pipeline::{FeatureJob, JobOptions, JobState, Waker};
 use crate::cpu::features::FeatureMap;
 use crate::cpu::pipeline::{Method, Request};
 use crate::cpu::rays::RAY_COUNTS;
@@ -36,6 +36,17 @@ pub fn step_seconds_for(frame_s: f64, step_s: f64) -> f64 {
         STEP_SECONDS
     }
 }
+/// Whether the viewer's feature jobs go in paced steps ([`STEP_SECONDS`]): natively, and in
+/// the browser on a hardware adapter. A software adapter in the browser (SwiftShader) keeps
+/// whole passes and fixed ray chunks: there the GPU process renders on the same CPU cores, a
+/// step's completion can reach the page after frames queued behind it, and a step
+/// took 0.25-0.38 s whether it held one line of a pass or two, so paced steps ran the job
+/// about 4.5 times slower (bench.mjs 64, Li: 44% after 677 s, against done in 329 s with whole
+/// passes; docs/performance.md).
+pub fn paced(ctx: &GpuContext) -> bool {
+    !(cfg!(target_arch = "wasm32") && ctx.is_software())
+}
+
 /// What the MIP and the slice overlay show.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DisplayMode {
@@ -259,6 +270,8 @@ pub struct FeatureManager {
     clock: u64,
     /// Bytes of feature textures kept at most (the newest is always kept).
     budget_bytes: u64,
+    /// Given to every job: asks the viewer for a frame when a step is done.
+    waker: Option<Waker>,
 }
 
 impl Default for FeatureManager {
@@ -270,11 +283,17 @@ impl Default for FeatureManager {
             next_id: 1,
             clock: 0,
             budget_bytes: 1 << 30,
+            waker: None,
         }
     }
 }
 
 impl FeatureManager {
+    /// What jobs call when a step is done on the GPU (the viewer: ask for a frame).
+    pub fn set_waker(&mut self, wake: Waker) {
+        self.waker = Some(wake);
+    }
+
     /// Forgets everything (a new volume).
     pub fn clear(&mut self) {
         self.entries.clear();
@@ -348,20 +367,19 @@ impl FeatureManager {
         self.cancel();
         // The job reads its slices from the loaded volume itself (no copy per computation).
         // Its steps follow the device's speed, so that a frame of the viewer never waits behind
-        // more than `STEP_SECONDS` of feature work (more only where its own frames are slower).
-        //
-        // Not in the browser: there the queue's completion callback arrives with the page's
-        // next task, a frame later, so a step's measured time is at least a frame and a paced
-        // step on a slow device never grew past its first line (bench.mjs on SwiftShader: the
-        // Li job at 0.3% after 420 s against 7.5% with whole passes). The page keeps whole
-        // passes (and fixed ray chunks) until a step can be timed there.
+        // more than `STEP_SECONDS` of feature work (more only where its own frames are slower):
+        // a step is timed from when the work queued before it (the last frame) was done, so a
+        // slow frame does not count as the step's.
         let options = JobOptions {
-            step_seconds: (!cfg!(target_arch = "wasm32")).then_some(STEP_SECONDS),
+            step_seconds: paced(ctx).then_some(STEP_SECONDS),
             ..JobOptions::default()
         };
         let job = FeatureJob::shared(ctx, Arc::clone(volume), &request, options);
         match job {
-            Ok(job) => {
+            Ok(mut job) => {
+                if let Some(wake) = &self.waker {
+                    job.set_waker(Arc::clone(wake));
+                }
                 let (fraction, stage) = match job.state() {
                     JobState::Running { fraction, stage } => (fraction, stage),
                     JobState::Done => (1.0, "done".to_owned()),
@@ -394,7 +412,7 @@ impl FeatureManager {
     pub fn step(&mut self, ctx: &GpuContext, frame_s: f64) -> Option<JobEvent> {
         let running = self.running.as_mut()?;
         if let Some(step_s) = running.job.last_step_seconds()
-            && !cfg!(target_arch = "wasm32")
+            && paced(ctx)
         {
             let seconds = step_seconds_for(frame_s, step_s);
             running.job.set_step_seconds(Some(seconds));

@@ -119,6 +119,17 @@ impl GpuContext {
         self.features.contains(wgpu::Features::FLOAT32_FILTERABLE)
     }
 
+    /// Whether the adapter renders on the CPU (lavapipe natively; in the browser a fallback
+    /// adapter such as SwiftShader, which WebGPU reports as `isFallbackAdapter`).
+    pub fn is_software(&self) -> bool {
+        self.adapter_info.device_type == wgpu::DeviceType::Cpu
+            || self
+                .adapter_info
+                .name
+                .to_lowercase()
+                .contains("swiftshader")
+    }
+
     /// A short name of the adapter and its backend, e.g. "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)".
     pub fn adapter_label(&self) -> String {
         format!(

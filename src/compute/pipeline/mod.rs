@@ -98,9 +98,10 @@ pub struct JobOptions {
     /// Output voxels per RST dispatch (a step); `None` picks from the adapter type. With
     /// [`Self::step_seconds`] this is the most a step may hold.
     pub rst_voxels_per_step: Option<u64>,
-    /// GPU seconds one step of the RST should take (the viewer's frame rule: a frame never
-    /// waits behind more than this): steps start at one row of voxels and follow the device's
-    /// measured speed. `None` (the CLI) gives fixed steps of [`Self::rst_voxels_per_step`].
+    /// GPU seconds one step should take (the viewer's frame rule: a frame never waits behind
+    /// more than this): steps start at the least work there is and follow the device's
+    /// measured speed. `None` (the CLI) gives whole passes and fixed ray steps of
+    /// [`Self::rst_voxels_per_step`].
     pub step_seconds: Option<f64>,
     /// The RST reads (I, g) with eight `textureLoad`s per step, bit for bit the CPU twin's
     /// trilinear interpolation, instead of one hardware-filtered fetch (the default where the
@@ -123,10 +124,11 @@ impl Default for JobOptions {
 }
 
 /// Paces a kind of step to [`JobOptions::step_seconds`] of GPU time: the first step holds the
-/// least work allowed; each finished step measures the device's work per second, from the
-/// submission to the queue's completion callback (work of the viewer's frames queued before it
-/// counts too, which errs towards smaller steps); the step follows a slower rate at once and a
-/// faster one at most doubling per step. Work is counted in a unit of the step's kind: ray
+/// least work allowed; each finished step measures the device's work per second over the step's
+/// own time on the queue ([`InFlight`]: from when the work queued before it was done, or its
+/// submission if later, to its own completion), so that the viewer's frames queued before it do
+/// not count as the step's; the step follows a slower rate at once and a faster one at most
+/// doubling per step. Work is counted in a unit of the step's kind: ray
 /// voxels for the RST, storage accesses for the Hessian's convolutions, voxels for the
 /// eigenvalue pass.
 struct StepPace {
@@ -178,6 +180,79 @@ impl StepPace {
             Some(old) if rate > old => old + 0.5 * (rate - old),
             _ => rate,
         });
+    }
+}
+
+/// One submitted step and the queue's word on it, in microseconds since the job's epoch
+/// (`u64::MAX` until the callback has run).
+///
+/// The step's own GPU time runs from when everything queued before it was done (`before`: the
+/// viewer's last frame, say) or its submission, whichever is later, to `done`. Timing from the
+/// submission alone counted a slow frame queued ahead as the step's (on SwiftShader a frame is
+/// ~0.2-0.3 s, so the step never grew); the callbacks come as the queue finishes (the browser
+/// resolves them within milliseconds while the page waits), not when the job next looks.
+struct InFlight {
+    submitted: u64,
+    before: Arc<AtomicU64>,
+    done: Arc<AtomicU64>,
+}
+
+/// What a job calls when a step is done on the GPU ([`FeatureJob::set_waker`]).
+pub type Waker = Arc<dyn Fn() + Send + Sync>;
+
+/// Callbacks stamped closer than this ran together (one poll, one task of the page).
+const STAMPED_APART_MICROS: u64 = 1000;
+
+impl InFlight {
+    fn submit(
+        ctx: &GpuContext,
+        epoch: web_time::Instant,
+        commands: wgpu::CommandBuffer,
+        wake: Option<Waker>,
+    ) -> Self {
+        let stamp = |flag: &Arc<AtomicU64>| {
+            let flag = Arc::clone(flag);
+            move || {
+                let micros = u64::try_from(epoch.elapsed().as_micros()).unwrap_or(u64::MAX - 1);
+                flag.store(micros.min(u64::MAX - 1), Ordering::Release);
+            }
+        };
+        let before = Arc::new(AtomicU64::new(u64::MAX));
+        let done = Arc::new(AtomicU64::new(u64::MAX));
+        ctx.queue.on_submitted_work_done(stamp(&before));
+        let submitted = u64::try_from(epoch.elapsed().as_micros()).unwrap_or(u64::MAX - 1);
+        ctx.queue.submit([commands]);
+        let stamp_done = stamp(&done);
+        ctx.queue.on_submitted_work_done(move || {
+            stamp_done();
+            if let Some(wake) = wake {
+                wake();
+            }
+        });
+        Self {
+            submitted,
+            before,
+            done,
+        }
+    }
+
+    /// The step's own GPU seconds once it is done.
+    fn seconds(&self) -> Option<f64> {
+        let done = self.done.load(Ordering::Acquire);
+        if done == u64::MAX {
+            return None;
+        }
+        // The callbacks run in submission order, so `before` has been stored. Were both stamped
+        // together (natively by one poll, which runs them when it looks; in a page that was busy
+        // while the queue finished), when the step started is not known: count from the
+        // submission, as before this existed (errs towards smaller steps).
+        let before = self.before.load(Ordering::Acquire);
+        let start = if done.saturating_sub(before) >= STAMPED_APART_MICROS {
+            self.submitted.max(before)
+        } else {
+            self.submitted
+        };
+        Some(done.saturating_sub(start) as f64 * 1e-6)
     }
 }
 
@@ -284,9 +359,12 @@ pub struct FeatureJob {
     /// The slab's (I, gx, gy, gz) texture the rays read, with its dims.
     packed: Option<([u32; 3], wgpu::Texture)>,
     // GPU sync.
-    /// The last submission's GPU time in microseconds once it is done (`u64::MAX` before),
-    /// stored by the queue's completion callback.
-    busy: Option<Arc<AtomicU64>>,
+    /// The last submission, until the queue's completion callback has been seen.
+    busy: Option<InFlight>,
+    /// What [`InFlight`]'s times count from.
+    epoch: web_time::Instant,
+    /// Called when a submitted step is done (the viewer asks for a frame then).
+    waker: Option<Waker>,
     pending: Option<(PendingRead, ReadFor)>,
     /// Steps that recorded and submitted work (a step may only find the GPU still busy).
     submissions: usize,
@@ -497,6 +575,8 @@ impl FeatureJob {
             pass_cursor: 0,
             packed: None,
             busy: None,
+            epoch: web_time::Instant::now(),
+            waker: None,
             pending: None,
             submissions: 0,
             last_step_s: None,
@@ -515,6 +595,13 @@ impl FeatureJob {
     /// GPU seconds (submission to the queue's completion callback) of the last step seen done.
     pub fn last_step_seconds(&self) -> Option<f64> {
         self.last_step_s
+    }
+
+    /// Calls `wake` whenever a step's work is done on the GPU, from the queue's completion
+    /// callback (in the browser it runs as the queue finishes, so the page can take the next
+    /// step without drawing frames in between; natively only when something polls the device).
+    pub fn set_waker(&mut self, wake: Waker) {
+        self.waker = Some(wake);
     }
 
     /// Changes [`JobOptions::step_seconds`] from the next step on (the viewer follows its own
@@ -589,13 +676,11 @@ impl FeatureJob {
         ctx.device
             .poll(wgpu::PollType::Poll)
             .map_err(ReadbackError::from)?;
-        if let Some(flag) = &self.busy {
-            let micros = flag.load(Ordering::Acquire);
-            if micros == u64::MAX {
+        if let Some(flight) = &self.busy {
+            let Some(secs) = flight.seconds() else {
                 return Ok(self.state());
-            }
+            };
             self.busy = None;
-            let secs = micros as f64 * 1e-6;
             self.last_step_s = Some(secs);
             self.rst_pace.finished(secs);
             self.conv_pace.finished(secs);
@@ -628,22 +713,19 @@ impl FeatureJob {
                 label: Some("feature job"),
             });
         let read = self.record(ctx, &mut encoder, task)?;
-        ctx.queue.submit([encoder.finish()]);
-        self.submissions += 1;
         if let Some((buffer, size, what)) = read {
+            ctx.queue.submit([encoder.finish()]);
             self.pending = Some((PendingRead::start(ctx, &buffer, size), what));
+            if let Some(wake) = self.waker.clone() {
+                // The mapping completes with the copy or just after: a late wake costs only
+                // the viewer's next regular frame.
+                ctx.queue.on_submitted_work_done(move || wake());
+            }
         } else {
-            let flag = Arc::new(AtomicU64::new(u64::MAX));
-            let f = Arc::clone(&flag);
-            let submitted = web_time::Instant::now();
-            // Timed when the queue says the work is done, not when the job next looks (a
-            // frame later in the viewer).
-            ctx.queue.on_submitted_work_done(move || {
-                let micros = u64::try_from(submitted.elapsed().as_micros()).unwrap_or(u64::MAX - 1);
-                f.store(micros.min(u64::MAX - 1), Ordering::Release);
-            });
-            self.busy = Some(flag);
+            let flight = InFlight::submit(ctx, self.epoch, encoder.finish(), self.waker.clone());
+            self.busy = Some(flight);
         }
+        self.submissions += 1;
         Ok(self.state())
     }
 
@@ -1452,4 +1534,33 @@ fn hessian_work_overhead(
         }
     }
     if needed > 0.0 { done / needed } else { 1.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn flight(submitted: u64, before: u64, done: u64) -> InFlight {
+        InFlight {
+            submitted,
+            before: Arc::new(AtomicU64::new(before)),
+            done: Arc::new(AtomicU64::new(done)),
+        }
+    }
+
+    #[test]
+    fn a_step_is_timed_from_when_the_work_queued_before_it_was_done() {
+        // Not done yet.
+        assert_eq!(flight(0, 500_000, u64::MAX).seconds(), None);
+        // A frame queued ahead ran 0.5 s after the submission: the step is the 0.25 s after it.
+        let s = flight(100_000, 600_000, 850_000).seconds().unwrap();
+        assert!((s - 0.25).abs() < 1e-9, "{s}");
+        // The queue was idle at the submission (its callback ran at once, before it).
+        let s = flight(100_000, 90_000, 400_000).seconds().unwrap();
+        assert!((s - 0.3).abs() < 1e-9, "{s}");
+        // Both callbacks stamped by one poll: when the step started is unknown, so from the
+        // submission (the step never looks shorter than it may have been).
+        let s = flight(100_000, 700_000, 700_050).seconds().unwrap();
+        assert!((s - 0.60005).abs() < 1e-9, "{s}");
+    }
 }
