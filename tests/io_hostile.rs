@@ -616,24 +616,35 @@ fn gzip_padding_is_accepted_and_trailing_garbage_refused() {
 fn decompression_bombs_of_a_few_mb_are_refused_before_inflating() {
     // NIfTI: 1600^3 u8 (4.1 GB) of zeros, a consistent stream in 4 MB: gzip members of 64 MiB
     // of zeros each (every member's CRC-32 and size right), after one holding the header.
-    let total: u64 = 1600 * 1600 * 1600;
     let zeros = gzip(&vec![0u8; 64 << 20]);
-    let mut head = nifti_u8_header([1600, 1600, 1600]);
-    head.resize(352 + (1 << 20), 0);
-    let mut gz = gzip(&head);
-    let mut left = total - (1 << 20);
-    while left >= 64 << 20 {
-        gz.extend_from_slice(&zeros);
-        left -= 64 << 20;
-    }
-    gz.extend_from_slice(&gzip(&vec![0u8; left as usize]));
-    assert!(gz.len() < 8 << 20, "{} bytes", gz.len());
-    for load in [load_one, load_on_demand] {
-        let t = std::time::Instant::now();
-        let (r, peak) = peak_during(|| load("huge.nii.gz", gz.clone(), &Limits::default()));
-        expect_err(r, "huge.nii.gz", &["decompression bomb"]);
-        assert!(peak < 16 * MIB, "peak {peak} bytes");
-        assert!(t.elapsed().as_secs() < 5, "{:?}", t.elapsed());
+    let zero_nifti = |dims: [u16; 3]| {
+        let total: u64 = dims.iter().map(|&d| u64::from(d)).product();
+        let mut head = nifti_u8_header(dims);
+        head.resize(352 + (1 << 20), 0);
+        let mut gz = gzip(&head);
+        let mut left = total - (1 << 20);
+        while left >= 64 << 20 {
+            gz.extend_from_slice(&zeros);
+            left -= 64 << 20;
+        }
+        gz.extend_from_slice(&gzip(&vec![0u8; left as usize]));
+        gz
+    };
+    // And one just over the floor: 1100 x 1100 x 1150 u8, 1.39 GB (1.30 GiB) in 1.4 MB. The
+    // floor was 1.5 GiB (1.61 GB), above the 1.5 GB the issue allows an input under 10 MB.
+    for (name, dims) in [
+        ("huge.nii.gz", [1600, 1600, 1600]),
+        ("over-the-floor.nii.gz", [1100, 1100, 1150]),
+    ] {
+        let gz = zero_nifti(dims);
+        assert!(gz.len() < 8 << 20, "{} bytes", gz.len());
+        for load in [load_one, load_on_demand] {
+            let t = std::time::Instant::now();
+            let (r, peak) = peak_during(|| load(name, gz.clone(), &Limits::default()));
+            expect_err(r, name, &["decompression bomb"]);
+            assert!(peak < 16 * MIB, "peak {peak} bytes");
+            assert!(t.elapsed().as_secs() < 5, "{:?}", t.elapsed());
+        }
     }
     // DICOM: 5000 JPEG frames of 512 x 512 (2.6 GB of voxels) in 4-byte fragments.
     let mut d = image_attributes(512, 512, Some(5000), 16, 0);
