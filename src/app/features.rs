@@ -36,12 +36,13 @@ pub fn step_seconds_for(frame_s: f64, step_s: f64) -> f64 {
         STEP_SECONDS
     }
 }
+
 /// Whether the viewer's feature jobs go in paced steps ([`STEP_SECONDS`]): natively, and in
 /// the browser on a hardware adapter. A software adapter in the browser (SwiftShader) keeps
 /// whole passes and fixed ray chunks: there the GPU process renders on the same CPU cores, a
 /// step's completion can reach the page after frames queued behind it, and a step
 /// took 0.25-0.38 s whether it held one line of a pass or two, so paced steps ran the job
-/// about 4.5 times slower (bench.mjs 64, Li: 44% after 677 s, against done in 329 s with whole
+/// about 4.5 times slower (bench.mjs 64, Li: 44% after 677 s, against done in 314 s with whole
 /// passes; docs/performance.md).
 pub fn paced(ctx: &GpuContext) -> bool {
     !(cfg!(target_arch = "wasm32") && ctx.is_software())
@@ -411,8 +412,11 @@ impl FeatureManager {
     /// last two frames (the step follows [`step_seconds_for`]).
     pub fn step(&mut self, ctx: &GpuContext, frame_s: f64) -> Option<JobEvent> {
         let running = self.running.as_mut()?;
+        // In the browser a frame waits for the job's waker or a timer, so the frame interval
+        // is not what a frame costs: steps stay at `STEP_SECONDS` there.
         if let Some(step_s) = running.job.last_step_seconds()
             && paced(ctx)
+            && !cfg!(target_arch = "wasm32")
         {
             let seconds = step_seconds_for(frame_s, step_s);
             running.job.set_step_seconds(Some(seconds));

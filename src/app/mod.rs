@@ -649,9 +649,11 @@ impl ShapecastApp {
             return;
         }
         self.started = true;
+        // One frame when a job's step is done (`request_repaint` would ask for two).
         let wake = ctx.clone();
-        self.features
-            .set_waker(Arc::new(move || wake.request_repaint()));
+        self.features.set_waker(Arc::new(move || {
+            wake.request_repaint_after(std::time::Duration::from_millis(1));
+        }));
         #[cfg(target_arch = "wasm32")]
         if let Err(e) = web_files::install(ctx) {
             self.error(format!("drag and drop is unavailable: {e}"));
@@ -1323,22 +1325,30 @@ impl ShapecastApp {
     }
 }
 
+impl ShapecastApp {
+    /// Frames for a running feature job. In the browser the job asks for a frame when its step
+    /// is done (its waker, from the queue's callback), so frames do not run back to back
+    /// between steps: on a software adapter a frame costs ~0.25 s of the device, and three of
+    /// them per step left the job a third of it. The progress line still moves four times a
+    /// second. Natively the queue's callbacks run only when something polls: frames go on.
+    fn repaint_for_job(&self, ctx: &egui::Context) {
+        if self.features.running_request().is_none() {
+            return;
+        }
+        if cfg!(target_arch = "wasm32") {
+            ctx.request_repaint_after(std::time::Duration::from_millis(250));
+        } else {
+            ctx.request_repaint();
+        }
+    }
+}
+
 impl eframe::App for ShapecastApp {
     fn logic(&mut self, ctx: &egui::Context, _frame: &mut eframe::Frame) {
         if self.load.is_some() || self.probe.busy() {
             ctx.request_repaint();
-        } else if self.features.running_request().is_some() {
-            // In the browser the job asks for a frame when its step is done (its waker, from
-            // the queue's callback), so frames do not run back to back between steps: on a
-            // software adapter a frame costs ~0.25 s of the device, and three of them per step
-            // left the job a third of it. The progress line still moves four times a second.
-            // Natively the queue's callbacks run only when something polls, so frames go on.
-            if cfg!(target_arch = "wasm32") {
-                ctx.request_repaint_after(std::time::Duration::from_millis(250));
-            } else {
-                ctx.request_repaint();
-            }
         }
+        self.repaint_for_job(ctx);
     }
 
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
@@ -1381,7 +1391,8 @@ impl eframe::App for ShapecastApp {
             self.status.publish();
             self.published = Some(self.status.clone());
         }
-        // (A running feature job asks for its frames in `logic`.)
+        // A job started in this frame (a mode, a recompute, a new volume) asks for its frames.
+        self.repaint_for_job(&ctx);
         if self.load.is_some()
             || self.uploading.is_some()
             || self.load_progress.is_some()

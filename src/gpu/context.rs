@@ -122,12 +122,12 @@ impl GpuContext {
     /// Whether the adapter renders on the CPU (lavapipe natively; in the browser a fallback
     /// adapter such as SwiftShader, which WebGPU reports as `isFallbackAdapter`).
     pub fn is_software(&self) -> bool {
+        #[cfg(target_arch = "wasm32")]
+        let name = browser_adapter_name().unwrap_or_default() + " " + &self.adapter_info.name;
+        #[cfg(not(target_arch = "wasm32"))]
+        let name = self.adapter_info.name.clone();
         self.adapter_info.device_type == wgpu::DeviceType::Cpu
-            || self
-                .adapter_info
-                .name
-                .to_lowercase()
-                .contains("swiftshader")
+            || name.to_lowercase().contains("swiftshader")
     }
 
     /// A short name of the adapter and its backend, e.g. "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)".
