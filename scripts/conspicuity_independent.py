@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""An independent Hessian Li conspicuity of lung2's mass (issue 13), to set beside Shapecast's.
+"""An independent Hessian Li and RST Li conspicuity of lung2's mass (issue 13), beside Shapecast's.
 
 Written from SCIENCE.md's definitions with numpy/scipy only (no Shapecast code or output is
 used), on ../shared/data/ct/lung2_image.nrrd and its label:
@@ -8,8 +8,12 @@ used), on ../shared/data/ct/lung2_image.nrrd and its label:
   (input voxel centres kept), as SCIENCE.md asks; features taken back at the input voxels;
 - Hessian by scipy.ndimage.gaussian_filter derivatives (sigma per axis in voxels, borders
   'nearest', scipy's own truncation at 4 sigma), times sigma^2, at the lung preset's scales
-  1.5, 2, 3, 4.5, 6.5, 9 mm; eigenvalues by numpy's eigvalsh, sorted by magnitude;
+  1.5, 2, 3, 4.5, 6.5, 9 mm, and again with 13 and 18 mm added (sigma sqrt3 reaching the
+  mass's radius); eigenvalues by numpy's eigvalsh, sorted by magnitude;
 - Li blobness B = |l2|^2 / |l0| where all three eigenvalues are negative, the maximum over scales;
+- RST Li blobness on the input grid (the RST is not refined): SCIENCE.md's consistent rule
+  with the lung preset (42 rays, R = 25 mm, dr = 0.25 mm, sigma_g = 0.7 mm, TF 100/300 HU),
+  scipy's Gaussian smoothing, np.gradient, map_coordinates (order 1), numpy's eigvalsh;
 - the lung: air below -400 HU, 6-connected parts of at least 100 ml touching no in-plane border,
   in-slice holes up to pi 15^2 mm^2 filled; the lesion's zone, the label grown by 10 mm (Euclidean
   distance in mm), left out;
@@ -18,7 +22,11 @@ used), on ../shared/data/ct/lung2_image.nrrd and its label:
   lesion's peak.
 
 Writes docs/reproduction/conspicuity_independent.json, which tests/cpu_real_ct_conspicuity.rs
-checks against Shapecast's own study. Needs: pip install numpy scipy pynrrd.
+checks against Shapecast's own study. `--image` may also be a folder of DICOM slices and
+`--label` a NIfTI: `--image ../shared/data/series/ct-chest-lung-kernel --label
+docs/reproduction/lung_pet_ct_dx_label.nii.gz --out docs/reproduction/
+conspicuity_independent_lung_pet_ct_dx.json` (the label from scripts/label_lung_pet_ct_dx.py).
+Needs: pip install numpy scipy pynrrd nibabel pydicom.
 """
 import argparse
 import json
@@ -26,14 +34,31 @@ import math
 import os
 import time
 
+import nibabel as nib
 import nrrd
 import numpy as np
 from scipy import ndimage
 
+from label_lung_pet_ct_dx import load_series
+from rst_independent import icosphere42
+
 SIGMAS_MM = [1.5, 2.0, 3.0, 4.5, 6.5, 9.0]
+# The preset's scales and two more, so that sigma sqrt3 reaches the mass's radius (~27 mm).
+WIDE_SIGMAS_MM = SIGMAS_MM + [13.0, 18.0]
+# The lung preset's RST: transfer function 100/300 HU (the auto rule keeps it at this scan's
+# 5.6 HU of noise), R = 25 mm.
+RST_TF_HU = (100.0, 300.0)
+RST_RADIUS_MM = 25.0
 
 
 def load(path):
+    """Voxels indexed (i, j, k) and spacing: an NRRD, a NIfTI or a folder of DICOM slices."""
+    if os.path.isdir(path):
+        hu, spacing, _, _ = load_series(path)
+        return hu, [float(v) for v in spacing]
+    if path.endswith((".nii", ".nii.gz")):
+        img = nib.load(path)
+        return np.asarray(img.dataobj, dtype=np.float32), [float(z) for z in img.header.get_zooms()[:3]]
     data, header = nrrd.read(path)
     dirs = np.array(header["space directions"], dtype=float)
     spacing = [float(np.linalg.norm(d)) for d in dirs]
@@ -71,8 +96,10 @@ def lung_mask(hu, spacing):
     return lung
 
 
-def li_blobness(crop, spacing, f, sigmas):
-    """Multi-scale Li blobness at the input voxels of `crop` (z refined by f, then subsampled)."""
+def li_blobness(crop, spacing, f, sigmas, probe):
+    """Multi-scale Li blobness at the input voxels of `crop` (z refined by f, then subsampled):
+    the maximum over each prefix of `sigmas`, keyed by its largest scale; and the eigenvalues
+    (by value) at the crop voxel `probe` per scale."""
     nz = crop.shape[2]
     zf = np.arange((nz - 1) * f + 1) / f
     lo = np.floor(zf).astype(int)
@@ -81,6 +108,8 @@ def li_blobness(crop, spacing, f, sigmas):
     fine = crop[:, :, lo] * (1 - w) + crop[:, :, hi] * w
     sp = [spacing[0], spacing[1], spacing[2] / f]
     best = np.zeros(crop.shape, dtype=np.float64)
+    prefix = {}
+    at_probe = {}
     pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
     for s in sigmas:
         sv = [s / d for d in sp]
@@ -95,12 +124,60 @@ def li_blobness(crop, spacing, f, sigmas):
             m[..., a, b] = d
             m[..., b, a] = d
         e = np.linalg.eigvalsh(m)
+        at_probe[s] = [float(v) for v in e[tuple(probe)]]
         idx = np.argsort(-np.abs(e), axis=-1, kind="stable")
         e = np.take_along_axis(e, idx, axis=-1)
         l0, l2 = e[..., 0], e[..., 2]
         blob = np.where((e < 0).all(axis=-1), l2 * l2 / np.maximum(np.abs(l0), 1e-30), 0.0)
         best = np.maximum(best, blob)
-    return best
+        prefix[s] = best.copy()
+    return prefix, at_probe
+
+
+def rst_li(vol, spacing, pts_vox, tf, radius_mm, step_mm=0.25, sigma_g=0.7, chunk=20000):
+    """Consistent-rule RST Li blobness (SCIENCE.md, RST items 1-6; eq. 2) at integer voxels
+    `pts_vox` (n x 3) of `vol`: 42 rays, trilinear (I, g), opacity as extinction with
+    L_i = 0.6 rho(r_i), each step weighted by the opacity it adds, a ray stopped after the step
+    that reaches 0.99. Rays of many voxels are stepped together."""
+    smooth = ndimage.gaussian_filter(vol.astype(np.float64), sigma=[sigma_g / s for s in spacing], mode="nearest")
+    grads = np.gradient(smooth, *spacing)
+    chans = [smooth] + list(grads)
+    s = np.asarray(spacing)
+    dirs = icosphere42()
+    K = int(math.floor(radius_mm / step_mm + 1e-6))
+    out = np.zeros(len(pts_vox))
+    for c0 in range(0, len(pts_vox), chunk):
+        p = pts_vox[c0:c0 + chunk].astype(np.float64)
+        n = len(p)
+        i0 = smooth[tuple(pts_vox[c0:c0 + chunk].T)]
+        T = np.zeros((n, 3, 3))
+        for r in dirs:
+            rho = math.sqrt(sigma_g ** 2 + float(np.sum(s ** 2 * (r ** 2 / 4 + r ** 4 / 3))))
+            L = 0.6 * rho
+            step = (step_mm * r / s)
+            alpha = np.zeros(n); acc = np.zeros((n, 3)); live = np.ones(n, bool)
+            f_prev = np.zeros(n)
+            g_prev = np.stack([grads[a][tuple(pts_vox[c0:c0 + chunk].T)] for a in range(3)], 1)
+            for k in range(1, K + 1):
+                idx = np.nonzero(live)[0]
+                if len(idx) == 0:
+                    break
+                q = (p[idx] + k * step).T
+                ii = ndimage.map_coordinates(smooth, q, order=1, mode="nearest")
+                gk = np.stack([ndimage.map_coordinates(g, q, order=1, mode="nearest") for g in grads], 1)
+                fk = np.clip((np.abs(ii - i0[idx]) - tf[0]) / (tf[1] - tf[0]), 0, 1)
+                a_new = 1 - (1 - alpha[idx]) * np.exp(-0.5 * (f_prev[idx] + fk) * step_mm / L)
+                acc[idx] += (a_new - alpha[idx])[:, None] * 0.5 * (g_prev[idx] + gk)
+                alpha[idx] = a_new; f_prev[idx] = fk; g_prev[idx] = gk
+                live[idx[a_new >= 0.99]] = False
+            T += L * acc[:, :, None] * r[None, None, :]
+        T /= len(dirs)
+        Ts = T + np.transpose(T, (0, 2, 1))
+        e = np.linalg.eigvalsh(Ts)
+        o = np.argsort(-np.abs(e), axis=-1, kind="stable")
+        e = np.take_along_axis(e, o, axis=-1)
+        out[c0:c0 + n] = np.where((e < 0).all(-1), e[:, 2] ** 2 / np.maximum(np.abs(e[:, 0]), 1e-30), 0.0)
+    return out
 
 
 def main():
@@ -123,24 +200,42 @@ def main():
     rlo = [max(0, blo[a] - grow[a]) for a in range(3)]
     rhi = [min(hu.shape[a], bhi[a] + grow[a]) for a in range(3)]
     # Support beyond the region: scipy's 4 sigma at the largest scale, plus a voxel.
-    sup = [math.ceil(4 * max(SIGMAS_MM) / s) + 1 for s in spacing]
+    sup = [math.ceil(4 * max(WIDE_SIGMAS_MM) / s) + 1 for s in spacing]
     clo = [max(0, rlo[a] - sup[a]) for a in range(3)]
     chi = [min(hu.shape[a], rhi[a] + sup[a]) for a in range(3)]
     crop = hu[clo[0]:chi[0], clo[1]:chi[1], clo[2]:chi[2]]
-    blob = li_blobness(crop, spacing, f, SIGMAS_MM)
+    centroid = [int(round(v)) for v in np.argwhere(lesion).mean(axis=0)]
+    blobs, at_centroid = li_blobness(crop, spacing, f, WIDE_SIGMAS_MM,
+                                     [centroid[a] - clo[a] for a in range(3)])
     r = tuple(slice(rlo[a] - clo[a], rhi[a] - clo[a]) for a in range(3))
-    feat = blob[r]
     full = tuple(slice(rlo[a], rhi[a]) for a in range(3))
     lung = lung_mask(hu, spacing)
     dist = ndimage.distance_transform_edt(~lesion, sampling=spacing)
     zone = dist <= 10.0
     les = lesion[full]
     others = lung[full] & ~zone[full]
-    peak = float(feat[les].max())
-    vals = np.sort(feat[others])
-    p999 = float(vals[max(1, math.ceil(0.999 * len(vals))) - 1])
-    above = others & (feat > peak)
-    _, groups = ndimage.label(above, structure=np.ones((3, 3, 3), dtype=bool))
+
+    def study(feat):
+        peak = float(feat[les].max())
+        vals = np.sort(feat[others])
+        p999 = float(vals[max(1, math.ceil(0.999 * len(vals))) - 1])
+        above = others & (feat > peak)
+        _, groups = ndimage.label(above, structure=np.ones((3, 3, 3), dtype=bool))
+        return {
+            "lesion_peak": peak,
+            "lung_p999": p999,
+            "ratio": peak / p999 if p999 > 0 else None,
+            "rank": 1 + int(groups),
+            "strongest_other": float(vals[-1]),
+        }
+    # The RST Li study on the same voxels: the lesion's and the lung's outside the zone.
+    pts = np.argwhere(les | others)
+    t_rst = time.time()
+    values = rst_li(crop, spacing, pts + np.array([rlo[a] - clo[a] for a in range(3)]),
+                    RST_TF_HU, RST_RADIUS_MM)
+    rst_feat = np.zeros(les.shape)
+    rst_feat[tuple(pts.T)] = values
+    rst_seconds = time.time() - t_rst
     out = {
         "image": os.path.basename(args.image),
         "spacing_mm": spacing,
@@ -149,13 +244,14 @@ def main():
         "region_lo": [int(v) for v in rlo],
         "region_hi": [int(v) for v in rhi],
         "lung_voxels_in_region": int(others.sum()),
-        "hessian_li": {
-            "lesion_peak": peak,
-            "lung_p999": p999,
-            "ratio": peak / p999 if p999 > 0 else None,
-            "rank": 1 + int(groups),
-            "strongest_other": float(vals[-1]),
-        },
+        "hessian_li": study(blobs[SIGMAS_MM[-1]][r]),
+        "wide_sigmas_mm": WIDE_SIGMAS_MM,
+        "hessian_li_wide": study(blobs[WIDE_SIGMAS_MM[-1]][r]),
+        "rst_li": study(rst_feat),
+        "rst": {"rays": 42, "radius_mm": RST_RADIUS_MM, "step_mm": 0.25, "sigma_g_mm": 0.7,
+                "tf_hu": list(RST_TF_HU), "seconds": round(rst_seconds, 1)},
+        "lesion_centroid": centroid,
+        "eigenvalues_at_centroid": {str(k): v for k, v in at_centroid.items()},
         "seconds": round(time.time() - t0, 1),
         "implementation": "numpy/scipy from SCIENCE.md (scripts/conspicuity_independent.py)",
     }

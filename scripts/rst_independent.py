@@ -17,6 +17,10 @@ Shapecast code or output is used:
 - Ts = T + T^T, eigenvalues by numpy's eigvalsh; blobness (eq. 1) |l2|, the smallest magnitude,
   where all three are negative.
 
+Beside it, an experiment outside SCIENCE.md (`rst_at(cubic=True)`): rays read a cubic
+B-spline of the smoothed intensity, to see how much of the thick-slice loss is the trilinear
+reading's.
+
 Evaluated at the grid point nearest the sphere's centre, for the spacings the issue names and
 spheres of radius 3, 4.7 and 7 mm (R = max(8, r + 5) mm, so that rays from the centre leave
 the sphere). The box reaches 4.3 mm beyond the sphere in-plane and 10.3 mm along z.
@@ -78,21 +82,37 @@ def render_sphere(radius, half_extent, spacing):
     return BACKGROUND_HU + CONTRAST_HU * frac, axes
 
 
-def rst_at(vol, spacing, point_vox, radius_mm, dirs):
+def rst_at(vol, spacing, point_vox, radius_mm, dirs, cubic=False):
+    """Blobness and eigenvalues at `point_vox`. `cubic` is an experiment outside SCIENCE.md:
+    rays read a cubic B-spline of the smoothed intensity and its exact gradient instead of
+    trilinear (I, g) and central differences, and rho keeps only what that reading does not
+    add, the partial-volume box of each spacing: rho^2 = sigma_g^2 + sum_a s_a^2 r_a^2 / 12
+    (a cubic spline reproduces cubics, so it adds no second moment)."""
     smooth = ndimage.gaussian_filter(vol, sigma=[SIGMA_G / s for s in spacing], mode="nearest")
     grads = np.gradient(smooth, *spacing)
+    coef = ndimage.spline_filter(smooth, order=3, mode="nearest") if cubic else None
     k_max = int(math.floor(radius_mm / DR + 1e-6))
     s = np.asarray(spacing)
     i0 = smooth[tuple(point_vox)]
     t = np.zeros((3, 3))
     for r in dirs:
-        rho = math.sqrt(SIGMA_G ** 2 + float(np.sum(s ** 2 * (r ** 2 / 4.0 + r ** 4 / 3.0))))
+        blur = r ** 2 / 12.0 if cubic else r ** 2 / 4.0 + r ** 4 / 3.0
+        rho = math.sqrt(SIGMA_G ** 2 + float(np.sum(s ** 2 * blur)))
         length = 0.6 * rho
         ks = np.arange(k_max + 1)
         pts = np.asarray(point_vox, float)[:, None] + (ks * DR)[None, :] * (r / s)[:, None]
-        ii = ndimage.map_coordinates(smooth, pts, order=1, mode="nearest")
-        gg = np.stack([ndimage.map_coordinates(g, pts, order=1, mode="nearest") for g in grads],
-                      axis=1)
+        if cubic:
+            def spline(q):
+                return ndimage.map_coordinates(coef, q, order=3, mode="nearest", prefilter=False)
+            ii = spline(pts)
+            h = 1e-3
+            gg = np.stack([(spline(pts + h * np.eye(3)[:, a:a + 1])
+                            - spline(pts - h * np.eye(3)[:, a:a + 1])) / (2 * h * s[a])
+                           for a in range(3)], axis=1)
+        else:
+            ii = ndimage.map_coordinates(smooth, pts, order=1, mode="nearest")
+            gg = np.stack([ndimage.map_coordinates(g, pts, order=1, mode="nearest")
+                           for g in grads], axis=1)
         f = np.clip((np.abs(ii - i0) - D_MIN) / (D_MAX - D_MIN), 0.0, 1.0)
         alpha_prev = 0.0
         acc = np.zeros(3)
@@ -130,7 +150,9 @@ def main():
             vol, axes = render_sphere(radius, half, sp)
             centre = [int(np.argmin(np.abs(ax))) for ax in axes]
             b, e = rst_at(vol, sp, centre, ray_mm, dirs)
-            rows.append({"spacing_mm": sp, "voxel": centre, "blobness": b, "eigenvalues": e})
+            cubic, _ = rst_at(vol, sp, centre, ray_mm, dirs, cubic=True)
+            rows.append({"spacing_mm": sp, "voxel": centre, "blobness": b, "eigenvalues": e,
+                         "cubic_experiment": cubic})
             print(f"r {radius} mm, spacing {sp}: blobness {b:.3f} "
                   f"(eigenvalues {', '.join(f'{v:.3f}' for v in e)})")
         bs = [r["blobness"] for r in rows]
@@ -141,9 +163,13 @@ def main():
             "rows": rows,
             "spread_first_three": max(bs[:3]) / min(bs[:3]),
             "spread_all": max(bs) / min(bs),
+            "cubic_spread_all": max(r["cubic_experiment"] for r in rows)
+            / min(r["cubic_experiment"] for r in rows),
         })
         print(f"r {radius} mm: spread over the first three {spheres[-1]['spread_first_three']:.3f},"
-              f" over all {spheres[-1]['spread_all']:.3f}")
+              f" over all {spheres[-1]['spread_all']:.3f}; cubic experiment "
+              f"{[round(r['cubic_experiment'], 3) for r in rows]}, spread "
+              f"{spheres[-1]['cubic_spread_all']:.3f}")
     out = {
         "spheres": spheres,
         "seconds": round(time.time() - t0, 1),

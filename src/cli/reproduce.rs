@@ -53,6 +53,13 @@ pub(crate) fn table(md: &mut String, header: &[&str], rows: &[Vec<String>]) {
     md.push('\n');
 }
 
+/// The JSON an independent script (scripts/) wrote into the report's folder, if it is there
+/// and parses.
+pub(crate) fn read_json(path: &std::path::Path) -> Option<serde_json::Value> {
+    let text = std::fs::read_to_string(path).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
 pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     let img_dir = args.out.join("reproduction");
@@ -94,7 +101,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     eprintln!("noise done ({:.0} s)", started.elapsed().as_secs_f64());
     section_stability(&mut md, &img_dir)?;
     eprintln!("stability done ({:.0} s)", started.elapsed().as_secs_f64());
-    section_thick_slices(&mut md);
+    section_thick_slices(&mut md, &img_dir);
     eprintln!(
         "thick slices done ({:.0} s)",
         started.elapsed().as_secs_f64()

@@ -15,47 +15,96 @@ use crate::io::InputFile;
 /// The lesion study's evaluation region: the label's box grown by this much (mm) on every side.
 pub const REGION_MARGIN_MM: f64 = 20.0;
 
+/// A file, or every file of a folder (a DICOM series), as the loader takes them.
 fn load(path: &Path) -> anyhow::Result<crate::Volume> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let name = path
-        .file_name()
-        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-    Ok(crate::io::load(&[InputFile::new(name, bytes)])
+    let paths: Vec<std::path::PathBuf> = if path.is_dir() {
+        let mut p: Vec<_> = std::fs::read_dir(path)
+            .with_context(|| format!("listing {}", path.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_file())
+            .collect();
+        p.sort();
+        p
+    } else {
+        vec![path.to_path_buf()]
+    };
+    let files = paths
+        .iter()
+        .map(|p| {
+            let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
+            let name = p
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+            Ok(InputFile::new(name, bytes))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(crate::io::load(&files)
         .with_context(|| format!("loading {}", path.display()))?
         .volume)
 }
 
-/// lung2 (`data`/ct/lung2_image.nrrd with its label): the study on the label's box grown by
-/// `REGION_MARGIN_MM`, or a line saying why it did not run; then the independent implementation's
-/// numbers (`dir`/conspicuity_independent.json, from scripts/conspicuity_independent.py).
+/// A real chest CT with a labelled lesion.
+struct Case {
+    /// The image (a file or a DICOM folder) and the label, relative to the shared data or the
+    /// report's folder.
+    image: std::path::PathBuf,
+    label: std::path::PathBuf,
+    /// Where the image comes from, what it is, and where the lesion lies (Markdown).
+    source: &'static str,
+    label_about: &'static str,
+    site: &'static str,
+    /// The independent implementation's numbers, in the report's folder.
+    independent: &'static str,
+}
+
+/// The real chest CTs with a lesion (`data`/ct/lung2_image.nrrd with its label, and the
+/// LUNG-PET-CT-Dx series with the label scripts/label_lung_pet_ct_dx.py drew into `dir`): each
+/// study on the label's box grown by `REGION_MARGIN_MM`, or a line saying why it did not run;
+/// then the independent implementation's numbers (`dir`/conspicuity_independent*.json, from
+/// scripts/conspicuity_independent.py).
 pub fn section_real_ct(md: &mut String, data: &Path, dir: &Path) {
     let _ = writeln!(md, "## Real-CT conspicuity (issue 13)\n");
-    let image = data.join("ct/lung2_image.nrrd");
-    let label = data.join("ct/lung2_label.nrrd");
-    if !image.exists() || !label.exists() {
-        let _ = writeln!(
-            md,
-            "Not run here: {} and its label are not present (`--data` names the folder of the project's shared data).\n",
-            image.display()
-        );
-        return;
+    let cases = [
+        Case {
+            image: data.join("ct/lung2_image.nrrd"),
+            label: data.join("ct/lung2_label.nrrd"),
+            source: "`lung2_image.nrrd` of ../shared/data (pyradiomics",
+            label_about: "its label",
+            site: "in the left lower lobe against the posterior chest wall",
+            independent: "conspicuity_independent.json",
+        },
+        Case {
+            image: data.join("series/ct-chest-lung-kernel"),
+            label: dir.join("lung_pet_ct_dx_label.nii.gz"),
+            source: "`series/ct-chest-lung-kernel` of ../shared/data (LUNG-PET-CT-Dx, a lung kernel",
+            label_about: "the label `scripts/label_lung_pet_ct_dx.py` draws from one seed (voxels above -400 HU within 25 mm of the seed, opened in each slice with a 3 mm disk, the part holding the seed; docs/reproduction/lung_pet_ct_dx_label.nii.gz)",
+            site: "in the right lower lung, reaching the hilum",
+            independent: "conspicuity_independent_lung_pet_ct_dx.json",
+        },
+    ];
+    for case in &cases {
+        if !case.image.exists() || !case.label.exists() {
+            let _ = writeln!(
+                md,
+                "Not run here: {} or its label {} is not present (`--data` names the folder of the project's shared data).\n",
+                case.image.display(),
+                case.label.display()
+            );
+            continue;
+        }
+        if let Err(e) = study(md, case) {
+            let _ = writeln!(md, "Not run: {e:#}.\n");
+        }
+        independent(md, &dir.join(case.independent));
     }
-    if let Err(e) = study(md, &image, &label) {
-        let _ = writeln!(md, "Not run: {e:#}.\n");
-    }
-    independent(md, dir);
 }
 
 /// The Hessian Li study by an independent implementation (numpy/scipy from SCIENCE.md).
-fn independent(md: &mut String, dir: &Path) {
-    let path = dir.join("conspicuity_independent.json");
-    let json: Option<serde_json::Value> = std::fs::read_to_string(&path)
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok());
-    let Some(json) = json else {
+fn independent(md: &mut String, path: &Path) {
+    let Some(json) = super::read_json(path) else {
         let _ = writeln!(
             md,
-            "The independent implementation was not run here: `python3 scripts/conspicuity_independent.py --out {}` writes its numbers, which the next `reproduce` includes.\n",
+            "The independent implementation was not run here: `python3 scripts/conspicuity_independent.py --out {}` (with `--image` and `--label` for this CT) writes its numbers, which the next `reproduce` includes.\n",
             path.display()
         );
         return;
@@ -64,19 +113,92 @@ fn independent(md: &mut String, dir: &Path) {
     let num = |k: &str| h[k].as_f64().unwrap_or(f64::NAN);
     let _ = writeln!(
         md,
-        "An independent implementation of the same Hessian Li study (`scripts/conspicuity_independent.py`: numpy and scipy written from SCIENCE.md, z refined by {} linearly, scipy's Gaussian derivatives, numpy's `eigvalsh`, its own lung mask; same region) gives lesion peak {:.2}, lung p99.9 {:.2}, ratio **{:.2}**, rank **{}**, strongest lung voxel {:.2}: the table's Hessian row agrees within 3% and to the rank (tests/cpu_real_ct_conspicuity.rs checks it). The Hessian's rank is the method's on this mass, not the implementation's. The RST has no independent implementation here (a second ray caster in numpy would take hours on this region).\n",
+        "An independent implementation of the same Hessian Li study (`scripts/conspicuity_independent.py`: numpy and scipy written from SCIENCE.md, z refined by {} linearly, scipy's Gaussian derivatives, numpy's `eigvalsh`, its own lung mask; same region) gives lesion peak {:.2}, lung p99.9 {:.2}, ratio **{:.2}**, rank **{}**, strongest lung voxel {:.2}: the table's Hessian row agrees within 3% and to the rank (tests/cpu_real_ct_conspicuity.rs checks it). The Hessian's rank is the method's on this mass, not the implementation's.{}{}\n",
         json["z_refinement"].as_u64().unwrap_or(0),
         num("lesion_peak"),
         num("lung_p999"),
         num("ratio"),
         num("rank"),
         num("strongest_other"),
+        wide(&json),
+        rst(&json),
     );
 }
 
-fn study(md: &mut String, image: &Path, label: &Path) -> anyhow::Result<()> {
+/// The independent RST Li study's numbers, or nothing when its JSON predates them.
+fn rst(json: &serde_json::Value) -> String {
+    let h = &json["rst_li"];
+    let Some(peak) = h["lesion_peak"].as_f64() else {
+        return String::new();
+    };
+    let num = |k: &str| h[k].as_f64().unwrap_or(f64::NAN);
+    format!(
+        " Its RST Li study (its own ray caster from SCIENCE.md's consistent rule: 42 rays, R = 25 mm, dr = 0.25 mm, TF 100/300 HU, trilinear (I, g) by scipy's `map_coordinates`; {:.0} s) gives lesion peak {peak:.2}, lung p99.9 {:.2}, ratio **{:.2}**, rank **{}**, strongest lung voxel {:.2}: the table's RST row agrees within 1% and to the rank (the test checks it).",
+        json["rst"]["seconds"].as_f64().unwrap_or(f64::NAN),
+        num("lung_p999"),
+        num("ratio"),
+        num("rank"),
+        num("strongest_other"),
+    )
+}
+
+/// What the independent study found with scales beyond the preset's (up to sigma sqrt3 about
+/// the mass's radius), or nothing when its JSON predates them.
+fn wide(json: &serde_json::Value) -> String {
+    let h = &json["hessian_li_wide"];
+    let Some(peak) = h["lesion_peak"].as_f64() else {
+        return String::new();
+    };
+    // Only a lesion the preset's scales do not rank first needs the larger ones.
+    if json["hessian_li"]["rank"].as_f64() == Some(1.0) {
+        return String::new();
+    }
+    let sigmas: Vec<String> = json["wide_sigmas_mm"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .filter_map(|v| v.as_f64())
+                .map(|v| format!("{v}"))
+                .collect()
+        })
+        .unwrap_or_default();
+    // Eigenvalues (by value) at the lesion's centroid for the scales from 9 mm up.
+    let mut ratios = (f64::INFINITY, 0.0f64);
+    let at: Vec<String> = json["eigenvalues_at_centroid"]
+        .as_object()
+        .map(|m| {
+            let mut v: Vec<(f64, String)> = m
+                .iter()
+                .filter_map(|(k, e)| {
+                    let s: f64 = k.parse().ok()?;
+                    let e: Vec<f64> = e.as_array()?.iter().filter_map(|x| x.as_f64()).collect();
+                    (s >= 9.0 && e.len() == 3 && e[2] < 0.0).then(|| {
+                        // By value: e[2] is the weakest of three negative eigenvalues.
+                        let q = (e[2] / e[0]).abs();
+                        ratios = (ratios.0.min(q), ratios.1.max(q));
+                        (s, format!("{s} mm: {:.0}, {:.0}, {:.0}", e[0], e[1], e[2]))
+                    })
+                })
+                .collect();
+            v.sort_by(|a, b| a.0.total_cmp(&b.0));
+            v.into_iter().map(|(_, t)| t).collect()
+        })
+        .unwrap_or_default();
+    format!(
+        " With scales up to {} mm ({} mm), so that sigma sqrt3 reaches the mass's radius, it gives lesion peak {peak:.2}, ratio {:.2}, rank {}: larger scales do not lift the lesion above the lung's junctions. At the lesion's centroid the eigenvalues (by value) are {}: the weakest is {:.2}-{:.2} of the strongest, so at the scales of its size the lesion is not round to the Hessian.",
+        sigmas.last().map_or("?", String::as_str),
+        sigmas.join(", "),
+        h["ratio"].as_f64().unwrap_or(f64::NAN),
+        h["rank"].as_f64().unwrap_or(f64::NAN),
+        at.join("; "),
+        ratios.0,
+        ratios.1,
+    )
+}
+
+fn study(md: &mut String, case: &Case) -> anyhow::Result<()> {
     let started = Instant::now();
-    let (image, label) = (load(image)?, load(label)?);
+    let (image, label) = (load(&case.image)?, load(&case.label)?);
     anyhow::ensure!(
         image.dims == label.dims,
         "the label's grid {:?} differs from the image's {:?}",
@@ -92,24 +214,28 @@ fn study(md: &mut String, image: &Path, label: &Path) -> anyhow::Result<()> {
     let region = lesion_box.grown(&grid, margin);
     let s = cs::lesion_study(&grid, &hu, &lab, region)?;
     let elapsed = started.elapsed().as_secs_f64();
+    // The Hessian's refinement of z, as the study's pipeline resolves it for the lung preset.
+    let mut req = crate::cpu::pipeline::Request::new(crate::cpu::pipeline::Method::Li);
+    req.preset = crate::cpu::Preset::LungNodules;
+    let z_factor = req.resolve(&grid).map_or(1, |r| r.factors[2]);
     let d = lesion_box.dims();
-    let size_mm = (0..3)
-        .map(|a| d[a] as f64 * grid.spacing_mm[a])
-        .fold(0.0, f64::max);
     let _ = writeln!(
         md,
-        "`lung2_image.nrrd` of ../shared/data (pyradiomics; chest CT {} x {} x {} at {:.3} x {:.3} x {:.1} mm, HU) with its label, a mass of {:.0} x {:.0} x {:.0} mm ({:.0} ml) in the left lower lobe against the posterior chest wall. Lung mask (`cpu::conspicuity::lung_mask`): voxels below {} HU, their 6-connected components that touch no in-plane border and hold at least {} ml, holes up to {:.0} mm^2 per axial slice filled (vessels, nodules); the lesion's zone (the label grown by {} mm) is left out of the lung. Evaluated on the label's box grown by {} mm (voxels {:?} to {:?}, {} lung voxels outside the zone), features computed on a crop reaching the kernels' and the rays' support beyond it. Lung preset: Hessian Li blobness at sigma 1.5-9 mm (z refined by 4 as the pipeline does), RST Li blobness with 42 rays, R = 25 mm, dr = 0.25 mm, transfer function {:.0}/{:.0} HU (the preset's, the noise of the whole volume being {}).\n",
+        "{}; chest CT {} x {} x {} at {:.3} x {:.3} x {:.1} mm, HU) with {}, a mass of {:.0} x {:.0} x {:.0} mm ({:.0} ml) {}. Lung mask (`cpu::conspicuity::lung_mask`): voxels below {} HU, their 6-connected components that touch no in-plane border and hold at least {} ml, holes up to {:.0} mm^2 per axial slice filled (vessels, nodules); the lesion's zone (the label grown by {} mm) is left out of the lung. Evaluated on the label's box grown by {} mm (voxels {:?} to {:?}, {} lung voxels outside the zone), features computed on a crop reaching the kernels' and the rays' support beyond it. Lung preset: Hessian Li blobness at sigma 1.5-9 mm (z refined by {} as the pipeline does), RST Li blobness with 42 rays, R = 25 mm, dr = 0.25 mm, transfer function {:.0}/{:.0} HU (the preset's, the noise of the whole volume being {}).\n",
+        case.source,
         grid.dims[0],
         grid.dims[1],
         grid.dims[2],
         grid.spacing_mm[0],
         grid.spacing_mm[1],
         grid.spacing_mm[2],
+        case.label_about,
         d[0] as f64 * grid.spacing_mm[0],
         d[1] as f64 * grid.spacing_mm[1],
         d[2] as f64 * grid.spacing_mm[2],
         lesion.iter().filter(|m| **m).count() as f64 * grid.spacing_mm.iter().product::<f64>()
             / 1000.0,
+        case.site,
         cs::LUNG_AIR_BELOW_HU,
         cs::LUNG_MIN_ML,
         cs::LUNG_HOLE_MAX_MM2,
@@ -118,6 +244,7 @@ fn study(md: &mut String, image: &Path, label: &Path) -> anyhow::Result<()> {
         s.region.lo,
         s.region.hi.map(|v| v - 1),
         s.rst_li.lung_voxels,
+        z_factor,
         s.tf.d_min,
         s.tf.d_max,
         s.noise_sigma_hu
@@ -151,19 +278,19 @@ fn study(md: &mut String, image: &Path, label: &Path) -> anyhow::Result<()> {
     );
     let _ = writeln!(
         md,
-        "The rank counts the blobs (26-connected groups of lung voxels outside the zone) above the lesion's peak. {} {}\n\nThe study took {elapsed:.0} s (tests/cpu_real_ct_conspicuity.rs runs it and bounds both ratios and ranks). The other chest CT with a tumour, series/ct-chest-lung-kernel (LUNG-PET-CT-Dx, 30 slices 8 mm apart), shows an irregular mass of several centimetres in the right lung beside the hilum (files 1-14 to 1-18), but comes without a label, so it is not measured here: a label (or a seed and a rule to grow it) would be needed first.\n",
-        verdict("The RST", &s.rst_li, size_mm),
-        verdict("The Hessian", &s.hessian_li, size_mm),
+        "The rank counts the blobs (26-connected groups of lung voxels outside the zone) above the lesion's peak. {} {}\n\nThe study took {elapsed:.0} s (tests/cpu_real_ct_conspicuity.rs runs it and bounds both ratios and ranks).\n",
+        verdict("The RST", &s.rst_li),
+        verdict("The Hessian", &s.hessian_li),
     );
     Ok(())
 }
 
-fn verdict(name: &str, c: &Conspicuity, size_mm: f64) -> String {
+fn verdict(name: &str, c: &Conspicuity) -> String {
     if c.rank == 1 {
         format!("{name} ranks the lesion first.")
     } else {
         format!(
-            "{name} does not rank the lesion first: {} blob(s) of the lung outside its zone respond more. A mass of up to {size_mm:.0} mm is larger than the preset's scales reach (sigma 9 mm answers best to a sphere of radius 9 sqrt3 = 16 mm), so inside it the Hessian sees a plateau and peaks near its surface, while vessel junctions cut by the thick slices look like small blobs at the smaller scales; scales reaching the mass (sigma up to about its radius / sqrt3) would fix it.",
+            "{name} does not rank the lesion first: {} blob(s) of the lung outside its zone respond more (below: what larger scales do).",
             c.rank - 1
         )
     }

@@ -144,7 +144,7 @@ pub fn section_skimage(md: &mut String, dir: &Path) {
 
 /// Thick slices (docs/science.md): the refinement rule, and one physical sphere's RST blobness
 /// through the pipeline users run at thin, thick and very thick slices.
-pub fn section_thick_slices(md: &mut String) {
+pub fn section_thick_slices(md: &mut String, dir: &Path) {
     use crate::cpu::pipeline::{Method, Request, compute};
     let _ = writeln!(md, "## Thick slices: the refinement rule\n");
     let _ = writeln!(
@@ -185,6 +185,86 @@ pub fn section_thick_slices(md: &mut String) {
         );
     }
     thick_slice_rays(md);
+    thick_slice_independent(md, dir);
+}
+
+/// One sphere of each of three sizes at the four spacings, here and in an independent
+/// implementation (`dir`/rst_independent.json, from scripts/rst_independent.py), with that
+/// script's cubic-reading experiment beside them.
+fn thick_slice_independent(md: &mut String, dir: &Path) {
+    let path = dir.join("rst_independent.json");
+    let json = super::read_json(&path);
+    let Some(spheres) = json.as_ref().and_then(|j| j["spheres"].as_array()) else {
+        let _ = writeln!(
+            md,
+            "The independent implementation was not run here: `python3 scripts/rst_independent.py --out {}` writes its numbers, which the next `reproduce` includes.\n",
+            path.display()
+        );
+        return;
+    };
+    let triple = |v: &serde_json::Value| -> [f64; 3] {
+        std::array::from_fn(|a| v[a].as_f64().unwrap_or(f64::NAN))
+    };
+    let mut rows = Vec::new();
+    let mut worst = 0.0f64;
+    for sphere in spheres {
+        let radius = sphere["radius_mm"].as_f64().unwrap_or(f64::NAN);
+        let half = triple(&sphere["half_extent_mm"]);
+        let params = cpu::RstParams {
+            radius_mm: sphere["ray_mm"].as_f64().unwrap_or(8.0),
+            ..ex::consistent()
+        };
+        let rows_of = sphere["rows"].as_array().map(Vec::as_slice).unwrap_or(&[]);
+        let thin = rows_of
+            .first()
+            .and_then(|r| r["blobness"].as_f64())
+            .unwrap_or(f64::NAN);
+        let thin_cubic = rows_of
+            .first()
+            .and_then(|r| r["cubic_experiment"].as_f64())
+            .unwrap_or(f64::NAN);
+        for row in rows_of {
+            let spacing = triple(&row["spacing_mm"]);
+            let theirs = row["blobness"].as_f64().unwrap_or(f64::NAN);
+            let cubic = row["cubic_experiment"].as_f64().unwrap_or(f64::NAN);
+            let mut p = phantom::sphere(radius, 100.0);
+            p.min_mm = half.map(|h| -h);
+            p.max_mm = half;
+            let volume = p.render(spacing);
+            let grid = cpu::Grid::of(&volume);
+            let x = grid.position_mm(grid.nearest_voxel(half));
+            let gv = cpu::GradientVolume::new(&grid, &volume.to_f32(), 0.7);
+            let ours = ex::blob(cpu::rst_eigen_at(&gv, x, &params));
+            worst = worst.max((ours / theirs - 1.0).abs());
+            rows.push(vec![
+                format!("{radius}"),
+                format!("{spacing:?}"),
+                format!("{ours:.3} ({:.2})", ours / thin),
+                format!("{theirs:.3}"),
+                format!("{cubic:.3} ({:.2})", cubic / thin_cubic),
+            ]);
+        }
+    }
+    let _ = writeln!(
+        md,
+        "The same loss in an independent implementation of SCIENCE.md's consistent rule (`scripts/rst_independent.py`: numpy and scipy, its own partial-volume spheres, scipy's smoothing, `np.gradient`, `map_coordinates`), for spheres of radius 3, 4.7 and 7 mm (R = max(8, r + 5) mm), blobness at the grid point nearest the centre; relative to 0.5 mm iso in brackets. The last column is an experiment outside SCIENCE.md: rays read a cubic B-spline of the smoothed intensity and its exact gradient, rho keeping only the slices' partial-volume box.\n"
+    );
+    table(
+        md,
+        &[
+            "radius (mm)",
+            "spacing (mm)",
+            "Shapecast",
+            "independent",
+            "cubic reading (experiment)",
+        ],
+        &rows,
+    );
+    let _ = writeln!(
+        md,
+        "\nShapecast and the independent implementation agree within {:.2}% at every sphere and spacing (tests/cpu_rst_invariance.rs checks 1%), 5 mm slices included, so the thick-slice loss is the definition's and not this code's. It grows as the sphere shrinks against the slice: at 5 mm slices a 6 mm sphere keeps about a quarter of its thin-slice blobness and a 14 mm one about four fifths, and at 2.5 mm the 6 mm sphere already loses a fifth. The cubic reading lifts the 9.4 mm sphere at 5 mm but lowers the 14 mm one, so it is no rule to adopt: the issue's spread <= 1.10 including 5 mm slices is not reached by the definition, nor by this change to it.\n",
+        100.0 * worst
+    );
 }
 
 /// Why the 5 mm slices halve the sphere's blobness: each ray's radial contribution
@@ -276,7 +356,7 @@ fn thick_slice_rays(md: &mut String) {
         .collect();
     let _ = writeln!(
         md,
-        "In-plane rays keep their contribution; rays with a z component lose part of it (table). The data hold less: the smoothed intensity along z from the centre, every 2 mm, is {} HU at 0.5 mm iso and {} HU at 5 mm slices (the sphere, 9.4 mm across, is one slice and two partial-volume neighbours, so trilinear sampling sees a 10 mm ramp), and the largest z gradient is {:.1} against {:.1} HU/mm in-plane (thin: {:.1}). The consistent rule weights a ray by L_i times the gradient where its opacity builds up: along z that gradient is {:.2} of the in-plane one, and the longer L_i of a z ray (from the spacing term of rho) makes up only part of it; an oblique ray meets the sharp in-plane edge, whose gradient has little z component; and Ts_zz, which the blobness (the smallest eigenvalue) is here, sums the rays' z components. Longer rays do not help (relative blobness at R = 15 and 25 mm: {}); neither does refining z (above), nor would a larger sigma_g along z (it only blurs the ramp). Making 5 mm slices match would mean sharpening the data along z beyond what they hold, so the RST stays on the input grid and the thick-slice value is reported, not corrected.\n",
+        "In-plane rays keep their contribution; rays with a z component lose part of it (table). The data hold less: the smoothed intensity along z from the centre, every 2 mm, is {} HU at 0.5 mm iso and {} HU at 5 mm slices (the sphere, 9.4 mm across, is one slice and two partial-volume neighbours, so trilinear sampling sees a 10 mm ramp), and the largest z gradient is {:.1} against {:.1} HU/mm in-plane (thin: {:.1}). The consistent rule weights a ray by L_i times the gradient where its opacity builds up: along z that gradient is {:.2} of the in-plane one, and the longer L_i of a z ray (from the spacing term of rho) makes up only part of it; an oblique ray meets the sharp in-plane edge, whose gradient has little z component; and Ts_zz, which the blobness (the smallest eigenvalue) is here, sums the rays' z components. Longer rays do not help (relative blobness at R = 15 and 25 mm: {}); neither does refining z (above), nor would a larger sigma_g along z (it only blurs the ramp). The RST stays on the input grid and the thick-slice value is reported, not corrected.\n",
         profile(&thin, x_thin),
         profile(&thick, x_thick),
         g_max(&thick, x_thick, 2),
