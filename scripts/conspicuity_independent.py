@@ -45,8 +45,11 @@ from rst_independent import icosphere42
 SIGMAS_MM = [1.5, 2.0, 3.0, 4.5, 6.5, 9.0]
 # The preset's scales and two more, so that sigma sqrt3 reaches the mass's radius (~27 mm).
 WIDE_SIGMAS_MM = SIGMAS_MM + [13.0, 18.0]
-# The lung preset's RST: transfer function 100/300 HU (the auto rule keeps it at this scan's
-# 5.6 HU of noise), R = 25 mm.
+# The lung preset's RST: transfer function 100/300 HU, R = 25 mm. The auto rule keeps 100/300
+# below 50 HU of noise; Shapecast measures 5.6 HU (lung2) and 7.9 HU (LUNG-PET-CT-Dx), and this
+# script takes the constant without measuring. The 42 directions are the icosahedron's in its
+# usual orientation (vertices (0, +-1, +-phi) and cyclic), as Shapecast's; SCIENCE.md does not fix
+# one, and 42 rays are not invariant to rotation, so that choice is shared.
 RST_TF_HU = (100.0, 300.0)
 RST_RADIUS_MM = 25.0
 

@@ -21,9 +21,11 @@ Beside it, an experiment outside SCIENCE.md (`rst_at(cubic=True)`): rays read a 
 B-spline of the smoothed intensity, to see how much of the thick-slice loss is the trilinear
 reading's.
 
-Evaluated at the grid point nearest the sphere's centre, for the spacings the issue names and
-spheres of radius 3, 4.7 and 7 mm (R = max(8, r + 5) mm, so that rays from the centre leave
-the sphere). The box reaches 4.3 mm beyond the sphere in-plane and 10.3 mm along z.
+Evaluated at the sphere's centre, a grid point (the box reaches at least 4.3 mm beyond the
+sphere in-plane and 10.3 mm along z, rounded up to whole voxels), and again with the sphere's
+centre half a slice along z, between two slices (evaluated exactly there), for the spacings the
+issue names and spheres of radius 3, 4.7 and 7 mm (R = max(8, r + 5) mm, so that rays from the
+centre leave the sphere).
 Prints a table and writes docs/reproduction/rst_independent.json, which
 tests/cpu_rst_invariance.rs checks Shapecast's CPU RST against.
 Needs: pip install numpy scipy.
@@ -63,8 +65,9 @@ def icosphere42():
     return dirs
 
 
-def render_sphere(radius, half_extent, spacing):
-    """Voxel values of a sphere at the origin; grid points at -half_extent + i * spacing."""
+def render_sphere(radius, half_extent, spacing, centre_z=0.0):
+    """Voxel values of a sphere centred at (0, 0, centre_z); grid points at
+    -half_extent + i * spacing."""
     dims = [int(math.floor(2 * half_extent[a] / spacing[a] + 1e-9)) + 1 for a in range(3)]
     axes = [-half_extent[a] + np.arange(dims[a]) * spacing[a] for a in range(3)]
     n_sub = [max(2, int(math.ceil(spacing[a] / 0.05))) for a in range(3)]
@@ -76,7 +79,7 @@ def render_sphere(radius, half_extent, spacing):
         for oy in offs[1]:
             y2 = (axes[1] + oy)[None, :, None] ** 2
             xy = x2 + y2
-            z = (axes[2][None, None, :, None] + offs[2][None, None, None, :]) ** 2
+            z = (axes[2][None, None, :, None] + offs[2][None, None, None, :] - centre_z) ** 2
             frac += (xy[..., None] + z <= radius * radius).mean(axis=-1)
     frac /= n_sub[0] * n_sub[1]
     return BACKGROUND_HU + CONTRAST_HU * frac, axes
@@ -93,7 +96,9 @@ def rst_at(vol, spacing, point_vox, radius_mm, dirs, cubic=False):
     coef = ndimage.spline_filter(smooth, order=3, mode="nearest") if cubic else None
     k_max = int(math.floor(radius_mm / DR + 1e-6))
     s = np.asarray(spacing)
-    i0 = smooth[tuple(point_vox)]
+    # The point may lie between grid points: I(x) read as the rays read I.
+    i0 = float(ndimage.map_coordinates(smooth, np.asarray(point_vox, float)[:, None], order=1,
+                                       mode="nearest")[0])
     t = np.zeros((3, 3))
     for r in dirs:
         blur = r ** 2 / 12.0 if cubic else r ** 2 / 4.0 + r ** 4 / 3.0
@@ -144,22 +149,30 @@ def main():
     spheres = []
     for radius in args.radii:
         ray_mm = max(8.0, radius + 5.0)
-        half = [radius + 4.3, radius + 4.3, radius + 10.3]
         rows = []
         for sp in SPACINGS:
+            # A box reaching 4.3 mm beyond the sphere in-plane and 10.3 mm along z, rounded up
+            # to whole voxels, so that the centre is a grid point at every spacing.
+            half = [math.ceil((radius + m) / sp[a] - 1e-9) * sp[a]
+                    for a, m in enumerate([4.3, 4.3, 10.3])]
             vol, axes = render_sphere(radius, half, sp)
-            centre = [int(np.argmin(np.abs(ax))) for ax in axes]
+            centre = [int(round(half[a] / sp[a])) for a in range(3)]
             b, e = rst_at(vol, sp, centre, ray_mm, dirs)
             cubic, _ = rst_at(vol, sp, centre, ray_mm, dirs, cubic=True)
-            rows.append({"spacing_mm": sp, "voxel": centre, "blobness": b, "eigenvalues": e,
+            # The same sphere with its centre half a slice along z, between two slices,
+            # evaluated exactly there.
+            vol_b, _ = render_sphere(radius, half, sp, centre_z=0.5 * sp[2])
+            between, _ = rst_at(vol_b, sp, [centre[0], centre[1], centre[2] + 0.5], ray_mm, dirs)
+            rows.append({"spacing_mm": sp, "half_extent_mm": half, "voxel": centre,
+                         "blobness": b, "eigenvalues": e, "between_slices": between,
                          "cubic_experiment": cubic})
             print(f"r {radius} mm, spacing {sp}: blobness {b:.3f} "
-                  f"(eigenvalues {', '.join(f'{v:.3f}' for v in e)})")
+                  f"(eigenvalues {', '.join(f'{v:.3f}' for v in e)}), between slices "
+                  f"{between:.3f}, cubic {cubic:.3f}")
         bs = [r["blobness"] for r in rows]
         spheres.append({
             "radius_mm": radius,
             "ray_mm": ray_mm,
-            "half_extent_mm": half,
             "rows": rows,
             "spread_first_three": max(bs[:3]) / min(bs[:3]),
             "spread_all": max(bs) / min(bs),

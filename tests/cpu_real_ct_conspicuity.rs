@@ -49,8 +49,8 @@ fn lung2_mass_conspicuity() {
     assert!((5.3..=6.5).contains(&rst.ratio), "RST ratio {}", rst.ratio);
     assert_eq!(rst.rank, 1, "RST: {rst:?}");
     // Measured: Hessian Li 2.02 (46.0 / 22.8), rank 4: three vessel junctions cut by the 5 mm
-    // slices respond more (the strongest 61.4 at -194 HU); scales up to 18 mm do not lift the
-    // mass, which lies against the chest wall (below, and docs/reproduction.md).
+    // slices respond more (the strongest 61.4 at -194 HU); in the independent study scales up
+    // to 18 mm do not lift the mass (below, and docs/reproduction.md).
     let hes = &s.hessian_li;
     assert!(
         (1.8..=2.25).contains(&hes.ratio),
@@ -178,66 +178,42 @@ fn agrees_with_the_independent_study(s: &LesionStudy, name: &str) {
         region.hi.to_vec(),
         "not the same region"
     );
-    let theirs = &json["hessian_li"];
-    let num = |key: &str| theirs[key].as_f64().expect(key);
-    println!(
-        "independent Hessian Li: peak {:.2}, p99.9 {:.2}, ratio {:.3}, rank {}; ours: {:.2}, {:.2}, {:.3}, {}",
-        num("lesion_peak"),
-        num("lung_p999"),
-        num("ratio"),
-        num("rank"),
-        hes.lesion_peak,
-        hes.lung_p999,
-        hes.ratio,
-        hes.rank
-    );
-    for (what, ours, them) in [
-        ("lesion peak", hes.lesion_peak, num("lesion_peak")),
-        ("lung p99.9", hes.lung_p999, num("lung_p999")),
-        ("ratio", hes.ratio, num("ratio")),
-        (
-            "strongest other",
-            hes.strongest_other.0,
-            num("strongest_other"),
-        ),
+    // The Hessian within 3% (scipy's kernels differ a little), the RST within 1% (its own ray
+    // caster, no refinement); the same rank for both.
+    for (method, key, ours, tolerance) in [
+        ("Hessian Li", "hessian_li", hes, 0.03),
+        ("RST Li", "rst_li", rst, 0.01),
     ] {
-        assert!(
-            (ours - them).abs() <= 0.03 * them,
-            "Hessian Li {what}: ours {ours}, independent {them}"
+        let theirs = &json[key];
+        let num = |key: &str| theirs[key].as_f64().expect(key);
+        println!(
+            "independent {method}: peak {:.2}, p99.9 {:.2}, ratio {:.3}, rank {}; ours: {:.2}, {:.2}, {:.3}, {}",
+            num("lesion_peak"),
+            num("lung_p999"),
+            num("ratio"),
+            num("rank"),
+            ours.lesion_peak,
+            ours.lung_p999,
+            ours.ratio,
+            ours.rank
         );
+        for (what, ours, them) in [
+            ("lesion peak", ours.lesion_peak, num("lesion_peak")),
+            ("lung p99.9", ours.lung_p999, num("lung_p999")),
+            ("ratio", ours.ratio, num("ratio")),
+            (
+                "strongest other",
+                ours.strongest_other.0,
+                num("strongest_other"),
+            ),
+        ] {
+            assert!(
+                (ours - them).abs() <= tolerance * them,
+                "{method} {what}: ours {ours}, independent {them}"
+            );
+        }
+        assert_eq!(ours.rank as f64, num("rank"), "{method} rank");
     }
-    assert_eq!(hes.rank as f64, num("rank"), "Hessian Li rank");
-    // The RST Li study the same way (the script's own ray caster, no refinement): the same
-    // numbers within 1%, and the same rank.
-    let theirs = &json["rst_li"];
-    let num = |key: &str| theirs[key].as_f64().expect(key);
-    println!(
-        "independent RST Li: peak {:.2}, p99.9 {:.2}, ratio {:.3}, rank {}; ours: {:.2}, {:.2}, {:.3}, {}",
-        num("lesion_peak"),
-        num("lung_p999"),
-        num("ratio"),
-        num("rank"),
-        rst.lesion_peak,
-        rst.lung_p999,
-        rst.ratio,
-        rst.rank
-    );
-    for (what, ours, them) in [
-        ("lesion peak", rst.lesion_peak, num("lesion_peak")),
-        ("lung p99.9", rst.lung_p999, num("lung_p999")),
-        ("ratio", rst.ratio, num("ratio")),
-        (
-            "strongest other",
-            rst.strongest_other.0,
-            num("strongest_other"),
-        ),
-    ] {
-        assert!(
-            (ours - them).abs() <= 0.01 * them,
-            "RST Li {what}: ours {ours}, independent {them}"
-        );
-    }
-    assert_eq!(rst.rank as f64, num("rank"), "RST Li rank");
 }
 
 /// A synthetic chest: air, a body of soft tissue touching no border, two lungs (-850 HU) with a
