@@ -251,6 +251,16 @@ impl Phantom {
     }
 
     /// Moves every object by `d_mm` (the box stays): sub-voxel offsets for tests.
+    /// The box reaching at least `reach_mm` from the frame's origin on each side, rounded up to
+    /// whole voxels of `spacing_mm`, so that the origin is a grid point of that spacing.
+    pub fn boxed_on_grid(mut self, reach_mm: [f64; 3], spacing_mm: [f64; 3]) -> Self {
+        let half: [f64; 3] =
+            std::array::from_fn(|a| (reach_mm[a] / spacing_mm[a] - 1e-9).ceil() * spacing_mm[a]);
+        self.min_mm = half.map(|h| -h);
+        self.max_mm = half;
+        self
+    }
+
     pub fn shifted(mut self, d_mm: [f64; 3]) -> Self {
         for o in &mut self.objects {
             o.shape = o.shape.translated(d_mm);

@@ -114,13 +114,11 @@ fn blobness_through_the_pipeline_at_thin_and_thick_slices() {
     req.radius_mm = Some(8.0);
     let mut b = Vec::new();
     for spacing in [[0.5; 3], [0.7, 0.7, 2.5], [0.9; 3], [0.6, 0.6, 5.0]] {
-        let mut p = phantom::sphere(4.7, 100.0);
-        // Room for the rays to leave the sphere; the centre on a voxel of every grid.
-        p.min_mm = [-9.0, -9.0, -15.0];
-        p.max_mm = [9.0, 9.0, 15.0];
+        // Room for the rays to leave the sphere; the centre a voxel of every grid.
+        let p = phantom::sphere(4.7, 100.0).boxed_on_grid([9.0, 9.0, 15.0], spacing);
         let volume = p.render(spacing);
         let grid = Grid::of(&volume);
-        let centre = grid.nearest_voxel([9.0, 9.0, 15.0]);
+        let centre = grid.nearest_voxel(p.grid_mm([0.0; 3]));
         let out = compute(&grid, &volume.to_f32(), &req).expect("rst");
         let v = f64::from(out.components[2][grid.index(centre[0], centre[1], centre[2])]);
         println!("spacing {spacing:?}: blobness {v:.3} at voxel {centre:?}");
