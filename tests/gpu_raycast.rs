@@ -883,3 +883,77 @@ fn bands_of_rows_draw_the_same_frame() {
     }
     assert!((5..=12).contains(&bands), "{bands} bands");
 }
+
+/// Values beyond a half float (a PET in Bq/ml or counts, up to 10^6) are kept: the texture holds
+/// them times a power of two, the window follows, and the brightest pixel of the MIP picks the
+/// hottest voxel, not one clipped to 65504 beside it (the bladder and an injection site were one
+/// white before). The picture is the CPU twin's.
+#[test]
+fn values_up_to_a_million_keep_their_order_in_the_mip() {
+    let dims = [24usize, 20, 16];
+    let n = dims[0] * dims[1] * dims[2];
+    let mut values = vec![100.0f32; n];
+    let hot = [17usize, 12, 9];
+    let warm = [5usize, 6, 4];
+    let at = |p: [usize; 3]| p[0] + dims[0] * (p[1] + dims[1] * p[2]);
+    // The hottest spot (the bladder), and one just above a half float's largest value (an
+    // injection site), each a voxel and its six neighbours.
+    for (centre, peak) in [(hot, 1.0e6f32), (warm, 65_700.0)] {
+        values[at(centre)] = peak;
+        for a in 0..3 {
+            for d in [-1i64, 1] {
+                let mut q = centre;
+                q[a] = (q[a] as i64 + d) as usize;
+                values[at(q)] = 0.5 * peak;
+            }
+        }
+    }
+    let volume = Volume::from_f32(dims, [4.0, 4.0, 4.0], values);
+    let comps = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
+    let Some(g) = gpu(&volume, &comps) else {
+        return;
+    };
+    assert_eq!(g.volume.value_scale, 1.0 / 32.0, "10^6 is scaled into 2^14..2^15");
+    let twin = TwinScene::new(&volume, None);
+    let camera = Camera::for_volume(&g.volume.world_from_voxel, g.volume.dims, ViewPreset::Anterior);
+    let settings = RenderSettings {
+        window: (0.0, 1.3e6),
+        ..Default::default()
+    };
+    let size = [96, 96];
+    let (image, twin_rgba, depths, _, target) =
+        both(&g, &twin, &camera, &settings, size, false, false);
+    for (a, b) in image.iter().zip(&twin_rgba) {
+        assert!(a.abs_diff(*b) <= 1, "GPU and twin differ: {a} vs {b}");
+    }
+    // The brightest pixel, and where its maximum came from.
+    let brightest = (0..size[0] as usize * size[1] as usize)
+        .max_by_key(|&p| image[4 * p])
+        .expect("pixels");
+    let pixel = [
+        (brightest % size[0] as usize) as u32,
+        (brightest / size[0] as usize) as u32,
+    ];
+    // A spike of one voxel and its neighbours, sampled 2 mm apart along the ray and between
+    // voxel centres across it: well above the warm spot, below the peak.
+    assert!(image[4 * brightest] >= 96, "1e6 of 1.3e6 is bright: {}", image[4 * brightest]);
+    let view = *target.rendered().expect("a frame");
+    let pick = view.pick_from(pixel, depths[brightest]).expect("a hit");
+    let off = (0..3)
+        .map(|a| (pick.voxel[a] as f64 - hot[a] as f64).abs() * 4.0)
+        .fold(0.0, f64::max);
+    assert!(off <= 8.0, "picked {:?}, hottest {hot:?}", pick.voxel);
+    // The warm spot stays below the hot one: 65,700 of 1.3e6 is grey level ~13, not white.
+    let warm_pixel = (0..size[0] as usize * size[1] as usize)
+        .filter(|&p| {
+            let pk = view.pick_from(
+                [(p % size[0] as usize) as u32, (p / size[0] as usize) as u32],
+                depths[p],
+            );
+            pk.is_some_and(|k| k.voxel == warm)
+        })
+        .map(|p| image[4 * p])
+        .max()
+        .expect("the warm spot is seen");
+    assert!((8..=20).contains(&warm_pixel), "warm spot grey {warm_pixel}");
+}

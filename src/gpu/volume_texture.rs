@@ -2,9 +2,14 @@
 //! volumes as 3D textures, kept on the GPU after they are computed (features computed once,
 //! projected many times).
 //!
-//! - Intensity: `R16Float`, physical values (HU), uploaded once from the CPU volume. Half floats
-//!   hold integers exactly up to 2048 and in steps of 2 up to 4096: enough for display; values
-//!   shown to the user come from the CPU volume.
+//! - Intensity: `R16Float`, physical values (HU, SUV, ...) times the volume's
+//!   [`texture_value_scale`], uploaded once from the CPU volume. Half floats hold integers
+//!   exactly up to 2048 and in steps of 2 up to 4096: enough for display; values shown to the
+//!   user come from the CPU volume. The scale is a power of two, 1 for every volume whose values
+//!   lie within 1..32768 in magnitude (CT, most MR): a PET in Bq/ml or counts (up to 10^6) would
+//!   otherwise be clipped at the half float's 65504, and tiny float values would lose their
+//!   precision among the subnormals. Scaling by a power of two commutes with rounding, so the
+//!   texture keeps 11 significant bits of every value whatever its range.
 //! - Features: `Rgb9e5Ufloat` per method, `(V, A, B)` in their physical units (no scale to
 //!   keep): three 9-bit mantissas with a shared 5-bit exponent, 4 bytes per voxel (half of
 //!   `Rgba16Float`), filterable everywhere, the features' range (0 to 65408) without a
@@ -29,6 +34,20 @@ pub const INTENSITY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R16Float;
 pub const FEATURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgb9e5Ufloat;
 /// Bytes of one feature texel.
 pub const FEATURE_TEXEL_BYTES: u32 = 4;
+
+/// The power of two by which physical values are multiplied into the intensity texture (and the
+/// display window with them): 1 when the largest magnitude of `range` lies within 1..=32768,
+/// else the power of two that brings it into 16384..=32768 (finite, non-zero ranges only).
+pub fn texture_value_scale(range: (f32, f32)) -> f32 {
+    let m = range.0.abs().max(range.1.abs());
+    if !m.is_finite() || m == 0.0 || (1.0..=32768.0).contains(&m) {
+        return 1.0;
+    }
+    // floor(log2(m)) from the exponent bits (m is a normal f32 or a subnormal; both fine here).
+    let e = ((m.to_bits() >> 23) & 0xff) as i32 - 127;
+    // m * 2^(14 - e) lies in [2^14, 2^15).
+    pow2((14 - e).clamp(-126, 127))
+}
 
 /// The largest value a shared-exponent texel holds: (2^9 - 1) / 2^9 * 2^16.
 pub const RGB9E5_MAX: f32 = 65408.0;
@@ -235,6 +254,8 @@ pub struct RenderVolume {
     pub intensity_view: wgpu::TextureView,
     /// Smallest and largest physical value.
     pub value_range: (f32, f32),
+    /// Texel value = physical value * `value_scale` ([`texture_value_scale`]).
+    pub value_scale: f32,
 }
 
 impl RenderVolume {
@@ -261,13 +282,15 @@ impl RenderVolume {
             intensity_usage(ctx),
         );
         let intensity_view = intensity.create_view(&wgpu::TextureViewDescriptor::default());
+        let value_range = volume.value_range().unwrap_or((0.0, 1.0));
         let render = Self {
             dims,
             spacing_mm: volume.spacing_mm.map(|s| s as f32),
             world_from_voxel: volume.world_from_voxel(),
             intensity,
             intensity_view,
-            value_range: volume.value_range().unwrap_or((0.0, 1.0)),
+            value_range,
+            value_scale: texture_value_scale(value_range),
         };
         let upload = IntensityUpload {
             next_z: 0,
@@ -320,7 +343,11 @@ impl IntensityUpload {
             z0 as usize * dims[0] as usize * dims[1] as usize,
             &mut values,
         );
-        let halves: Vec<half::f16> = values.iter().map(|&v| half::f16::from_f32(v)).collect();
+        let scale = render.value_scale;
+        let halves: Vec<half::f16> = values
+            .iter()
+            .map(|&v| half::f16::from_f32(v * scale))
+            .collect();
         drop(values);
         write_slices(
             ctx,

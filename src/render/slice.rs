@@ -165,8 +165,9 @@ impl SliceRenderer {
             index: plane.index,
             overlay: u32::from(overlay.is_some()),
             out_size: size,
-            window_lo: request.window.0,
-            window_hi: request.window.1,
+            // The texture holds values times the volume's scale; the window follows them.
+            window_lo: request.window.0 * volume.value_scale,
+            window_hi: request.window.1 * volume.value_scale,
             scale,
         };
         let params_buf = params_buffer(&ctx.device, "slice params", &params);
@@ -219,7 +220,15 @@ pub fn cpu_twin(
 ) -> Vec<[u8; 4]> {
     let plane = request.plane;
     let (w, h) = (dims[plane.across], dims[plane.vertical]);
-    let (lo, hi) = request.window;
+    // The texture's scale, from the values' range as `RenderVolume::create` takes it.
+    let range = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(None, |r: Option<(f32, f32)>, &v| {
+            Some(r.map_or((v, v), |(lo, hi)| (lo.min(v), hi.max(v))))
+        });
+    let scale = crate::gpu::volume_texture::texture_value_scale(range.unwrap_or((0.0, 1.0)));
+    let (lo, hi) = (request.window.0 * scale, request.window.1 * scale);
     let mut out = Vec::with_capacity(w * h);
     for y in 0..h {
         for x in 0..w {
@@ -228,7 +237,7 @@ pub fn cpu_twin(
             p[plane.across] = x;
             p[plane.vertical] = y;
             let n = p[0] + dims[0] * (p[1] + dims[1] * p[2]);
-            let v = as_f16(values[n]);
+            let v = as_f16(values[n] * scale);
             let g = ((v - lo) / (hi - lo).max(1e-6)).clamp(0.0, 1.0);
             let mut rgb = [g; 3];
             if let (Some(o), Some(f)) = (request.overlay, features) {

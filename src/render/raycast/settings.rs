@@ -137,6 +137,8 @@ pub struct VolumeGeometry {
     pub dims: [u32; 3],
     pub spacing_mm: [f32; 3],
     pub world_from_voxel: DAffine3,
+    /// Intensity texel = physical value * `value_scale` (the window is scaled with it).
+    pub value_scale: f32,
 }
 
 impl VolumeGeometry {
@@ -145,6 +147,7 @@ impl VolumeGeometry {
             dims: volume.dims,
             spacing_mm: volume.spacing_mm,
             world_from_voxel: volume.world_from_voxel,
+            value_scale: volume.value_scale,
         }
     }
 
@@ -153,6 +156,9 @@ impl VolumeGeometry {
             dims: volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX)),
             spacing_mm: volume.spacing_mm.map(|s| s as f32),
             world_from_voxel: volume.world_from_voxel(),
+            value_scale: crate::gpu::volume_texture::texture_value_scale(
+                volume.value_range().unwrap_or((0.0, 1.0)),
+            ),
         }
     }
 }
@@ -231,9 +237,9 @@ pub fn params(
         dims: geometry.dims,
         flags,
         feature_scale,
-        window_lo: settings.window.0,
+        window_lo: settings.window.0 * geometry.value_scale,
         out_size: size,
-        window_hi: settings.window.1,
+        window_hi: settings.window.1 * geometry.value_scale,
         max_steps,
         row0: 0,
         row_end: size[1],

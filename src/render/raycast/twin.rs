@@ -25,7 +25,10 @@ pub struct TwinScene {
 impl TwinScene {
     /// The scene [`RenderVolume::upload`] and [`FeatureTexture::from_components`] would make.
     pub fn new(volume: &crate::Volume, components: Option<&crate::cpu::Components3>) -> Self {
-        let half = |v: f32| half::f16::from_f32(v).to_f32();
+        let scale = crate::gpu::volume_texture::texture_value_scale(
+            volume.value_range().unwrap_or((0.0, 1.0)),
+        );
+        let half = |v: f32| half::f16::from_f32(v * scale).to_f32();
         let intensity: Vec<f32> = volume.to_f32().into_iter().map(half).collect();
         let features: Option<Vec<[f32; 4]>> = components.map(|c| {
             (0..volume.voxel_count())
