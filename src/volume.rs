@@ -16,6 +16,9 @@ pub enum Modality {
     Ct,
     /// Magnetic resonance; values are arbitrary scanner units.
     Mr,
+    /// Positron emission tomography; values in SUVbw when the header allows it, else in the
+    /// series' own unit ([`Volume::pet`] says which).
+    Pt,
     /// A synthetic volume made by this program (phantoms); values in HU.
     Phantom,
     #[default]
@@ -27,6 +30,7 @@ impl Modality {
         match self {
             Self::Ct => "CT",
             Self::Mr => "MR",
+            Self::Pt => "PT",
             Self::Phantom => "phantom",
             Self::Unknown => "unknown",
         }
@@ -96,6 +100,18 @@ impl Voxels {
     }
 }
 
+/// What a PET series' values mean.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PetScale {
+    /// Units (0054,1001) as written ("BQML", "CNTS", "GML"; empty when missing).
+    pub units: String,
+    /// SUVbw per unit of the rescaled stored value. When known, it is folded into
+    /// `value_slope` and `value_intercept`, so the volume's physical values are SUV.
+    pub suv_factor: Option<f64>,
+    /// How the factor was found (the QIBA rule's branch), or why it could not be.
+    pub rule: String,
+}
+
 /// A 3D scalar volume with its scanner geometry.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Volume {
@@ -112,6 +128,11 @@ pub struct Volume {
     pub value_slope: f32,
     pub value_intercept: f32,
     pub modality: Modality,
+    /// For a PET series: its unit and SUV factor.
+    pub pet: Option<PetScale>,
+    /// DICOM's FrameOfReferenceUID: volumes that share it share one patient space (a PET and
+    /// the CT of the same PET/CT scan). `None` for other formats.
+    pub frame_of_reference: Option<String>,
     /// Where the volume came from (file name, "phantom: sphere", ...), for the user.
     pub source: String,
     /// Things the user should know (uneven slices, 4D file reduced to its first volume, ...).
@@ -131,6 +152,8 @@ impl Volume {
             value_slope: 1.0,
             value_intercept: 0.0,
             modality: Modality::Unknown,
+            pet: None,
+            frame_of_reference: None,
             source: String::new(),
             warnings: Vec::new(),
         }
@@ -191,8 +214,24 @@ impl Volume {
             value_slope: self.value_slope,
             value_intercept: self.value_intercept,
             modality: self.modality,
+            pet: self.pet.clone(),
+            frame_of_reference: self.frame_of_reference.clone(),
             source: self.source.clone(),
             warnings: self.warnings.clone(),
+        }
+    }
+
+    /// The unit of the physical values, for the user: "HU" (CT and phantoms), "SUV" (a PET
+    /// with its SUV factor), the PET's own unit without one, "" when unknown.
+    pub fn unit(&self) -> &str {
+        match self.modality {
+            Modality::Ct | Modality::Phantom => "HU",
+            Modality::Pt => match &self.pet {
+                Some(p) if p.suv_factor.is_some() => "SUV",
+                Some(p) => p.units.as_str(),
+                None => "",
+            },
+            Modality::Mr | Modality::Unknown => "",
         }
     }
 
@@ -344,6 +383,45 @@ impl Volume {
         (lo <= hi).then_some((lo, hi))
     }
 
+    /// The physical value at an LPS point (mm), trilinear between voxel centres (non-finite
+    /// voxels as [`Self::value`] gives them); `None` outside the voxel centres' box. How a PET is
+    /// read at a CT's point: on its own grid, never resampled into a copy.
+    pub fn value_at_world(&self, p_world: DVec3) -> Option<f32> {
+        self.value_at_continuous(self.voxel_from_world().transform_point3(p_world))
+    }
+
+    /// The physical value at a continuous voxel index, trilinear between voxel centres; `None`
+    /// outside the voxel centres' box.
+    pub fn value_at_continuous(&self, q: DVec3) -> Option<f32> {
+        let q = [q.x, q.y, q.z];
+        let mut i0 = [0usize; 3];
+        let mut w = [0.0f64; 3];
+        for a in 0..3 {
+            let max = self.dims[a].checked_sub(1)? as f64;
+            if !(q[a] >= -1e-6 && q[a] <= max + 1e-6) {
+                return None;
+            }
+            let c = q[a].clamp(0.0, max);
+            let f = c.floor().min((max - 1.0).max(0.0));
+            i0[a] = f as usize;
+            w[a] = c - f;
+        }
+        let mut sum = 0.0f64;
+        for corner in 0..8 {
+            let mut weight = 1.0;
+            let mut idx = [0usize; 3];
+            for a in 0..3 {
+                let hi = corner >> a & 1 == 1;
+                weight *= if hi { w[a] } else { 1.0 - w[a] };
+                idx[a] = (i0[a] + usize::from(hi)).min(self.dims[a] - 1);
+            }
+            if weight > 0.0 {
+                sum += weight * f64::from(self.value_at(idx[0], idx[1], idx[2]));
+            }
+        }
+        Some(sum as f32)
+    }
+
     /// Physical size of the volume's bounding box (centre to centre of the outer voxels), mm.
     pub fn extent_mm(&self) -> [f64; 3] {
         std::array::from_fn(|a| (self.dims[a].max(1) - 1) as f64 * self.spacing_mm[a])
@@ -361,6 +439,17 @@ impl Volume {
     /// The affine map from LPS mm to continuous voxel index.
     pub fn voxel_from_world(&self) -> DAffine3 {
         self.world_from_voxel().inverse()
+    }
+}
+
+/// A value with its unit for the user: two decimals for SUV, whole numbers otherwise (HU,
+/// scanner units).
+pub fn format_value(value: f32, unit: &str) -> String {
+    let digits = if unit == "SUV" { 2 } else { 0 };
+    if unit.is_empty() {
+        format!("{value:.digits$}")
+    } else {
+        format!("{value:.digits$} {unit}")
     }
 }
 
@@ -436,6 +525,20 @@ mod tests {
         assert!((p - DVec3::new(-10.0 - 7.5, 20.5, 30.0 - 1.4)).length() < 1e-9);
         let back = v.voxel_from_world().transform_point3(p);
         assert!((back - DVec3::new(1.0, 2.0, 3.0)).length() < 1e-9);
+    }
+
+    #[test]
+    fn values_at_world_points_are_trilinear_in_the_volume_s_own_grid() {
+        let values: Vec<f32> = (0..24).map(|n| n as f32).collect();
+        let mut v = Volume::from_f32([2, 3, 4], [2.0, 1.0, 3.0], values);
+        v.origin_mm = [10.0, 0.0, -5.0];
+        // Voxel (1, 2, 3) is value 1 + 2*2 + 3*6 = 23 at (12, 2, 4) mm.
+        assert_eq!(v.value_at_world(DVec3::new(12.0, 2.0, 4.0)), Some(23.0));
+        // Half way between voxel (0,0,0) and (1,0,0).
+        assert_eq!(v.value_at_world(DVec3::new(11.0, 0.0, -5.0)), Some(0.5));
+        // Half way along k between slices 1 and 2 at (0, 1): 2 + 6*1.5 = 11.
+        assert_eq!(v.value_at_world(DVec3::new(10.0, 1.0, -0.5)), Some(11.0));
+        assert_eq!(v.value_at_world(DVec3::new(9.0, 0.0, -5.0)), None);
     }
 
     #[test]

@@ -124,6 +124,8 @@ pub(crate) fn tile_along_z(volume: &Volume, nz: usize) -> Volume {
         value_slope: volume.value_slope,
         value_intercept: volume.value_intercept,
         modality: volume.modality,
+        pet: volume.pet.clone(),
+        frame_of_reference: volume.frame_of_reference.clone(),
         source: format!("{} tiled along z to {nz} slices", volume.source),
         warnings: volume.warnings.clone(),
     }

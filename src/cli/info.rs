@@ -90,11 +90,32 @@ fn to_json(loaded: &Loaded) -> serde_json::Value {
         "orientation": axes,
         "voxel_type": v.voxels.type_name(),
         "modality": v.modality.as_str(),
+        "unit": v.unit(),
         "min": range.map(|r| r.0),
         "max": range.map(|r| r.1),
+        "suv": suv_json(v, range),
         "warnings": v.warnings,
         "notes": loaded.notes,
     })
+}
+
+/// A PET's SUV: the factor (SUVbw per unit of the rescaled stored value), the largest SUV and
+/// the rule that gave the factor; null for other volumes and for a PET without a factor (its
+/// warning says why).
+fn suv_json(v: &crate::volume::Volume, range: Option<(f32, f32)>) -> serde_json::Value {
+    match v
+        .pet
+        .as_ref()
+        .and_then(|p| p.suv_factor.map(|f| (f, &p.rule)))
+    {
+        Some((factor, rule)) => serde_json::json!({
+            "factor": factor,
+            "max": range.map(|r| r.1),
+            "rule": rule,
+            "units": v.pet.as_ref().map(|p| p.units.as_str()),
+        }),
+        None => serde_json::Value::Null,
+    }
 }
 
 fn to_text(loaded: &Loaded) -> String {
@@ -146,10 +167,9 @@ fn to_text(loaded: &Loaded) -> String {
     }
     match v.value_range() {
         Some((lo, hi)) => {
-            let unit = if v.modality == crate::volume::Modality::Ct {
-                " HU"
-            } else {
-                ""
+            let unit = match v.unit() {
+                "" => String::new(),
+                u => format!(" {u}"),
             };
             let _ = writeln!(s, "intensity:   {lo} .. {hi}{unit}");
         }
@@ -158,6 +178,20 @@ fn to_text(loaded: &Loaded) -> String {
         }
     }
     let _ = writeln!(s, "modality:    {}", v.modality.as_str());
+    if let Some(p) = &v.pet {
+        match p.suv_factor {
+            Some(f) => {
+                let _ = writeln!(
+                    s,
+                    "suv:         factor {f:.6e} per {} ({})",
+                    p.units, p.rule
+                );
+            }
+            None => {
+                let _ = writeln!(s, "suv:         none ({})", p.rule);
+            }
+        }
+    }
     for w in &v.warnings {
         let _ = writeln!(s, "warning:     {w}");
     }

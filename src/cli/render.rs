@@ -118,6 +118,17 @@ pub struct RenderArgs {
     /// Render this many frames and print the frame time.
     #[arg(long)]
     pub bench: Option<u32>,
+    /// A PET of the same patient (file or folder) fused over the picture in hot iron: its MIP
+    /// along the same rays, read on its own grid in patient coordinates. `--pick` then adds the
+    /// PET's value (SUV when the header allows) at the picked point.
+    #[arg(long)]
+    pub pet: Option<PathBuf>,
+    /// The PET's window LO,HI in its display unit (SUV; default 0,10).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub pet_window: Option<Vec<f32>>,
+    /// How much the PET covers the picture where it is hot, 0..1.
+    #[arg(long, default_value_t = 0.5)]
+    pub pet_opacity: f32,
 }
 
 fn parse_size(s: &str) -> anyhow::Result<[u32; 2]> {
@@ -171,15 +182,103 @@ fn method(m: RenderMethod) -> Option<Method> {
     }
 }
 
-/// The grey window a radiologist would start with.
+/// The grey window a radiologist would start with (0-10 SUV for a PET in SUV).
 pub fn default_window(volume: &Volume, preset: Preset) -> (f32, f32) {
     if volume.modality == Modality::Ct {
         match preset {
             Preset::LungNodules | Preset::Airways => (-1350.0, 150.0),
             _ => (-160.0, 240.0),
         }
+    } else if volume.unit() == "SUV" {
+        PET_WINDOW
     } else {
         volume.value_range().unwrap_or((0.0, 1.0))
+    }
+}
+
+/// The PET window nuclear-medicine readers start with, SUV.
+const PET_WINDOW: (f32, f32) = (0.0, 10.0);
+
+/// A `LO,HI` window argument, checked.
+fn window_arg(name: &str, w: &[f32]) -> anyhow::Result<(f32, f32)> {
+    let [lo, hi] = w[..] else {
+        bail!("{name} takes LO,HI");
+    };
+    if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+        bail!("{name} {lo},{hi}: need LO < HI");
+    }
+    Ok((lo, hi))
+}
+
+/// The PET of `render --pet`: loaded, uploaded, and the MIP settings it is drawn with.
+struct PetOverlay {
+    volume: Volume,
+    render: RenderVolume,
+    settings: RenderSettings,
+    opacity: f32,
+}
+
+impl PetOverlay {
+    fn load(ctx: &GpuContext, args: &RenderArgs, ct: &Volume) -> anyhow::Result<Option<Self>> {
+        let Some(path) = &args.pet else {
+            return Ok(None);
+        };
+        let files = crate::cli::features::read_input(path)?;
+        let loaded = io::load(&files).with_context(|| format!("loading {}", path.display()))?;
+        for w in &loaded.volume.warnings {
+            eprintln!("warning: PET: {w}");
+        }
+        let volume = loaded.volume;
+        if volume.modality != Modality::Pt {
+            eprintln!(
+                "warning: --pet {}: its modality is {}, not PT; fused as given",
+                path.display(),
+                volume.modality.as_str()
+            );
+        }
+        if let Some(note) = crate::io::frame_of_reference_note(ct, &volume) {
+            eprintln!("warning: {note}");
+        }
+        if !(0.0..=1.0).contains(&args.pet_opacity) {
+            bail!("--pet-opacity {}: give 0..1", args.pet_opacity);
+        }
+        let window = match &args.pet_window {
+            Some(w) => window_arg("--pet-window", w)?,
+            None => default_window(&volume, Preset::default()),
+        };
+        let render = RenderVolume::upload(ctx, &volume)?;
+        let settings = RenderSettings {
+            window,
+            ..Default::default()
+        };
+        Ok(Some(Self {
+            volume,
+            render,
+            settings,
+            opacity: args.pet_opacity,
+        }))
+    }
+
+    /// The PET's MIP along the rays of `camera`, blended over `rgba` (the CT's picture).
+    fn fuse(
+        &self,
+        ctx: &GpuContext,
+        caster: &Raycaster,
+        camera: &Camera,
+        size: [u32; 2],
+        rgba: &mut [u8],
+    ) -> anyhow::Result<()> {
+        let scene = Scene {
+            volume: &self.render,
+            features: None,
+            bricks: None,
+            feature_bricks: None,
+        };
+        let mut target = RaycastTarget::new(ctx, size)?;
+        caster.render(ctx, &scene, camera, &self.settings, &mut target, ..)?;
+        let pet = target.read_image_blocking(ctx)?;
+        crate::render::fusion::fuse_rgba(rgba, &pet, self.opacity);
+        Ok(())
     }
 }
 
@@ -275,6 +374,10 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let volume = std::sync::Arc::new(volume);
     let ctx = pollster::block_on(GpuContext::new_headless())?;
     let render_volume = RenderVolume::upload(&ctx, &volume)?;
+    let pet = PetOverlay::load(&ctx, &args, &volume)?;
+    if pet.is_some() && args.turntable.is_some() {
+        bail!("--pet with --turntable is not supported yet: render the fused frames one by one");
+    }
     let features = match method(args.method) {
         None => None,
         Some(m) => {
@@ -308,13 +411,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     if let Some(w) = &args.window {
-        let [lo, hi] = w[..] else {
-            bail!("--window takes LO,HI");
-        };
-        if !(lo.is_finite() && hi.is_finite() && hi > lo) {
-            bail!("--window {lo},{hi}: need LO < HI");
-        }
-        settings.window = (lo, hi);
+        settings.window = window_arg("--window", w)?;
     }
     if let Some(g) = &args.gain {
         let gains = match g[..] {
@@ -387,7 +484,10 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             dir,
         )?;
     } else if let Some(out) = &args.out {
-        let rgba = target.read_image_blocking(&ctx)?;
+        let mut rgba = target.read_image_blocking(&ctx)?;
+        if let Some(pet) = &pet {
+            pet.fuse(&ctx, &caster, &camera, size, &mut rgba)?;
+        }
         image::save_buffer(
             out,
             &rgba,
@@ -407,7 +507,17 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     }
     if let Some(pixel) = pick_pixel {
         let pick = target.pick_blocking(&ctx, pixel)?;
-        let json = pick_json(&ctx, &volume, features.as_ref(), args.method, pixel, pick)?;
+        let mut json = pick_json(&ctx, &volume, features.as_ref(), args.method, pixel, pick)?;
+        if let (Some(pet), Some(p)) = (&pet, pick) {
+            // The PET's value at the picked 3D point, read on its own grid.
+            json["pet"] = serde_json::json!({
+                "value": pet.volume.value_at_world(p.world_mm),
+                "unit": pet.volume.unit(),
+            });
+            if pet.volume.unit() == "SUV" {
+                json["suv"] = serde_json::json!(pet.volume.value_at_world(p.world_mm));
+            }
+        }
         println!("{}", serde_json::to_string_pretty(&json)?);
     }
     Ok(())

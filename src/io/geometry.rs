@@ -51,6 +51,8 @@ impl Grid {
             value_slope: 1.0,
             value_intercept: 0.0,
             modality: Modality::Unknown,
+            pet: None,
+            frame_of_reference: None,
             source,
             warnings,
         }

@@ -58,6 +58,23 @@ impl std::fmt::Debug for Patient {
     }
 }
 
+/// What a user should know before two volumes are read in one patient space (a PET over its
+/// CT): `None` when both carry the same FrameOfReferenceUID, else a sentence saying that the
+/// frames differ or are not known, and that they are placed by their patient coordinates anyway.
+pub fn frame_of_reference_note(primary: &Volume, other: &Volume) -> Option<String> {
+    match (&primary.frame_of_reference, &other.frame_of_reference) {
+        (Some(a), Some(b)) if a == b => None,
+        (Some(_), Some(_)) => Some(format!(
+            "{} and {} have different frames of reference (FrameOfReferenceUID): they are placed by their patient coordinates, which may not match",
+            primary.source, other.source
+        )),
+        _ => Some(format!(
+            "the frame of reference of {} or {} is not known (no FrameOfReferenceUID): they are placed by their patient coordinates",
+            primary.source, other.source
+        )),
+    }
+}
+
 /// Memory caps applied before allocating. The defaults let a 512x512x2000 i16 CT (1 GiB) through.
 #[derive(Clone, Copy, Debug)]
 pub struct Limits {

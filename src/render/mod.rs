@@ -6,6 +6,7 @@
 //! later shown or copied, with a one-texel stand-in where no features are bound.
 
 pub mod camera;
+pub mod fusion;
 pub mod probe;
 pub mod raycast;
 pub mod slice;

@@ -8,6 +8,7 @@ mod inflated;
 mod listing;
 mod series;
 mod stream;
+pub mod suv;
 #[cfg(test)]
 pub(crate) mod synth;
 mod validate;
@@ -287,6 +288,10 @@ pub(super) struct FileHeader {
     /// set is not deflated: a file read on demand then has its fragments read where they lie,
     /// a frame at a time ([`encapsulated::locate_fragments`]), not parsed into memory.
     pub encapsulated_pixels: Option<u64>,
+    /// A PET image's SUV tags (units, decay, dose, weight, times).
+    pub pet: Option<suv::PetTags>,
+    /// FrameOfReferenceUID (0020,0052).
+    pub frame_of_reference: Option<String>,
 }
 
 fn frame_info(levels: &[Option<&InMemDicomObject>]) -> FrameInfo {
@@ -517,8 +522,10 @@ pub(super) fn read_header(
     let modality = match modality_name.as_str() {
         "CT" => Modality::Ct,
         "MR" => Modality::Mr,
+        "PT" => Modality::Pt,
         _ => Modality::Unknown,
     };
+    let pet = (modality == Modality::Pt).then(|| suv::PetTags::from_object(&obj));
     let bits_allocated = elem_int(&obj, tags::BITS_ALLOCATED).unwrap_or(16);
     let bits_stored = elem_int(&obj, tags::BITS_STORED).unwrap_or(bits_allocated);
     if !(1..=bits_allocated).contains(&bits_stored) {
@@ -539,6 +546,8 @@ pub(super) fn read_header(
         .filter(|_| !NATIVE_SYNTAXES.contains(&ts_trimmed))
         .map(|(at, _)| at);
     Ok(Some(FileHeader {
+        pet,
+        frame_of_reference: elem_str(&obj, tags::FRAME_OF_REFERENCE_UID).filter(|s| !s.is_empty()),
         native_pixels,
         encapsulated_pixels,
         series_uid: elem_str(&obj, tags::SERIES_INSTANCE_UID)

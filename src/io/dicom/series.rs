@@ -13,7 +13,7 @@ use super::{FileHeader, FrameInfo, NATIVE_SYNTAXES, check_transfer_syntax, encap
 use crate::io::geometry::checked_grid;
 use crate::io::raw;
 use crate::io::{InputFile, Limits, LoadError};
-use crate::volume::{Volume, Voxels};
+use crate::volume::{PetScale, Volume, Voxels};
 
 /// One frame of the chosen series: which file, which frame in it, and its header values.
 pub(super) struct Frame<'a> {
@@ -247,19 +247,54 @@ impl Layout<'_> {
         } else {
             format!("DICOM series {series} ({} files)", files.len())
         };
+        let mut warnings = self.warnings;
+        let pet = pet_scale(files, &mut warnings);
+        // A known SUV factor is folded into the rescale: the volume's values are then SUV.
+        let suv = pet.as_ref().and_then(|p| p.suv_factor).unwrap_or(1.0);
         Volume {
             dims: self.dims,
             spacing_mm: self.spacing_mm,
             origin_mm: self.origin_mm,
             direction: self.direction,
             voxels,
-            value_slope,
-            value_intercept,
+            value_slope: (f64::from(value_slope) * suv) as f32,
+            value_intercept: (f64::from(value_intercept) * suv) as f32,
             modality: files[0].1.modality,
+            pet,
+            frame_of_reference: files[0].1.frame_of_reference.clone(),
             source,
-            warnings: self.warnings,
+            warnings,
         }
     }
+}
+
+/// A PET series' unit and SUVbw factor from its images' tags (the QIBA rule,
+/// [`super::suv::suv_factor`]). Without a factor the PET keeps its own unit, and a warning names
+/// what is missing or contradictory.
+fn pet_scale(files: &[(&str, &FileHeader)], warnings: &mut Vec<String>) -> Option<PetScale> {
+    let tags: Vec<super::suv::PetTags> = files.iter().filter_map(|(_, h)| h.pet.clone()).collect();
+    let first = tags.first()?;
+    let units = first.units.clone().unwrap_or_default();
+    Some(match super::suv::suv_factor(&tags) {
+        Ok(f) => PetScale {
+            units,
+            suv_factor: Some(f.factor),
+            rule: f.rule,
+        },
+        Err(e) => {
+            let shown = if units.is_empty() {
+                "its stored unit"
+            } else {
+                units.as_str()
+            };
+            warnings.push(format!("PET shown in {shown}, not SUV: {e}"));
+            PetScale {
+                units,
+                suv_factor: None,
+                rule: e.to_string(),
+            }
+        }
+    })
 }
 
 /// Checks that the images of a stack store pixels alike, orders their frames and works out

@@ -128,11 +128,17 @@ pub fn parse_instances(url: &str, body: &[u8]) -> Result<Vec<InstanceInfo>, Dico
 }
 
 /// The series to open when none is named: the CT or MR series with the most instances (the
-/// first listed of equals); without CT or MR, the series with the most instances.
+/// first listed of equals); without CT or MR, the PET series with the most, then any series.
 pub fn choose_series(series: &[SeriesInfo]) -> Option<usize> {
     let key = |s: &SeriesInfo| {
-        let volumetric = matches!(s.modality.as_deref(), Some("CT" | "MR"));
-        (volumetric, s.instances.unwrap_or(0))
+        // CT and MR first (the features are computed on them; a PET/CT study opens its CT),
+        // then PET, then anything else.
+        let rank = match s.modality.as_deref() {
+            Some("CT" | "MR") => 2,
+            Some("PT") => 1,
+            _ => 0,
+        };
+        (rank, s.instances.unwrap_or(0))
     };
     let mut best: Option<usize> = None;
     for (i, s) in series.iter().enumerate() {
