@@ -89,6 +89,22 @@ pub struct SeriesStatus {
     pub loading: bool,
 }
 
+/// The PET fused over the CT (`window.shapecastStatus.pet`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PetStatus {
+    pub dims: [usize; 3],
+    pub spacing_mm: [f64; 3],
+    /// "SUV", or the PET's own unit when its SUV factor is not known.
+    pub unit: String,
+    /// SUVbw per unit of the rescaled stored value, when known.
+    pub suv_factor: Option<f64>,
+    /// The PET's value (SUV) at the crosshair, `None` outside the PET.
+    pub at_crosshair: Option<f32>,
+    pub window: (f32, f32),
+    pub opacity: f32,
+    pub visible: bool,
+}
+
 /// Everything `window.shapecastStatus` holds.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct AppStatus {
@@ -121,6 +137,9 @@ pub struct AppStatus {
     /// The series list (empty unless the files given hold several series); row `i` is the
     /// control "series:i".
     pub series: Vec<SeriesStatus>,
+    /// The PET over the CT, once loaded; `pet_loading` while it is read.
+    pub pet: Option<PetStatus>,
+    pub pet_loading: bool,
 }
 
 impl AppStatus {
@@ -239,6 +258,31 @@ mod web {
             })
             .collect();
         set(&obj, "series", series);
+        let pet = object(status.pet.as_ref(), |o, p| {
+            set(o, "dims", array_f64(p.dims.iter().map(|&d| d as f64)));
+            set(o, "spacing_mm", array_f64(p.spacing_mm));
+            set(o, "unit", p.unit.as_str());
+            set(
+                o,
+                "suv_factor",
+                p.suv_factor.map_or(JsValue::NULL, JsValue::from_f64),
+            );
+            set(
+                o,
+                "at_crosshair",
+                p.at_crosshair
+                    .map_or(JsValue::NULL, |v| JsValue::from_f64(f64::from(v))),
+            );
+            set(
+                o,
+                "window",
+                array_f64([f64::from(p.window.0), f64::from(p.window.1)]),
+            );
+            set(o, "opacity", f64::from(p.opacity));
+            set(o, "visible", p.visible);
+        });
+        set(&obj, "pet", pet);
+        set(&obj, "pet_loading", status.pet_loading);
         let _ = Reflect::set(&window, &JsValue::from_str("shapecastStatus"), &obj);
     }
 }

@@ -806,3 +806,76 @@ fn a_large_volume_is_uploaded_over_frames() {
     assert_eq!(harness.state().volume().map(|v| v.dims), Some(before));
     assert_eq!(harness.state().status().phase, Phase::Ready);
 }
+
+/// A PET/CT study's folder (the CT and the PET of one scan) opens the CT, reads the PET after
+/// it and fuses it over the slice panes in hot iron; the status gives the PET's SUV at the
+/// crosshair, read on the PET's own grid at the CT voxel's patient position.
+#[test]
+fn a_pet_ct_folder_opens_the_ct_with_its_pet_fused() {
+    let (Some(folder), Some(ct_dir), Some(pet_dir)) = (
+        common::shared_data("petct/sts-cropped/STS_001"),
+        common::shared_data("petct/sts-cropped/STS_001/CT"),
+        common::shared_data("petct/sts-cropped/STS_001/PET"),
+    ) else {
+        return;
+    };
+    let Some(mut harness) = harness(intensity_only(StartWith::Paths(vec![folder]))) else {
+        return;
+    };
+    run_until(&mut harness, "the PET loaded", 200, |app| {
+        app.status().pet.is_some() && !app.status().pet_loading
+    });
+    harness.run_steps(3);
+    let status = harness.state().status().clone();
+    assert_eq!(status.error, None);
+    assert_eq!(status.volume.as_ref().expect("a volume").modality, "CT");
+    let pet = status.pet.clone().expect("the PET");
+    assert_eq!(pet.unit, "SUV");
+    assert_eq!(pet.window, (0.0, 10.0));
+    let ct = shapecast::io::load(&common::inputs_in(&ct_dir))
+        .expect("CT")
+        .volume;
+    let pet_volume = shapecast::io::load(&common::inputs_in(&pet_dir))
+        .expect("PET")
+        .volume;
+    assert_eq!(pet.dims, pet_volume.dims);
+    let c = status.crosshair.as_ref().expect("crosshair").lps_mm;
+    let expected = pet_volume
+        .value_at_world(glam::DVec3::from(c))
+        .expect("the crosshair inside the PET");
+    let got = pet.at_crosshair.expect("SUV at the crosshair");
+    assert!((got - expected).abs() < 1e-5, "{got} vs {expected}");
+    assert_eq!(ct.dims, status.volume.as_ref().expect("volume").dims);
+    // The slice panes show the PET in hot iron: red well above green somewhere in the axial
+    // pane, none when the PET is hidden.
+    let image = harness.render().expect("render");
+    save(&image, "app_pet_ct.png");
+    let axial = harness
+        .state()
+        .pane_rect(SliceKind::Axial)
+        .expect("axial pane");
+    let warm = |image: &image::RgbaImage| {
+        let mut n = 0;
+        for y in axial.top().ceil() as u32..axial.bottom().floor() as u32 {
+            for x in axial.left().ceil() as u32..axial.right().floor() as u32 {
+                if x < image.width() && y < image.height() {
+                    let p = image.get_pixel(x, y);
+                    n += usize::from(
+                        p[0] > p[1].saturating_add(40) && p[0] > p[2].saturating_add(40),
+                    );
+                }
+            }
+        }
+        n
+    };
+    let fused = warm(&image);
+    assert!(fused > 100, "{fused} hot-iron pixels in the axial pane");
+    click_control(&mut harness, "pet-visible");
+    harness.run_steps(3);
+    assert!(!harness.state().status().pet.as_ref().expect("PET").visible);
+    let hidden = warm(&harness.render().expect("render"));
+    assert!(
+        hidden * 10 < fused,
+        "{hidden} warm pixels with the PET hidden, {fused} shown"
+    );
+}

@@ -913,9 +913,17 @@ fn values_up_to_a_million_keep_their_order_in_the_mip() {
     let Some(g) = gpu(&volume, &comps) else {
         return;
     };
-    assert_eq!(g.volume.value_scale, 1.0 / 32.0, "10^6 is scaled into 2^14..2^15");
+    assert_eq!(
+        g.volume.value_scale,
+        1.0 / 32.0,
+        "10^6 is scaled into 2^14..2^15"
+    );
     let twin = TwinScene::new(&volume, None);
-    let camera = Camera::for_volume(&g.volume.world_from_voxel, g.volume.dims, ViewPreset::Anterior);
+    let camera = Camera::for_volume(
+        &g.volume.world_from_voxel,
+        g.volume.dims,
+        ViewPreset::Anterior,
+    );
     let settings = RenderSettings {
         window: (0.0, 1.3e6),
         ..Default::default()
@@ -936,7 +944,11 @@ fn values_up_to_a_million_keep_their_order_in_the_mip() {
     ];
     // A spike of one voxel and its neighbours, sampled 2 mm apart along the ray and between
     // voxel centres across it: well above the warm spot, below the peak.
-    assert!(image[4 * brightest] >= 96, "1e6 of 1.3e6 is bright: {}", image[4 * brightest]);
+    assert!(
+        image[4 * brightest] >= 96,
+        "1e6 of 1.3e6 is bright: {}",
+        image[4 * brightest]
+    );
     let view = *target.rendered().expect("a frame");
     let pick = view.pick_from(pixel, depths[brightest]).expect("a hit");
     let off = (0..3)
@@ -955,5 +967,8 @@ fn values_up_to_a_million_keep_their_order_in_the_mip() {
         .map(|p| image[4 * p])
         .max()
         .expect("the warm spot is seen");
-    assert!((8..=20).contains(&warm_pixel), "warm spot grey {warm_pixel}");
+    assert!(
+        (8..=20).contains(&warm_pixel),
+        "warm spot grey {warm_pixel}"
+    );
 }

@@ -17,6 +17,7 @@ pub mod mip_view;
 pub mod movie;
 mod pacs;
 mod panels;
+mod pet;
 pub mod picture;
 mod probe;
 mod series_list;
@@ -40,7 +41,7 @@ use crate::gpu::GpuContext;
 use crate::gpu::volume_texture::{IntensityUpload, RenderVolume};
 use crate::render::slice::{Overlay, SliceRenderer};
 use crate::status::{
-    AdapterStatus, AppStatus, CrosshairStatus, FeatureStatus, Phase, VolumeStatus,
+    AdapterStatus, AppStatus, CrosshairStatus, FeatureStatus, PetStatus, Phase, VolumeStatus,
 };
 use crate::volume::Volume;
 
@@ -129,6 +130,9 @@ pub struct AppOptions {
     pub view: Option<ViewState>,
     /// What could not be read from the link, one message per field.
     pub link_problems: Vec<String>,
+    /// A PET to fuse over the CT that opens (`shapecast view CT --pet PET`).
+    #[cfg(not(target_arch = "wasm32"))]
+    pub pet: Option<Vec<std::path::PathBuf>>,
 }
 
 impl Default for AppOptions {
@@ -140,6 +144,8 @@ impl Default for AppOptions {
             preset: None,
             view: None,
             link_problems: Vec::new(),
+            #[cfg(not(target_arch = "wasm32"))]
+            pet: None,
         }
     }
 }
@@ -282,6 +288,14 @@ struct Scene {
     origin: Option<ViewSource>,
 }
 
+impl Scene {
+    /// The unit values are shown in: HU for what looks like a CT, else the volume's own ("SUV"
+    /// for a PET with its factor).
+    fn unit(&self) -> &str {
+        if self.is_ct { "HU" } else { self.volume.unit() }
+    }
+}
+
 /// A loaded volume whose intensity texture is being written, slab by slab over frames (a
 /// whole-body CT is 1 GB: seconds of uploading in one frame would stop the viewer); it is
 /// installed, and the volume shown replaced, once the last slab is in.
@@ -364,6 +378,8 @@ pub struct ShapecastApp {
     pacs: pacs::Pacs,
     /// The series of the files given, when they hold several.
     series: series_list::SeriesState,
+    /// The PET of a PET/CT study, fused over the CT.
+    pet: pet::PetState,
 }
 
 impl ShapecastApp {
@@ -460,6 +476,7 @@ impl ShapecastApp {
             controls: Vec::new(),
             link_copied_at: None,
             pacs: pacs::Pacs::default(),
+            pet: pet::PetState::default(),
             series: series_list::SeriesState::default(),
         }
     }
@@ -774,6 +791,20 @@ impl ShapecastApp {
                             origin.or_else(|| self.scene.as_ref().and_then(|s| s.origin.clone()));
                         self.install(*loaded, series);
                     }
+                    web_files::WebEvent::PetLoaded { loaded, generation } => {
+                        let ct = self.scene.as_ref().map(|s| s.volume.as_ref());
+                        if let Some(message) = self.pet.install(loaded.volume, ct, generation) {
+                            self.error(message);
+                        }
+                    }
+                    web_files::WebEvent::PetFailed {
+                        message,
+                        generation,
+                    } => {
+                        if self.pet.failed(generation) {
+                            self.error(format!("PET: {message}"));
+                        }
+                    }
                     web_files::WebEvent::Failed { message } => {
                         self.load_progress = None;
                         self.series.loading = None;
@@ -814,6 +845,12 @@ impl ShapecastApp {
                     self.load_failed(message);
                 }
             }
+        }
+        if let Some(message) = self.pet.step(
+            self.scene.as_ref().map(|s| s.volume.as_ref()),
+            self.generation,
+        ) {
+            self.error(message);
         }
         if let Some(gpu) = &self.gpu {
             match self.features.step(gpu, frame_s) {
@@ -975,6 +1012,19 @@ impl ShapecastApp {
         self.pending_camera = None;
         // The list goes with the volume shown.
         self.series.set = series;
+        // The PET that came with a CT (a PET/CT study's folder) is read next, over it.
+        self.pet.clear();
+        if let (Some(set), Some(scene)) = (&self.series.set, &self.scene) {
+            self.pet.start_with(set, &scene.volume, self.generation);
+        }
+        #[cfg(not(target_arch = "wasm32"))]
+        if let Some(paths) = self.options.pet.take()
+            && let Some(scene) = &self.scene
+            && scene.volume.modality != crate::volume::Modality::Pt
+        {
+            self.pet
+                .start_source(LoadSource::Paths(paths), self.generation);
+        }
         // A link's view for this volume replaces the defaults it just got (after loading the
         // series it names, when that is another of these files).
         self.apply_pending_view();
@@ -1005,7 +1055,22 @@ impl ShapecastApp {
             .map(|(n, r)| (n.clone(), [r.left(), r.top(), r.width(), r.height()]))
             .collect();
         let movie = self.movie_progress();
+        let pet_status = self.pet.layer.as_ref().map(|p| PetStatus {
+            dims: p.volume.dims,
+            spacing_mm: p.volume.spacing_mm,
+            unit: p.unit().to_owned(),
+            suv_factor: p.volume.pet.as_ref().and_then(|x| x.suv_factor),
+            at_crosshair: self
+                .scene
+                .as_ref()
+                .and_then(|sc| p.value_at_ct_voxel(&sc.volume, self.crosshair)),
+            window: p.window,
+            opacity: p.opacity,
+            visible: p.visible,
+        });
         let s = &mut self.status;
+        s.pet = pet_status;
+        s.pet_loading = self.pet.loading();
         s.volume = self.scene.as_ref().map(|sc| VolumeStatus {
             dims: sc.volume.dims,
             spacing_mm: sc.volume.spacing_mm,
@@ -1168,7 +1233,8 @@ impl ShapecastApp {
             window: self.window.range(),
             tool: self.measure.tool,
             measurements: &self.measure.list,
-            unit: if scene.is_ct { "HU" } else { "" },
+            unit: scene.unit(),
+            pet: self.pet.layer.as_ref(),
         };
         let mut hover = None;
         let mut toggle = None;
@@ -1262,9 +1328,10 @@ impl ShapecastApp {
                                 self.mip_view.hover_text = out.hover.map(|p| {
                                     let [i, j, k] = p.voxel;
                                     let value = scene.volume.value_at(i, j, k);
-                                    let unit = if scene.is_ct { " HU" } else { "" };
-                                    let mut t =
-                                        format!("{value:.0}{unit} at voxel ({i}, {j}, {k})");
+                                    let mut t = format!(
+                                        "{} at voxel ({i}, {j}, {k})",
+                                        crate::volume::format_value(value, scene.unit())
+                                    );
                                     if let Some(e) = entry
                                         && let Some([a, b, c]) = self.probe.value_at(e.id, p.voxel)
                                     {

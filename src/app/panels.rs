@@ -155,6 +155,8 @@ impl ShapecastApp {
                     }
                 }
                 self.series_ui(ui);
+                let controls = self.pet.panel_ui(ui);
+                self.controls.extend(controls);
                 if !self.notes.is_empty() {
                     let title = format!("Notes ({})", self.notes.len());
                     notes_ui(ui, title, "notes", &self.notes);
@@ -318,7 +320,7 @@ impl ShapecastApp {
             }
         });
         let Some(scene) = &self.scene else { return };
-        let unit = if scene.is_ct { "HU" } else { "" };
+        let unit = scene.unit();
         let mut remove = None;
         let mut go_to = None;
         for (n, e) in self.measure.list.iter().enumerate() {
@@ -385,12 +387,20 @@ impl ShapecastApp {
         let p = v
             .world_from_voxel()
             .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64));
-        let value = v.value_at(i, j, k);
-        let unit = if scene.is_ct { "HU" } else { "" };
+        let value = crate::volume::format_value(v.value_at(i, j, k), scene.unit());
         let mut s = format!(
-            "voxel ({i}, {j}, {k})   LPS ({:.1}, {:.1}, {:.1}) mm   {value:.0} {unit}",
+            "voxel ({i}, {j}, {k})   LPS ({:.1}, {:.1}, {:.1}) mm   {value}",
             p.x, p.y, p.z
         );
+        if let Some(pet) = &self.pet.layer {
+            match pet.volume.value_at_world(p) {
+                Some(x) => s.push_str(&format!(
+                    "   PET {}",
+                    crate::volume::format_value(x, pet.unit())
+                )),
+                None => s.push_str("   PET: outside"),
+            }
+        }
         if let Some(entry) = self.displayed_entry() {
             match self.probe.value_at(entry.id, voxel) {
                 Some([a, b, c]) => s.push_str(&format!(

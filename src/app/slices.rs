@@ -336,6 +336,8 @@ pub struct PaneInputs<'a> {
     pub measurements: &'a [measure::Entry],
     /// The values' unit ("HU", or "" when unknown).
     pub unit: &'a str,
+    /// The PET fused over the CT, when one is shown.
+    pub pet: Option<&'a super::pet::PetLayer>,
 }
 
 /// What happened in a pane this frame.
@@ -385,6 +387,8 @@ pub struct SlicePane {
     cine: Option<Cine>,
     /// The measurement being drawn: its kind and first point (pane coordinates).
     drawing: Option<(MeasureKind, [f64; 2])>,
+    /// The fused PET's image of the slice shown.
+    pet_overlay: super::pet::PaneOverlay,
 }
 
 /// Wheel points per slice (a notch of a mouse wheel in a browser is about 100 points).
@@ -413,6 +417,7 @@ impl SlicePane {
             cine_fps: 10.0,
             cine: None,
             drawing: None,
+            pet_overlay: super::pet::PaneOverlay::default(),
         }
     }
 
@@ -624,6 +629,12 @@ impl SlicePane {
         let painter = ui.painter_at(area);
         painter.rect_filled(area, 0.0, egui::Color32::BLACK);
         if let Some(id) = self.texture_id {
+            painter.image(id, rect, axes.uv(), egui::Color32::WHITE);
+        }
+        if let Some(pet) = inputs.pet.filter(|p| p.visible) {
+            let id =
+                self.pet_overlay
+                    .texture(ui.ctx(), pet, volume, axes, slice, inputs.generation);
             painter.image(id, rect, axes.uv(), egui::Color32::WHITE);
         }
         self.draw_overlay(&painter, area, rect, axes, crosshair, w, h, volume);

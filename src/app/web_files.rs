@@ -54,6 +54,13 @@ pub enum WebEvent {
         series: Option<super::load::SeriesSet>,
         origin: Option<ViewSource>,
     },
+    /// The PET series of a PET/CT study's files, read for the CT of `generation`.
+    PetLoaded {
+        loaded: Box<crate::io::Loaded>,
+        generation: u64,
+    },
+    /// Reading the PET series failed; the CT shown stays, without it.
+    PetFailed { message: String, generation: u64 },
     /// Reading failed; the message names the file.
     Failed { message: String },
     /// The user cancelled a download.
@@ -549,7 +556,7 @@ async fn read_dicom_set(files: &[Named], label: &str, total: f64) -> bool {
             let chosen = list.default_choice();
             let handles = files.iter().map(|f| f.file.clone()).collect();
             let set = super::load::SeriesSet::of_web_files(list, handles, chosen);
-            read_series(set, Some(origin)).await;
+            read_series(set, SeriesFor::Shown(Some(origin))).await;
         }
         Err(e) => push(WebEvent::Failed {
             message: e.to_string(),
@@ -561,10 +568,31 @@ async fn read_dicom_set(files: &[Named], label: &str, total: f64) -> bool {
 /// Loads the chosen series of a set of the page's files (a click in the series list): its
 /// files read again one at a time and decoded as they come.
 pub fn load_series(set: super::load::SeriesSet) {
-    wasm_bindgen_futures::spawn_local(read_series(set, None));
+    wasm_bindgen_futures::spawn_local(read_series(set, SeriesFor::Shown(None)));
 }
 
-async fn read_series(set: super::load::SeriesSet, origin: Option<ViewSource>) {
+/// Loads the PET series of a set of the page's files, for the CT of `generation`.
+pub fn load_pet_series(set: super::load::SeriesSet, generation: u64) {
+    wasm_bindgen_futures::spawn_local(read_series(set, SeriesFor::Pet(generation)));
+}
+
+/// What a series read from the page's files is for.
+enum SeriesFor {
+    /// To be shown (`origin`: how a link names the files; `None`: another series of the set
+    /// shown).
+    Shown(Option<ViewSource>),
+    /// The PET over the CT of this generation.
+    Pet(u64),
+}
+
+async fn read_series(set: super::load::SeriesSet, purpose: SeriesFor) {
+    let fail = |message: String| match purpose {
+        SeriesFor::Shown(_) => WebEvent::Failed { message },
+        SeriesFor::Pet(generation) => WebEvent::PetFailed {
+            message,
+            generation,
+        },
+    };
     let Some(files) = set.web_files() else {
         return;
     };
@@ -597,19 +625,29 @@ async fn read_series(set: super::load::SeriesSet, origin: Option<ViewSource>) {
             Err(message) => Err(message),
         };
         if let Err(message) = pushed {
-            push(WebEvent::Failed { message });
+            push(fail(message));
             return;
         }
         done += file.size();
     }
-    match crate::io::finish_entry(&set.list, builder) {
-        Ok(loaded) => push(WebEvent::Loaded {
+    match (crate::io::finish_entry(&set.list, builder), purpose) {
+        (Ok(loaded), SeriesFor::Shown(origin)) => push(WebEvent::Loaded {
             loaded: Box::new(loaded),
             series: Some(set),
             origin,
         }),
-        Err(e) => push(WebEvent::Failed {
-            message: e.to_string(),
+        (Ok(loaded), SeriesFor::Pet(generation)) => push(WebEvent::PetLoaded {
+            loaded: Box::new(loaded),
+            generation,
+        }),
+        (Err(e), purpose) => push(match purpose {
+            SeriesFor::Shown(_) => WebEvent::Failed {
+                message: e.to_string(),
+            },
+            SeriesFor::Pet(generation) => WebEvent::PetFailed {
+                message: e.to_string(),
+                generation,
+            },
         }),
     }
 }

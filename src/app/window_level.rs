@@ -102,16 +102,20 @@ pub fn looks_like_ct(volume: &Volume, range: Option<(f32, f32)>) -> bool {
         Modality::Unknown => {
             range.is_some_and(|(lo, hi)| (-1100.0..=-900.0).contains(&lo) && hi > 100.0)
         }
-        Modality::Mr | Modality::Phantom => false,
+        Modality::Mr | Modality::Pt | Modality::Phantom => false,
     }
 }
 
-/// The window a volume opens with: the abdomen (soft-tissue) window for CT, otherwise the 1st to
-/// 99.5th percentile of the values (MR has no units; phantoms have low contrast).
+/// The window a volume opens with: the abdomen (soft-tissue) window for CT, 0-10 for a PET in
+/// SUV, otherwise the 1st to 99.5th percentile of the values (MR has no units; phantoms have low contrast).
 pub fn default_window(volume: &Volume) -> Window {
     let range = volume.value_range();
     if looks_like_ct(volume, range) {
         return WindowPreset::Abdomen.window();
+    }
+    // A PET in SUV opens on 0-10 SUV, as nuclear-medicine viewers do.
+    if volume.unit() == "SUV" {
+        return Window::from_range(0.0, 10.0);
     }
     match percentiles(volume, 0.01, 0.995) {
         Some((lo, hi)) if hi > lo => Window::from_range(lo, hi),

@@ -80,12 +80,16 @@ pub struct ViewArgs {
     /// Open a phantom instead: sphere, cylinder, bifurcation, airway, ... (see `phantom`).
     #[arg(long, conflicts_with = "paths")]
     pub phantom: Option<String>,
-    /// The display mode to open in: intensity, hessian, rst, li, frangi or gst.
-    #[arg(long, default_value = "rst")]
+    /// The display mode to open in: intensity, hessian, rst, li, frangi or gst (the Hessian,
+    /// the lighter one, as the page opens).
+    #[arg(long, default_value = "hessian")]
     pub method: String,
     /// The feature preset: lymph-nodes, lung-nodules, airways or vessels.
     #[arg(long)]
     pub preset: Option<String>,
+    /// A PET of the same patient (file or folder) fused over the CT, read on its own grid.
+    #[arg(long)]
+    pub pet: Option<std::path::PathBuf>,
 }
 
 fn view(args: ViewArgs) -> anyhow::Result<()> {
@@ -111,6 +115,7 @@ fn view(args: ViewArgs) -> anyhow::Result<()> {
         start,
         mode,
         preset,
+        pet: args.pet.map(|p| vec![p]),
         ..AppOptions::default()
     })
 }
@@ -119,7 +124,7 @@ fn view(args: ViewArgs) -> anyhow::Result<()> {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command.unwrap_or_else(|| {
         Command::View(ViewArgs {
-            method: "rst".to_owned(),
+            method: "hessian".to_owned(),
             ..ViewArgs::default()
         })
     }) {
