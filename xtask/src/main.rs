@@ -200,6 +200,11 @@ fn ensure_apt() -> Result {
         .copied()
         .filter(|p| !dpkg_installed(p))
         .collect();
+    apt_install(&missing)
+}
+
+/// Installs Debian packages (as root; otherwise says which to install).
+fn apt_install(missing: &[&str]) -> Result {
     if missing.is_empty() {
         return Ok(());
     }
@@ -213,7 +218,7 @@ fn ensure_apt() -> Result {
     run(Command::new("apt-get").args(["update", "-q"]))?;
     run(Command::new("apt-get")
         .args(["install", "-y", "-q", "--no-install-recommends"])
-        .args(&missing)
+        .args(missing)
         .env("DEBIAN_FRONTEND", "noninteractive"))
 }
 
@@ -225,8 +230,10 @@ fn ensure_node_modules() -> Result {
     {
         return Ok(());
     }
+    // Node and npm come from Debian like the other packages when the machine has none (a
+    // machine with another Node, e.g. NodeSource's, which bundles npm, is left as it is).
     if output("npm", &["--version"]).is_none() {
-        return Err("npm is missing: apt-get install -y nodejs npm".to_owned());
+        apt_install(&["nodejs", "npm"])?;
     }
     // playwright-core never downloads a browser; the test drives Debian's /usr/bin/chromium.
     // binaryen is npm's build of wasm-opt (a working one: Debian's 108 breaks this wasm), used
