@@ -218,7 +218,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k1 = i32(floor(t1 / params.step_mm));
     let count = min(k1 - k0 + 1, i32(params.max_steps));
     if t0 > t1 || count <= 0 {
-        textureStore(image, vec2<i32>(xy), vec4<f32>(0.0, 0.0, 0.0, 1.0));
+        // Missed: the background, white when the grey is inverted (a PET MIP's paper).
+        var bg = 0.0;
+        if (params.flags & 16u) != 0u && (params.flags & 2u) != 0u {
+            bg = 1.0;
+        }
+        textureStore(image, vec2<i32>(xy), vec4<f32>(bg, bg, bg, 1.0));
         pick[pixel] = vec2<f32>(0.0, -1.0);
         return;
     }
@@ -302,7 +307,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if use_features {
         a = clamp(best_f * params.feature_scale, vec3<f32>(0.0), vec3<f32>(1.0));
     }
-    var rgb = vec3<f32>(g);
+    // Bit 4 of flags: the grey drawn inverted (a PET MIP); `g` keeps its meaning for picks.
+    var grey = g;
+    if (params.flags & 16u) != 0u && (params.flags & 2u) != 0u {
+        grey = 1.0 - g;
+    }
+    var rgb = vec3<f32>(grey);
     rgb = rgb + (vec3<f32>(1.0, 0.0, 0.0) - rgb) * a.x;
     rgb = rgb + (vec3<f32>(0.0, 0.4, 1.0) - rgb) * a.y;
     rgb = rgb + (vec3<f32>(1.0, 1.0, 0.0) - rgb) * a.z;

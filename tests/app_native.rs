@@ -879,3 +879,92 @@ fn a_pet_ct_folder_opens_the_ct_with_its_pet_fused() {
         "{hidden} warm pixels with the PET hidden, {fused} shown"
     );
 }
+
+/// The PET MIP beside the shape MIP: inverted grey (hot is dark), and a click on its darkest
+/// pixel moves the crosshair to the PET's maximum along that ray, whose SUV it shows.
+#[test]
+fn a_click_in_the_pet_mip_goes_to_the_ray_s_maximum() {
+    let (Some(folder), Some(pet_dir)) = (
+        common::shared_data("petct/sts-cropped/STS_001"),
+        common::shared_data("petct/sts-cropped/STS_001/PET"),
+    ) else {
+        return;
+    };
+    let Some(mut harness) = harness(intensity_only(StartWith::Paths(vec![folder]))) else {
+        return;
+    };
+    run_until(&mut harness, "the PET loaded", 200, |app| {
+        app.status().pet.is_some() && !app.status().pet_loading
+    });
+    harness.run_steps(4);
+    let rect = harness
+        .state()
+        .status()
+        .controls
+        .iter()
+        .find(|(n, _)| n == "pane:pet-mip")
+        .map(|(_, r)| egui::Rect::from_min_size(egui::pos2(r[0], r[1]), egui::vec2(r[2], r[3])))
+        .expect("the PET MIP pane");
+    let image = harness.render().expect("render");
+    save(&image, "app_pet_mip.png");
+    // The darkest pixel of the PET MIP (inverted: the hottest projection).
+    let mut darkest = (255u8, egui::Pos2::ZERO);
+    for y in rect.top().ceil() as u32 + 2..rect.bottom().floor() as u32 - 2 {
+        for x in rect.left().ceil() as u32 + 2..rect.right().floor() as u32 - 2 {
+            let p = image.get_pixel(x, y);
+            if p[0] < darkest.0 && p[0] == p[1] && p[1] == p[2] {
+                darkest = (p[0], egui::pos2(x as f32 + 0.5, y as f32 + 0.5));
+            }
+        }
+    }
+    assert!(
+        darkest.0 < 200,
+        "the PET MIP shows its hot spot: darkest {}",
+        darkest.0
+    );
+    let pet = shapecast::io::load(&common::inputs_in(&pet_dir))
+        .expect("PET")
+        .volume;
+    let (hot, max) = (0..pet.voxel_count())
+        .map(|n| (n, pet.value(n)))
+        .fold((0, f32::MIN), |b, c| if c.1 > b.1 { c } else { b });
+    harness.hover_at(darkest.1);
+    for pressed in [true, false] {
+        harness.event(egui::Event::PointerButton {
+            pos: darkest.1,
+            button: egui::PointerButton::Primary,
+            pressed,
+            modifiers: egui::Modifiers::NONE,
+        });
+    }
+    let before = harness.state().status().crosshair.clone();
+    run_until(&mut harness, "the crosshair moved", 60, |app| {
+        app.status().crosshair != before
+    });
+    let c = harness
+        .state()
+        .status()
+        .crosshair
+        .clone()
+        .expect("crosshair");
+    let at = glam::DVec3::from(c.lps_mm);
+    let suv = pet.value_at_world(at).expect("inside the PET");
+    let d = pet.dims;
+    let hot_mm = pet.world_from_voxel().transform_point3(glam::DVec3::new(
+        (hot % d[0]) as f64,
+        ((hot / d[0]) % d[1]) as f64,
+        (hot / (d[0] * d[1])) as f64,
+    ));
+    eprintln!(
+        "clicked grey {} at {:?}: crosshair {:?} (SUV {suv:.2}), hottest {max:.2} SUV at {hot_mm:?}",
+        darkest.0, darkest.1, c.lps_mm
+    );
+    // The pick is where the ray has its maximum: the SUV there is what the pixel shows
+    // (inverted grey over the 0-10 SUV window), within the rounding of the crosshair to a CT
+    // voxel and the ray's sampling.
+    let shown = f32::from(255 - darkest.0) / 255.0 * 10.0;
+    assert!(
+        (suv - shown).abs() <= 1.0,
+        "SUV {suv} at the crosshair, {shown} shown"
+    );
+}

@@ -380,6 +380,7 @@ pub struct ShapecastApp {
     series: series_list::SeriesState,
     /// The PET of a PET/CT study, fused over the CT.
     pet: pet::PetState,
+    pet_mip: pet::PetMip,
 }
 
 impl ShapecastApp {
@@ -477,6 +478,7 @@ impl ShapecastApp {
             link_copied_at: None,
             pacs: pacs::Pacs::default(),
             pet: pet::PetState::default(),
+            pet_mip: pet::PetMip::default(),
             series: series_list::SeriesState::default(),
         }
     }
@@ -793,7 +795,10 @@ impl ShapecastApp {
                     }
                     web_files::WebEvent::PetLoaded { loaded, generation } => {
                         let ct = self.scene.as_ref().map(|s| s.volume.as_ref());
-                        if let Some(message) = self.pet.install(loaded.volume, ct, generation) {
+                        if let Some(message) =
+                            self.pet
+                                .install(loaded.volume, ct, generation, self.gpu.as_ref())
+                        {
                             self.error(message);
                         }
                     }
@@ -849,6 +854,7 @@ impl ShapecastApp {
         if let Some(message) = self.pet.step(
             self.scene.as_ref().map(|s| s.volume.as_ref()),
             self.generation,
+            self.gpu.as_ref(),
         ) {
             self.error(message);
         }
@@ -1242,6 +1248,7 @@ impl ShapecastApp {
         let mut errors = Vec::new();
         let mut measured = Vec::new();
         let mut mip_drawn = false;
+        let mut pet_window = None;
         // The crosshair before a click in the MIP, and what the click picked.
         let mut mip_click = None;
         for (id, rect) in &rects {
@@ -1274,89 +1281,136 @@ impl ShapecastApp {
                                 }
                             }
                             PaneId::Mip => {
-                                // The shape MIP (paper section 5): the displayed method's
-                                // features over the windowed intensity; a click moves the
-                                // crosshair to the 3D point the pixel's maximum came from.
-                                let clicked = ui
-                                    .horizontal(|ui| {
-                                        ui.label(egui::RichText::new("MIP").strong());
-                                        let (icon, tip) = if maximised {
-                                            ("restore", "back to all panes")
-                                        } else {
-                                            ("maximise", "show this pane alone")
-                                        };
-                                        ui.small_button(icon).on_hover_text(tip).clicked()
-                                    })
-                                    .inner;
-                                let label = self.mode.label();
-                                let feats: Vec<(&str, &FeatureTexture)> =
-                                    entry.map(|e| (label, &e.texture)).into_iter().collect();
-                                self.mip_view.mode = entry.map(|_| label.to_owned());
-                                // The MIP has its own window (set per volume; its W fields
-                                // change it): a soft-tissue window saturates a CT's MIP, where
-                                // contrast, vessels and bone are what should stay apart.
-                                if self.mip_window_for != Some(scene.generation) {
-                                    self.mip_window_for = Some(scene.generation);
-                                    self.mip_view.settings.window =
-                                        default_mip_window(scene, self.window);
-                                }
-                                for c in 0..3 {
-                                    self.mip_view.settings.channels[c].on = self.display.enabled[c];
-                                    self.mip_view.settings.channels[c].gain = self.display.gain[c];
-                                }
-                                let [i, j, k] = self.crosshair;
-                                let centre = scene.volume.world_from_voxel().transform_point3(
-                                    glam::DVec3::new(i as f64, j as f64, k as f64),
-                                );
-                                self.mip_view.set_crosshair(Some(centre));
-                                // Toolbar above, image below.
-                                let mip_scene = MipScene {
-                                    volume: &scene.render,
-                                    features: &feats,
-                                };
-                                self.mip_view.controls_ui(ui, &mip_scene);
-                                let out = self.mip_view.image_ui(ui, gpu, render_state, &mip_scene);
-                                // The toolbar's channel toggles and gains are the display's.
-                                for c in 0..3 {
-                                    self.display.enabled[c] = self.mip_view.settings.channels[c].on;
-                                    self.display.gain[c] = self.mip_view.settings.channels[c].gain;
-                                }
-                                mip_drawn = true;
-                                // The value where the pointer's pixel has its maximum, in the
-                                // image's corner and the status bar's mouse line.
-                                hover = hover.or(out.hover.map(|p| p.voxel));
-                                self.mip_view.hover_text = out.hover.map(|p| {
-                                    let [i, j, k] = p.voxel;
-                                    let value = scene.volume.value_at(i, j, k);
-                                    let mut t = format!(
-                                        "{} at voxel ({i}, {j}, {k})",
-                                        crate::volume::format_value(value, scene.unit())
-                                    );
-                                    if let Some(e) = entry
-                                        && let Some([a, b, c]) = self.probe.value_at(e.id, p.voxel)
-                                    {
-                                        t.push_str(&format!("   V {a:.1}  A {b:.1}  B {c:.1}"));
+                                // With a PET, its MIP (inverted grey, as nuclear-medicine
+                                // readers see it) on the left, turning with the shape MIP
+                                // (the paper's Fig. 21); a click in it goes to the PET's
+                                // hottest point along that ray.
+                                let whole = ui.available_rect_before_wrap();
+                                let image_top = self.mip_view.image_area().top();
+                                let ct_rect = match self.pet_mip.ui(
+                                    ui,
+                                    whole,
+                                    gpu,
+                                    render_state,
+                                    inputs.pet,
+                                    &mut self.mip_view.camera,
+                                    image_top,
+                                ) {
+                                    Some(out) => {
+                                        pet_window = Some(out.window);
+                                        self.controls.push((
+                                            "pane:pet-mip".to_owned(),
+                                            self.pet_mip.image_area(),
+                                        ));
+                                        if let Some(p) = out.pick {
+                                            let q =
+                                                scene.volume.voxel_from_world().transform_point3(p);
+                                            let v = scene.volume.dims;
+                                            let voxel: [usize; 3] = std::array::from_fn(|a| {
+                                                let c =
+                                                    [q.x, q.y, q.z][a].round().max(0.0) as usize;
+                                                c.min(v[a].saturating_sub(1))
+                                            });
+                                            self.crosshair = voxel;
+                                        }
+                                        out.rest
                                     }
-                                    t
+                                    None => whole,
+                                };
+                                ui.scope_builder(egui::UiBuilder::new().max_rect(ct_rect), |ui| {
+                                    // The shape MIP (paper section 5): the displayed method's
+                                    // features over the windowed intensity; a click moves the
+                                    // crosshair to the 3D point the pixel's maximum came from.
+                                    let clicked = ui
+                                        .horizontal(|ui| {
+                                            ui.label(egui::RichText::new("MIP").strong());
+                                            let (icon, tip) = if maximised {
+                                                ("restore", "back to all panes")
+                                            } else {
+                                                ("maximise", "show this pane alone")
+                                            };
+                                            ui.small_button(icon).on_hover_text(tip).clicked()
+                                        })
+                                        .inner;
+                                    let label = self.mode.label();
+                                    let feats: Vec<(&str, &FeatureTexture)> =
+                                        entry.map(|e| (label, &e.texture)).into_iter().collect();
+                                    self.mip_view.mode = entry.map(|_| label.to_owned());
+                                    // The MIP has its own window (set per volume; its W fields
+                                    // change it): a soft-tissue window saturates a CT's MIP, where
+                                    // contrast, vessels and bone are what should stay apart.
+                                    if self.mip_window_for != Some(scene.generation) {
+                                        self.mip_window_for = Some(scene.generation);
+                                        self.mip_view.settings.window =
+                                            default_mip_window(scene, self.window);
+                                    }
+                                    for c in 0..3 {
+                                        self.mip_view.settings.channels[c].on =
+                                            self.display.enabled[c];
+                                        self.mip_view.settings.channels[c].gain =
+                                            self.display.gain[c];
+                                    }
+                                    let [i, j, k] = self.crosshair;
+                                    let centre = scene.volume.world_from_voxel().transform_point3(
+                                        glam::DVec3::new(i as f64, j as f64, k as f64),
+                                    );
+                                    self.mip_view.set_crosshair(Some(centre));
+                                    // Toolbar above, image below.
+                                    let mip_scene = MipScene {
+                                        volume: &scene.render,
+                                        features: &feats,
+                                    };
+                                    self.mip_view.controls_ui(ui, &mip_scene);
+                                    let out =
+                                        self.mip_view.image_ui(ui, gpu, render_state, &mip_scene);
+                                    // The toolbar's channel toggles and gains are the display's.
+                                    for c in 0..3 {
+                                        self.display.enabled[c] =
+                                            self.mip_view.settings.channels[c].on;
+                                        self.display.gain[c] =
+                                            self.mip_view.settings.channels[c].gain;
+                                    }
+                                    mip_drawn = true;
+                                    // The value where the pointer's pixel has its maximum, in the
+                                    // image's corner and the status bar's mouse line.
+                                    hover = hover.or(out.hover.map(|p| p.voxel));
+                                    self.mip_view.hover_text = out.hover.map(|p| {
+                                        let [i, j, k] = p.voxel;
+                                        let value = scene.volume.value_at(i, j, k);
+                                        let mut t = format!(
+                                            "{} at voxel ({i}, {j}, {k})",
+                                            crate::volume::format_value(value, scene.unit())
+                                        );
+                                        if let Some(e) = entry
+                                            && let Some([a, b, c]) =
+                                                self.probe.value_at(e.id, p.voxel)
+                                        {
+                                            t.push_str(&format!("   V {a:.1}  A {b:.1}  B {c:.1}"));
+                                        }
+                                        t
+                                    });
+                                    if let Some(pick) = out.pick {
+                                        mip_click = Some((self.crosshair, pick));
+                                        self.crosshair = pick.voxel;
+                                    }
+                                    measure::draw_rulers_3d(
+                                        &ui.painter_at(self.mip_view.image_area()),
+                                        inputs.measurements,
+                                        |p| self.mip_view.screen_pos_of(p),
+                                    );
+                                    if clicked {
+                                        toggle = Some(id);
+                                    }
                                 });
-                                if let Some(pick) = out.pick {
-                                    mip_click = Some((self.crosshair, pick));
-                                    self.crosshair = pick.voxel;
-                                }
-                                measure::draw_rulers_3d(
-                                    &ui.painter_at(self.mip_view.image_area()),
-                                    inputs.measurements,
-                                    |p| self.mip_view.screen_pos_of(p),
-                                );
-                                if clicked {
-                                    toggle = Some(id);
-                                }
                             }
                         }
                     });
             });
         }
         self.hover = hover;
+        if let (Some(w), Some(layer)) = (pet_window, &mut self.pet.layer) {
+            layer.window = w;
+        }
         if let Some(s) = &self.scene {
             // With the ruler, a click in the MIP measures in 3D from the crosshair to the point
             // it picked.

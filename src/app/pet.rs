@@ -13,7 +13,11 @@ use std::sync::Arc;
 use glam::{DAffine3, DVec3};
 
 use super::load::{LoadJob, LoadSource, LoadStep, SeriesSet};
+use super::mip_view::{MipScene, MipView};
 use super::slices::PaneAxes;
+use crate::gpu::GpuContext;
+use crate::gpu::volume_texture::RenderVolume;
+use crate::render::camera::Camera;
 use crate::render::fusion::{hot_iron, pet_alpha};
 use crate::volume::{Modality, Volume};
 
@@ -27,6 +31,8 @@ pub struct PetLayer {
     pub visible: bool,
     /// What the user should know (a frame of reference that differs, no SUV).
     pub notes: Vec<String>,
+    /// The PET's own 3D texture, for its MIP (`None` where the GPU refused it).
+    pub render: Option<RenderVolume>,
 }
 
 impl PetLayer {
@@ -44,6 +50,7 @@ impl PetLayer {
             opacity: 0.5,
             visible: true,
             notes,
+            render: None,
         }
     }
 
@@ -173,12 +180,107 @@ pub struct PetState {
     loading_for: Option<u64>,
 }
 
+/// The PET's MIP viewport: its camera follows the shape MIP's.
+#[derive(Default)]
+pub struct PetMip {
+    mip: MipView,
+    /// The PET texture the viewport last framed (its first frame keeps the CT's camera).
+    mip_for: Option<usize>,
+}
+
+/// What the PET's MIP did this frame.
+pub struct PetMipOutput {
+    /// A click picked this point (LPS mm): the PET's maximum along that ray.
+    pub pick: Option<DVec3>,
+    /// What is left of the MIP pane for the shape MIP.
+    pub rest: egui::Rect,
+    /// The PET's window after this frame (a right drag in the viewport sets it).
+    pub window: (f32, f32),
+}
+
 impl PetState {
     /// Forgets the PET (a new CT was loaded).
     pub fn clear(&mut self) {
         *self = Self::default();
     }
+}
 
+impl PetMip {
+    /// Where the PET's MIP image was drawn last frame.
+    pub fn image_area(&self) -> egui::Rect {
+        self.mip.image_area()
+    }
+
+    /// The PET's MIP in the left half of the MIP pane's `area`, turned with `camera` (the shape
+    /// MIP's: a drag in either turns both): inverted grey in the PET's window. `None` (the
+    /// whole pane for the shape MIP) without a PET shown.
+    pub fn ui(
+        &mut self,
+        ui: &mut egui::Ui,
+        area: egui::Rect,
+        gpu: &GpuContext,
+        render_state: &eframe::egui_wgpu::RenderState,
+        layer: Option<&PetLayer>,
+        camera: &mut Camera,
+        image_top: f32,
+    ) -> Option<PetMipOutput> {
+        let layer = layer.filter(|l| l.visible)?;
+        let render = layer.render.as_ref()?;
+        let (left, right) = area.split_left_right_at_fraction(0.5);
+        let mut pick = None;
+        let mut window = layer.window;
+        let first = self.mip_for != Some(Arc::as_ptr(&layer.volume) as usize);
+        let mip = &mut self.mip;
+        ui.scope_builder(egui::UiBuilder::new().max_rect(left.shrink(2.0)), |ui| {
+            ui.horizontal(|ui| {
+                ui.label(egui::RichText::new("PET MIP").strong());
+                ui.label(format!(
+                    "{:.1} to {:.1} {}",
+                    layer.window.0,
+                    layer.window.1,
+                    layer.volume.unit()
+                ));
+            });
+            // The image starts where the shape MIP's does (below its toolbar), so that both
+            // have one size and one scale.
+            let gap = image_top - ui.cursor().top();
+            if gap > 0.0 && gap < 200.0 {
+                ui.add_space(gap);
+            }
+            mip.camera = *camera;
+            mip.settings.window = layer.window;
+            mip.settings.invert_grey = true;
+            mip.settings.show_intensity = true;
+            mip.mode = None;
+            let scene = MipScene {
+                volume: render,
+                features: &[],
+            };
+            let out = mip.image_ui(ui, gpu, render_state, &scene);
+            pick = out.pick.map(|p| p.world_mm);
+            // Its right drag sets the PET's window, as in the slice panes.
+            if mip.settings.window.1 > mip.settings.window.0 {
+                window = mip.settings.window;
+            }
+        });
+        if first {
+            // The viewport framed the PET on its first frame: keep the shape MIP's view.
+            self.mip_for = Some(Arc::as_ptr(&layer.volume) as usize);
+            self.mip.camera = *camera;
+            ui.ctx().request_repaint();
+        } else if self.mip.camera != *camera {
+            *camera = self.mip.camera;
+            ui.ctx().request_repaint();
+        }
+        Some(PetMipOutput {
+            pick,
+            rest: right,
+            window,
+        })
+    }
+}
+
+impl PetState {
     /// Whether a PET is being loaded.
     pub fn loading(&self) -> bool {
         self.loading_for.is_some()
@@ -221,13 +323,18 @@ impl PetState {
     /// Advances the load by one step; a finished load becomes the layer over `ct` (of
     /// `generation`). Returns a message for the user when it failed or what it loaded is not
     /// a PET.
-    pub fn step(&mut self, ct: Option<&Volume>, generation: u64) -> Option<String> {
+    pub fn step(
+        &mut self,
+        ct: Option<&Volume>,
+        generation: u64,
+        gpu: Option<&GpuContext>,
+    ) -> Option<String> {
         let job = self.job.as_mut()?;
         match job.step() {
             LoadStep::Working { .. } => None,
             LoadStep::Done(loaded) => {
                 self.job = None;
-                self.install(loaded.volume, ct, generation)
+                self.install(loaded.volume, ct, generation, gpu)
             }
             LoadStep::Failed(message) => {
                 self.job = None;
@@ -253,6 +360,7 @@ impl PetState {
         volume: Volume,
         ct: Option<&Volume>,
         generation: u64,
+        gpu: Option<&GpuContext>,
     ) -> Option<String> {
         if self.loading_for.take() != Some(generation) {
             return None;
@@ -265,8 +373,18 @@ impl PetState {
                 volume.modality.as_str()
             ));
         }
-        self.layer = Some(PetLayer::new(volume, ct));
-        None
+        let mut layer = PetLayer::new(volume, ct);
+        let mut message = None;
+        if let Some(gpu) = gpu {
+            // The PET is small beside its CT (a whole-body PET of 200 x 200 x 700 is 56 MB
+            // of texture): uploaded in one go.
+            match RenderVolume::upload(gpu, &layer.volume) {
+                Ok(r) => layer.render = Some(r),
+                Err(e) => message = Some(format!("PET MIP: {e} (the fused slices still show it)")),
+            }
+        }
+        self.layer = Some(layer);
+        message
     }
 
     /// The panel's PET section: what is shown, its window (SUV), the opacity, on/off.
@@ -290,6 +408,7 @@ impl PetState {
             v.spacing_mm[1],
             v.spacing_mm[2],
             match v.pet.as_ref().and_then(|p| p.suv_factor) {
+                Some(f) if f == 1.0 => "stored as SUVbw".to_owned(),
                 Some(f) => format!("SUVbw (factor {f:.4e})"),
                 None => format!("in {} (no SUV)", layer.unit()),
             }
@@ -392,7 +511,7 @@ mod tests {
             loading_for: Some(1),
             ..Default::default()
         };
-        assert_eq!(state.install(p.clone(), Some(&ct), 2), None);
+        assert_eq!(state.install(p.clone(), Some(&ct), 2, None), None);
         assert!(state.layer.is_none());
         state.loading_for = Some(2);
         let mut not_pet = p;

@@ -27,7 +27,7 @@ pub struct Params {
     /// 0 = MIP, 1 = MinIP (intensity only).
     pub mode: u32,
     pub dims: [u32; 3],
-    /// `FLAG_*` bits: features, intensity, hardware filtering, brick skipping.
+    /// `FLAG_*` bits: features, intensity, hardware filtering, brick skipping, inverted grey.
     pub flags: u32,
     /// Opacity per unit feature value (gain / reference; 0 = channel off).
     pub feature_scale: [f32; 3],
@@ -58,6 +58,7 @@ pub(super) const FLAG_FEATURES: u32 = 1;
 pub(super) const FLAG_INTENSITY: u32 = 2;
 pub(super) const FLAG_FILTERED: u32 = 4;
 pub(super) const FLAG_BRICKS: u32 = 8;
+pub(super) const FLAG_INVERT: u32 = 16;
 
 pub(super) const BIG: f32 = 3.0e38;
 
@@ -115,6 +116,9 @@ pub struct RenderSettings {
     /// Trilinear interpolation by the texture unit (one sample) instead of eight `textureLoad`s
     /// in the shader: faster, but the CPU twin matches it only within a tolerance.
     pub hardware_filtering: bool,
+    /// Grey drawn inverted (hot = dark on white), as nuclear-medicine readers see a PET MIP.
+    /// Picks are unchanged: they still find the brightest value.
+    pub invert_grey: bool,
 }
 
 impl Default for RenderSettings {
@@ -127,6 +131,7 @@ impl Default for RenderSettings {
             slab: None,
             step_fraction: 0.5,
             hardware_filtering: false,
+            invert_grey: false,
         }
     }
 }
@@ -221,6 +226,9 @@ pub fn params(
     }
     if settings.hardware_filtering {
         flags |= FLAG_FILTERED;
+    }
+    if settings.invert_grey {
+        flags |= FLAG_INVERT;
     }
     Params {
         origin_v: f3(voxel_from_world.transform_point3(origin_world)),

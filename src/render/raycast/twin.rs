@@ -6,7 +6,9 @@
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 
 use super::bricks::{BRICK, brick_dims, cpu_bricks};
-use super::settings::{BIG, CHANNEL_COLOURS, FLAG_BRICKS, FLAG_FEATURES, FLAG_INTENSITY, Params};
+use super::settings::{
+    BIG, CHANNEL_COLOURS, FLAG_BRICKS, FLAG_FEATURES, FLAG_INTENSITY, FLAG_INVERT, Params,
+};
 
 /// The data of the CPU twin: exactly the values the GPU textures hold (the intensity as half
 /// floats, the features as the shared-exponent texels [`FeatureTexture::from_components`]
@@ -98,7 +100,10 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
             let (t0, t1, k0, count) = ray_span(p, o);
             let out = &mut rgba[pixel * 4..pixel * 4 + 4];
             if t0 > t1 || count <= 0 {
-                out.copy_from_slice(&[0, 0, 0, 255]);
+                // Missed: white behind an inverted grey, as the shader draws it.
+                let inverted = p.flags & FLAG_INVERT != 0 && p.flags & FLAG_INTENSITY != 0;
+                let bg = if inverted { 255 } else { 0 };
+                out.copy_from_slice(&[bg, bg, bg, 255]);
                 continue;
             }
             let minip = p.mode == 1;
@@ -210,7 +215,12 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
             } else {
                 [0.0; 3]
             };
-            let mut rgb = [g; 3];
+            let grey = if show && p.flags & FLAG_INVERT != 0 {
+                1.0 - g
+            } else {
+                g
+            };
+            let mut rgb = [grey; 3];
             for (c, colour) in CHANNEL_COLOURS.iter().enumerate() {
                 for k in 0..3 {
                     rgb[k] += (colour[k] - rgb[k]) * a[c];
