@@ -1287,14 +1287,17 @@ impl ShapecastApp {
                                 // hottest point along that ray.
                                 let whole = ui.available_rect_before_wrap();
                                 let image_top = self.mip_view.image_area().top();
+                                let area = pet::MipArea {
+                                    pane: whole,
+                                    image_top,
+                                };
                                 let ct_rect = match self.pet_mip.ui(
                                     ui,
-                                    whole,
+                                    area,
                                     gpu,
                                     render_state,
                                     inputs.pet,
                                     &mut self.mip_view.camera,
-                                    image_top,
                                 ) {
                                     Some(out) => {
                                         pet_window = Some(out.window);

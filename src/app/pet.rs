@@ -188,6 +188,13 @@ pub struct PetMip {
     mip_for: Option<usize>,
 }
 
+/// Where the PET's MIP goes: the MIP pane, and where the shape MIP's image starts in it.
+#[derive(Clone, Copy, Debug)]
+pub struct MipArea {
+    pub pane: egui::Rect,
+    pub image_top: f32,
+}
+
 /// What the PET's MIP did this frame.
 pub struct PetMipOutput {
     /// A click picked this point (LPS mm): the PET's maximum along that ray.
@@ -217,13 +224,16 @@ impl PetMip {
     pub fn ui(
         &mut self,
         ui: &mut egui::Ui,
-        area: egui::Rect,
+        area: MipArea,
         gpu: &GpuContext,
         render_state: &eframe::egui_wgpu::RenderState,
         layer: Option<&PetLayer>,
         camera: &mut Camera,
-        image_top: f32,
     ) -> Option<PetMipOutput> {
+        let MipArea {
+            pane: area,
+            image_top,
+        } = area;
         let layer = layer.filter(|l| l.visible)?;
         let render = layer.render.as_ref()?;
         let (left, right) = area.split_left_right_at_fraction(0.5);
@@ -314,7 +324,8 @@ impl PetState {
         true
     }
 
-    /// Starts loading a PET from other files or paths than the CT's (`--pet`, `&pet=`).
+    /// Starts loading a PET from other paths than the CT's (`shapecast view CT --pet PET`).
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn start_source(&mut self, source: LoadSource, generation: u64) {
         self.loading_for = Some(generation);
         self.job = Some(LoadJob::new(source));
@@ -408,7 +419,7 @@ impl PetState {
             v.spacing_mm[1],
             v.spacing_mm[2],
             match v.pet.as_ref().and_then(|p| p.suv_factor) {
-                Some(f) if f == 1.0 => "stored as SUVbw".to_owned(),
+                Some(1.0) => "stored as SUVbw".to_owned(),
                 Some(f) => format!("SUVbw (factor {f:.4e})"),
                 None => format!("in {} (no SUV)", layer.unit()),
             }
@@ -518,7 +529,7 @@ mod tests {
         not_pet.modality = Modality::Ct;
         assert!(
             state
-                .install(not_pet, Some(&ct), 2)
+                .install(not_pet, Some(&ct), 2, None)
                 .is_some_and(|m| m.contains("not a PET"))
         );
     }
