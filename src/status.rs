@@ -140,6 +140,13 @@ pub struct AppStatus {
     /// The PET over the CT, once loaded; `pet_loading` while it is read.
     pub pet: Option<PetStatus>,
     pub pet_loading: bool,
+    /// The MIP's picture: "none" (nothing drawn yet), "coarse" (a reduced frame, the view
+    /// moving), "refining" (the full frame being drawn in bands over a coarse one) or "done"
+    /// (the full-resolution frame of the current view is drawn): automation compares finished
+    /// pictures instead of sleeping.
+    pub mip: String,
+    /// The same for the PET's MIP ("none" without a PET).
+    pub pet_mip: String,
 }
 
 impl AppStatus {
@@ -283,6 +290,8 @@ mod web {
         });
         set(&obj, "pet", pet);
         set(&obj, "pet_loading", status.pet_loading);
+        set(&obj, "mip", status.mip.as_str());
+        set(&obj, "pet_mip", status.pet_mip.as_str());
         let _ = Reflect::set(&window, &JsValue::from_str("shapecastStatus"), &obj);
     }
 }

@@ -881,9 +881,9 @@ fn a_pet_ct_folder_opens_the_ct_with_its_pet_fused() {
 }
 
 /// The PET MIP beside the shape MIP: inverted grey (hot is dark), and a click on its darkest
-/// pixel moves the crosshair to the PET's maximum along that ray, whose SUV it shows.
+/// pixel moves the crosshair to the PET's maximum along that ray: the hottest voxel.
 #[test]
-fn a_click_in_the_pet_mip_goes_to_the_ray_s_maximum() {
+fn a_click_in_the_pet_mip_goes_to_the_hot_spot() {
     let (Some(folder), Some(pet_dir)) = (
         common::shared_data("petct/sts-cropped/STS_001"),
         common::shared_data("petct/sts-cropped/STS_001/PET"),
@@ -959,12 +959,15 @@ fn a_click_in_the_pet_mip_goes_to_the_ray_s_maximum() {
         "clicked grey {} at {:?}: crosshair {:?} (SUV {suv:.2}), hottest {max:.2} SUV at {hot_mm:?}",
         darkest.0, darkest.1, c.lps_mm
     );
-    // The pick is where the ray has its maximum: the SUV there is what the pixel shows
-    // (inverted grey over the 0-10 SUV window), within the rounding of the crosshair to a CT
-    // voxel and the ray's sampling.
+    // The pick is where the ray has its maximum: at least what the pixel shows (inverted grey
+    // over the 0-10 SUV window; the ray's samples may pass beside a one-voxel peak that the
+    // crosshair, rounded to a CT voxel, lands nearer), and the darkest pixel's ray passes the
+    // hottest voxel: the crosshair lands within 8 mm of it.
     let shown = f32::from(255 - darkest.0) / 255.0 * 10.0;
     assert!(
-        (suv - shown).abs() <= 1.0,
+        suv >= shown - 1.0,
         "SUV {suv} at the crosshair, {shown} shown"
     );
+    let off = (at - hot_mm).length();
+    assert!(off <= 8.0, "{off:.1} mm from the hottest voxel");
 }

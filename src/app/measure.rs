@@ -212,6 +212,42 @@ pub fn inside_ellipse(u: usize, v: usize, centre: [f64; 2], radii: [f64; 2]) -> 
 /// The statistics of an ellipse measurement on `volume` (values as [`Volume::value_at`] gives
 /// them: HU for CT); `None` for a ruler, or when no pixel centre is inside.
 pub fn region_stats(volume: &Volume, m: &Measurement) -> Option<RegionStats> {
+    let (voxels, radii, axes) = ellipse_voxels(volume, m)?;
+    let (mut n, mut sum, mut sum2) = (0usize, 0.0f64, 0.0f64);
+    let (mut min, mut max) = (f32::INFINITY, f32::NEG_INFINITY);
+    for ijk in voxels {
+        let x = volume.value_at(ijk[0], ijk[1], ijk[2]);
+        if !x.is_finite() {
+            continue;
+        }
+        n += 1;
+        sum += f64::from(x);
+        sum2 += f64::from(x) * f64::from(x);
+        min = min.min(x);
+        max = max.max(x);
+    }
+    if n == 0 {
+        return None;
+    }
+    let mean = sum / n as f64;
+    let var = (sum2 / n as f64 - mean * mean).max(0.0);
+    let pixel_mm2 = volume.spacing_mm[axes.across] * volume.spacing_mm[axes.vertical];
+    Some(RegionStats {
+        pixels: n,
+        mean,
+        sd: var.sqrt(),
+        min,
+        max,
+        area_mm2: std::f64::consts::PI * radii[0] * radii[1] * pixel_mm2,
+    })
+}
+
+/// The voxels of `volume` inside an ellipse measurement (centre-in-ellipse, on its slice), its
+/// half-axes in voxels and its pane's axes; `None` for a ruler or an ellipse off the volume.
+fn ellipse_voxels(
+    volume: &Volume,
+    m: &Measurement,
+) -> Option<(Vec<[usize; 3]>, [f64; 2], super::slices::PaneAxes)> {
     if m.kind != MeasureKind::Ellipse {
         return None;
     }
@@ -230,42 +266,88 @@ pub fn region_stats(volume: &Volume, m: &Measurement) -> Option<RegionStats> {
         range(centre[0], radii[0], w)?,
         range(centre[1], radii[1], h)?,
     );
-    let (mut n, mut sum, mut sum2) = (0usize, 0.0f64, 0.0f64);
-    let (mut min, mut max) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut out = Vec::new();
     for v in vs {
         for u in us.clone() {
-            if !inside_ellipse(u, v, centre, radii) {
-                continue;
+            if inside_ellipse(u, v, centre, radii) {
+                let mut ijk = [0usize; 3];
+                ijk[axes.fixed] = p.slice;
+                ijk[axes.across] = u;
+                ijk[axes.vertical] = v;
+                out.push(ijk);
             }
-            let mut ijk = [0usize; 3];
-            ijk[axes.fixed] = p.slice;
-            ijk[axes.across] = u;
-            ijk[axes.vertical] = v;
-            let x = volume.value_at(ijk[0], ijk[1], ijk[2]);
-            if !x.is_finite() {
-                continue;
-            }
-            n += 1;
-            sum += f64::from(x);
-            sum2 += f64::from(x) * f64::from(x);
-            min = min.min(x);
-            max = max.max(x);
         }
     }
-    if n == 0 {
-        return None;
+    Some((out, radii, axes))
+}
+
+/// What an ellipse reads on the PET fused over its CT (PERCIST's measures), in the PET's unit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PetRegionStats {
+    /// The largest PET value at the ROI's CT pixel centres (the PET read there trilinearly).
+    pub max: f32,
+    /// The mean of the PET at the ROI's CT pixel centres.
+    pub mean: f64,
+    /// SUVpeak: the mean of the PET voxels whose centres lie within the 1 cm³ sphere (radius
+    /// 6.2 mm) centred on the ROI's hottest point; the hottest value itself when no voxel
+    /// centre is that close (PET voxels coarser than the sphere).
+    pub peak: f64,
+    pub unit: String,
+}
+
+/// The radius of a 1 cm³ sphere, mm.
+pub const PEAK_SPHERE_RADIUS_MM: f64 = 6.2035;
+
+/// An ellipse's PET measures, the PET read on its own grid at the CT pixels' patient points.
+pub fn pet_region_stats(ct: &Volume, pet: &Volume, m: &Measurement) -> Option<PetRegionStats> {
+    let (voxels, _, _) = ellipse_voxels(ct, m)?;
+    let world = ct.world_from_voxel();
+    let (mut n, mut sum) = (0usize, 0.0f64);
+    let mut hottest: Option<(f32, DVec3)> = None;
+    for ijk in voxels {
+        let p = world.transform_point3(DVec3::from(ijk.map(|x| x as f64)));
+        let Some(x) = pet.value_at_world(p).filter(|x| x.is_finite()) else {
+            continue;
+        };
+        n += 1;
+        sum += f64::from(x);
+        if hottest.is_none_or(|(h, _)| x > h) {
+            hottest = Some((x, p));
+        }
     }
-    let mean = sum / n as f64;
-    let var = (sum2 / n as f64 - mean * mean).max(0.0);
-    let pixel_mm2 = volume.spacing_mm[axes.across] * volume.spacing_mm[axes.vertical];
-    Some(RegionStats {
-        pixels: n,
-        mean,
-        sd: var.sqrt(),
-        min,
+    let (max, at) = hottest?;
+    Some(PetRegionStats {
         max,
-        area_mm2: std::f64::consts::PI * radii[0] * radii[1] * pixel_mm2,
+        mean: sum / n as f64,
+        peak: sphere_mean(pet, at, PEAK_SPHERE_RADIUS_MM).unwrap_or(f64::from(max)),
+        unit: pet.unit().to_owned(),
     })
+}
+
+/// The mean of `volume`'s voxels whose centres lie within `radius_mm` of `centre` (LPS mm).
+fn sphere_mean(volume: &Volume, centre: DVec3, radius_mm: f64) -> Option<f64> {
+    let c = volume.voxel_from_world().transform_point3(centre);
+    let reach: [f64; 3] = std::array::from_fn(|a| radius_mm / volume.spacing_mm[a]);
+    let range = |a: usize, c: f64| {
+        let lo = (c - reach[a]).ceil().max(0.0) as usize;
+        let hi = ((c + reach[a]).floor() as i64).min(volume.dims[a] as i64 - 1);
+        lo..=(hi.max(-1) as usize).min(volume.dims[a].saturating_sub(1))
+    };
+    let world = volume.world_from_voxel();
+    let (mut n, mut sum) = (0usize, 0.0f64);
+    for k in range(2, c.z) {
+        for j in range(1, c.y) {
+            for i in range(0, c.x) {
+                let p = world.transform_point3(DVec3::new(i as f64, j as f64, k as f64));
+                let x = volume.value_at(i, j, k);
+                if (p - centre).length() <= radius_mm && x.is_finite() {
+                    n += 1;
+                    sum += f64::from(x);
+                }
+            }
+        }
+    }
+    (n > 0).then(|| sum / n as f64)
 }
 
 /// A measurement with what it reads on the volume it was made on.
@@ -273,6 +355,8 @@ pub fn region_stats(volume: &Volume, m: &Measurement) -> Option<RegionStats> {
 pub struct Entry {
     pub measurement: Measurement,
     pub stats: Option<RegionStats>,
+    /// An ellipse's PET measures, when a PET is fused over the volume.
+    pub pet: Option<PetRegionStats>,
 }
 
 impl Entry {
@@ -280,7 +364,14 @@ impl Entry {
         Self {
             stats: region_stats(volume, &measurement),
             measurement,
+            pet: None,
         }
+    }
+
+    /// The same with its PET measures on `pet` (fused over `volume`).
+    pub fn with_pet(mut self, volume: &Volume, pet: Option<&Volume>) -> Self {
+        self.pet = pet.and_then(|p| pet_region_stats(volume, p, &self.measurement));
+        self
     }
 
     /// What it reads, e.g. "12.3 mm" or "mean 40.2 SD 3.1 HU (20..61), 78.5 mm², 310 px".
@@ -293,10 +384,24 @@ impl Entry {
         match self.measurement.kind {
             MeasureKind::Ruler => format!("{:.1} mm", self.measurement.length_mm()),
             MeasureKind::Ellipse => match &self.stats {
-                Some(s) => format!(
-                    "mean {:.1} SD {:.1}{unit} ({:.0}..{:.0}), {:.1} mm², {} px",
-                    s.mean, s.sd, s.min, s.max, s.area_mm2, s.pixels
-                ),
+                Some(s) => {
+                    let mut text = format!(
+                        "mean {:.1} SD {:.1}{unit} ({:.0}..{:.0}), {:.1} mm², {} px",
+                        s.mean, s.sd, s.min, s.max, s.area_mm2, s.pixels
+                    );
+                    if let Some(p) = &self.pet {
+                        let (max, mean, peak) = if p.unit == "SUV" {
+                            ("SUVmax", "SUVmean", "SUVpeak")
+                        } else {
+                            ("PET max", "mean", "peak")
+                        };
+                        text.push_str(&format!(
+                            "; {max} {:.2}, {mean} {:.2}, {peak} {:.2}",
+                            p.max, p.mean, p.peak
+                        ));
+                    }
+                    text
+                }
                 None => "no pixel centre inside".to_owned(),
             },
         }
@@ -345,8 +450,16 @@ impl Measurements {
         self.list = list.iter().map(|m| Entry::new(volume, *m)).collect();
     }
 
-    pub fn add(&mut self, volume: &Volume, m: Measurement) {
-        self.list.push(Entry::new(volume, m));
+    /// Adds a measurement, with its PET measures when a PET is fused over `volume`.
+    pub fn add(&mut self, volume: &Volume, pet: Option<&Volume>, m: Measurement) {
+        self.list.push(Entry::new(volume, m).with_pet(volume, pet));
+    }
+
+    /// Reads every measurement's PET measures again on `pet` (a PET loaded after them).
+    pub fn read_pet(&mut self, volume: &Volume, pet: Option<&Volume>) {
+        for e in &mut self.list {
+            e.pet = pet.and_then(|p| pet_region_stats(volume, p, &e.measurement));
+        }
     }
 
     pub fn measurements(&self) -> Vec<Measurement> {
@@ -409,6 +522,69 @@ impl super::ShapecastApp {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An ellipse over a PET hot spot (a Gaussian of SUV 10 centred on a voxel of both grids):
+    /// SUVmax is the spot's peak, SUVmean lies below it, SUVpeak is the mean of the PET voxels
+    /// within the 1 cm³ sphere about the peak (computed here by brute force), and the reading
+    /// names all three.
+    #[test]
+    fn an_ellipse_over_a_pet_reads_suvmax_mean_and_peak() {
+        let mut ct = Volume::from_f32([40, 40, 10], [1.0, 1.0, 2.0], vec![0.0; 16_000]);
+        ct.modality = crate::volume::Modality::Ct;
+        let centre = DVec3::new(20.0, 20.0, 8.0);
+        let (dims, spacing) = ([20usize, 20, 10], [2.0, 2.0, 2.0]);
+        let suv = |p: DVec3| 10.0 * (-(p - centre).length_squared() / 32.0).exp() as f32;
+        let mut values = Vec::new();
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    values.push(suv(DVec3::new(
+                        2.0 * i as f64,
+                        2.0 * j as f64,
+                        2.0 * k as f64,
+                    )));
+                }
+            }
+        }
+        let mut pet = Volume::from_f32(dims, spacing, values);
+        pet.modality = crate::volume::Modality::Pt;
+        pet.pet = Some(crate::volume::PetScale {
+            units: "BQML".to_owned(),
+            suv_factor: Some(1.0),
+            rule: "test".to_owned(),
+        });
+        // The axial slice through the centre (z = 8 mm is CT slice 4), a 16 mm ellipse.
+        let m = Measurement {
+            kind: MeasureKind::Ellipse,
+            pane: Some(SliceKind::Axial),
+            a_mm: DVec3::new(12.0, 12.0, 8.0),
+            b_mm: DVec3::new(28.0, 28.0, 8.0),
+        };
+        let stats = pet_region_stats(&ct, &pet, &m).expect("PET stats");
+        assert!((stats.max - 10.0).abs() < 1e-5, "{stats:?}");
+        assert!(stats.mean > 1.0 && stats.mean < 9.0, "{stats:?}");
+        let (mut n, mut sum) = (0, 0.0);
+        for (idx, &v) in pet.to_f32().iter().enumerate() {
+            let p = DVec3::new(
+                2.0 * (idx % 20) as f64,
+                2.0 * ((idx / 20) % 20) as f64,
+                2.0 * (idx / 400) as f64,
+            );
+            if (p - centre).length() <= PEAK_SPHERE_RADIUS_MM {
+                n += 1;
+                sum += f64::from(v);
+            }
+        }
+        assert!(n > 20, "{n} voxels in the sphere");
+        assert!((stats.peak - sum / f64::from(n)).abs() < 1e-6, "{stats:?}");
+        assert!(stats.peak < f64::from(stats.max) && stats.peak > stats.mean);
+        let entry = Entry::new(&ct, m).with_pet(&ct, Some(&pet));
+        let text = entry.reading("HU");
+        assert!(
+            text.contains("SUVmax 10.00") && text.contains("SUVpeak"),
+            "{text}"
+        );
+    }
 
     #[test]
     fn text_round_trips_and_garbage_is_refused() {

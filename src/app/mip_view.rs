@@ -214,6 +214,20 @@ impl MipView {
         self.refining.is_some()
     }
 
+    /// The picture's state for automation: "none", "coarse", "refining" or "done"
+    /// ([`crate::status::AppStatus::mip`]).
+    pub fn picture_state(&self) -> &'static str {
+        if self.frames == 0 {
+            "none"
+        } else if self.refining() {
+            "refining"
+        } else if self.showing_preview() {
+            "coarse"
+        } else {
+            "done"
+        }
+    }
+
     /// Whether a pick is being read back.
     pub fn pick_pending(&self) -> bool {
         self.pending.is_some()

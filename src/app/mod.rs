@@ -133,6 +133,8 @@ pub struct AppOptions {
     /// A PET to fuse over the CT that opens (`shapecast view CT --pet PET`).
     #[cfg(not(target_arch = "wasm32"))]
     pub pet: Option<Vec<std::path::PathBuf>>,
+    /// A PET to fuse over the CT that opens, by URL (the page's `&pet=URL`).
+    pub pet_urls: Vec<String>,
 }
 
 impl Default for AppOptions {
@@ -146,6 +148,7 @@ impl Default for AppOptions {
             link_problems: Vec::new(),
             #[cfg(not(target_arch = "wasm32"))]
             pet: None,
+            pet_urls: Vec::new(),
         }
     }
 }
@@ -180,6 +183,11 @@ impl AppOptions {
             if !urls.is_empty() {
                 o.start = StartWith::Urls(urls);
             }
+            o.pet_urls = query
+                .iter()
+                .filter(|(k, v)| k == "pet" && !v.trim().is_empty())
+                .map(|(_, v)| web_files::absolute_url(v.trim()))
+                .collect();
             if let Some(base) = param("dicomweb").filter(|b| !b.trim().is_empty()) {
                 o.start = StartWith::DicomWeb(PacsTarget {
                     base: base.trim().to_owned(),
@@ -289,10 +297,16 @@ struct Scene {
 }
 
 impl Scene {
-    /// The unit values are shown in: HU for what looks like a CT, else the volume's own ("SUV"
-    /// for a PET with its factor).
+    /// The unit values are shown in: HU for what looks like a CT, a PET's own ("SUV" with its
+    /// factor), none otherwise (MR, phantoms, volumes of unknown modality).
     fn unit(&self) -> &str {
-        if self.is_ct { "HU" } else { self.volume.unit() }
+        if self.is_ct {
+            "HU"
+        } else if self.volume.modality == crate::volume::Modality::Pt {
+            self.volume.unit()
+        } else {
+            ""
+        }
     }
 }
 
@@ -801,6 +815,15 @@ impl ShapecastApp {
                         {
                             self.error(message);
                         }
+                        self.pet_arrived();
+                    }
+                    web_files::WebEvent::PetFiles {
+                        label,
+                        files,
+                        generation,
+                    } => {
+                        self.pet
+                            .start_source(LoadSource::Files { label, files }, generation);
                     }
                     web_files::WebEvent::PetFailed {
                         message,
@@ -851,12 +874,16 @@ impl ShapecastApp {
                 }
             }
         }
+        let had_pet = self.pet.layer.is_some();
         if let Some(message) = self.pet.step(
             self.scene.as_ref().map(|s| s.volume.as_ref()),
             self.generation,
             self.gpu.as_ref(),
         ) {
             self.error(message);
+        }
+        if !had_pet {
+            self.pet_arrived();
         }
         if let Some(gpu) = &self.gpu {
             match self.features.step(gpu, frame_s) {
@@ -872,6 +899,14 @@ impl ShapecastApp {
         }
         if let Some(request) = self.displayed_request() {
             self.features.touch(&request);
+        }
+    }
+
+    /// A PET just fused over the CT: the measurements made before it (a link's) read it too.
+    fn pet_arrived(&mut self) {
+        if let (Some(layer), Some(scene)) = (&self.pet.layer, &self.scene) {
+            self.measure
+                .read_pet(&scene.volume, Some(layer.volume.as_ref()));
         }
     }
 
@@ -1031,6 +1066,22 @@ impl ShapecastApp {
             self.pet
                 .start_source(LoadSource::Paths(paths), self.generation);
         }
+        // A PET/CT link's PET (`&pet=URL`): downloaded once the CT it goes over is shown.
+        if !self.options.pet_urls.is_empty()
+            && let Some(scene) = &self.scene
+            && scene.volume.modality != crate::volume::Modality::Pt
+        {
+            let urls = std::mem::take(&mut self.options.pet_urls);
+            self.pet.urls = urls.clone();
+            self.pet.expect(self.generation);
+            #[cfg(target_arch = "wasm32")]
+            web_fetch::fetch_pet_urls(urls, self.generation);
+            #[cfg(not(target_arch = "wasm32"))]
+            self.error(format!(
+                "{}: a PET by URL opens in the browser; natively give --pet PATH",
+                urls.join(", ")
+            ));
+        }
         // A link's view for this volume replaces the defaults it just got (after loading the
         // series it names, when that is another of these files).
         self.apply_pending_view();
@@ -1074,9 +1125,21 @@ impl ShapecastApp {
             opacity: p.opacity,
             visible: p.visible,
         });
+        let mip_state = if self.scene.is_some() {
+            self.mip_view.picture_state()
+        } else {
+            "none"
+        };
+        let pet_mip_state = if self.pet.layer.is_some() {
+            self.pet_mip.picture_state()
+        } else {
+            "none"
+        };
         let s = &mut self.status;
         s.pet = pet_status;
         s.pet_loading = self.pet.loading();
+        s.mip = mip_state.to_owned();
+        s.pet_mip = pet_mip_state.to_owned();
         s.volume = self.scene.as_ref().map(|sc| VolumeStatus {
             dims: sc.volume.dims,
             spacing_mm: sc.volume.spacing_mm,
@@ -1287,9 +1350,15 @@ impl ShapecastApp {
                                 // hottest point along that ray.
                                 let whole = ui.available_rect_before_wrap();
                                 let image_top = self.mip_view.image_area().top();
+                                let [ci, cj, ck] = self.crosshair;
                                 let area = pet::MipArea {
                                     pane: whole,
                                     image_top,
+                                    crosshair_mm: Some(
+                                        scene.volume.world_from_voxel().transform_point3(
+                                            glam::DVec3::new(ci as f64, cj as f64, ck as f64),
+                                        ),
+                                    ),
                                 };
                                 let ct_rect = match self.pet_mip.ui(
                                     ui,
@@ -1426,7 +1495,8 @@ impl ShapecastApp {
                 ));
             }
             for m in measured {
-                self.measure.add(&s.volume, m);
+                let pet = self.pet.layer.as_ref().map(|p| p.volume.as_ref());
+                self.measure.add(&s.volume, pet, m);
             }
         }
         if mip_drawn {

@@ -15,6 +15,7 @@ use glam::{DAffine3, DVec3};
 use super::load::{LoadJob, LoadSource, LoadStep, SeriesSet};
 use super::mip_view::{MipScene, MipView};
 use super::slices::PaneAxes;
+use super::view_link::PetView;
 use crate::gpu::GpuContext;
 use crate::gpu::volume_texture::RenderVolume;
 use crate::render::camera::Camera;
@@ -51,6 +52,19 @@ impl PetLayer {
             visible: true,
             notes,
             render: None,
+        }
+    }
+
+    /// A link's window, opacity and visibility.
+    pub fn apply_view(&mut self, view: &PetView) {
+        if let Some(w) = view.window {
+            self.window = w;
+        }
+        if let Some(o) = view.opacity {
+            self.opacity = o;
+        }
+        if let Some(v) = view.visible {
+            self.visible = v;
         }
     }
 
@@ -178,6 +192,10 @@ pub struct PetState {
     job: Option<LoadJob>,
     /// The CT generation the PET is being loaded for (a newer CT drops it).
     loading_for: Option<u64>,
+    /// Where the PET came from when it came by URL (a link names them).
+    pub urls: Vec<String>,
+    /// A link's fusion settings, waiting for the PET.
+    pending_view: Option<PetView>,
 }
 
 /// The PET's MIP viewport: its camera follows the shape MIP's.
@@ -193,6 +211,8 @@ pub struct PetMip {
 pub struct MipArea {
     pub pane: egui::Rect,
     pub image_top: f32,
+    /// The shared crosshair (LPS mm), marked in the PET's MIP as in the shape MIP.
+    pub crosshair_mm: Option<DVec3>,
 }
 
 /// What the PET's MIP did this frame.
@@ -218,6 +238,11 @@ impl PetMip {
         self.mip.image_area()
     }
 
+    /// The PET MIP's picture state ([`MipView::picture_state`]).
+    pub fn picture_state(&self) -> &'static str {
+        self.mip.picture_state()
+    }
+
     /// The PET's MIP in the left half of the MIP pane's `area`, turned with `camera` (the shape
     /// MIP's: a drag in either turns both): inverted grey in the PET's window. `None` (the
     /// whole pane for the shape MIP) without a PET shown.
@@ -233,6 +258,7 @@ impl PetMip {
         let MipArea {
             pane: area,
             image_top,
+            crosshair_mm,
         } = area;
         let layer = layer.filter(|l| l.visible)?;
         let render = layer.render.as_ref()?;
@@ -258,6 +284,7 @@ impl PetMip {
                 ui.add_space(gap);
             }
             mip.camera = *camera;
+            mip.set_crosshair(crosshair_mm);
             mip.settings.window = layer.window;
             mip.settings.invert_grey = true;
             mip.settings.show_intensity = true;
@@ -324,11 +351,37 @@ impl PetState {
         true
     }
 
-    /// Starts loading a PET from other paths than the CT's (`shapecast view CT --pet PET`).
-    #[cfg(not(target_arch = "wasm32"))]
+    /// Starts decoding a PET from other files than the CT's (`shapecast view CT --pet PET`,
+    /// a link's `&pet=URL` once downloaded), for the CT of `generation`.
     pub fn start_source(&mut self, source: LoadSource, generation: u64) {
+        if self.loading_for.is_some_and(|g| g != generation) {
+            return;
+        }
         self.loading_for = Some(generation);
         self.job = Some(LoadJob::new(source));
+    }
+
+    /// A PET for the CT of `generation` is on its way (being downloaded).
+    pub fn expect(&mut self, generation: u64) {
+        self.loading_for = Some(generation);
+    }
+
+    /// A link's fusion settings: applied now, or when the PET arrives.
+    pub fn apply_view(&mut self, view: &PetView) {
+        match &mut self.layer {
+            Some(layer) => layer.apply_view(view),
+            None => self.pending_view = Some(view.clone()),
+        }
+    }
+
+    /// What a link says of the PET shown.
+    pub fn view(&self) -> Option<PetView> {
+        self.layer.as_ref().map(|l| PetView {
+            urls: self.urls.clone(),
+            window: Some(l.window),
+            opacity: Some(l.opacity),
+            visible: Some(l.visible),
+        })
     }
 
     /// Advances the load by one step; a finished load becomes the layer over `ct` (of
@@ -393,6 +446,9 @@ impl PetState {
                 Ok(r) => layer.render = Some(r),
                 Err(e) => message = Some(format!("PET MIP: {e} (the fused slices still show it)")),
             }
+        }
+        if let Some(view) = self.pending_view.take() {
+            layer.apply_view(&view);
         }
         self.layer = Some(layer);
         message

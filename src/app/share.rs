@@ -62,6 +62,7 @@ impl ShapecastApp {
                 })
                 .and_then(|set| set.list.entries().get(set.chosen))
                 .map(super::series_list::entry_key),
+            pet: self.pet.view(),
         }
     }
 
@@ -235,6 +236,18 @@ impl ShapecastApp {
         if let Some(m) = &view.measurements {
             self.measure.set(&volume, m);
         }
+        if let Some(p) = &view.pet {
+            self.pet.apply_view(p);
+            // A PET the link names by URL and that is not here yet comes with this CT.
+            #[cfg(target_arch = "wasm32")]
+            if self.pet.layer.is_none() && !self.pet.loading() && !p.urls.is_empty() {
+                self.pet.urls = p.urls.clone();
+                self.pet.expect(generation);
+                super::web_fetch::fetch_pet_urls(p.urls.clone(), generation);
+            }
+        }
+        self.measure
+            .read_pet(&volume, self.pet.layer.as_ref().map(|l| l.volume.as_ref()));
     }
 
     /// Right after the MIP pane drew the current volume (the widget framed it then): the

@@ -107,6 +107,18 @@ pub struct ViewState {
     /// archive): its SeriesInstanceUID, with `:k` for stack k of a series split in several
     /// (`series_list::entry_key`). A DICOMweb source names its series itself.
     pub choice: Option<String>,
+    /// The PET fused over the CT: its URLs when it came by link (`pet=`, repeated; a PET that
+    /// came with the CT's own files needs none), its window, opacity and whether it is shown.
+    pub pet: Option<PetView>,
+}
+
+/// The PET of a PET/CT link.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PetView {
+    pub urls: Vec<String>,
+    pub window: Option<(f32, f32)>,
+    pub opacity: Option<f32>,
+    pub visible: Option<bool>,
 }
 
 /// One field's value, written the same way into the fragment and the JSON.
@@ -265,6 +277,20 @@ impl ViewState {
                 "m",
                 Value::Texts(m.iter().map(Measurement::to_text).collect()),
             ));
+        }
+        if let Some(p) = &self.pet {
+            if !p.urls.is_empty() {
+                f.push(("pet", Value::Texts(p.urls.clone())));
+            }
+            if let Some((lo, hi)) = p.window {
+                f.push(("petwin", Value::Nums(vec![num32(lo), num32(hi)])));
+            }
+            if let Some(o) = p.opacity {
+                f.push(("petop", Value::Num(num32(o))));
+            }
+            if let Some(on) = p.visible {
+                f.push(("peton", Value::Bool(on)));
+            }
         }
         f
     }
@@ -595,6 +621,28 @@ impl ViewState {
         if !measurements.is_empty() {
             v.measurements = Some(measurements);
         }
+        let pet = PetView {
+            urls: params
+                .iter()
+                .filter(|(k, _)| k == "pet")
+                .map(|(_, u)| u.trim().to_owned())
+                .filter(|u| !u.is_empty())
+                .collect(),
+            window: f.read("petwin", "lo,hi with hi > lo", |s| {
+                numbers::<f32>(s, 2)
+                    .filter(|w| w[1] > w[0])
+                    .map(|w| (w[0], w[1]))
+            }),
+            opacity: f.read("petop", "an opacity of 0-1", |s| {
+                numbers::<f32>(s, 1)
+                    .map(|o| o[0])
+                    .filter(|o| (0.0..=1.0).contains(o))
+            }),
+            visible: f.read("peton", "0 or 1", |s| bools(s, 1).map(|b| b[0])),
+        };
+        if pet != PetView::default() {
+            v.pet = Some(pet);
+        }
         (v, f.problems)
     }
 }
@@ -747,6 +795,12 @@ mod tests {
                 },
             ]),
             choice: Some("1.2.840.113619.2.55.3.604688119:1".to_owned()),
+            pet: Some(PetView {
+                urls: vec!["https://example.org/pet/PT.zip".to_owned()],
+                window: Some((0.0, 7.5)),
+                opacity: Some(0.35),
+                visible: Some(true),
+            }),
         }
     }
 

@@ -107,6 +107,43 @@ pub fn fetch_urls(urls: Vec<String>) {
     });
 }
 
+/// Downloads the PET of a PET/CT link (`&pet=URL`, absolute) for the CT of `generation`, beside
+/// any other download (it is not the page's cancellable one): its files are decoded as the
+/// PET over that CT.
+pub fn fetch_pet_urls(urls: Vec<String>, generation: u64) {
+    let controller = match web_sys::AbortController::new() {
+        Ok(c) => c,
+        Err(e) => {
+            push(WebEvent::PetFailed {
+                message: format!("cannot start a download: {}", js_error(&e)),
+                generation,
+            });
+            return;
+        }
+    };
+    wasm_bindgen_futures::spawn_local(async move {
+        let label = match urls.as_slice() {
+            [one] => file_name(one),
+            many => format!("{} files from {}", many.len(), host_of(&many[0])),
+        };
+        match download_all(&urls, &controller).await {
+            Ok(files) => push(WebEvent::PetFiles {
+                label,
+                files,
+                generation,
+            }),
+            Err(Failure::Cancelled) => push(WebEvent::PetFailed {
+                message: format!("{label}: download cancelled"),
+                generation,
+            }),
+            Err(Failure::Message(message)) => push(WebEvent::PetFailed {
+                message,
+                generation,
+            }),
+        }
+    });
+}
+
 enum Failure {
     Cancelled,
     Message(String),

@@ -61,6 +61,12 @@ pub enum WebEvent {
     },
     /// Reading the PET series failed; the CT shown stays, without it.
     PetFailed { message: String, generation: u64 },
+    /// The files of a PET/CT link's PET (`&pet=URL`), downloaded for the CT of `generation`.
+    PetFiles {
+        label: String,
+        files: Vec<InputFile>,
+        generation: u64,
+    },
     /// Reading failed; the message names the file.
     Failed { message: String },
     /// The user cancelled a download.

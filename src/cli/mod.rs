@@ -155,7 +155,10 @@ mod tests {
         match parse(&["shapecast", "view", "a.nii.gz", "dicom/"]) {
             Ok(Some(Command::View(v))) => {
                 assert_eq!(v.paths.len(), 2);
-                assert_eq!(v.method, "rst");
+                assert_eq!(
+                    v.method, "hessian",
+                    "the viewer opens on the Hessian, as the page does"
+                );
             }
             other => panic!("{other:?}"),
         }

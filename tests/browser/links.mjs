@@ -83,6 +83,12 @@ const SERIES = 'series/ct-head-64px';
 
 const generated = {};
 if (haveData) generated['ct-head-64px.zip'] = zipFolder(path.join(data, SERIES), 'ct-head-64px');
+// A PET/CT study's CT and PET, each a zipped series, for `?url=CT&pet=PET`.
+const PETCT = 'petct/sts-cropped/STS_001';
+if (haveData) {
+  generated['sts001-ct.zip'] = zipFolder(path.join(data, PETCT, 'CT'), 'CT');
+  generated['sts001-pet.zip'] = zipFolder(path.join(data, PETCT, 'PET'), 'PET');
+}
 
 // ---- Servers ------------------------------------------------------------------------------
 
@@ -535,6 +541,36 @@ try {
     });
   } else {
     skip('link round trip and dropped-file link', `${data} is missing`);
+  }
+
+  // ---- 5b. PET/CT by link: ?url=CT&pet=PET, and the fusion carried by the copied link -----
+  if (haveData) {
+    await withBrowser([...baseArgs, ...webgpuArgs], async (page) => {
+      const ct = `${A}/gen/sts001-ct.zip`;
+      const pet = `${A}/gen/sts001-pet.zip`;
+      await page.goto(`${A}${SUB}?url=${encodeURIComponent(ct)}&pet=${encodeURIComponent(pet)}&method=intensity`);
+      let s = await waitStatus(page, () => window.shapecastStatus?.pet?.unit === 'SUV'
+        || window.shapecastStatus?.phase === 'error', 'the CT and its PET by link');
+      check('PET/CT link: the CT opens with its PET by URL, in SUV', s?.volume?.modality === 'CT'
+        && s?.pet?.unit === 'SUV' && JSON.stringify(s?.pet?.dims) === '[41,43,59]',
+        `volume ${s?.volume?.modality}, pet ${JSON.stringify(s?.pet)}; error ${s?.error}`);
+      const link = s?.link ?? '';
+      const plain = decodeURIComponent(link);
+      check('PET/CT link: the copied link names the PET and its fusion', plain.includes(`pet=${pet}`)
+        && /[#&]petwin=0,10(&|$)/.test(plain) && /[#&]petop=0.5(&|$)/.test(plain), link);
+      // The link with another opacity and window reopens both volumes with them.
+      const edited = link.replace(/petop=[^&]*/, 'petop=0.25').replace(/petwin=[^&]*/, 'petwin=1,6');
+      await page.goto('about:blank');
+      await page.goto(edited);
+      s = await waitStatus(page, () => window.shapecastStatus?.pet?.unit === 'SUV'
+        || window.shapecastStatus?.phase === 'error', 'the PET/CT link reopened');
+      check('PET/CT link: reopened with its PET, window and opacity', s?.volume?.modality === 'CT'
+        && s?.pet?.opacity === 0.25 && JSON.stringify(s?.pet?.window) === '[1,6]',
+        `pet ${JSON.stringify(s?.pet)}; error ${s?.error}`);
+      await page.screenshot({ path: path.join(outDir, 'url-pet-ct.png') });
+    });
+  } else {
+    skip('PET/CT by link', `${data} is missing`);
   }
 
   // ---- 6. Pages that cannot run ------------------------------------------------------------

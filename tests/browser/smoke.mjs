@@ -5,7 +5,8 @@
 //  2. the screenshot is not blank,
 //  3. the page's file inputs and drag and drop load volumes: a corrupt file gives an error that
 //     names it and keeps the volume; a DICOM folder (the "Open folder" input), and one holding
-//     two series (both listed, one click on the other loads it); a detached-header
+//     two series (both listed, one click on the other loads it), a PET/CT study's folder (the
+//     CT with its PET fused, the PET MIP drawn and clickable); a detached-header
 //     NRRD with its data file dropped together; "Save picture" (key P over a pane) downloads a
 //     PNG of that pane; "Save movie" (key M) downloads a 36-frame animated PNG of a turn of the
 //     MIP, with its progress in the status,
@@ -257,6 +258,45 @@ try {
       && status?.series?.[ctRow]?.chosen === true,
       `row ${JSON.stringify(rowRect)}, dims ${JSON.stringify(status?.volume?.dims)}, series ${JSON.stringify(status?.series)}; error ${status?.error}`);
     fs.rmSync(two, { recursive: true, force: true });
+
+    // 3b'': a PET/CT study's folder (../shared/data: the CT and the PET of one scan, in two
+    // sub-folders): the CT opens, the PET is read after it and fused over the slices, its MIP
+    // drawn beside the shape MIP, the SUV at the crosshair published.
+    const petct = path.join(root, '..', 'shared', 'data', 'petct', 'sts-cropped', 'STS_001');
+    if (fs.existsSync(petct)) {
+      await page.setInputFiles('#shapecast_open_folder', petct);
+      status = await waitStatus(() => window.shapecastStatus?.pet?.unit === 'SUV'
+        && window.shapecastStatus?.volume?.modality === 'CT', 'the PET/CT study', 240000);
+      const pet = status?.pet;
+      check('PET/CT folder: the CT opens with its PET in SUV', status?.volume?.modality === 'CT'
+        && pet?.unit === 'SUV' && JSON.stringify(pet?.dims) === '[41,43,59]'
+        && typeof pet?.at_crosshair === 'number' && pet.at_crosshair >= 0,
+        `volume ${status?.volume?.modality} ${JSON.stringify(status?.volume?.dims)}, pet ${JSON.stringify(pet)}; error ${status?.error}`);
+      const mipRect = status?.controls?.['pane:pet-mip'];
+      check('PET/CT folder: the PET MIP is drawn beside the shape MIP', Array.isArray(mipRect)
+        && mipRect[2] > 50 && mipRect[3] > 50, JSON.stringify(mipRect));
+      // Both MIPs finished (not a coarse frame) before the screenshot.
+      status = await waitStatus(() => window.shapecastStatus?.mip === 'done'
+        && window.shapecastStatus?.pet_mip === 'done', 'both MIPs drawn in full', 120000);
+      check('PET/CT folder: both MIPs report a finished picture', status?.mip === 'done'
+        && status?.pet_mip === 'done', `mip ${status?.mip}, pet_mip ${status?.pet_mip}`);
+      await page.screenshot({ path: path.join(outDir, 'pet_ct.png') });
+      if (Array.isArray(mipRect)) {
+        const before = JSON.stringify(status?.crosshair?.voxel);
+        await page.mouse.click(mipRect[0] + mipRect[2] * 0.4, mipRect[1] + mipRect[3] * 0.45);
+        await page.waitForFunction((b) => JSON.stringify(window.shapecastStatus?.crosshair?.voxel) !== b,
+          before, { timeout: 60000, polling: 200 }).catch(() => console.log('  timed out waiting for the PET MIP click'));
+        status = await page.evaluate(() => window.shapecastStatus);
+        check('PET/CT folder: a click in the PET MIP moves the crosshair',
+          JSON.stringify(status?.crosshair?.voxel) !== before
+          && typeof status?.pet?.at_crosshair === 'number',
+          `${before} -> ${JSON.stringify(status?.crosshair?.voxel)}, SUV ${status?.pet?.at_crosshair}`);
+      }
+    } else if (process.env.CI === 'true') {
+      check('PET/CT folder: ../shared/data present under CI=true', false, petct);
+    } else {
+      console.log(`SKIPPED: PET/CT folder (${petct} not present)`);
+    }
 
     // 3c: a detached-header NRRD and its data file dropped together on the canvas.
     await page.evaluate(() => {
