@@ -896,7 +896,13 @@ fn a_click_in_the_pet_mip_goes_to_the_hot_spot() {
     run_until(&mut harness, "the PET loaded", 200, |app| {
         app.status().pet.is_some() && !app.status().pet_loading
     });
-    harness.run_steps(4);
+    // The whole SUV range as window (as the check asks): the darkest pixel is then the
+    // hottest projection, not any of several saturated at the default 10 SUV.
+    harness.state_mut().set_pet_window((0.0, 30.0));
+    harness.run_steps(2);
+    run_until(&mut harness, "both MIPs drawn in full", 200, |app| {
+        app.status().mip == "done" && app.status().pet_mip == "done"
+    });
     let rect = harness
         .state()
         .status()
@@ -960,10 +966,10 @@ fn a_click_in_the_pet_mip_goes_to_the_hot_spot() {
         darkest.0, darkest.1, c.lps_mm
     );
     // The pick is where the ray has its maximum: at least what the pixel shows (inverted grey
-    // over the 0-10 SUV window; the ray's samples may pass beside a one-voxel peak that the
+    // over the 0-30 SUV window; the ray's samples may pass beside a one-voxel peak that the
     // crosshair, rounded to a CT voxel, lands nearer), and the darkest pixel's ray passes the
     // hottest voxel: the crosshair lands within 8 mm of it.
-    let shown = f32::from(255 - darkest.0) / 255.0 * 10.0;
+    let shown = f32::from(255 - darkest.0) / 255.0 * 30.0;
     assert!(
         suv >= shown - 1.0,
         "SUV {suv} at the crosshair, {shown} shown"

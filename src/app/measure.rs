@@ -385,8 +385,10 @@ impl Entry {
             MeasureKind::Ruler => format!("{:.1} mm", self.measurement.length_mm()),
             MeasureKind::Ellipse => match &self.stats {
                 Some(s) => {
+                    // SUV in hundredths, HU and scanner units in whole numbers.
+                    let d = if unit == " SUV" { 2 } else { 0 };
                     let mut text = format!(
-                        "mean {:.1} SD {:.1}{unit} ({:.0}..{:.0}), {:.1} mm², {} px",
+                        "mean {:.1} SD {:.1}{unit} ({:.d$}..{:.d$}), {:.1} mm², {} px",
                         s.mean, s.sd, s.min, s.max, s.area_mm2, s.pixels
                     );
                     if let Some(p) = &self.pet {

@@ -534,6 +534,15 @@ impl ShapecastApp {
         self.window = window;
     }
 
+    /// Sets the fused PET's window (its display unit, SUV); nothing without a PET.
+    pub fn set_pet_window(&mut self, window: (f32, f32)) {
+        if let Some(layer) = &mut self.pet.layer
+            && window.1 > window.0
+        {
+            layer.window = window;
+        }
+    }
+
     pub fn volume(&self) -> Option<&Volume> {
         self.scene.as_ref().map(|s| s.volume.as_ref())
     }
@@ -822,8 +831,11 @@ impl ShapecastApp {
                         files,
                         generation,
                     } => {
-                        self.pet
-                            .start_source(LoadSource::Files { label, files }, generation);
+                        // Only for the CT it was asked for (a newer CT drops it unread).
+                        if self.pet.expecting(generation) {
+                            self.pet
+                                .start_source(LoadSource::Files { label, files }, generation);
+                        }
                     }
                     web_files::WebEvent::PetFailed {
                         message,
@@ -1130,10 +1142,13 @@ impl ShapecastApp {
         } else {
             "none"
         };
-        let pet_mip_state = if self.pet.layer.is_some() {
-            self.pet_mip.picture_state()
-        } else {
+        let pet_mip_state = if self.pet.layer.is_none() {
             "none"
+        } else if self.pet_mip.lags(&self.mip_view.camera) {
+            // Drawn with the shape MIP's camera of the frame before: the next frame redraws it.
+            "refining"
+        } else {
+            self.pet_mip.picture_state()
         };
         let s = &mut self.status;
         s.pet = pet_status;
@@ -1483,6 +1498,10 @@ impl ShapecastApp {
         if let (Some(w), Some(layer)) = (pet_window, &mut self.pet.layer) {
             layer.window = w;
         }
+        // The shape MIP turned after the PET's was drawn: one more frame brings the PET along.
+        if self.pet.layer.is_some() && self.pet_mip.lags(&self.mip_view.camera) {
+            ui.ctx().request_repaint();
+        }
         if let Some(s) = &self.scene {
             // With the ruler, a click in the MIP measures in 3D from the crosshair to the point
             // it picked.
@@ -1539,7 +1558,7 @@ impl ShapecastApp {
 
 impl eframe::App for ShapecastApp {
     fn logic(&mut self, ctx: &egui::Context, _frame: &mut eframe::Frame) {
-        if self.load.is_some() || self.probe.busy() {
+        if self.load.is_some() || self.probe.busy() || self.pet.busy() {
             ctx.request_repaint();
         }
         self.repaint_for_job(ctx);
@@ -1591,6 +1610,7 @@ impl eframe::App for ShapecastApp {
             || self.uploading.is_some()
             || self.load_progress.is_some()
             || self.probe.busy()
+            || self.pet.busy()
         {
             ctx.request_repaint();
         }

@@ -40,6 +40,12 @@ impl PetLayer {
     pub fn new(volume: Volume, ct: &Volume) -> Self {
         let mut notes = volume.warnings.clone();
         notes.extend(crate::io::frame_of_reference_note(ct, &volume));
+        if volume.modality != Modality::Pt {
+            notes.push(format!(
+                "{} does not say it is a PET: fused over the CT as given, in its own values",
+                volume.source
+            ));
+        }
         let window = if volume.unit() == "SUV" {
             (0.0, 10.0)
         } else {
@@ -238,6 +244,12 @@ impl PetMip {
         self.mip.image_area()
     }
 
+    /// Whether the PET's MIP was drawn with another camera than `camera` (the shape MIP's,
+    /// moved after it this frame): it needs another frame.
+    pub fn lags(&self, camera: &Camera) -> bool {
+        self.mip_for.is_some() && self.mip.camera != *camera
+    }
+
     /// The PET MIP's picture state ([`MipView::picture_state`]).
     pub fn picture_state(&self) -> &'static str {
         self.mip.picture_state()
@@ -326,9 +338,13 @@ impl PetState {
     /// The PET series among the files a CT came from: the PT series with the most images.
     pub fn pet_entry(set: &SeriesSet) -> Option<usize> {
         let entries = set.list.entries();
+        // The first of equals (`max_by_key` would take the last).
         (0..entries.len())
             .filter(|&i| entries[i].modality == "PT")
-            .max_by_key(|&i| entries[i].images)
+            .fold(None, |best: Option<usize>, i| match best {
+                Some(b) if entries[b].images >= entries[i].images => Some(b),
+                _ => Some(i),
+            })
     }
 
     /// Starts loading the PET series of `set` (the files the CT of `generation` came from),
@@ -394,17 +410,37 @@ impl PetState {
         gpu: Option<&GpuContext>,
     ) -> Option<String> {
         let job = self.job.as_mut()?;
+        // The job is for the CT it was started for (`clear` drops it with a new CT).
+        let Some(loading_for) = self.loading_for else {
+            self.job = None;
+            return None;
+        };
         match job.step() {
             LoadStep::Working { .. } => None,
             LoadStep::Done(loaded) => {
                 self.job = None;
+                if loading_for != generation {
+                    self.loading_for = None;
+                    return None;
+                }
                 self.install(loaded.volume, ct, generation, gpu)
             }
             LoadStep::Failed(message) => {
                 self.job = None;
-                self.failed(generation).then(|| format!("PET: {message}"))
+                self.failed(loading_for).then(|| format!("PET: {message}"))
             }
         }
+    }
+
+    /// Whether a PET is being decoded in the app's frames (they must keep coming).
+    pub fn busy(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// Whether a PET for the CT of `generation` is awaited (its download may be decoded).
+    #[cfg(target_arch = "wasm32")]
+    pub fn expecting(&self, generation: u64) -> bool {
+        self.loading_for == Some(generation) && self.job.is_none()
     }
 
     /// A PET load for the CT of `generation` failed: true when that is still the CT shown
@@ -426,16 +462,22 @@ impl PetState {
         generation: u64,
         gpu: Option<&GpuContext>,
     ) -> Option<String> {
-        if self.loading_for.take() != Some(generation) {
+        // A PET read for an older CT is dropped, and does not end the load of the current one.
+        if self.loading_for != Some(generation) {
             return None;
         }
+        self.loading_for = None;
         let ct = ct?;
-        if volume.modality != Modality::Pt {
-            return Some(format!(
-                "{}: not a PET (modality {}); not fused",
-                volume.source,
-                volume.modality.as_str()
-            ));
+        match volume.modality {
+            // A NIfTI or NRRD PET says nothing of its modality: fused as given, said so.
+            Modality::Pt | Modality::Unknown => {}
+            other => {
+                return Some(format!(
+                    "{}: not a PET (modality {}); not fused",
+                    volume.source,
+                    other.as_str()
+                ));
+            }
         }
         let mut layer = PetLayer::new(volume, ct);
         let mut message = None;
@@ -484,15 +526,22 @@ impl PetState {
         controls.push(("pet-visible".to_owned(), r.rect));
         let unit = layer.unit().to_owned();
         let (mut lo, mut hi) = layer.window;
-        let top = v.value_range().map_or(10.0, |r| r.1.max(1.0));
+        // The sliders' ranges hold the window set (a link's, a PET's own values below 0 or
+        // above its maximum), and never clamp it just by being drawn.
+        let range = v.value_range().unwrap_or((0.0, 10.0));
+        let top = range.1.max(hi).max(lo + 1.0);
+        let bottom = range.0.min(lo).min(0.0);
         let r = ui.add(
-            egui::Slider::new(&mut hi, (lo + 0.01)..=top)
+            egui::Slider::new(&mut hi, bottom..=top)
                 .text(format!("window top ({unit})"))
-                .logarithmic(true),
+                .clamping(egui::SliderClamping::Never),
         );
         controls.push(("pet-window-hi".to_owned(), r.rect));
-        let r =
-            ui.add(egui::Slider::new(&mut lo, 0.0..=(hi - 0.01).max(0.0)).text("window bottom"));
+        let r = ui.add(
+            egui::Slider::new(&mut lo, bottom..=top)
+                .text("window bottom")
+                .clamping(egui::SliderClamping::Never),
+        );
         controls.push(("pet-window-lo".to_owned(), r.rect));
         if hi > lo {
             layer.window = (lo, hi);

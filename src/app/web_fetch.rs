@@ -84,7 +84,7 @@ pub fn fetch_urls(urls: Vec<String>) {
             [one] => file_name(one),
             many => format!("{} files from {}", many.len(), host_of(&many[0])),
         };
-        let result = download_all(&urls, &controller).await;
+        let result = download_all(&urls, &controller, true).await;
         let mine = ACTIVE.with(|a| {
             let mut a = a.borrow_mut();
             let same = a.as_ref() == Some(&controller);
@@ -126,7 +126,7 @@ pub fn fetch_pet_urls(urls: Vec<String>, generation: u64) {
             [one] => file_name(one),
             many => format!("{} files from {}", many.len(), host_of(&many[0])),
         };
-        match download_all(&urls, &controller).await {
+        match download_all(&urls, &controller, false).await {
             Ok(files) => push(WebEvent::PetFiles {
                 label,
                 files,
@@ -161,9 +161,12 @@ fn file_name(url: &str) -> String {
     super::url_params::decode(last)
 }
 
+/// Downloads `urls` in turn; `report`: the page's progress bar follows them (not for a PET
+/// downloaded beside the volume shown, which must not take the bar of another load).
 async fn download_all(
     urls: &[String],
     controller: &web_sys::AbortController,
+    report: bool,
 ) -> Result<Vec<InputFile>, Failure> {
     let mut files: Vec<InputFile> = Vec::with_capacity(urls.len());
     let mut total_bytes: u64 = 0;
@@ -177,7 +180,8 @@ async fn download_all(
         } else {
             name.clone()
         };
-        let bytes = download(url, &label, controller, max_download_bytes() - total_bytes).await?;
+        let limit = max_download_bytes() - total_bytes;
+        let bytes = download(url, &label, controller, limit, report).await?;
         total_bytes += bytes.len();
         files.push(js_bytes::into_input(bytes, name).map_err(Failure::Message)?);
     }
@@ -268,16 +272,19 @@ async fn download(
     label: &str,
     controller: &web_sys::AbortController,
     room: u64,
+    report: bool,
 ) -> Result<JsBytes, Failure> {
     let fail = |m: String| Failure::Message(m);
     let signal = controller.signal();
     let window = web_sys::window().ok_or_else(|| fail("no window object".to_owned()))?;
-    push(WebEvent::Progress {
-        verb: "downloading",
-        label: label.to_owned(),
-        done: 0.0,
-        total: 0.0,
-    });
+    if report {
+        push(WebEvent::Progress {
+            verb: "downloading",
+            label: label.to_owned(),
+            done: 0.0,
+            total: 0.0,
+        });
+    }
     let init = web_sys::RequestInit::new();
     init.set_signal(Some(&signal));
     let response = match JsFuture::from(window.fetch_with_str_and_init(url, &init)).await {
@@ -358,7 +365,7 @@ async fn download(
         }
         bytes.push(&array);
         // A progress event per ~256 KB is plenty (chunks are often 16-64 KB).
-        if bytes.len() - last_report >= 256 << 10 {
+        if report && bytes.len() - last_report >= 256 << 10 {
             last_report = bytes.len();
             push(WebEvent::Progress {
                 verb: "downloading",

@@ -614,12 +614,16 @@ async fn read_series(set: super::load::SeriesSet, purpose: SeriesFor) {
     let mut done = 0.0;
     for &i in &members {
         let Some(file) = files.get(i) else { continue };
-        push(WebEvent::Progress {
-            verb: "reading",
-            label: label.clone(),
-            done,
-            total,
-        });
+        // A PET read beside the volume shown does not take the progress bar of another load
+        // (the panel says it is loading).
+        if matches!(purpose, SeriesFor::Shown(_)) {
+            push(WebEvent::Progress {
+                verb: "reading",
+                label: label.clone(),
+                done,
+                total,
+            });
+        }
         let named = Named {
             name: set.list.file_name(i).to_owned(),
             file: file.clone(),

@@ -74,6 +74,12 @@ pub enum SuvError {
     ScanBeforeInjection { seconds: f64 },
     #[error("Units (0054,1001) CNTS without a non-zero {PHILIPS_SUV} or {PHILIPS_ACTIVITY}")]
     NoPhilipsScale,
+    #[error(
+        "the scan is {hours:.1} h after the injection (0018,1072 or 0018,1078): more than a day, so the dates do not describe one scan (de-identified?)"
+    )]
+    ImplausibleDecay { hours: f64 },
+    #[error("the SUV factor came out as {0}, not a finite positive number")]
+    NotFinite(f64),
 }
 
 fn bad_value(tag: &'static str, value: impl ToString) -> SuvError {
@@ -250,6 +256,9 @@ pub fn suv_factor(instances: &[PetTags]) -> Result<SuvFactor, SuvError> {
         },
         other => return Err(SuvError::UnsupportedUnits(other.to_owned())),
     };
+    if !(factor.is_finite() && factor > 0.0) {
+        return Err(SuvError::NotFinite(factor));
+    }
     Ok(SuvFactor { factor, rule })
 }
 
@@ -272,6 +281,13 @@ fn bqml(instances: &[PetTags], first: &PetTags) -> Res<(f64, String)> {
             }
             if seconds < 0.0 {
                 return Err(SuvError::ScanBeforeInjection { seconds: -seconds });
+            }
+            // FDG decays to 10^-4 in a day: a longer gap is dates that do not belong together
+            // (de-identification shifts one and not the other), never a scan.
+            if seconds > 86_400.0 {
+                return Err(SuvError::ImplausibleDecay {
+                    hours: seconds / 3600.0,
+                });
             }
             let decayed = dose * (-seconds / half_life).exp2();
             (decayed, format!("decay from {from} over {seconds:.0} s"))
@@ -501,6 +517,20 @@ mod tests {
         assert_eq!(e, Err(SuvError::MissingTag { tag: SERIES_TIME }));
         let all = siemens(|t| (t.start_date_time, t.start_time) = (Some("2020".into()), None));
         assert_eq!(suv_factor(&all), Err(bad_value(START_DATE_TIME, "2020")));
+    }
+
+    /// De-identified dates that shift the series and not the injection: years of decay would
+    /// make the factor infinite; it is an error naming the gap instead.
+    #[test]
+    fn a_scan_years_after_the_injection_is_refused() {
+        let all = siemens(|t| {
+            t.series_date = Some("20251217".into());
+            t.acquisition_date = Some("20251217".into());
+        });
+        match suv_factor(&all) {
+            Err(SuvError::ImplausibleDecay { hours }) => assert!(hours > 24.0 * 365.0, "{hours}"),
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]
