@@ -276,6 +276,7 @@ impl PetMip {
         let render = layer.render.as_ref()?;
         let (left, right) = area.split_left_right_at_fraction(0.5);
         let mut pick = None;
+        let mut touched = false;
         let mut window = layer.window;
         let first = self.mip_for != Some(Arc::as_ptr(&layer.volume) as usize);
         let mip = &mut self.mip;
@@ -307,16 +308,21 @@ impl PetMip {
             };
             let out = mip.image_ui(ui, gpu, render_state, &scene);
             pick = out.pick.map(|p| p.world_mm);
+            // Only the user's own moves here (drag, wheel, the view's keys) turn the shape MIP.
+            touched = out.response.dragged() || out.response.hovered();
             // Its right drag sets the PET's window, as in the slice panes.
             if mip.settings.window.1 > mip.settings.window.0 {
                 window = mip.settings.window;
             }
         });
-        if first {
-            // The viewport framed the PET on its first frame: keep the shape MIP's view.
+        if first || !touched {
+            // The viewport framed the PET on its first frame (or changed its camera by itself):
+            // the shape MIP's view stays, and is the PET's from the next frame.
             self.mip_for = Some(Arc::as_ptr(&layer.volume) as usize);
-            self.mip.camera = *camera;
-            ui.ctx().request_repaint();
+            if self.mip.camera != *camera {
+                self.mip.camera = *camera;
+                ui.ctx().request_repaint();
+            }
         } else if self.mip.camera != *camera {
             *camera = self.mip.camera;
             ui.ctx().request_repaint();

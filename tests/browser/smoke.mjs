@@ -275,9 +275,11 @@ try {
       const mipRect = status?.controls?.['pane:pet-mip'];
       check('PET/CT folder: the PET MIP is drawn beside the shape MIP', Array.isArray(mipRect)
         && mipRect[2] > 50 && mipRect[3] > 50, JSON.stringify(mipRect));
-      // Both MIPs finished (not a coarse frame) before the screenshot.
-      status = await waitStatus(() => window.shapecastStatus?.mip === 'done'
-        && window.shapecastStatus?.pet_mip === 'done', 'both MIPs drawn in full', 120000);
+      // Both MIPs finished (not a coarse frame) before the screenshot: the CT's features
+      // (this page computes the Li map) take the GPU first, and the MIPs refine after them.
+      status = await waitStatus(() => window.shapecastStatus?.features?.state !== 'running'
+        && window.shapecastStatus?.mip === 'done'
+        && window.shapecastStatus?.pet_mip === 'done', 'both MIPs drawn in full', 300000);
       check('PET/CT folder: both MIPs report a finished picture', status?.mip === 'done'
         && status?.pet_mip === 'done', `mip ${status?.mip}, pet_mip ${status?.pet_mip}`);
       await page.screenshot({ path: path.join(outDir, 'pet_ct.png') });
