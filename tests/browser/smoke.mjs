@@ -31,7 +31,9 @@ const dist = path.join(root, 'dist');
 const outDir = path.join(here, 'out');
 const chromiumPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
 const DEMO_DIMS = [120, 126, 164];
-const timeoutMs = Number(process.env.SHAPECAST_BROWSER_TIMEOUT_MS ?? 300000);
+// The demo's Li features took 222 s on SwiftShader here in November 2026 and 298-310 s on
+// 2026-11-28 (Chromium 148): a wait limit well above, not a speed target.
+const timeoutMs = Number(process.env.SHAPECAST_BROWSER_TIMEOUT_MS ?? 600000);
 
 let passed = 0;
 let failed = 0;
