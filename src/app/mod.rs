@@ -832,7 +832,7 @@ impl ShapecastApp {
                         generation,
                     } => {
                         // Only for the CT it was asked for (a newer CT drops it unread).
-                        if self.pet.expecting(generation) {
+                        if self.pet.awaits(generation) {
                             self.pet
                                 .start_source(LoadSource::Files { label, files }, generation);
                         }
@@ -1085,7 +1085,7 @@ impl ShapecastApp {
         {
             let urls = std::mem::take(&mut self.options.pet_urls);
             self.pet.urls = urls.clone();
-            self.pet.expect(self.generation);
+            self.pet.awaiting(self.generation);
             #[cfg(target_arch = "wasm32")]
             web_fetch::fetch_pet_urls(urls, self.generation);
             #[cfg(not(target_arch = "wasm32"))]

@@ -384,7 +384,7 @@ impl PetState {
     }
 
     /// A PET for the CT of `generation` is on its way (being downloaded).
-    pub fn expect(&mut self, generation: u64) {
+    pub fn awaiting(&mut self, generation: u64) {
         self.loading_for = Some(generation);
     }
 
@@ -445,7 +445,7 @@ impl PetState {
 
     /// Whether a PET for the CT of `generation` is awaited (its download may be decoded).
     #[cfg(target_arch = "wasm32")]
-    pub fn expecting(&self, generation: u64) -> bool {
+    pub fn awaits(&self, generation: u64) -> bool {
         self.loading_for == Some(generation) && self.job.is_none()
     }
 

@@ -242,7 +242,7 @@ impl ShapecastApp {
             #[cfg(target_arch = "wasm32")]
             if self.pet.layer.is_none() && !self.pet.loading() && !p.urls.is_empty() {
                 self.pet.urls = p.urls.clone();
-                self.pet.expect(generation);
+                self.pet.awaiting(generation);
                 super::web_fetch::fetch_pet_urls(p.urls.clone(), generation);
             }
         }
