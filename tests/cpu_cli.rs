@@ -323,3 +323,99 @@ fn gpu_and_cpu_backends_write_the_same_features() {
         );
     }
 }
+
+/// `findings` on the demo phantom (four spheres beside and between vessels, 200 HU in 0 HU):
+/// the spheres are found, each once, with their sizes, ranked in JSON.
+#[test]
+fn findings_list_the_demo_spheres_once_each_with_their_sizes() {
+    let input = tmp("demo-findings.nii.gz");
+    run(bin().args(["phantom", "demo", "--out"]).arg(&input));
+    let out = bin()
+        .arg("findings")
+        .arg(&input)
+        .args([
+            "--preset",
+            "lymph-nodes",
+            "--method",
+            "hessian",
+            "--backend",
+            "cpu",
+            "--json",
+            "--all",
+        ])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let list = json["findings"].as_array().expect("findings");
+    // (centre voxel, radius mm) of the demo's spheres (src/phantom/catalogue.rs).
+    let spheres = [
+        ([30.0, 40.0, 48.0], 5.0),
+        ([62.0, 58.0, 40.0], 4.0),
+        ([48.0, 70.0, 66.0], 6.0),
+        ([70.0, 30.0, 60.0], 3.0),
+    ];
+    for (c, r) in spheres {
+        let near: Vec<&serde_json::Value> = list
+            .iter()
+            .filter(|f| {
+                let v: Vec<f64> = (0..3)
+                    .map(|a| f["voxel"][a].as_f64().expect("a number"))
+                    .collect();
+                (0..3).map(|a| (v[a] - c[a]).powi(2)).sum::<f64>().sqrt() <= r
+            })
+            .collect();
+        assert_eq!(near.len(), 1, "one finding per sphere at {c:?}: {json}");
+        let f = near[0];
+        let d = f["diameter_mm"].as_f64().expect("a number");
+        assert!(
+            (d - 2.0 * r).abs() <= 0.25 * 2.0 * r,
+            "sphere r = {r} mm at {c:?}: diameter {d} mm"
+        );
+        assert!(f["score"].as_f64().expect("a number") > 1.0);
+        assert!((f["mean_hu"].as_f64().expect("a number") - 200.0).abs() < 40.0);
+    }
+    // The four spheres rank above everything else (vessel junctions, cylinder ends).
+    for f in list.iter().take(4) {
+        let v: Vec<f64> = (0..3)
+            .map(|a| f["voxel"][a].as_f64().expect("a number"))
+            .collect();
+        assert!(
+            spheres
+                .iter()
+                .any(|(c, r)| { (0..3).map(|a| (v[a] - c[a]).powi(2)).sum::<f64>().sqrt() <= *r }),
+            "rank {} at {v:?} is not one of the spheres: {json}",
+            f["rank"]
+        );
+    }
+    let ranks: Vec<u64> = list
+        .iter()
+        .map(|f| f["rank"].as_u64().expect("a rank"))
+        .collect();
+    assert_eq!(ranks, (1..=list.len() as u64).collect::<Vec<_>>());
+    // A table without --json, and a method without blobness is refused by name.
+    let table = run(bin().arg("findings").arg(&input).args([
+        "--preset",
+        "lymph-nodes",
+        "--method",
+        "hessian",
+        "--backend",
+        "cpu",
+    ]));
+    assert!(
+        table.contains("rank") && table.contains("diam mm"),
+        "{table}"
+    );
+    let out = bin()
+        .arg("findings")
+        .arg(&input)
+        .args(["--method", "frangi", "--backend", "cpu"])
+        .output()
+        .expect("runs");
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("blobness"));
+}

@@ -158,32 +158,22 @@ fn backend_context(backend: BackendArg) -> anyhow::Result<Option<GpuContext>> {
     }
 }
 
-pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
-    let req = request(&args)?;
-    let loaded = match &args.input {
-        Some(input) => {
-            io::load(&read_input(input)?).with_context(|| format!("loading {}", input.display()))?
-        }
-        None => args.dicomweb.load()?,
-    };
-    for n in &loaded.notes {
-        eprintln!("note: {n}");
-    }
-    // Shared with the feature job: one copy of the voxels.
-    let volume = std::sync::Arc::new(loaded.volume);
-    for w in &volume.warnings {
-        eprintln!("warning: {w}");
-    }
-    let grid = Grid::of(&volume);
-    let started = std::time::Instant::now();
-    let (components, notes, backend) = match backend_context(args.backend)? {
+/// The features of `volume` on the backend asked for (the GPU job, read back, or the CPU
+/// reference), with the pipeline's notes and the backend's name.
+pub fn compute_components(
+    volume: &std::sync::Arc<crate::volume::Volume>,
+    req: &Request,
+    backend: BackendArg,
+    exact_rst: bool,
+) -> anyhow::Result<(crate::cpu::Components3, Vec<String>, &'static str)> {
+    match backend_context(backend)? {
         Some(ctx) => {
             let options = JobOptions {
                 export: true,
-                exact_rst: args.exact_rst,
+                exact_rst,
                 ..JobOptions::default()
             };
-            let mut job = FeatureJob::shared(&ctx, std::sync::Arc::clone(&volume), &req, options)?;
+            let mut job = FeatureJob::shared(&ctx, std::sync::Arc::clone(volume), req, options)?;
             eprintln!(
                 "GPU: {} ({} brick{}, halo overhead {:.2})",
                 ctx.adapter_label(),
@@ -196,13 +186,43 @@ pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
             let comps = result
                 .components
                 .context("the GPU job returned no features")?;
-            (comps, result.notes, "gpu")
+            Ok((comps, result.notes, "gpu"))
         }
         None => {
-            let outcome = pipeline::compute(&grid, &volume.to_f32(), &req)?;
-            (outcome.components, outcome.notes, "cpu")
+            let outcome = pipeline::compute(&Grid::of(volume), &volume.to_f32(), req)?;
+            Ok((outcome.components, outcome.notes, "cpu"))
         }
+    }
+}
+
+/// The volume of a file or folder, or of an archive's series, its loader's notes and warnings
+/// printed; shared with the feature job (one copy of the voxels).
+pub fn load_volume(
+    input: Option<&std::path::Path>,
+    dicomweb: &crate::cli::dicomweb::DicomWebArgs,
+) -> anyhow::Result<std::sync::Arc<crate::volume::Volume>> {
+    let loaded = match input {
+        Some(input) => {
+            io::load(&read_input(input)?).with_context(|| format!("loading {}", input.display()))?
+        }
+        None => dicomweb.load()?,
     };
+    for n in &loaded.notes {
+        eprintln!("note: {n}");
+    }
+    let volume = std::sync::Arc::new(loaded.volume);
+    for w in &volume.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(volume)
+}
+
+pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
+    let req = request(&args)?;
+    let volume = load_volume(args.input.as_deref(), &args.dicomweb)?;
+    let started = std::time::Instant::now();
+    let (components, notes, backend) =
+        compute_components(&volume, &req, args.backend, args.exact_rst)?;
     for n in &notes {
         eprintln!("{n}");
     }

@@ -5,6 +5,7 @@ use clap::{Parser, Subcommand};
 pub mod bench;
 pub mod dicomweb;
 pub mod features;
+pub mod findings;
 pub mod info;
 pub mod phantom;
 pub mod render;
@@ -62,6 +63,9 @@ pub enum Command {
     Phantom(phantom::PhantomArgs),
     /// Compute Hessian, Frangi, structure-tensor or RST features of a volume (GPU or CPU).
     Features(features::FeaturesArgs),
+    /// The ranked findings of a CT: round candidates from the preset's blobness, where the
+    /// preset looks (the lung for lung nodules, soft tissue for lymph nodes), as a table or JSON.
+    Findings(findings::FindingsArgs),
     /// Time every GPU feature stage against the CPU reference (and scikit-image).
     Bench(bench::BenchArgs),
     /// Print a volume's dimensions, spacing, orientation, intensity range, modality and warnings.
@@ -132,6 +136,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Gpu => gpu_info(),
         Command::Phantom(args) => phantom::run(args),
         Command::Features(args) => features::run(args),
+        Command::Findings(args) => findings::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Render(args) => render::run(args),
         Command::Reproduce(args) => reproduce::run(args),

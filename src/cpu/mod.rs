@@ -15,6 +15,7 @@
 pub mod conspicuity;
 pub mod eigen;
 pub mod features;
+pub mod findings;
 pub mod gaussian;
 pub mod hessian;
 pub mod parallel;

@@ -1,0 +1,170 @@
+//! `shapecast findings INPUT --preset P [--json]`: the ranked candidates of a CT
+//! ([`crate::cpu::findings`], the code behind the app's findings panel), as a table or JSON.
+
+use std::path::PathBuf;
+
+use anyhow::bail;
+use serde_json::json;
+
+use crate::cli::features::{BackendArg, compute_components, load_volume};
+use crate::cpu::findings::{self, Findings, SHOWN};
+use crate::cpu::pipeline::{Method, Request};
+use crate::cpu::{FeatureMap, Grid};
+use crate::volume::Volume;
+
+#[derive(clap::Args, Debug)]
+pub struct FindingsArgs {
+    /// A CT: a volume file or a folder holding a DICOM series.
+    #[arg(required_unless_present = "dicomweb", conflicts_with = "dicomweb")]
+    pub input: Option<PathBuf>,
+    #[command(flatten)]
+    pub dicomweb: crate::cli::dicomweb::DicomWebArgs,
+    /// lung-nodules (in or against the lung), lymph-nodes (soft tissue in the body), airways or
+    /// vessels (anywhere in the body).
+    #[arg(long, default_value = "lung-nodules")]
+    pub preset: String,
+    /// The blobness read: rst (its Li map, as the viewer computes it; the paper's method, and
+    /// the one that ranks real lesions first: docs/science.md, "Findings"), hessian (eq. 1) or
+    /// li (the Hessian's eq. 2 map).
+    #[arg(long, default_value = "rst")]
+    pub method: Method,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// List every candidate, not only the first 30.
+    #[arg(long)]
+    pub all: bool,
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendArg,
+}
+
+/// The request whose blobness the findings read (the RST's Li map, as the viewer's).
+pub fn request(method: Method, preset: crate::cpu::Preset) -> anyhow::Result<Request> {
+    match method {
+        Method::Hessian | Method::Li | Method::Rst => {}
+        other => bail!(
+            "--method {}: findings read blobness, which hessian and rst have",
+            other.name()
+        ),
+    }
+    let mut req = Request::new(method);
+    req.preset = preset;
+    req.rst_map = FeatureMap::Li;
+    Ok(req)
+}
+
+pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
+    let preset = crate::cli::preset(&args.preset)?;
+    let req = request(args.method, preset)?;
+    let volume = load_volume(args.input.as_deref(), &args.dicomweb)?;
+    let started = std::time::Instant::now();
+    let (components, notes, backend) = compute_components(&volume, &req, args.backend, false)?;
+    for n in &notes {
+        eprintln!("{n}");
+    }
+    let features_s = started.elapsed().as_secs_f64();
+    let started = std::time::Instant::now();
+    let found = findings::find(&Grid::of(&volume), &volume.to_f32(), &components[2], preset)?;
+    let findings_s = started.elapsed().as_secs_f64();
+    let shown = if args.all {
+        found.findings.len()
+    } else {
+        SHOWN
+    };
+    if args.json {
+        let mut out = to_json(&volume, &found, shown);
+        out["method"] = json!(args.method.name());
+        out["preset"] = json!(preset.name());
+        out["backend"] = json!(backend);
+        out["seconds"] = json!({"features": features_s, "findings": findings_s});
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        print!("{}", table(&volume, &found, shown));
+        println!(
+            "{} {} blobness ({backend}): features {features_s:.1} s, findings {findings_s:.2} s",
+            preset.name(),
+            args.method.name()
+        );
+    }
+    Ok(())
+}
+
+/// The findings as JSON: `{"findings": [{rank, lps_mm, voxel, score, ...}], "more": N, ...}`,
+/// the first `shown` of them listed.
+pub fn to_json(volume: &Volume, found: &Findings, shown: usize) -> serde_json::Value {
+    let world = volume.world_from_voxel();
+    let list: Vec<serde_json::Value> = found
+        .findings
+        .iter()
+        .take(shown)
+        .map(|f| {
+            let p = world.transform_point3(glam::DVec3::from(f.voxel.map(|v| v as f64)));
+            json!({
+                "rank": f.rank,
+                "lps_mm": [round2(p.x), round2(p.y), round2(p.z)],
+                "voxel": f.voxel,
+                "score": round2(f.score),
+                "feature": f.feature,
+                "diameter_mm": round2(f.diameter_mm),
+                "volume_ml": (f.volume_ml * 1000.0).round() / 1000.0,
+                "mean_hu": round2(f.mean_hu),
+                "max_hu": round2(f.max_hu),
+                "bounded": f.bounded,
+                "merged": f.merged,
+            })
+        })
+        .collect();
+    json!({
+        "findings": list,
+        "more": found.findings.len().saturating_sub(shown),
+        "reference": found.reference,
+        "gate": found.gate.describe(),
+        "transfer_function_hu": [found.tf.d_min, found.tf.d_max],
+        "noise_hu": found.noise_hu,
+        "dropped": {"outside": found.outside, "dense": found.dense, "small": found.small},
+    })
+}
+
+fn round2(v: f64) -> f64 {
+    (v * 100.0).round() / 100.0
+}
+
+/// The findings as a table, the first `shown` of them.
+pub fn table(volume: &Volume, found: &Findings, shown: usize) -> String {
+    let world = volume.world_from_voxel();
+    let mut out = format!(
+        "{:>4} {:>7} {:>26} {:>16} {:>8} {:>9} {:>8} {:>8}\n",
+        "rank", "score", "LPS mm", "voxel", "diam mm", "vol ml", "mean HU", "max HU"
+    );
+    for f in found.findings.iter().take(shown) {
+        let p = world.transform_point3(glam::DVec3::from(f.voxel.map(|v| v as f64)));
+        out += &format!(
+            "{:>4} {:>7.2} {:>26} {:>16} {:>7.1}{} {:>9.3} {:>8.0} {:>8.0}\n",
+            f.rank,
+            f.score,
+            format!("{:.1}, {:.1}, {:.1}", p.x, p.y, p.z),
+            format!("{}, {}, {}", f.voxel[0], f.voxel[1], f.voxel[2]),
+            f.diameter_mm,
+            if f.bounded { "+" } else { " " },
+            f.volume_ml,
+            f.mean_hu,
+            f.max_hu,
+        );
+    }
+    let more = found.findings.len().saturating_sub(shown);
+    if more > 0 {
+        out += &format!("... {more} more (--all lists them)\n");
+    }
+    out += &format!(
+        "{} finding(s) {}; score 1 = the blobness's 99.9th percentile there ({:.3}); dropped: {} outside, {} dense (mean above {} HU), {} smaller than {} mm; + = reached the ray length\n",
+        found.findings.len(),
+        found.gate.describe(),
+        found.reference,
+        found.outside,
+        found.dense,
+        findings::DENSE_ABOVE_HU,
+        found.small,
+        findings::SMALLEST_MM
+    );
+    out
+}

@@ -1,0 +1,579 @@
+//! Findings: the ranked list of round things a reader should look at (docs/science.md,
+//! "Findings"), from a blobness volume on the CT's grid and the CT itself. Pure CPU code on
+//! arrays: the command line (`shapecast findings`) and the app (its findings panel) call the
+//! same [`find`].
+//!
+//! 1. **Where.** The preset says what the list is for ([`Gate`]): lung nodules lie in the lung
+//!    ([`lung_mask`]) or against it, lymph nodes in soft tissue inside the body, away from the
+//!    skin; the other presets take anything inside the body.
+//! 2. **How bright.** The feature's 99.9th percentile over that domain is the reference: a
+//!    candidate's score is its peak feature over it, and only local maxima above it (score > 1)
+//!    are candidates. The reference comes from the volume, as the presets' noise-refined
+//!    transfer functions do; no constant is tuned to a scan.
+//! 3. **One per structure.** Maxima are taken from the strongest down. Each grows its region:
+//!    the voxels 26-connected to the peak within the preset's ray length R whose HU lie within
+//!    the transfer function's band of the core's (the mean of the 3 x 3 x 3 voxels at the peak):
+//!    `core - (d_min + d_max) / 2 <= HU <= core + (d_min + d_max)`, the edge the RST's rays stop
+//!    at, and no farther than twice the reach of the feature's half maximum (a vessel of the
+//!    same HU that touches a nodule is not the nodule). A weaker maximum inside an earlier region, or in its feature's half-maximum
+//!    neighbourhood, is merged into it. Size (volume, equivalent diameter) and HU (mean, max) are
+//!    the region's.
+//! 4. **Not a nodule or a node.** A region of mean HU above [`DENSE_ABOVE_HU`] is bone, metal or
+//!    undiluted contrast; a region outside the preset's domain, or smaller than [`SMALLEST_MM`],
+//!    is dropped. All are counted.
+
+use std::collections::HashMap;
+
+use super::Grid;
+use super::conspicuity::lung_mask;
+use super::tf::{
+    NOISE_BAND_HU, Preset, TransferFunction, auto_transfer_function, estimate_noise_sigma,
+};
+
+/// Regions of mean HU above this are bone, metal or undiluted contrast, not nodules or nodes.
+pub const DENSE_ABOVE_HU: f64 = 700.0;
+/// Soft tissue (a lymph node's core): fat is below, contrast-filled vessels and bone above.
+pub const SOFT_TISSUE_HU: (f64, f64) = (-100.0, 200.0);
+/// Air below this (HU), as the lung mask's.
+pub const AIR_BELOW_HU: f32 = super::conspicuity::LUNG_AIR_BELOW_HU;
+/// A soft-tissue or body candidate lies at least this far from the air outside the body (skin
+/// folds, the table's edges), mm.
+pub const SKIN_MARGIN_MM: f64 = 10.0;
+/// A lung candidate whose peak is not in the lung mask needs at least this share of its
+/// region's outer neighbours to be lung (a juxtapleural nodule, a mass larger than the mask's
+/// filled holes).
+pub const LUNG_CONTACT_MIN: f64 = 0.25;
+/// Regions smaller than a sphere of this diameter (mm) are not findings: below 3 mm a "nodule"
+/// is a voxel or two of noise or a vessel's cross-section (LIDC-IDRI's readers marked nodules
+/// from 3 mm).
+pub const SMALLEST_MM: f64 = 3.0;
+/// Findings listed before "more".
+pub const SHOWN: usize = 30;
+
+/// Where a preset's findings may lie.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gate {
+    /// In the lung or against it (lung nodules).
+    Lung,
+    /// Soft tissue inside the body, not in the lung (lymph nodes).
+    SoftTissue,
+    /// Anywhere inside the body.
+    Body,
+}
+
+impl Gate {
+    pub fn of(preset: Preset) -> Self {
+        match preset {
+            Preset::LungNodules => Self::Lung,
+            Preset::LymphNodes => Self::SoftTissue,
+            Preset::Airways | Preset::Vessels => Self::Body,
+        }
+    }
+
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Lung => "in or against the lung",
+            Self::SoftTissue => "soft tissue inside the body",
+            Self::Body => "inside the body",
+        }
+    }
+}
+
+/// One candidate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Finding {
+    /// 1 for the strongest.
+    pub rank: usize,
+    /// The voxel of the feature's peak (where a click on the finding goes).
+    pub voxel: [usize; 3],
+    /// The peak feature value.
+    pub feature: f32,
+    /// The peak over the domain's 99.9th percentile.
+    pub score: f64,
+    /// The region's volume, ml, and the diameter of the sphere of that volume, mm.
+    pub volume_ml: f64,
+    pub diameter_mm: f64,
+    pub mean_hu: f64,
+    pub max_hu: f64,
+    /// The region reached its limit (the preset's ray length R, or twice the reach of the
+    /// feature's half maximum): its size is a lower bound.
+    pub bounded: bool,
+    /// Weaker maxima merged into this finding.
+    pub merged: usize,
+}
+
+/// The ranked candidates of a volume and what was left out.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Findings {
+    pub gate: Gate,
+    /// The feature's 99.9th percentile over the gate's domain (score 1).
+    pub reference: f32,
+    /// The transfer function whose band bounds the regions, and the CT's noise it was refined
+    /// by (HU; `None` where no 11 x 11 window lies in soft tissue).
+    pub tf: TransferFunction,
+    pub noise_hu: Option<f64>,
+    /// Every candidate, strongest first ([`SHOWN`] of them are listed before "more").
+    pub findings: Vec<Finding>,
+    /// Candidates dropped as outside the domain, as dense (bone, metal, contrast), and as
+    /// smaller than [`SMALLEST_MM`].
+    pub outside: usize,
+    pub dense: usize,
+    pub small: usize,
+}
+
+/// Why findings cannot be computed.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum FindingsError {
+    #[error("the feature has {feature} voxels and the CT {hu}; the grid holds {grid}")]
+    Length {
+        feature: usize,
+        hu: usize,
+        grid: usize,
+    },
+}
+
+/// The findings of `feature` (a blobness on `grid`) in the CT `hu`, for `preset` (module
+/// documentation). The regions' HU band is the preset's transfer function refined by the CT's
+/// own noise ([`auto_transfer_function`] of the noise of `hu` itself, which the regions read).
+pub fn find(
+    grid: &Grid,
+    hu: &[f32],
+    feature: &[f32],
+    preset: Preset,
+) -> Result<Findings, FindingsError> {
+    if hu.len() != grid.len() || feature.len() != grid.len() {
+        return Err(FindingsError::Length {
+            feature: feature.len(),
+            hu: hu.len(),
+            grid: grid.len(),
+        });
+    }
+    let gate = Gate::of(preset);
+    let noise_hu = estimate_noise_sigma(grid, hu, NOISE_BAND_HU);
+    let tf = auto_transfer_function(preset.transfer_function(), noise_hu);
+    let domain = Domain {
+        gate,
+        grid,
+        hu,
+        lung: lung_mask(grid, hu),
+        outside: outside_air(grid, hu),
+    };
+    let reference = percentile_999(
+        (0..grid.len())
+            .filter(|&n| domain.contains(n))
+            .map(|n| feature[n]),
+    );
+    let mut result = Findings {
+        gate,
+        reference,
+        tf,
+        noise_hu,
+        findings: Vec::new(),
+        outside: 0,
+        dense: 0,
+        small: 0,
+    };
+    if reference.is_nan() || reference <= 0.0 {
+        return Ok(result);
+    }
+    let mut maxima = local_maxima(grid, feature, reference);
+    maxima.sort_by(|a, b| feature[*b].total_cmp(&feature[*a]).then(a.cmp(b)));
+
+    let radius_mm = preset.radius_mm();
+    let half_band = 0.5 * (tf.d_min + tf.d_max);
+    // Voxel -> the candidate (kept or dropped) whose region holds it.
+    let mut owner: HashMap<usize, Owner> = HashMap::new();
+    for peak in maxima {
+        if let Some(&o) = owner.get(&peak) {
+            if let Owner::Kept(f) = o {
+                result.findings[f].merged += 1;
+            }
+            continue;
+        }
+        let core = core_hu(grid, hu, peak);
+        let band = (core - half_band, core + 2.0 * half_band);
+        let halo = grow(grid, peak, radius_mm, |n| feature[n] >= 0.5 * feature[peak]);
+        // A structure reaches about twice as far as its feature's half maximum: beyond that a
+        // region of the same HU is a neighbour it touches (a vessel), not itself.
+        let c = grid.ijk(peak);
+        let halo_mm = halo
+            .voxels
+            .iter()
+            .map(|&n| distance_mm(grid, c, grid.ijk(n)))
+            .fold(0.0, f64::max);
+        let reach_mm =
+            radius_mm.min(2.0 * halo_mm + grid.spacing_mm.iter().fold(0.0f64, |a, &b| a.max(b)));
+        let region = grow(grid, peak, reach_mm, |n| {
+            let v = f64::from(hu[n]);
+            band.0 <= v && v <= band.1
+        });
+        let values = region.voxels.iter().map(|&n| f64::from(hu[n]));
+        let mean_hu = values.clone().sum::<f64>() / region.voxels.len() as f64;
+        let max_hu = values.fold(f64::NEG_INFINITY, f64::max);
+        let voxel_ml = grid.spacing_mm.iter().product::<f64>() / 1000.0;
+        let volume_ml = region.voxels.len() as f64 * voxel_ml;
+        let diameter_mm = (6.0 * volume_ml * 1000.0 / std::f64::consts::PI).cbrt();
+        let keep = if mean_hu > DENSE_ABOVE_HU {
+            result.dense += 1;
+            false
+        } else if !domain.admits(peak, core, &region.voxels) {
+            result.outside += 1;
+            false
+        } else if diameter_mm < SMALLEST_MM {
+            result.small += 1;
+            false
+        } else {
+            true
+        };
+        let who = if keep {
+            result.findings.push(Finding {
+                rank: result.findings.len() + 1,
+                voxel: grid.ijk(peak),
+                feature: feature[peak],
+                score: f64::from(feature[peak]) / f64::from(reference),
+                volume_ml,
+                diameter_mm,
+                mean_hu,
+                max_hu,
+                bounded: region.bounded,
+                merged: 0,
+            });
+            Owner::Kept(result.findings.len() - 1)
+        } else {
+            Owner::Dropped
+        };
+        for n in region.voxels.into_iter().chain(halo.voxels) {
+            owner.entry(n).or_insert(who);
+        }
+    }
+    Ok(result)
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Owner {
+    Kept(usize),
+    Dropped,
+}
+
+/// Where a gate's findings may lie, on one CT.
+struct Domain<'a> {
+    gate: Gate,
+    grid: &'a Grid,
+    hu: &'a [f32],
+    lung: Vec<bool>,
+    /// The air around the body ([`outside_air`]).
+    outside: Vec<bool>,
+}
+
+impl Domain<'_> {
+    /// Whether voxel `n` counts towards the reference percentile.
+    fn contains(&self, n: usize) -> bool {
+        match self.gate {
+            Gate::Lung => self.lung[n],
+            Gate::SoftTissue => !self.lung[n] && !self.outside[n] && self.hu[n] >= AIR_BELOW_HU,
+            Gate::Body => !self.outside[n],
+        }
+    }
+
+    /// Whether a candidate (peak voxel, core HU, region) lies where the gate wants it.
+    fn admits(&self, peak: usize, core: f64, region: &[usize]) -> bool {
+        let (grid, lung, outside) = (self.grid, &self.lung, &self.outside);
+        match self.gate {
+            Gate::Lung => lung[peak] || lung_contact(grid, lung, region) >= LUNG_CONTACT_MIN,
+            Gate::SoftTissue => {
+                !lung[peak]
+                    && self.hu[peak] >= AIR_BELOW_HU
+                    && (SOFT_TISSUE_HU.0..=SOFT_TISSUE_HU.1).contains(&core)
+                    && !near(grid, outside, peak, SKIN_MARGIN_MM)
+            }
+            Gate::Body => !outside[peak] && !near(grid, outside, peak, SKIN_MARGIN_MM),
+        }
+    }
+}
+
+/// The share of the region's outer 6-neighbours that are lung.
+fn lung_contact(grid: &Grid, lung: &[bool], region: &[usize]) -> f64 {
+    let inside: std::collections::HashSet<usize> = region.iter().copied().collect();
+    let mut rim = std::collections::HashSet::new();
+    for &n in region {
+        for m in neighbours(grid, n, &NEIGHBOURS_6) {
+            if !inside.contains(&m) {
+                rim.insert(m);
+            }
+        }
+    }
+    if rim.is_empty() {
+        return 0.0;
+    }
+    rim.iter().filter(|&&m| lung[m]).count() as f64 / rim.len() as f64
+}
+
+/// Whether any voxel of `mask` lies within `mm` of voxel `n`.
+fn near(grid: &Grid, mask: &[bool], n: usize, mm: f64) -> bool {
+    let c = grid.ijk(n);
+    let r: [usize; 3] = std::array::from_fn(|a| (mm / grid.spacing_mm[a]).floor() as usize);
+    for k in c[2].saturating_sub(r[2])..(c[2] + r[2] + 1).min(grid.dims[2]) {
+        for j in c[1].saturating_sub(r[1])..(c[1] + r[1] + 1).min(grid.dims[1]) {
+            for i in c[0].saturating_sub(r[0])..(c[0] + r[0] + 1).min(grid.dims[0]) {
+                if distance_mm(grid, c, [i, j, k]) <= mm && mask[grid.index(i, j, k)] {
+                    return true;
+                }
+            }
+        }
+    }
+    false
+}
+
+fn distance_mm(grid: &Grid, a: [usize; 3], b: [usize; 3]) -> f64 {
+    (0..3)
+        .map(|x| ((a[x] as f64 - b[x] as f64) * grid.spacing_mm[x]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// The mean HU of the (up to) 3 x 3 x 3 voxels around `n`.
+fn core_hu(grid: &Grid, hu: &[f32], n: usize) -> f64 {
+    let mut sum = f64::from(hu[n]);
+    let mut count = 1.0;
+    for m in neighbours(grid, n, &NEIGHBOURS_26) {
+        sum += f64::from(hu[m]);
+        count += 1.0;
+    }
+    sum / count
+}
+
+struct Region {
+    voxels: Vec<usize>,
+    /// The region reached the radius.
+    bounded: bool,
+}
+
+/// The voxels 26-connected to `seed` within `radius_mm` of it where `inside` holds (the seed
+/// always).
+fn grow(grid: &Grid, seed: usize, radius_mm: f64, inside: impl Fn(usize) -> bool) -> Region {
+    let c = grid.ijk(seed);
+    let mut seen = std::collections::HashSet::from([seed]);
+    let mut stack = vec![seed];
+    let mut voxels = Vec::new();
+    let mut bounded = false;
+    while let Some(n) = stack.pop() {
+        voxels.push(n);
+        for m in neighbours(grid, n, &NEIGHBOURS_26) {
+            if seen.contains(&m) || !inside(m) {
+                continue;
+            }
+            if distance_mm(grid, c, grid.ijk(m)) > radius_mm {
+                bounded = true;
+                continue;
+            }
+            seen.insert(m);
+            stack.push(m);
+        }
+    }
+    Region { voxels, bounded }
+}
+
+/// Voxels above `threshold` that no 26-neighbour exceeds (of equal neighbours, the first in
+/// memory order is the maximum).
+fn local_maxima(grid: &Grid, feature: &[f32], threshold: f32) -> Vec<usize> {
+    (0..grid.len())
+        .filter(|&n| {
+            let v = feature[n];
+            v > threshold
+                && neighbours(grid, n, &NEIGHBOURS_26)
+                    .all(|m| feature[m] < v || (feature[m] == v && m > n))
+        })
+        .collect()
+}
+
+/// The nearest-rank 99.9th percentile of `values` (0 when there are none).
+fn percentile_999(values: impl Iterator<Item = f32>) -> f32 {
+    let mut v: Vec<f32> = values.filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    let k = ((0.999 * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
+    *v.select_nth_unstable_by(k, f32::total_cmp).1
+}
+
+/// Air (below [`AIR_BELOW_HU`]) 6-connected to a voxel on the volume's in-plane border: the
+/// air around the body.
+pub fn outside_air(grid: &Grid, hu: &[f32]) -> Vec<bool> {
+    let [nx, ny, nz] = grid.dims;
+    let mut outside = vec![false; grid.len()];
+    let mut stack = Vec::new();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let border = i == 0 || j == 0 || i + 1 == nx || j + 1 == ny;
+                let n = grid.index(i, j, k);
+                if border && hu[n] < AIR_BELOW_HU && !outside[n] {
+                    outside[n] = true;
+                    stack.push(n);
+                }
+            }
+        }
+    }
+    while let Some(n) = stack.pop() {
+        for m in neighbours(grid, n, &NEIGHBOURS_6) {
+            if !outside[m] && hu[m] < AIR_BELOW_HU {
+                outside[m] = true;
+                stack.push(m);
+            }
+        }
+    }
+    outside
+}
+
+const NEIGHBOURS_6: [[isize; 3]; 6] = [
+    [-1, 0, 0],
+    [1, 0, 0],
+    [0, -1, 0],
+    [0, 1, 0],
+    [0, 0, -1],
+    [0, 0, 1],
+];
+
+const NEIGHBOURS_26: [[isize; 3]; 26] = {
+    let mut out = [[0; 3]; 26];
+    let mut n = 0;
+    let mut code = 0;
+    while code < 27 {
+        let d = [code % 3 - 1, code / 3 % 3 - 1, code / 9 - 1];
+        if !(d[0] == 0 && d[1] == 0 && d[2] == 0) {
+            out[n] = d;
+            n += 1;
+        }
+        code += 1;
+    }
+    out
+};
+
+/// The in-grid neighbours of voxel `n` at the given offsets.
+fn neighbours<'a>(
+    grid: &'a Grid,
+    n: usize,
+    offsets: &'a [[isize; 3]],
+) -> impl Iterator<Item = usize> + 'a {
+    let c = grid.ijk(n);
+    offsets.iter().filter_map(move |d| {
+        let i = c[0].checked_add_signed(d[0])?;
+        let j = c[1].checked_add_signed(d[1])?;
+        let k = c[2].checked_add_signed(d[2])?;
+        (i < grid.dims[0] && j < grid.dims[1] && k < grid.dims[2]).then(|| grid.index(i, j, k))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A chest-like box: body (40 HU) with a lung (-850 HU) inside, air around.
+    fn chest(dims: [usize; 3], spacing: [f64; 3]) -> (Grid, Vec<f32>) {
+        let grid = Grid::new(dims, spacing);
+        let mut hu = vec![-1000.0f32; grid.len()];
+        for (n, v) in hu.iter_mut().enumerate() {
+            let [i, j, _] = grid.ijk(n);
+            let body = i >= 3 && j >= 3 && i + 3 < dims[0] && j + 3 < dims[1];
+            let lung = i >= 8 && j >= 8 && i + 8 < dims[0] && j + 8 < dims[1];
+            *v = if lung {
+                -850.0
+            } else if body {
+                40.0
+            } else {
+                -1000.0
+            };
+        }
+        (grid, hu)
+    }
+
+    fn ball(grid: &Grid, hu: &mut [f32], feature: &mut [f32], c: [usize; 3], r_mm: f64, v: f32) {
+        for n in 0..grid.len() {
+            let d = distance_mm(grid, c, grid.ijk(n));
+            if d <= r_mm {
+                hu[n] = v;
+            }
+            feature[n] = feature[n].max((100.0 * (1.0 - d / (2.0 * r_mm))).max(0.0) as f32);
+        }
+    }
+
+    #[test]
+    fn a_nodule_in_the_lung_is_found_with_its_size_and_a_bone_blob_is_not() {
+        let (grid, mut hu) = chest([60, 60, 60], [2.0; 3]);
+        let mut feature = vec![0.0f32; grid.len()];
+        // A 6 mm nodule in the lung; a brighter dense blob of the same size (bone) in the body.
+        ball(&grid, &mut hu, &mut feature, [30, 30, 30], 6.0, 30.0);
+        ball(&grid, &mut hu, &mut feature, [5, 30, 10], 6.0, 1200.0);
+        for (n, f) in feature.iter_mut().enumerate() {
+            if grid.ijk(n)[0] < 12 {
+                *f *= 2.0;
+            }
+        }
+        let found = find(&grid, &hu, &feature, Preset::LungNodules).expect("same lengths");
+        assert_eq!(found.findings.len(), 1, "{found:?}");
+        let f = &found.findings[0];
+        assert_eq!((f.rank, f.voxel), (1, [30, 30, 30]));
+        // A digital ball of r = 6 mm on 2 mm voxels: 4/3 pi 3^3 = 113 voxels of 8 mm^3.
+        assert!((f.volume_ml - 0.905).abs() < 0.1, "{f:?}");
+        assert!((f.diameter_mm - 12.0).abs() < 1.0, "{f:?}");
+        assert_eq!(f.mean_hu, 30.0);
+        assert!(f.score > 1.0 && !f.bounded);
+        assert_eq!(
+            found.dense + found.outside,
+            1,
+            "the bone blob is dropped: {found:?}"
+        );
+        assert_eq!(found.small, 0);
+    }
+
+    #[test]
+    fn maxima_of_one_structure_are_one_finding_ranked_by_their_peak() {
+        let (grid, mut hu) = chest([60, 60, 40], [2.0; 3]);
+        let mut feature = vec![0.0f32; grid.len()];
+        ball(&grid, &mut hu, &mut feature, [20, 20, 20], 5.0, 20.0);
+        ball(&grid, &mut hu, &mut feature, [40, 40, 20], 8.0, 20.0);
+        // A second, weaker maximum inside the larger nodule.
+        feature[grid.index(42, 40, 20)] = 150.0;
+        feature[grid.index(40, 40, 20)] = 160.0;
+        let found = find(&grid, &hu, &feature, Preset::LungNodules).expect("same lengths");
+        let peaks: Vec<_> = found.findings.iter().map(|f| (f.rank, f.voxel)).collect();
+        assert_eq!(peaks, [(1, [40, 40, 20]), (2, [20, 20, 20])]);
+        assert_eq!(found.findings[0].merged, 1);
+        assert!(found.findings[0].diameter_mm > found.findings[1].diameter_mm);
+    }
+
+    #[test]
+    fn lymph_node_findings_stay_in_soft_tissue_away_from_the_skin() {
+        let (grid, mut hu) = chest([60, 60, 40], [2.0; 3]);
+        let mut feature = vec![0.0f32; grid.len()];
+        // Near the skin (within 10 mm of the air outside): dropped. In the lung: dropped. A
+        // faint background keeps the reference above zero, as real tissue's feature does.
+        feature.fill(1.0);
+        ball(&grid, &mut hu, &mut feature, [30, 5, 20], 2.0, 40.0);
+        ball(&grid, &mut hu, &mut feature, [30, 30, 20], 4.0, 40.0);
+        let found = find(&grid, &hu, &feature, Preset::LymphNodes).expect("same lengths");
+        assert!(found.findings.is_empty(), "{found:?}");
+        assert_eq!(found.outside, 2);
+        let (grid, mut hu) = chest([80, 80, 40], [2.0; 3]);
+        for v in hu.iter_mut().filter(|v| **v < -800.0 && **v > -900.0) {
+            *v = -80.0; // fat where the lung was
+        }
+        let mut feature = vec![0.0f32; grid.len()];
+        ball(&grid, &mut hu, &mut feature, [40, 40, 20], 5.0, 45.0);
+        let found = find(&grid, &hu, &feature, Preset::LymphNodes).expect("same lengths");
+        assert_eq!(found.findings.len(), 1, "{found:?}");
+        assert_eq!(found.findings[0].voxel, [40, 40, 20]);
+    }
+
+    #[test]
+    fn a_feature_of_the_wrong_size_is_an_error_and_an_empty_volume_has_no_findings() {
+        let grid = Grid::new([4, 4, 4], [1.0; 3]);
+        let err = find(&grid, &[0.0; 64], &[0.0; 63], Preset::LungNodules);
+        assert!(matches!(
+            err,
+            Err(FindingsError::Length { feature: 63, .. })
+        ));
+        let none = find(&grid, &[0.0; 64], &[0.0; 64], Preset::LymphNodes).expect("same lengths");
+        assert!(none.findings.is_empty());
+    }
+}
