@@ -105,6 +105,30 @@ pub struct PetStatus {
     pub visible: bool,
 }
 
+/// The findings of the displayed blobness (`window.shapecastStatus.findings`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FindingsStatus {
+    /// "none", "reading" (the features being read back), "linked" (a link's list, waiting for
+    /// the features) or "done".
+    pub state: String,
+    /// Findings made (the list shows the first 30 until "more").
+    pub total: usize,
+    /// The row the crosshair was last sent to.
+    pub current: Option<usize>,
+    pub listed: Vec<FindingStatus>,
+}
+
+/// One listed finding.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FindingStatus {
+    pub lps_mm: [f64; 3],
+    /// The peak voxel and the score, once the list is made (a link's rows have neither).
+    pub voxel: Option<[usize; 3]>,
+    pub score: Option<f64>,
+    /// "open", "confirmed" or "dismissed".
+    pub mark: String,
+}
+
 /// Everything `window.shapecastStatus` holds.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct AppStatus {
@@ -147,6 +171,7 @@ pub struct AppStatus {
     pub mip: String,
     /// The same for the PET's MIP ("none" without a PET).
     pub pet_mip: String,
+    pub findings: FindingsStatus,
 }
 
 impl AppStatus {
@@ -292,6 +317,40 @@ mod web {
         set(&obj, "pet_loading", status.pet_loading);
         set(&obj, "mip", status.mip.as_str());
         set(&obj, "pet_mip", status.pet_mip.as_str());
+        let f = &status.findings;
+        let findings = Object::new();
+        set(&findings, "state", f.state.as_str());
+        set(&findings, "total", f.total as f64);
+        set(
+            &findings,
+            "current",
+            f.current
+                .map_or(JsValue::NULL, |c| JsValue::from_f64(c as f64)),
+        );
+        let listed: Array = f
+            .listed
+            .iter()
+            .map(|r| {
+                let o = Object::new();
+                set(&o, "lps_mm", array_f64(r.lps_mm));
+                set(
+                    &o,
+                    "voxel",
+                    r.voxel.map_or(JsValue::NULL, |v| {
+                        array_f64(v.iter().map(|&d| d as f64)).into()
+                    }),
+                );
+                set(
+                    &o,
+                    "score",
+                    r.score.map_or(JsValue::NULL, JsValue::from_f64),
+                );
+                set(&o, "mark", r.mark.as_str());
+                JsValue::from(o)
+            })
+            .collect();
+        set(&findings, "listed", listed);
+        set(&obj, "findings", findings);
         let _ = Reflect::set(&window, &JsValue::from_str("shapecastStatus"), &obj);
     }
 }

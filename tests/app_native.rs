@@ -977,3 +977,94 @@ fn a_click_in_the_pet_mip_goes_to_the_hot_spot() {
     let off = (at - hot_mm).length();
     assert!(off <= 8.0, "{off:.1} mm from the hottest voxel");
 }
+
+/// Findings on the demo: with the Hessian shown (lymph-node preset, as the demo opens), the
+/// panel lists each of the demo's four spheres once; a click on a row moves the crosshair to
+/// it, a dismissed row is skipped by N, and the marks go into the link and come back from it.
+#[test]
+fn findings_list_the_demo_spheres_and_n_skips_the_dismissed() {
+    use shapecast::app::ViewState;
+    let start = || AppOptions {
+        start: StartWith::Phantom("demo".into()),
+        mode: DisplayMode::Features(Method::Hessian),
+        compute_on_load: true,
+        preset: Some(shapecast::cpu::Preset::LymphNodes),
+        ..AppOptions::default()
+    };
+    let Some(mut harness) = harness(start()) else {
+        return;
+    };
+    run_until(&mut harness, "findings listed", 400, |app| {
+        app.findings_status().state == "done"
+    });
+    let status = harness.state().findings_status();
+    // (centre voxel, radius in voxels) of the demo's spheres (src/phantom/catalogue.rs).
+    let spheres = [
+        ([30.0, 40.0, 48.0], 5.0),
+        ([62.0, 58.0, 40.0], 4.0),
+        ([48.0, 70.0, 66.0], 6.0),
+        ([70.0, 30.0, 60.0], 3.0),
+    ];
+    let voxels: Vec<[usize; 3]> = status
+        .listed
+        .iter()
+        .map(|f| f.voxel.expect("a made list has voxels"))
+        .collect();
+    for (c, r) in spheres {
+        let near = voxels
+            .iter()
+            .filter(|v| {
+                (0..3)
+                    .map(|a| (v[a] as f64 - c[a]).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+                    <= r
+            })
+            .count();
+        assert_eq!(near, 1, "one finding per sphere at {c:?}: {voxels:?}");
+    }
+    harness.run_steps(2);
+    save(&harness.render().expect("render"), "app_findings.png");
+
+    click_control(&mut harness, "finding:1");
+    assert_eq!(harness.state().crosshair(), voxels[1]);
+    click_control(&mut harness, "finding:2:dismiss");
+    click_control(&mut harness, "finding:0:confirm");
+    // From row 1, N skips the dismissed row 2; Shift+N comes back to row 1.
+    harness.state_mut().next_finding(true);
+    assert_eq!(harness.state().crosshair(), voxels[3]);
+    harness.state_mut().next_finding(false);
+    assert_eq!(harness.state().crosshair(), voxels[1]);
+    let marks: Vec<String> = harness
+        .state()
+        .findings_status()
+        .listed
+        .iter()
+        .map(|f| f.mark.clone())
+        .collect();
+    assert_eq!(&marks[..3], ["confirmed", "open", "dismissed"]);
+
+    // The link carries the list and its marks; a second app opened from it shows them.
+    let view = harness.state().view_state();
+    let fragment = view.fragment();
+    assert!(fragment.contains("&find="), "{fragment}");
+    drop(harness);
+    let (read, problems) = ViewState::from_fragment(&format!("#{fragment}"));
+    assert!(problems.is_empty(), "{problems:?}");
+    let mut options = start();
+    options.apply_link(read);
+    let Some(mut opened) = self::harness(options) else {
+        return;
+    };
+    run_until(&mut opened, "the linked findings", 400, |app| {
+        app.findings_status().state == "done"
+    });
+    let again: Vec<String> = opened
+        .state()
+        .findings_status()
+        .listed
+        .iter()
+        .map(|f| f.mark.clone())
+        .collect();
+    assert_eq!(again, marks);
+}

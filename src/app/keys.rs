@@ -42,6 +42,10 @@ pub const HELP: &[(&str, &str)] = &[
         "M",
         "save a movie: a full turn of the MIP as an animated PNG",
     ),
+    (
+        "N, shift + N",
+        "next / previous finding (the Findings list; dismissed ones are skipped)",
+    ),
     ("?", "show or hide this help"),
 ];
 
@@ -62,7 +66,9 @@ impl ShapecastApp {
                     modifiers,
                     ..
                 } if !(modifiers.ctrl || modifiers.command || modifiers.alt) => {
-                    if key == egui::Key::P {
+                    if key == egui::Key::N {
+                        self.next_finding(!modifiers.shift);
+                    } else if key == egui::Key::P {
                         let pane = self.pane_under_pointer(ctx);
                         self.save_picture(ctx, pane);
                     } else if key == egui::Key::M {

@@ -95,6 +95,8 @@ pub struct MipView {
     pub mode: Option<String>,
     /// The shared crosshair in LPS mm, drawn as a marker; the slab's centre.
     pub crosshair_mm: Option<DVec3>,
+    /// The findings' numbered markers, set by the app each frame.
+    pub markers: Vec<super::findings::Marker>,
     /// Resolution (fraction of the full one) of the frames drawn while a drag or the wheel
     /// moves the view; the full resolution follows when the mouse stops. 1 turns it off.
     pub interactive_scale: f32,
@@ -150,6 +152,7 @@ impl MipView {
             slab_mm: None,
             mode: None,
             crosshair_mm: None,
+            markers: Vec::new(),
             interactive_scale: 0.5,
             pacer: FramePacer::new(Some(Self::FRAME_BUDGET_S)),
             refining: None,
@@ -834,6 +837,11 @@ impl MipView {
                 (egui::vec2(0.0, 3.0), egui::vec2(0.0, 10.0)),
             ] {
                 painter.line_segment([p + a, p + b], stroke);
+            }
+        }
+        for m in &self.markers {
+            if let Some(p) = self.screen_pos_of(m.lps_mm) {
+                super::findings::draw_one(painter, m, p, 9.0);
             }
         }
         if let Some(t) = &self.hover_text {

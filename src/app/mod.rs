@@ -8,6 +8,7 @@
 
 pub mod demo;
 pub mod features;
+pub mod findings;
 #[cfg(target_arch = "wasm32")]
 mod js_bytes;
 mod keys;
@@ -395,6 +396,8 @@ pub struct ShapecastApp {
     /// The PET of a PET/CT study, fused over the CT.
     pet: pet::PetState,
     pet_mip: pet::PetMip,
+    /// The ranked findings of the displayed blobness.
+    findings: findings::FindingsState,
 }
 
 impl ShapecastApp {
@@ -493,6 +496,7 @@ impl ShapecastApp {
             pacs: pacs::Pacs::default(),
             pet: pet::PetState::default(),
             pet_mip: pet::PetMip::default(),
+            findings: findings::FindingsState::default(),
             series: series_list::SeriesState::default(),
         }
     }
@@ -912,6 +916,45 @@ impl ShapecastApp {
         if let Some(request) = self.displayed_request() {
             self.features.touch(&request);
         }
+        if let (Some(gpu), Some(scene)) = (&self.gpu, &self.scene) {
+            // The phantoms are modelled in HU (air -1000 where they have it, tissue 0 to 200).
+            let reads_hu = scene.is_ct || scene.volume.modality == crate::volume::Modality::Phantom;
+            let entry = self
+                .displayed_request()
+                .and_then(|r| self.features.find(&r));
+            if let Some(message) =
+                self.findings
+                    .update(gpu, self.generation, &scene.volume, reads_hu, entry)
+            {
+                self.error(message);
+            }
+        }
+    }
+
+    /// Sends the crosshair (and the MIP's marker) to a point in patient space (LPS mm).
+    fn go_to_lps(&mut self, p: glam::DVec3) {
+        let Some(volume) = self.volume() else { return };
+        let v = volume.voxel_from_world().transform_point3(p);
+        let dims = volume.dims;
+        if !v.is_finite() {
+            return;
+        }
+        self.crosshair = std::array::from_fn(|a| {
+            (v[a].round().max(0.0) as usize).min(dims[a].saturating_sub(1))
+        });
+        self.mip_view.set_crosshair(Some(p));
+    }
+
+    /// N / Shift+N: the next or previous finding not dismissed.
+    pub fn next_finding(&mut self, forward: bool) {
+        if let Some(p) = self.findings.step(self.generation, forward) {
+            self.go_to_lps(p);
+        }
+    }
+
+    /// The findings of the shown volume, for tests and automation.
+    pub fn findings_status(&self) -> crate::status::FindingsStatus {
+        self.findings.status(self.generation)
     }
 
     /// A PET just fused over the CT: the measurements made before it (a link's) read it too.
@@ -1034,6 +1077,7 @@ impl ShapecastApp {
         self.crosshair = volume.dims.map(|d| d / 2);
         self.hover = None;
         self.features.clear();
+        self.findings.clear();
         self.measure.list.clear();
         self.measure.last_pick = None;
         self.probe = probe::ProbeState::default();
@@ -1155,6 +1199,7 @@ impl ShapecastApp {
         s.pet_loading = self.pet.loading();
         s.mip = mip_state.to_owned();
         s.pet_mip = pet_mip_state.to_owned();
+        s.findings = self.findings.status(self.generation);
         s.volume = self.scene.as_ref().map(|sc| VolumeStatus {
             dims: sc.volume.dims,
             spacing_mm: sc.volume.spacing_mm,
@@ -1305,6 +1350,7 @@ impl ShapecastApp {
             .displayed_request()
             .and_then(|r| self.features.find(&r));
         let overlay = self.overlay();
+        let markers = self.findings.markers(scene.generation);
         let inputs = PaneInputs {
             gpu,
             render_state,
@@ -1319,6 +1365,7 @@ impl ShapecastApp {
             measurements: &self.measure.list,
             unit: scene.unit(),
             pet: self.pet.layer.as_ref(),
+            findings: &markers,
         };
         let mut hover = None;
         let mut toggle = None;
@@ -1442,6 +1489,7 @@ impl ShapecastApp {
                                         glam::DVec3::new(i as f64, j as f64, k as f64),
                                     );
                                     self.mip_view.set_crosshair(Some(centre));
+                                    self.mip_view.markers.clone_from(&markers);
                                     // Toolbar above, image below.
                                     let mip_scene = MipScene {
                                         volume: &scene.render,

@@ -212,6 +212,17 @@ impl ShapecastApp {
                 }
             });
 
+        egui::CollapsingHeader::new("Findings")
+            .default_open(true)
+            .show(ui, |ui| {
+                let computing = self.computing();
+                let (go, controls) = self.findings.panel_ui(ui, self.generation, computing);
+                self.controls.extend(controls);
+                if let Some(p) = go {
+                    self.go_to_lps(p);
+                }
+            });
+
         egui::CollapsingHeader::new("Display")
             .default_open(true)
             .show(ui, |ui| {

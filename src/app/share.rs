@@ -63,6 +63,9 @@ impl ShapecastApp {
                 .and_then(|set| set.list.entries().get(set.chosen))
                 .map(super::series_list::entry_key),
             pet: self.pet.view(),
+            findings: scene
+                .map(|s| self.findings.link_marks(s.generation))
+                .filter(|m| !m.is_empty()),
         }
     }
 
@@ -235,6 +238,9 @@ impl ShapecastApp {
         }
         if let Some(m) = &view.measurements {
             self.measure.set(&volume, m);
+        }
+        if let Some(f) = &view.findings {
+            self.findings.set_linked(generation, f.clone());
         }
         if let Some(p) = &view.pet {
             self.pet.apply_view(p);

@@ -338,6 +338,8 @@ pub struct PaneInputs<'a> {
     pub unit: &'a str,
     /// The PET fused over the CT, when one is shown.
     pub pet: Option<&'a super::pet::PetLayer>,
+    /// The findings' markers (drawn where the slice crosses them).
+    pub findings: &'a [super::findings::Marker],
 }
 
 /// What happened in a pane this frame.
@@ -652,6 +654,21 @@ impl SlicePane {
             egui::Color32::from_gray(190),
         );
         self.draw_measurements(&painter, inputs, rect, axes, slice, w, h);
+        let to_voxel = volume.voxel_from_world();
+        super::findings::draw_markers(
+            &painter,
+            inputs.findings,
+            rect.width() / size_mm.x.max(1e-6),
+            |p| {
+                let v = to_voxel.transform_point3(p);
+                v.is_finite().then(|| {
+                    (
+                        axes.screen_of_coord(rect, [v[axes.across], v[axes.vertical]], w, h),
+                        (v[axes.fixed] - slice as f64) * volume.spacing_mm[axes.fixed],
+                    )
+                })
+            },
+        );
         if let (Some((kind, a)), Some(pos)) = (self.drawing, response.interact_pointer_pos()) {
             let b = axes.coord_at(rect, pos, w, h);
             let m = Measurement {

@@ -13,6 +13,7 @@ use glam::{DQuat, DVec3};
 
 use super::Layout;
 use super::features::{DisplayMode, FeatureDisplay, FeatureParams};
+use super::findings::FindingMark;
 use super::measure::Measurement;
 use super::url_params::{encode, parse_params};
 use super::window_level::Window;
@@ -110,6 +111,8 @@ pub struct ViewState {
     /// The PET fused over the CT: its URLs when it came by link (`pet=`, repeated; a PET that
     /// came with the CT's own files needs none), its window, opacity and whether it is shown.
     pub pet: Option<PetView>,
+    /// The findings listed, with the reader's marks (points in LPS mm).
+    pub findings: Option<Vec<FindingMark>>,
 }
 
 /// The PET of a PET/CT link.
@@ -276,6 +279,12 @@ impl ViewState {
             f.push((
                 "m",
                 Value::Texts(m.iter().map(Measurement::to_text).collect()),
+            ));
+        }
+        if let Some(list) = &self.findings {
+            f.push((
+                "find",
+                Value::Texts(list.iter().map(FindingMark::to_text).collect()),
             ));
         }
         if let Some(p) = &self.pet {
@@ -621,6 +630,22 @@ impl ViewState {
         if !measurements.is_empty() {
             v.measurements = Some(measurements);
         }
+        // Findings: one `find` field each, `x,y,z,mark`; a bad one is named, the others kept.
+        let mut findings = Vec::new();
+        for (_, text) in params.iter().filter(|(k, _)| k == "find") {
+            match FindingMark::from_text(text) {
+                Some(m) => findings.push(m),
+                None => bad(
+                    &mut f.problems,
+                    "find",
+                    text,
+                    "x,y,z in mm and open, confirmed or dismissed",
+                ),
+            }
+        }
+        if !findings.is_empty() {
+            v.findings = Some(findings);
+        }
         let pet = PetView {
             urls: params
                 .iter()
@@ -801,6 +826,16 @@ mod tests {
                 opacity: Some(0.35),
                 visible: Some(true),
             }),
+            findings: Some(vec![
+                FindingMark {
+                    lps_mm: [-40.5, 12.0, 101.25],
+                    mark: super::super::findings::Mark::Confirmed,
+                },
+                FindingMark {
+                    lps_mm: [1.0 / 3.0, 0.0, -7.0],
+                    mark: super::super::findings::Mark::Open,
+                },
+            ]),
         }
     }
 

@@ -1,0 +1,602 @@
+//! The findings panel: the ranked round candidates of the displayed blobness
+//! ([`crate::cpu::findings`], the code behind `shapecast findings`), numbered markers on the MIP
+//! and the slice panes, N / Shift+N to go from one to the next, and a mark per finding
+//! (confirmed, dismissed) that the copied link carries.
+//!
+//! The list is made once per computed feature texture: its texels are read back from the GPU
+//! (polled over frames, never blocking), the blobness decoded, and [`find`] run on the CPU with
+//! the CT's voxels. A link's marks wait for the list of their volume and go to the findings
+//! within [`LINK_MATCH_MM`] of them; until the list is made they are listed as they came.
+
+use glam::DVec3;
+
+use crate::cpu::Grid;
+use crate::cpu::findings::{Findings, SHOWN, find};
+use crate::cpu::pipeline::Method;
+use crate::cpu::tf::Preset;
+use crate::gpu::GpuContext;
+use crate::gpu::readback::PendingTexture;
+use crate::gpu::volume_texture::{FEATURE_TEXEL_BYTES, decode_feature_texels};
+use crate::volume::Volume;
+
+use super::features::{FeatureEntry, method_name};
+
+/// A link's finding goes to a computed one this close to it, mm.
+pub const LINK_MATCH_MM: f64 = 3.0;
+
+/// The reader's mark on a finding.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Mark {
+    #[default]
+    Open,
+    Confirmed,
+    Dismissed,
+}
+
+impl Mark {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Open => "open",
+            Self::Confirmed => "confirmed",
+            Self::Dismissed => "dismissed",
+        }
+    }
+
+    pub fn from_name(s: &str) -> Option<Self> {
+        [Self::Open, Self::Confirmed, Self::Dismissed]
+            .into_iter()
+            .find(|m| m.name() == s)
+    }
+}
+
+/// A finding as a link carries it: where (LPS mm) and the reader's mark.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FindingMark {
+    pub lps_mm: [f64; 3],
+    pub mark: Mark,
+}
+
+impl FindingMark {
+    /// `x,y,z,mark`, e.g. `-12.5,30,101.25,confirmed`.
+    pub fn to_text(&self) -> String {
+        let n = |x: f64| format!("{}", if x.is_finite() { x } else { 0.0 });
+        let [x, y, z] = self.lps_mm;
+        format!("{},{},{},{}", n(x), n(y), n(z), self.mark.name())
+    }
+
+    pub fn from_text(s: &str) -> Option<Self> {
+        let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+        let [x, y, z, mark] = parts[..] else {
+            return None;
+        };
+        let num = |t: &str| t.parse::<f64>().ok().filter(|v| v.is_finite());
+        Some(Self {
+            lps_mm: [num(x)?, num(y)?, num(z)?],
+            mark: Mark::from_name(mark)?,
+        })
+    }
+}
+
+/// The list made from one feature texture.
+pub struct FindingList {
+    pub generation: u64,
+    /// The feature texture's cache id.
+    pub source: u64,
+    pub method: Method,
+    pub preset: Preset,
+    pub findings: Findings,
+    /// Each finding's peak in LPS mm.
+    pub lps: Vec<DVec3>,
+    pub marks: Vec<Mark>,
+    /// CPU seconds [`find`] took.
+    pub seconds: f64,
+}
+
+struct Reading {
+    generation: u64,
+    source: u64,
+    method: Method,
+    preset: Preset,
+    dims: [u32; 3],
+    pending: PendingTexture,
+}
+
+/// What the viewer draws for a finding.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Marker {
+    pub lps_mm: DVec3,
+    /// The finding's number (its rank).
+    pub number: usize,
+    pub radius_mm: f64,
+    pub mark: Mark,
+    pub current: bool,
+}
+
+/// The findings of the volume shown.
+#[derive(Default)]
+pub struct FindingsState {
+    reading: Option<Reading>,
+    list: Option<FindingList>,
+    /// A link's marks and the volume generation they are for.
+    linked: Option<(u64, Vec<FindingMark>)>,
+    /// The finding the crosshair was last sent to (an index into the list shown).
+    pub current: Option<usize>,
+    show_all: bool,
+    /// Why there is no list (not a CT, a method without blobness, a failed read).
+    pub message: Option<String>,
+}
+
+impl FindingsState {
+    /// Forgets the list (a new volume).
+    pub fn clear(&mut self) {
+        self.reading = None;
+        self.list = None;
+        self.current = None;
+        self.message = None;
+    }
+
+    /// A link's marks for the volume of `generation`.
+    pub fn set_linked(&mut self, generation: u64, marks: Vec<FindingMark>) {
+        self.linked = (!marks.is_empty()).then_some((generation, marks));
+    }
+
+    /// Starts reading the displayed features when they are new, and makes the list when they
+    /// arrive. `entry`: the displayed method's features, if computed. Returns an error for the
+    /// user when the read failed.
+    pub fn update(
+        &mut self,
+        gpu: &GpuContext,
+        generation: u64,
+        volume: &Volume,
+        is_ct: bool,
+        entry: Option<&FeatureEntry>,
+    ) -> Option<String> {
+        let entry = entry?;
+        let method = entry.request.method;
+        let same = |g: u64, s: u64| g == generation && s == entry.id;
+        let have = self
+            .list
+            .as_ref()
+            .is_some_and(|l| same(l.generation, l.source))
+            || self
+                .reading
+                .as_ref()
+                .is_some_and(|r| same(r.generation, r.source));
+        if !have {
+            self.message = None;
+            if !is_ct {
+                self.message = Some(
+                    "findings need a CT: their rules (lung, soft tissue, dense) are in HU".into(),
+                );
+            } else if !matches!(method, Method::Hessian | Method::Li | Method::Rst) {
+                self.message = Some(format!(
+                    "findings read blobness: show Hessian, Li or RST ({} has none)",
+                    method_name(method)
+                ));
+            } else {
+                self.reading = Some(Reading {
+                    generation,
+                    source: entry.id,
+                    method,
+                    preset: entry.request.preset,
+                    dims: entry.texture.dims,
+                    pending: PendingTexture::start(
+                        gpu,
+                        &entry.texture.texture,
+                        entry.texture.dims,
+                        FEATURE_TEXEL_BYTES,
+                    ),
+                });
+            }
+        }
+        let r = self.reading.as_mut()?;
+        if r.generation != generation {
+            self.reading = None;
+            return None;
+        }
+        let bytes = r.pending.poll(gpu)?;
+        let r = self.reading.take()?;
+        let bytes = match bytes {
+            Ok(b) => b,
+            Err(e) => {
+                let message = format!("findings: reading the features back failed: {e}");
+                self.message = Some(message.clone());
+                return Some(message);
+            }
+        };
+        let blob: Vec<f32> = decode_feature_texels(&bytes).map(|t| t[2]).collect();
+        let started = web_time::Instant::now();
+        let grid = Grid::of(volume);
+        if r.dims.map(|d| d as usize) != volume.dims {
+            return None; // features of another volume (cannot happen within a generation)
+        }
+        match find(&grid, &volume.to_f32(), &blob, r.preset) {
+            Ok(findings) => {
+                let world = volume.world_from_voxel();
+                let lps: Vec<DVec3> = findings
+                    .findings
+                    .iter()
+                    .map(|f| world.transform_point3(DVec3::from(f.voxel.map(|v| v as f64))))
+                    .collect();
+                let marks = self.linked_marks(generation, &lps);
+                self.current = None;
+                self.list = Some(FindingList {
+                    generation,
+                    source: r.source,
+                    method: r.method,
+                    preset: r.preset,
+                    findings,
+                    lps,
+                    marks,
+                    seconds: started.elapsed().as_secs_f64(),
+                });
+                None
+            }
+            Err(e) => {
+                let message = format!("findings: {e}");
+                self.message = Some(message.clone());
+                Some(message)
+            }
+        }
+    }
+
+    /// The marks a link gave for the findings at `lps` (open where it gave none).
+    fn linked_marks(&self, generation: u64, lps: &[DVec3]) -> Vec<Mark> {
+        let linked = match &self.linked {
+            Some((g, m)) if *g == generation => m.as_slice(),
+            _ => &[],
+        };
+        lps.iter()
+            .map(|p| {
+                linked
+                    .iter()
+                    .filter(|l| DVec3::from(l.lps_mm).distance(*p) <= LINK_MATCH_MM)
+                    .min_by(|a, b| {
+                        let d = |l: &FindingMark| DVec3::from(l.lps_mm).distance(*p);
+                        d(a).total_cmp(&d(b))
+                    })
+                    .map_or(Mark::Open, |l| l.mark)
+            })
+            .collect()
+    }
+
+    /// The list for the volume of `generation`, once made.
+    pub fn list(&self, generation: u64) -> Option<&FindingList> {
+        self.list.as_ref().filter(|l| l.generation == generation)
+    }
+
+    /// Whether the features are being read back for a list.
+    pub fn busy(&self) -> bool {
+        self.reading.is_some()
+    }
+
+    /// What is listed: (LPS mm, mark, rank) of the computed findings (the first [`SHOWN`]
+    /// unless "more" was asked for), else of a link's.
+    fn rows(&self, generation: u64) -> Vec<(DVec3, Mark, usize)> {
+        if let Some(l) = self.list(generation) {
+            let n = if self.show_all { l.lps.len() } else { SHOWN };
+            return l
+                .lps
+                .iter()
+                .zip(&l.marks)
+                .enumerate()
+                .take(n)
+                .map(|(i, (p, m))| (*p, *m, i + 1))
+                .collect();
+        }
+        match &self.linked {
+            Some((g, marks)) if *g == generation => marks
+                .iter()
+                .enumerate()
+                .map(|(i, m)| (DVec3::from(m.lps_mm), m.mark, i + 1))
+                .collect(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The next (`forward`) or previous finding not dismissed, from the current one: where to
+    /// send the crosshair.
+    pub fn step(&mut self, generation: u64, forward: bool) -> Option<DVec3> {
+        let rows = self.rows(generation);
+        let n = rows.len();
+        if n == 0 {
+            return None;
+        }
+        let start = self.current.filter(|&c| c < n);
+        for k in 1..=n {
+            let i = match (start, forward) {
+                (None, true) => k - 1,
+                (None, false) => n - k,
+                (Some(c), true) => (c + k) % n,
+                (Some(c), false) => (c + n * k - k) % n,
+            };
+            if rows[i].1 != Mark::Dismissed {
+                self.current = Some(i);
+                return Some(rows[i].0);
+            }
+        }
+        None
+    }
+
+    /// The markers to draw.
+    pub fn markers(&self, generation: u64) -> Vec<Marker> {
+        let list = self.list(generation);
+        self.rows(generation)
+            .into_iter()
+            .enumerate()
+            .map(|(i, (p, mark, number))| Marker {
+                lps_mm: p,
+                number,
+                radius_mm: list
+                    .and_then(|l| l.findings.findings.get(i))
+                    .map_or(5.0, |f| (0.5 * f.diameter_mm).max(3.0)),
+                mark,
+                current: self.current == Some(i),
+            })
+            .collect()
+    }
+
+    /// The marks a copied link carries: every finding listed, with its mark.
+    pub fn link_marks(&self, generation: u64) -> Vec<FindingMark> {
+        self.rows(generation)
+            .into_iter()
+            .map(|(p, mark, _)| FindingMark {
+                lps_mm: p.to_array(),
+                mark,
+            })
+            .collect()
+    }
+
+    fn set_mark(&mut self, generation: u64, i: usize, mark: Mark) {
+        if let Some(l) = self.list.as_mut().filter(|l| l.generation == generation) {
+            if let Some(m) = l.marks.get_mut(i) {
+                *m = mark;
+            }
+        } else if let Some((g, marks)) = &mut self.linked
+            && *g == generation
+            && let Some(m) = marks.get_mut(i)
+        {
+            m.mark = mark;
+        }
+    }
+
+    /// The panel: the ranked list, a click on a row goes there; a mark per row. Returns where
+    /// to send the crosshair, and the controls drawn ("finding:i", "finding:i:confirm",
+    /// "finding:i:dismiss").
+    pub fn panel_ui(
+        &mut self,
+        ui: &mut egui::Ui,
+        generation: u64,
+        computing: bool,
+    ) -> (Option<DVec3>, Vec<(String, egui::Rect)>) {
+        let mut go = None;
+        let mut controls = Vec::new();
+        if let Some(m) = &self.message {
+            ui.label(egui::RichText::new(m).weak());
+        }
+        let rows = self.rows(generation);
+        let list = self.list(generation);
+        match list {
+            Some(l) => {
+                ui.label(format!(
+                    "{} finding(s) {} ({} blobness, {} preset); score 1 = its 99.9th percentile there",
+                    l.findings.findings.len(),
+                    l.findings.gate.describe(),
+                    method_name(l.method),
+                    super::features::preset_label(l.preset),
+                ))
+                .on_hover_text(format!(
+                    "dropped: {} outside, {} dense (mean above {} HU), {} smaller than {} mm; made in {:.2} s",
+                    l.findings.outside,
+                    l.findings.dense,
+                    crate::cpu::findings::DENSE_ABOVE_HU,
+                    l.findings.small,
+                    crate::cpu::findings::SMALLEST_MM,
+                    l.seconds
+                ));
+            }
+            None if self.busy() => {
+                ui.label("reading the features…");
+            }
+            None if !rows.is_empty() => {
+                ui.label("from the link; the list is made when the features are computed");
+            }
+            None if computing => {
+                ui.label("made when the features are computed");
+            }
+            None if self.message.is_none() => {
+                ui.label("show a feature (Hessian, Li or RST) to list its findings");
+            }
+            None => {}
+        }
+        let texts: Vec<String> = rows
+            .iter()
+            .enumerate()
+            .map(
+                |(i, (p, _, number))| match list.and_then(|l| l.findings.findings.get(i)) {
+                    Some(f) => format!(
+                        "{number}. score {:.1}, {:.0} mm{}, {:.0} HU",
+                        f.score,
+                        f.diameter_mm,
+                        if f.bounded { "+" } else { "" },
+                        f.mean_hu
+                    ),
+                    None => format!("{number}. {:.0}, {:.0}, {:.0} mm", p.x, p.y, p.z),
+                },
+            )
+            .collect();
+        let more = list.map_or(0, |l| l.findings.findings.len().saturating_sub(rows.len()));
+        let mut current = self.current;
+        let mut marks = Vec::new();
+        egui::Grid::new("findings")
+            .num_columns(4)
+            .striped(true)
+            .show(ui, |ui| {
+                for (i, ((p, mark, _), text)) in rows.iter().zip(texts).enumerate() {
+                    let strike = *mark == Mark::Dismissed;
+                    let mut rich = egui::RichText::new(text);
+                    if strike {
+                        rich = rich.strikethrough().weak();
+                    }
+                    let r = ui.selectable_label(current == Some(i), rich);
+                    controls.push((format!("finding:{i}"), r.rect));
+                    if r.clicked() {
+                        current = Some(i);
+                        go = Some(*p);
+                    }
+                    let c = ui
+                        .selectable_label(*mark == Mark::Confirmed, "confirm")
+                        .on_hover_text("confirm: a finding you agree with");
+                    controls.push((format!("finding:{i}:confirm"), c.rect));
+                    if c.clicked() {
+                        marks.push((i, toggle(*mark, Mark::Confirmed)));
+                    }
+                    let d = ui
+                        .selectable_label(*mark == Mark::Dismissed, "dismiss")
+                        .on_hover_text("dismiss (N skips it)");
+                    controls.push((format!("finding:{i}:dismiss"), d.rect));
+                    if d.clicked() {
+                        marks.push((i, toggle(*mark, Mark::Dismissed)));
+                    }
+                    ui.end_row();
+                }
+            });
+        self.current = current;
+        if more > 0 && ui.button(format!("{more} more")).clicked() {
+            self.show_all = true;
+        }
+        for (i, m) in marks {
+            self.set_mark(generation, i, m);
+        }
+        if !rows.is_empty() {
+            ui.label(egui::RichText::new("N / Shift+N: next / previous finding").weak());
+        }
+        (go, controls)
+    }
+
+    /// For `window.shapecastStatus`: "none", "reading", "done" and the findings listed.
+    pub fn status(&self, generation: u64) -> crate::status::FindingsStatus {
+        let state = if self.busy() {
+            "reading"
+        } else if self.list(generation).is_some() {
+            "done"
+        } else if self.linked.as_ref().is_some_and(|(g, _)| *g == generation) {
+            "linked"
+        } else {
+            "none"
+        };
+        let list = self.list(generation);
+        crate::status::FindingsStatus {
+            state: state.to_owned(),
+            total: list.map_or(0, |l| l.findings.findings.len()),
+            current: self.current,
+            listed: self
+                .rows(generation)
+                .into_iter()
+                .enumerate()
+                .map(|(i, (p, mark, _))| crate::status::FindingStatus {
+                    lps_mm: p.to_array(),
+                    voxel: list
+                        .and_then(|l| l.findings.findings.get(i))
+                        .map(|f| f.voxel),
+                    score: list
+                        .and_then(|l| l.findings.findings.get(i))
+                        .map(|f| f.score),
+                    mark: mark.name().to_owned(),
+                })
+                .collect(),
+        }
+    }
+}
+
+fn toggle(now: Mark, to: Mark) -> Mark {
+    if now == to { Mark::Open } else { to }
+}
+
+/// Draws the findings' markers on a slice pane: a ring (the finding's size) with its number
+/// where the slice crosses the finding. `screen_of` maps LPS mm to the pane (with the distance
+/// from the slice plane, mm); `px_per_mm` the pane's scale.
+pub fn draw_markers(
+    painter: &egui::Painter,
+    markers: &[Marker],
+    px_per_mm: f32,
+    screen_of: impl Fn(DVec3) -> Option<(egui::Pos2, f64)>,
+) {
+    for m in markers {
+        let Some((p, off)) = screen_of(m.lps_mm) else {
+            continue;
+        };
+        if off.abs() > m.radius_mm {
+            continue;
+        }
+        // The ring is the finding's section in this slice.
+        let r = (m.radius_mm * m.radius_mm - off * off).sqrt() as f32 * px_per_mm;
+        draw_one(painter, m, p, r.max(6.0));
+    }
+}
+
+/// One marker: a ring of radius `r` px at `p`, its number beside it, coloured by its mark.
+pub fn draw_one(painter: &egui::Painter, m: &Marker, p: egui::Pos2, r: f32) {
+    let colour = match m.mark {
+        Mark::Open => egui::Color32::from_rgb(255, 170, 40),
+        Mark::Confirmed => egui::Color32::from_rgb(90, 230, 90),
+        Mark::Dismissed => egui::Color32::from_gray(130),
+    };
+    let width = if m.current { 2.5 } else { 1.5 };
+    painter.circle_stroke(p, r, egui::Stroke::new(width, colour));
+    painter.text(
+        p + egui::vec2(r * 0.75 + 2.0, -r * 0.75 - 2.0),
+        egui::Align2::LEFT_BOTTOM,
+        m.number.to_string(),
+        egui::FontId::proportional(if m.current { 15.0 } else { 13.0 }),
+        colour,
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn marks_round_trip_as_text() {
+        let m = FindingMark {
+            lps_mm: [-12.5, 30.0, 101.25],
+            mark: Mark::Confirmed,
+        };
+        assert_eq!(m.to_text(), "-12.5,30,101.25,confirmed");
+        assert_eq!(FindingMark::from_text(&m.to_text()), Some(m));
+        assert_eq!(FindingMark::from_text("1,2,3"), None);
+        assert_eq!(FindingMark::from_text("1,2,nan,open"), None);
+        assert_eq!(FindingMark::from_text("1,2,3,maybe"), None);
+    }
+
+    #[test]
+    fn n_skips_dismissed_findings_and_wraps() {
+        let mut s = FindingsState::default();
+        let marks = [Mark::Open, Mark::Dismissed, Mark::Confirmed]
+            .iter()
+            .enumerate()
+            .map(|(i, &mark)| FindingMark {
+                lps_mm: [i as f64, 0.0, 0.0],
+                mark,
+            })
+            .collect();
+        s.set_linked(7, marks);
+        let x = |p: Option<DVec3>| p.map(|p| p.x);
+        assert_eq!(x(s.step(7, true)), Some(0.0));
+        assert_eq!(
+            x(s.step(7, true)),
+            Some(2.0),
+            "the dismissed one is skipped"
+        );
+        assert_eq!(x(s.step(7, true)), Some(0.0), "wraps");
+        assert_eq!(x(s.step(7, false)), Some(2.0));
+        assert_eq!(
+            s.step(8, true),
+            None,
+            "another volume's marks are not listed"
+        );
+        assert_eq!(s.link_marks(7).len(), 3);
+        assert!(s.markers(7)[2].current);
+    }
+}
