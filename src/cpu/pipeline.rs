@@ -173,6 +173,30 @@ impl Request {
                 }
             })
             .collect();
+        // A preset's Hessian scales below half the thick spacing answer to the slices, not to
+        // shape (docs/science.md, "Thick slices"): they are dropped on this volume (the largest
+        // is kept if none is left). Scales the user chose are kept, with the warning below.
+        let thick_mm = (0..3)
+            .filter(|&a| grid.dims[a] > 1)
+            .map(|a| grid.spacing_mm[a])
+            .fold(0.0, f64::max);
+        let from_preset = self
+            .sigmas_mm
+            .as_ref()
+            .is_none_or(|s| *s == self.preset.sigmas_mm());
+        let mut dropped = Vec::new();
+        let sigmas_mm = if from_preset
+            && matches!(self.method, Method::Hessian | Method::Li | Method::Frangi)
+        {
+            let largest = sigmas_mm.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let (keep, drop): (Vec<f64>, Vec<f64>) = sigmas_mm
+                .into_iter()
+                .partition(|&s| s >= 0.5 * thick_mm || s == largest);
+            dropped = drop;
+            keep
+        } else {
+            sigmas_mm
+        };
         let sigma_min = sigmas_mm.iter().copied().fold(f64::INFINITY, f64::min);
         let factors = match self.method {
             Method::Hessian | Method::Li | Method::Frangi => refinement_factors(grid, sigma_min),
@@ -188,6 +212,11 @@ impl Request {
         {
             notes.push(format!(
                 "warning: scales {capped:?} mm are wider than the volume holds ({extent_mm:.3} mm at most): capped at {cap_mm:.4} mm"
+            ));
+        }
+        if !dropped.is_empty() {
+            notes.push(format!(
+                "the preset's scales {dropped:?} mm are below half the slice spacing ({thick_mm:.3} mm) and answer to the slices, not to shape: dropped on this volume (scales {sigmas_mm:?} mm)"
             ));
         }
         if compute != *grid {
@@ -340,4 +369,53 @@ pub fn compute(grid: &Grid, values: &[f32], req: &Request) -> Result<Outcome, Re
         tf: tf_used,
         noise_sigma_hu: noise,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// On 5 mm slices the lung preset's scales below 2.5 mm are dropped (and said so), the
+    /// refinement follows the smallest kept scale; scales the user gave are kept with a
+    /// warning; thin slices keep every scale; the RST is not touched.
+    #[test]
+    fn a_presets_scales_below_half_the_slice_spacing_are_dropped() {
+        let thick = Grid::new([64, 64, 20], [0.7, 0.7, 5.0]);
+        let mut req = Request::new(Method::Hessian);
+        req.preset = Preset::LungNodules;
+        let r = req.resolve(&thick).expect("resolves");
+        assert_eq!(r.sigmas_mm, [3.0, 4.5, 6.5, 9.0]);
+        assert!(
+            r.notes
+                .iter()
+                .any(|n| n.contains("[1.5, 2.0] mm") && n.contains("dropped")),
+            "{:?}",
+            r.notes
+        );
+        // The same list given explicitly (the app's) is the preset's.
+        req.sigmas_mm = Some(Preset::LungNodules.sigmas_mm());
+        assert_eq!(
+            req.resolve(&thick).expect("resolves").sigmas_mm,
+            r.sigmas_mm
+        );
+        // A user's own scales stay, with the warning.
+        req.sigmas_mm = Some(vec![1.0, 2.0]);
+        let own = req.resolve(&thick).expect("resolves");
+        assert_eq!(own.sigmas_mm, [1.0, 2.0]);
+        assert!(
+            own.notes
+                .iter()
+                .any(|n| n.contains("below half the z spacing"))
+        );
+        // Thin slices: all six.
+        req.sigmas_mm = None;
+        let thin = Grid::new([64, 64, 64], [0.7, 0.7, 1.0]);
+        assert_eq!(req.resolve(&thin).expect("resolves").sigmas_mm.len(), 6);
+        // Every scale below half the spacing: the largest stays.
+        req.preset = Preset::Vessels;
+        let very = Grid::new([64, 64, 10], [0.7, 0.7, 10.0]);
+        assert_eq!(req.resolve(&very).expect("resolves").sigmas_mm, [4.0]);
+        let rst = Request::new(Method::Rst).resolve(&thick).expect("resolves");
+        assert!(rst.notes.iter().all(|n| !n.contains("dropped")));
+    }
 }

@@ -103,7 +103,9 @@ fn independent(md: &mut String, path: &Path, ours: Option<&cs::LesionStudy>) {
         num("ratio"),
         num("rank"),
         num("strongest_other"),
-        agreement("Hessian", h, ours.map(|s| &s.hessian_li), 0.03),
+        // 10%: the lung's p99.9 at sigma >= 3 mm parts from scipy's by up to 7.5% (the test's
+        // comment); the peaks agree within 1%.
+        agreement("Hessian", h, ours.map(|s| &s.hessian_li), 0.10),
         wide(&json),
         rst(&json, ours.map(|s| &s.rst_li)),
     );
@@ -270,11 +272,13 @@ fn study(md: &mut String, case: &Case) -> anyhow::Result<cs::LesionStudy> {
     // The Hessian's refinement of z, as the study's pipeline resolves it for the lung preset.
     let mut req = crate::cpu::pipeline::Request::new(crate::cpu::pipeline::Method::Li);
     req.preset = crate::cpu::Preset::LungNodules;
-    let z_factor = req.resolve(&grid).map_or(1, |r| r.factors[2]);
+    let resolved = req.resolve(&grid);
+    let z_factor = resolved.as_ref().map_or(1, |r| r.factors[2]);
+    let sigmas = resolved.map_or_else(|_| "?".to_owned(), |r| format!("{:?}", r.sigmas_mm));
     let d = lesion_box.dims();
     let _ = writeln!(
         md,
-        "{}; chest CT {} x {} x {} at {:.3} x {:.3} x {:.1} mm, HU) with {}, a mass of {:.0} x {:.0} x {:.0} mm ({:.0} ml) {}. Lung mask (`cpu::conspicuity::lung_mask`): voxels below {} HU, their 6-connected components that touch no in-plane border and hold at least {} ml, holes up to {:.0} mm^2 per axial slice filled (vessels, nodules); the lesion's zone (the label grown by {} mm) is left out of the lung. Evaluated on the label's box grown by {} mm (voxels {:?} to {:?}, {} lung voxels outside the zone), features computed on a crop reaching the kernels' and the rays' support beyond it. Lung preset: Hessian Li blobness at sigma 1.5-9 mm (z refined by {} as the pipeline does), RST Li blobness with 42 rays, R = 25 mm, dr = 0.25 mm, transfer function {:.0}/{:.0} HU (the preset's, the noise of the whole volume being {}).\n",
+        "{}; chest CT {} x {} x {} at {:.3} x {:.3} x {:.1} mm, HU) with {}, a mass of {:.0} x {:.0} x {:.0} mm ({:.0} ml) {}. Lung mask (`cpu::conspicuity::lung_mask`): voxels below {} HU, their 6-connected components that touch no in-plane border and hold at least {} ml, holes up to {:.0} mm^2 per axial slice filled (vessels, nodules); the lesion's zone (the label grown by {} mm) is left out of the lung. Evaluated on the label's box grown by {} mm (voxels {:?} to {:?}, {} lung voxels outside the zone), features computed on a crop reaching the kernels' and the rays' support beyond it. Lung preset: Hessian Li blobness at sigma {} mm (the preset's 1.5-9 mm less the scales below half the slice spacing; z refined by {} as the pipeline does), RST Li blobness with 42 rays, R = 25 mm, dr = 0.25 mm, transfer function {:.0}/{:.0} HU (the preset's, the noise of the whole volume being {}).\n",
         case.source,
         grid.dims[0],
         grid.dims[1],
@@ -297,6 +301,7 @@ fn study(md: &mut String, case: &Case) -> anyhow::Result<cs::LesionStudy> {
         s.region.lo,
         s.region.hi.map(|v| v - 1),
         s.rst_li.lung_voxels,
+        sigmas,
         z_factor,
         s.tf.d_min,
         s.tf.d_max,

@@ -196,7 +196,9 @@ fn eigen_order_on_thick_slices(md: &mut String) {
     let grid = cpu::Grid::of(&volume);
     let mut req = Request::new(Method::Hessian);
     req.eigen = true;
-    let factors = req.resolve(&grid).map_or([1; 3], |r| r.factors);
+    let resolved = req.resolve(&grid);
+    let factors = resolved.as_ref().map_or([1; 3], |r| r.factors);
+    let sigmas = resolved.map_or_else(|_| "?".to_owned(), |r| format!("{:?}", r.sigmas_mm));
     let Ok(out) = compute(&grid, &volume.to_f32(), &req) else {
         return;
     };
@@ -206,7 +208,7 @@ fn eigen_order_on_thick_slices(md: &mut String) {
         .count();
     let _ = writeln!(
         md,
-        "`features --method hessian --eigen` on that sphere at 0.6 x 0.6 x 5 mm (the lymph-node preset's sigma 1.5-5 mm, z refined by {}): {unsorted} of {} voxels not sorted by magnitude (tests/gpu_real_ct.rs checks the same on the three real CTs, on CPU and GPU).\n",
+        "`features --method hessian --eigen` on that sphere at 0.6 x 0.6 x 5 mm (the lymph-node preset's sigma {sigmas} mm, those below half the slice spacing dropped; z refined by {}): {unsorted} of {} voxels not sorted by magnitude (tests/gpu_real_ct.rs checks the same on the three real CTs, on CPU and GPU).\n",
         factors[2],
         grid.len()
     );
