@@ -245,3 +245,121 @@ fn a_fused_render_reports_the_suv_at_the_pick() {
     assert!(warm > 0, "no hot-iron pixel in the fused picture");
     let _ = std::fs::remove_file(&out_png);
 }
+
+/// `findings CT --pet PET`: the PET's hot spots above the PERCIST threshold of the liver the
+/// whole-body PET holds (found on the patient's right, between the heart and the pelvis), ranked
+/// by SUVpeak; the bladder is the hottest and lies in the CT, which gives its shape there;
+/// spots beyond the cropped CT have no CT shape; each CT finding reads the SUVpeak at its peak.
+#[test]
+fn findings_with_a_pet_list_its_hot_spots_with_their_ct_shape() {
+    let (Some(ct_dir), Some(pet_dir)) = (
+        common::shared_data("petct/sts-cropped/STS_001/CT"),
+        common::shared_data("petct/sts001-raw/PT"),
+    ) else {
+        return;
+    };
+    let out = shapecast()
+        .arg("findings")
+        .arg(&ct_dir)
+        .arg("--pet")
+        .arg(&pet_dir)
+        .args([
+            "--preset",
+            "lymph-nodes",
+            "--method",
+            "hessian",
+            "--backend",
+            "cpu",
+            "--json",
+            "--all",
+        ])
+        .output()
+        .expect("run shapecast");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let pet = &json["pet"];
+    let num = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("a number: {v}"));
+    let liver = &pet["reference"]["liver"];
+    let (mean, sd) = (num(&liver["mean"]), num(&liver["sd"]));
+    assert!((1.5..=3.0).contains(&mean) && sd < 0.2 * mean, "{liver}");
+    // LPS: x < 0 is the patient's right; below the heart (z -290), above the bladder (-680).
+    let at: Vec<f64> = (0..3).map(|a| num(&liver["lps_mm"][a])).collect();
+    assert!(
+        at[0] < -30.0 && (-520.0..=-330.0).contains(&at[2]),
+        "{liver}"
+    );
+    let threshold = num(&pet["reference"]["threshold_suv"]);
+    assert!((threshold - (1.5 * mean + 2.0 * sd)).abs() < 0.02, "{pet}");
+    let spots = pet["hot_spots"].as_array().expect("hot spots");
+    assert!(spots.len() >= 5, "{pet}");
+    let peaks: Vec<f64> = spots.iter().map(|h| num(&h["suv_peak"])).collect();
+    assert!(
+        peaks.windows(2).all(|w| w[0] >= w[1]),
+        "ranked by SUVpeak: {peaks:?}"
+    );
+    assert!(peaks.iter().all(|&p| p > threshold), "{peaks:?}");
+    let bladder = &spots[0];
+    assert!(num(&bladder["suv_peak"]) > 30.0, "{bladder}");
+    assert!(
+        bladder["ct_round"].is_boolean() && bladder["ct_score"].is_number(),
+        "{bladder}"
+    );
+    let outside = spots.iter().filter(|h| h["ct_round"].is_null()).count();
+    assert!(outside > 0 && outside < spots.len(), "{pet}");
+    for h in spots.iter().filter(|h| h["ct_round"].is_boolean()) {
+        assert_eq!(
+            h["ct_round"].as_bool(),
+            Some(num(&h["ct_score"]) >= 1.0),
+            "{h}"
+        );
+    }
+    // The lymph-node preset finds nothing round in soft tissue on this crop (a thigh sarcoma
+    // and the pelvis); the vessels preset's findings (inside the body) read the PET's SUVpeak.
+    let out = shapecast()
+        .arg("findings")
+        .arg(&ct_dir)
+        .arg("--pet")
+        .arg(&pet_dir)
+        .args([
+            "--preset",
+            "vessels",
+            "--method",
+            "hessian",
+            "--backend",
+            "cpu",
+            "--json",
+        ])
+        .output()
+        .expect("run shapecast");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let findings = json["findings"].as_array().expect("findings");
+    assert!(!findings.is_empty(), "{json}");
+    let pet = load("petct/sts001-raw/PT").expect("present");
+    for f in findings {
+        let p = DVec3::new(
+            num(&f["lps_mm"][0]),
+            num(&f["lps_mm"][1]),
+            num(&f["lps_mm"][2]),
+        );
+        let expected = shapecast::cpu::hot_spots::sphere_mean(
+            &pet,
+            p,
+            shapecast::cpu::hot_spots::PEAK_SPHERE_RADIUS_MM,
+        )
+        .expect("the PET holds the CT");
+        // lps_mm is rounded to 0.01 mm: the sphere may gain or lose a voxel at its rim only.
+        assert!(
+            (num(&f["suv_peak"]) - expected).abs() <= 0.02 + 0.2 * expected,
+            "{f}: {expected}"
+        );
+    }
+}

@@ -295,8 +295,8 @@ pub struct PetRegionStats {
     pub unit: String,
 }
 
-/// The radius of a 1 cm³ sphere, mm.
-pub const PEAK_SPHERE_RADIUS_MM: f64 = 6.2035;
+pub use crate::cpu::hot_spots::PEAK_SPHERE_RADIUS_MM;
+use crate::cpu::hot_spots::sphere_mean;
 
 /// An ellipse's PET measures, the PET read on its own grid at the CT pixels' patient points.
 pub fn pet_region_stats(ct: &Volume, pet: &Volume, m: &Measurement) -> Option<PetRegionStats> {
@@ -322,32 +322,6 @@ pub fn pet_region_stats(ct: &Volume, pet: &Volume, m: &Measurement) -> Option<Pe
         peak: sphere_mean(pet, at, PEAK_SPHERE_RADIUS_MM).unwrap_or(f64::from(max)),
         unit: pet.unit().to_owned(),
     })
-}
-
-/// The mean of `volume`'s voxels whose centres lie within `radius_mm` of `centre` (LPS mm).
-fn sphere_mean(volume: &Volume, centre: DVec3, radius_mm: f64) -> Option<f64> {
-    let c = volume.voxel_from_world().transform_point3(centre);
-    let reach: [f64; 3] = std::array::from_fn(|a| radius_mm / volume.spacing_mm[a]);
-    let range = |a: usize, c: f64| {
-        let lo = (c - reach[a]).ceil().max(0.0) as usize;
-        let hi = ((c + reach[a]).floor() as i64).min(volume.dims[a] as i64 - 1);
-        lo..=(hi.max(-1) as usize).min(volume.dims[a].saturating_sub(1))
-    };
-    let world = volume.world_from_voxel();
-    let (mut n, mut sum) = (0usize, 0.0f64);
-    for k in range(2, c.z) {
-        for j in range(1, c.y) {
-            for i in range(0, c.x) {
-                let p = world.transform_point3(DVec3::new(i as f64, j as f64, k as f64));
-                let x = volume.value_at(i, j, k);
-                if (p - centre).length() <= radius_mm && x.is_finite() {
-                    n += 1;
-                    sum += f64::from(x);
-                }
-            }
-        }
-    }
-    (n > 0).then(|| sum / n as f64)
 }
 
 /// A measurement with what it reads on the volume it was made on.

@@ -3,13 +3,15 @@
 
 use std::path::PathBuf;
 
-use anyhow::bail;
+use anyhow::{Context, bail};
 use serde_json::json;
 
-use crate::cli::features::{BackendArg, compute_components, load_volume};
+use crate::cli::features::{BackendArg, compute_components, load_volume, read_input};
 use crate::cpu::findings::{self, Findings, SHOWN};
+use crate::cpu::hot_spots::{self, CtShape, HotSpots};
 use crate::cpu::pipeline::{Method, Request};
 use crate::cpu::{FeatureMap, Grid};
+use crate::io;
 use crate::volume::Volume;
 
 #[derive(clap::Args, Debug)]
@@ -28,6 +30,11 @@ pub struct FindingsArgs {
     /// li (the Hessian's eq. 2 map).
     #[arg(long, default_value = "rst")]
     pub method: Method,
+    /// A PET of the same patient (a file or a series folder): its hot spots are listed too,
+    /// each with the CT's shape there ("round on CT" or not), and each CT finding gets the
+    /// SUVpeak at its peak.
+    #[arg(long)]
+    pub pet: Option<PathBuf>,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -71,8 +78,40 @@ pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
     } else {
         SHOWN
     };
+    let pet = match &args.pet {
+        Some(path) => {
+            let loaded = io::load(&read_input(path)?)
+                .with_context(|| format!("loading the PET {}", path.display()))?;
+            for n in &loaded.notes {
+                eprintln!("note: PET: {n}");
+            }
+            let pet = loaded.volume;
+            if pet.modality != crate::volume::Modality::Pt {
+                eprintln!(
+                    "warning: --pet {}: its modality is {}, not PT; its values are taken as SUV",
+                    path.display(),
+                    pet.modality.as_str()
+                );
+            }
+            let started = std::time::Instant::now();
+            let spots = hot_spots::hot_spots(
+                &pet,
+                Some(&CtShape {
+                    ct: &volume,
+                    blobness: &components[2],
+                    reference: found.reference,
+                }),
+            );
+            Some((pet, spots, started.elapsed().as_secs_f64()))
+        }
+        None => None,
+    };
     if args.json {
         let mut out = to_json(&volume, &found, shown);
+        if let Some((pet, spots, seconds)) = &pet {
+            add_pet_json(&mut out, &volume, &found, pet, spots, args.all);
+            out["seconds_hot_spots"] = json!(seconds);
+        }
         out["method"] = json!(args.method.name());
         out["preset"] = json!(preset.name());
         out["backend"] = json!(backend);
@@ -80,6 +119,9 @@ pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&out)?);
     } else {
         print!("{}", table(&volume, &found, shown));
+        if let Some((pet, spots, _)) = &pet {
+            print!("{}", hot_spot_table(pet, spots, args.all));
+        }
         println!(
             "{} {} blobness ({backend}): features {features_s:.1} s, findings {findings_s:.2} s",
             preset.name(),
@@ -123,6 +165,99 @@ pub fn to_json(volume: &Volume, found: &Findings, shown: usize) -> serde_json::V
         "noise_hu": found.noise_hu,
         "dropped": {"outside": found.outside, "dense": found.dense, "small": found.small},
     })
+}
+
+/// Adds the PET's part to the findings' JSON: each listed CT finding's `suv_peak` (the 1 cm³
+/// sphere at its peak; `null` outside the PET) and `"pet": {reference, hot_spots, more}`, the
+/// first [`SHOWN`] hot spots unless `all`.
+pub fn add_pet_json(
+    out: &mut serde_json::Value,
+    ct: &Volume,
+    found: &Findings,
+    pet: &Volume,
+    spots: &HotSpots,
+    all: bool,
+) {
+    let shown = if all { spots.spots.len() } else { SHOWN };
+    let world = ct.world_from_voxel();
+    if let Some(list) = out["findings"].as_array_mut() {
+        for (entry, f) in list.iter_mut().zip(&found.findings) {
+            let p = world.transform_point3(glam::DVec3::from(f.voxel.map(|v| v as f64)));
+            entry["suv_peak"] =
+                json!(hot_spots::sphere_mean(pet, p, hot_spots::PEAK_SPHERE_RADIUS_MM).map(round2));
+        }
+    }
+    let r = &spots.reference;
+    let list: Vec<serde_json::Value> = spots
+        .spots
+        .iter()
+        .take(shown)
+        .map(|h| {
+            json!({
+                "rank": h.rank,
+                "lps_mm": [round2(h.lps_mm.x), round2(h.lps_mm.y), round2(h.lps_mm.z)],
+                "pet_voxel": h.pet_voxel,
+                "suv_max": round2(h.suv_max),
+                "suv_peak": round2(h.suv_peak),
+                "volume_ml": round2(h.volume_ml),
+                "ct_blobness": h.ct_blobness,
+                "ct_score": h.ct_score.map(round2),
+                "ct_round": h.ct_round(),
+            })
+        })
+        .collect();
+    out["pet"] = json!({
+        "unit": pet.unit(),
+        "reference": {
+            "rule": r.rule(),
+            "threshold_suv": round2(r.threshold),
+            "liver": r.liver.map(|(p, mean, sd)| json!({
+                "lps_mm": [round2(p.x), round2(p.y), round2(p.z)],
+                "mean": round2(mean),
+                "sd": round2(sd),
+            })),
+        },
+        "hot_spots": list,
+        "more": spots.spots.len().saturating_sub(shown),
+    });
+}
+
+/// The PET's hot spots as a table, the first [`SHOWN`] of them unless `all`.
+pub fn hot_spot_table(pet: &Volume, spots: &HotSpots, all: bool) -> String {
+    let shown = if all { spots.spots.len() } else { SHOWN };
+    let mut out = format!(
+        "\nPET hot spots ({}; {}):\n{:>4} {:>8} {:>8} {:>26} {:>8} {:>9} {}\n",
+        pet.unit(),
+        spots.reference.rule(),
+        "rank",
+        "SUVpeak",
+        "SUVmax",
+        "LPS mm",
+        "vol ml",
+        "CT score",
+        "CT shape"
+    );
+    for h in spots.spots.iter().take(shown) {
+        out += &format!(
+            "{:>4} {:>8.2} {:>8.2} {:>26} {:>8.1} {:>9} {}\n",
+            h.rank,
+            h.suv_peak,
+            h.suv_max,
+            format!("{:.1}, {:.1}, {:.1}", h.lps_mm.x, h.lps_mm.y, h.lps_mm.z),
+            h.volume_ml,
+            h.ct_score.map_or("-".to_owned(), |s| format!("{s:.2}")),
+            match h.ct_round() {
+                Some(true) => "round on CT",
+                Some(false) => "not round",
+                None => "outside the CT",
+            }
+        );
+    }
+    let more = spots.spots.len().saturating_sub(shown);
+    if more > 0 {
+        out += &format!("... {more} more (--all lists them)\n");
+    }
+    out
 }
 
 fn round2(v: f64) -> f64 {

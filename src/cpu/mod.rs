@@ -18,6 +18,7 @@ pub mod features;
 pub mod findings;
 pub mod gaussian;
 pub mod hessian;
+pub mod hot_spots;
 pub mod parallel;
 pub mod pipeline;
 pub mod rays;
