@@ -116,6 +116,18 @@ pub struct FindingsStatus {
     /// The row the crosshair was last sent to.
     pub current: Option<usize>,
     pub listed: Vec<FindingStatus>,
+    /// With a PET fused: its hot spots (strongest SUVpeak first) and the SUV they were cut at.
+    pub hot_spots: Vec<HotSpotStatus>,
+    pub pet_threshold: Option<f64>,
+}
+
+/// One PET hot spot with its CT shape.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HotSpotStatus {
+    pub lps_mm: [f64; 3],
+    pub suv_peak: f64,
+    /// "round on CT" (true), "not round" (false), outside the CT (`None`).
+    pub ct_round: Option<bool>,
 }
 
 /// One listed finding.
@@ -350,6 +362,27 @@ mod web {
             })
             .collect();
         set(&findings, "listed", listed);
+        let spots: Array = f
+            .hot_spots
+            .iter()
+            .map(|h| {
+                let o = Object::new();
+                set(&o, "lps_mm", array_f64(h.lps_mm));
+                set(&o, "suv_peak", h.suv_peak);
+                set(
+                    &o,
+                    "ct_round",
+                    h.ct_round.map_or(JsValue::NULL, JsValue::from_bool),
+                );
+                JsValue::from(o)
+            })
+            .collect();
+        set(&findings, "hot_spots", spots);
+        set(
+            &findings,
+            "pet_threshold",
+            f.pet_threshold.map_or(JsValue::NULL, JsValue::from_f64),
+        );
         set(&obj, "findings", findings);
         let _ = Reflect::set(&window, &JsValue::from_str("shapecastStatus"), &obj);
     }

@@ -1068,3 +1068,60 @@ fn findings_list_the_demo_spheres_and_n_skips_the_dismissed() {
         .collect();
     assert_eq!(again, marks);
 }
+
+/// Findings with a PET fused (STS_001: CT and the PET cropped around the sarcoma): the panel
+/// lists the PET's hot spots with their CT shape, cut at SUV 2.5 since the crop holds no liver;
+/// a click on the first moves the crosshair to it.
+#[test]
+fn findings_list_the_pet_hot_spots_and_a_click_goes_to_one() {
+    let Some(folder) = common::shared_data("petct/sts-cropped/STS_001") else {
+        return;
+    };
+    let Some(mut harness) = harness(AppOptions {
+        start: StartWith::Paths(vec![folder]),
+        mode: DisplayMode::Features(Method::Hessian),
+        compute_on_load: true,
+        preset: Some(shapecast::cpu::Preset::LymphNodes),
+        ..AppOptions::default()
+    }) else {
+        return;
+    };
+    run_until(&mut harness, "hot spots listed", 600, |app| {
+        let f = app.findings_status();
+        f.state == "done" && !f.hot_spots.is_empty()
+    });
+    let f = harness.state().findings_status();
+    assert_eq!(
+        f.pet_threshold,
+        Some(shapecast::cpu::hot_spots::FALLBACK_SUV),
+        "no liver in the crop"
+    );
+    let peaks: Vec<f64> = f.hot_spots.iter().map(|h| h.suv_peak).collect();
+    assert!(peaks.windows(2).all(|w| w[0] >= w[1]), "{peaks:?}");
+    assert!(peaks.iter().all(|&p| p > 2.5), "{peaks:?}");
+    let first = f.hot_spots[0].clone();
+    assert!(
+        first.ct_round.is_some(),
+        "the CT holds the sarcoma: {first:?}"
+    );
+    harness.run_steps(2);
+    // The side panel scrolls down to the findings.
+    let panel = egui::pos2(150.0, 400.0);
+    harness.hover_at(panel);
+    for _ in 0..10 {
+        harness.event(egui::Event::MouseWheel {
+            unit: egui::MouseWheelUnit::Point,
+            delta: egui::vec2(0.0, -400.0),
+            phase: egui::TouchPhase::Move,
+            source: egui::MouseWheelSource::Unknown,
+            modifiers: egui::Modifiers::NONE,
+        });
+        harness.run_steps(1);
+    }
+    harness.run_steps(10);
+    save(&harness.render().expect("render"), "app_findings_pet.png");
+    click_control(&mut harness, "hot-spot:0");
+    let at = harness.state().crosshair_lps_mm().expect("crosshair");
+    let d = at.distance(glam::DVec3::from(first.lps_mm));
+    assert!(d <= 2.5, "crosshair {d} mm from the hot spot");
+}

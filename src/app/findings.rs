@@ -12,6 +12,7 @@ use glam::DVec3;
 
 use crate::cpu::Grid;
 use crate::cpu::findings::{Findings, SHOWN, find};
+use crate::cpu::hot_spots::{CtShape, HotSpots, hot_spots};
 use crate::cpu::pipeline::Method;
 use crate::cpu::tf::Preset;
 use crate::gpu::GpuContext;
@@ -88,13 +89,23 @@ pub struct FindingList {
     /// Each finding's peak in LPS mm.
     pub lps: Vec<DVec3>,
     pub marks: Vec<Mark>,
-    /// CPU seconds [`find`] took.
+    /// CPU seconds [`find`] (and the hot spots) took.
     pub seconds: f64,
+    /// The fused PET's hot spots with the CT's shape (docs/science.md, "PET hot spots"), and
+    /// which PET they are of.
+    pub hot_spots: Option<HotSpots>,
+    pet: Option<usize>,
+}
+
+/// Which PET volume (its allocation; a new PET is a new one).
+fn pet_key(pet: Option<&std::sync::Arc<Volume>>) -> Option<usize> {
+    pet.map(|p| std::sync::Arc::as_ptr(p) as usize)
 }
 
 struct Reading {
     generation: u64,
     source: u64,
+    pet: Option<usize>,
     method: Method,
     preset: Preset,
     dims: [u32; 3],
@@ -150,18 +161,22 @@ impl FindingsState {
         volume: &Volume,
         is_ct: bool,
         entry: Option<&FeatureEntry>,
+        pet: Option<&std::sync::Arc<Volume>>,
     ) -> Option<String> {
         let entry = entry?;
         let method = entry.request.method;
-        let same = |g: u64, s: u64| g == generation && s == entry.id;
+        let pet_now = pet_key(pet);
+        // A PET fused after the list was made: the list is made again with its hot spots.
+        let same =
+            |g: u64, s: u64, p: Option<usize>| g == generation && s == entry.id && p == pet_now;
         let have = self
             .list
             .as_ref()
-            .is_some_and(|l| same(l.generation, l.source))
+            .is_some_and(|l| same(l.generation, l.source, l.pet))
             || self
                 .reading
                 .as_ref()
-                .is_some_and(|r| same(r.generation, r.source));
+                .is_some_and(|r| same(r.generation, r.source, r.pet));
         if !have {
             self.message = None;
             if !is_ct {
@@ -177,6 +192,7 @@ impl FindingsState {
                 self.reading = Some(Reading {
                     generation,
                     source: entry.id,
+                    pet: pet_now,
                     method,
                     preset: entry.request.preset,
                     dims: entry.texture.dims,
@@ -219,6 +235,16 @@ impl FindingsState {
                     .map(|f| world.transform_point3(DVec3::from(f.voxel.map(|v| v as f64))))
                     .collect();
                 let marks = self.linked_marks(generation, &lps);
+                let spots = pet.filter(|_| r.pet == pet_now).map(|pet| {
+                    hot_spots(
+                        pet,
+                        Some(&CtShape {
+                            ct: volume,
+                            blobness: &blob,
+                            reference: findings.reference,
+                        }),
+                    )
+                });
                 self.current = None;
                 self.list = Some(FindingList {
                     generation,
@@ -229,6 +255,8 @@ impl FindingsState {
                     lps,
                     marks,
                     seconds: started.elapsed().as_secs_f64(),
+                    pet: if spots.is_some() { pet_now } else { None },
+                    hot_spots: spots,
                 });
                 None
             }
@@ -426,6 +454,52 @@ impl FindingsState {
             )
             .collect();
         let more = list.map_or(0, |l| l.findings.findings.len().saturating_sub(rows.len()));
+        // The PET's hot spots, as text (the list is borrowed no further).
+        let pet_rows = list.and_then(|l| l.hot_spots.as_ref()).map(|spots| {
+            let n = if self.show_all {
+                spots.spots.len()
+            } else {
+                SHOWN
+            };
+            let rows: Vec<(String, String, DVec3)> = spots
+                .spots
+                .iter()
+                .take(n)
+                .map(|h| {
+                    let shape = match h.ct_round() {
+                        Some(true) => "round on CT",
+                        Some(false) => "not round",
+                        None => "outside the CT",
+                    };
+                    (
+                        format!(
+                            "P{}. SUVpeak {:.1}, {:.0} ml, {shape}",
+                            h.rank, h.suv_peak, h.volume_ml
+                        ),
+                        format!(
+                            "SUVmax {:.1}; CT blobness score {}",
+                            h.suv_max,
+                            h.ct_score.map_or("-".to_owned(), |s| format!("{s:.2}"))
+                        ),
+                        h.lps_mm,
+                    )
+                })
+                .collect();
+            (
+                format!(
+                    "{} PET hot spot(s), SUVpeak above {:.2}{}",
+                    spots.spots.len(),
+                    spots.reference.threshold,
+                    if spots.reference.liver.is_some() {
+                        " (PERCIST, liver)"
+                    } else {
+                        " (no liver in the PET)"
+                    }
+                ),
+                spots.reference.rule(),
+                rows,
+            )
+        });
         let mut current = self.current;
         let mut marks = Vec::new();
         egui::Grid::new("findings")
@@ -471,6 +545,17 @@ impl FindingsState {
         if !rows.is_empty() {
             ui.label(egui::RichText::new("N / Shift+N: next / previous finding").weak());
         }
+        if let Some((title, rule, pet_rows)) = pet_rows {
+            ui.separator();
+            ui.label(title).on_hover_text(rule);
+            for (i, (text, hover, at)) in pet_rows.into_iter().enumerate() {
+                let r = ui.selectable_label(false, text).on_hover_text(hover);
+                controls.push((format!("hot-spot:{i}"), r.rect));
+                if r.clicked() {
+                    go = Some(at);
+                }
+            }
+        }
         (go, controls)
     }
 
@@ -505,6 +590,22 @@ impl FindingsState {
                     mark: mark.name().to_owned(),
                 })
                 .collect(),
+            hot_spots: list
+                .and_then(|l| l.hot_spots.as_ref())
+                .map(|h| {
+                    h.spots
+                        .iter()
+                        .map(|s| crate::status::HotSpotStatus {
+                            lps_mm: s.lps_mm.to_array(),
+                            suv_peak: s.suv_peak,
+                            ct_round: s.ct_round(),
+                        })
+                        .collect()
+                })
+                .unwrap_or_default(),
+            pet_threshold: list
+                .and_then(|l| l.hot_spots.as_ref())
+                .map(|h| h.reference.threshold),
         }
     }
 }

@@ -922,10 +922,14 @@ impl ShapecastApp {
             let entry = self
                 .displayed_request()
                 .and_then(|r| self.features.find(&r));
-            if let Some(message) =
-                self.findings
-                    .update(gpu, self.generation, &scene.volume, reads_hu, entry)
-            {
+            if let Some(message) = self.findings.update(
+                gpu,
+                self.generation,
+                &scene.volume,
+                reads_hu,
+                entry,
+                self.pet.layer.as_ref().map(|l| &l.volume),
+            ) {
                 self.error(message);
             }
         }
