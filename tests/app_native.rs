@@ -469,6 +469,22 @@ fn corrupt_file_shows_an_error_and_keeps_the_volume_then_a_folder_drop_loads() {
 }
 
 /// Clicks the control `name` of the published status (as the browser test does).
+/// Scrolls the side panel to its end, where the findings are.
+fn scroll_side_panel_down(h: &mut Harness<'static, ShapecastApp>) {
+    h.hover_at(egui::pos2(150.0, 400.0));
+    for _ in 0..10 {
+        h.event(egui::Event::MouseWheel {
+            unit: egui::MouseWheelUnit::Point,
+            delta: egui::vec2(0.0, -400.0),
+            phase: egui::TouchPhase::Move,
+            source: egui::MouseWheelSource::Unknown,
+            modifiers: egui::Modifiers::NONE,
+        });
+        h.run_steps(1);
+    }
+    h.run_steps(10);
+}
+
 fn click_control(h: &mut Harness<'static, ShapecastApp>, name: &str) {
     let at = h
         .state()
@@ -1023,7 +1039,7 @@ fn findings_list_the_demo_spheres_and_n_skips_the_dismissed() {
             .count();
         assert_eq!(near, 1, "one finding per sphere at {c:?}: {voxels:?}");
     }
-    harness.run_steps(2);
+    scroll_side_panel_down(&mut harness);
     save(&harness.render().expect("render"), "app_findings.png");
 
     click_control(&mut harness, "finding:1");
@@ -1043,6 +1059,37 @@ fn findings_list_the_demo_spheres_and_n_skips_the_dismissed() {
         .map(|f| f.mark.clone())
         .collect();
     assert_eq!(&marks[..3], ["confirmed", "open", "dismissed"]);
+    // Another method and back makes the list again: the reader's marks stay.
+    harness
+        .state_mut()
+        .set_mode(DisplayMode::Features(Method::Li));
+    run_until(&mut harness, "the Li list", 400, |app| {
+        app.findings_status().state == "done"
+            && app
+                .status()
+                .features
+                .as_ref()
+                .is_some_and(|f| f.method == "li")
+    });
+    harness
+        .state_mut()
+        .set_mode(DisplayMode::Features(Method::Hessian));
+    run_until(&mut harness, "the Hessian list again", 400, |app| {
+        app.findings_status().state == "done"
+            && app
+                .status()
+                .features
+                .as_ref()
+                .is_some_and(|f| f.method == "hessian")
+    });
+    let kept: Vec<String> = harness
+        .state()
+        .findings_status()
+        .listed
+        .iter()
+        .map(|f| f.mark.clone())
+        .collect();
+    assert_eq!(kept, marks, "marks after Li and back");
 
     // The link carries the list and its marks; a second app opened from it shows them.
     let view = harness.state().view_state();
@@ -1105,20 +1152,7 @@ fn findings_list_the_pet_hot_spots_and_a_click_goes_to_one() {
         "the CT holds the sarcoma: {first:?}"
     );
     harness.run_steps(2);
-    // The side panel scrolls down to the findings.
-    let panel = egui::pos2(150.0, 400.0);
-    harness.hover_at(panel);
-    for _ in 0..10 {
-        harness.event(egui::Event::MouseWheel {
-            unit: egui::MouseWheelUnit::Point,
-            delta: egui::vec2(0.0, -400.0),
-            phase: egui::TouchPhase::Move,
-            source: egui::MouseWheelSource::Unknown,
-            modifiers: egui::Modifiers::NONE,
-        });
-        harness.run_steps(1);
-    }
-    harness.run_steps(10);
+    scroll_side_panel_down(&mut harness);
     save(&harness.render().expect("render"), "app_findings_pet.png");
     click_control(&mut harness, "hot-spot:0");
     let at = harness.state().crosshair_lps_mm().expect("crosshair");

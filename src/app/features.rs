@@ -187,7 +187,11 @@ impl FeatureParams {
                 r.rst_map = self.map;
             }
             Method::Hessian | Method::Li | Method::Frangi => {
-                r.sigmas_mm = Some(self.sigmas_mm());
+                // The preset's own scales go unnamed, so that the pipeline drops those below
+                // half the slice spacing (docs/science.md, "Thick slices"); scales the user
+                // changed are named and kept.
+                let sigmas = self.sigmas_mm();
+                r.sigmas_mm = (sigmas != self.preset.sigmas_mm()).then_some(sigmas);
             }
         }
         r
@@ -662,7 +666,7 @@ mod tests {
         let mut p = FeatureParams::from_preset(Preset::LungNodules);
         let h = p.request(Method::Hessian);
         let r = p.request(Method::Rst);
-        assert_eq!(h.sigmas_mm, Some(Preset::LungNodules.sigmas_mm()));
+        assert_eq!(h.sigmas_mm, None, "the preset's scales go unnamed");
         assert_eq!(r.radius_mm, Some(25.0));
         assert_eq!(r.rst_map, FeatureMap::Li);
         p.rays = 98;

@@ -3,9 +3,12 @@
 //! and the slice panes, N / Shift+N to go from one to the next, and a mark per finding
 //! (confirmed, dismissed) that the copied link carries.
 //!
-//! The list is made once per computed feature texture: its texels are read back from the GPU
-//! (polled over frames, never blocking), the blobness decoded, and [`find`] run on the CPU with
-//! the CT's voxels. A link's marks wait for the list of their volume and go to the findings
+//! The list is made once per computed feature texture (and fused PET): its texels are read
+//! back from the GPU (polled over frames, never blocking), the blobness decoded, and [`find`]
+//! (and the PET's hot spots) run on the CPU with the CT's voxels in the frame they arrive: a
+//! stall of seconds on a large volume, and a full-volume copy of the texture and the values
+//! (moving this off the frame, and reading back in slabs, is open work). The reader's marks
+//! survive a list made again (another method and back, a PET fused later). A link's marks wait for the list of their volume and go to the findings
 //! within [`LINK_MATCH_MM`] of them; until the list is made they are listed as they came.
 
 use glam::DVec3;
@@ -92,9 +95,25 @@ pub struct FindingList {
     /// CPU seconds [`find`] (and the hot spots) took.
     pub seconds: f64,
     /// The fused PET's hot spots with the CT's shape (docs/science.md, "PET hot spots"), and
-    /// which PET they are of.
+    /// which PET they are of; why there are none when a PET is fused.
     pub hot_spots: Option<HotSpots>,
     pet: Option<usize>,
+    pub pet_note: Option<String>,
+}
+
+impl FindingList {
+    /// The findings' marks other than open, as a link carries them.
+    fn link_marks(&self) -> Vec<FindingMark> {
+        self.lps
+            .iter()
+            .zip(&self.marks)
+            .filter(|(_, m)| **m != Mark::Open)
+            .map(|(p, m)| FindingMark {
+                lps_mm: p.to_array(),
+                mark: *m,
+            })
+            .collect()
+    }
 }
 
 /// Which PET volume (its allocation; a new PET is a new one).
@@ -132,6 +151,8 @@ pub struct FindingsState {
     linked: Option<(u64, Vec<FindingMark>)>,
     /// The finding the crosshair was last sent to (an index into the list shown).
     pub current: Option<usize>,
+    /// The (generation, features, PET) whose list could not be made: not tried again.
+    failed: Option<(u64, u64, Option<usize>)>,
     show_all: bool,
     /// Why there is no list (not a CT, a method without blobness, a failed read).
     pub message: Option<String>,
@@ -144,11 +165,20 @@ impl FindingsState {
         self.list = None;
         self.current = None;
         self.message = None;
+        self.failed = None;
+        self.show_all = false;
     }
 
     /// A link's marks for the volume of `generation`.
     pub fn set_linked(&mut self, generation: u64, marks: Vec<FindingMark>) {
         self.linked = (!marks.is_empty()).then_some((generation, marks));
+        // A list already made (a link opened on the volume shown) takes the marks at once.
+        if let Some(l) = self.list.as_ref().filter(|l| l.generation == generation) {
+            let marks = self.carried_marks(generation, l, &[]);
+            if let Some(l) = self.list.as_mut() {
+                l.marks = marks;
+            }
+        }
     }
 
     /// Starts reading the displayed features when they are new, and makes the list when they
@@ -176,7 +206,9 @@ impl FindingsState {
             || self
                 .reading
                 .as_ref()
-                .is_some_and(|r| same(r.generation, r.source, r.pet));
+                .is_some_and(|r| same(r.generation, r.source, r.pet))
+            // A read that failed is not tried again until the features or the PET change.
+            || self.failed.is_some_and(|(g, s, p)| same(g, s, p));
         if !have {
             self.message = None;
             if !is_ct {
@@ -212,21 +244,26 @@ impl FindingsState {
         }
         let bytes = r.pending.poll(gpu)?;
         let r = self.reading.take()?;
+        let key = (r.generation, r.source, r.pet);
         let bytes = match bytes {
             Ok(b) => b,
             Err(e) => {
                 let message = format!("findings: reading the features back failed: {e}");
                 self.message = Some(message.clone());
+                self.failed = Some(key);
                 return Some(message);
             }
         };
         let blob: Vec<f32> = decode_feature_texels(&bytes).map(|t| t[2]).collect();
+        drop(bytes);
         let started = web_time::Instant::now();
         let grid = Grid::of(volume);
         if r.dims.map(|d| d as usize) != volume.dims {
-            return None; // features of another volume (cannot happen within a generation)
+            self.failed = Some(key); // features of another volume (not within a generation)
+            return None;
         }
-        match find(&grid, &volume.to_f32(), &blob, r.preset) {
+        let hu = volume.to_f32();
+        match find(&grid, &hu, &blob, r.preset) {
             Ok(findings) => {
                 let world = volume.world_from_voxel();
                 let lps: Vec<DVec3> = findings
@@ -234,56 +271,96 @@ impl FindingsState {
                     .iter()
                     .map(|f| world.transform_point3(DVec3::from(f.voxel.map(|v| v as f64))))
                     .collect();
-                let marks = self.linked_marks(generation, &lps);
-                let spots = pet.filter(|_| r.pet == pet_now).map(|pet| {
+                // Hot spots are cut in SUV: a PET in another unit gets none, said so.
+                let pet = pet.filter(|_| r.pet == pet_now);
+                let pet_note = pet.filter(|p| p.unit() != "SUV").map(|p| {
+                    format!(
+                        "no PET hot spots: the PET's values are in {}, not SUV",
+                        if p.unit().is_empty() {
+                            "no known unit"
+                        } else {
+                            p.unit()
+                        }
+                    )
+                });
+                let spots = pet.filter(|p| p.unit() == "SUV").map(|pet| {
                     hot_spots(
                         pet,
                         Some(&CtShape {
                             ct: volume,
                             blobness: &blob,
-                            reference: findings.reference,
+                            reference: crate::cpu::findings::reference(
+                                &grid,
+                                &hu,
+                                &blob,
+                                crate::cpu::findings::Gate::SoftTissue,
+                            ),
                         }),
                     )
                 });
-                self.current = None;
-                self.list = Some(FindingList {
+                let mut list = FindingList {
                     generation,
                     source: r.source,
                     method: r.method,
                     preset: r.preset,
                     findings,
                     lps,
-                    marks,
+                    marks: Vec::new(),
                     seconds: started.elapsed().as_secs_f64(),
-                    pet: if spots.is_some() { pet_now } else { None },
+                    pet: pet.map(|_| pet_now).unwrap_or(None),
                     hot_spots: spots,
-                });
+                    pet_note,
+                };
+                // The reader's marks on the list this one replaces (same volume) stay.
+                let previous: Vec<FindingMark> = self
+                    .list
+                    .as_ref()
+                    .filter(|l| l.generation == generation)
+                    .map(|l| l.link_marks())
+                    .unwrap_or_default();
+                list.marks = self.carried_marks(generation, &list, &previous);
+                self.current = None;
+                self.list = Some(list);
                 None
             }
             Err(e) => {
                 let message = format!("findings: {e}");
                 self.message = Some(message.clone());
+                self.failed = Some(key);
                 Some(message)
             }
         }
     }
 
-    /// The marks a link gave for the findings at `lps` (open where it gave none).
-    fn linked_marks(&self, generation: u64, lps: &[DVec3]) -> Vec<Mark> {
+    /// The marks of `list`'s findings: from `previous` (the reader's marks on the list it
+    /// replaces) or else the link's, each going to the nearest finding within the larger of
+    /// [`LINK_MATCH_MM`] and the finding's radius; open where none is that close.
+    fn carried_marks(
+        &self,
+        generation: u64,
+        list: &FindingList,
+        previous: &[FindingMark],
+    ) -> Vec<Mark> {
         let linked = match &self.linked {
             Some((g, m)) if *g == generation => m.as_slice(),
             _ => &[],
         };
-        lps.iter()
-            .map(|p| {
-                linked
-                    .iter()
-                    .filter(|l| DVec3::from(l.lps_mm).distance(*p) <= LINK_MATCH_MM)
-                    .min_by(|a, b| {
-                        let d = |l: &FindingMark| DVec3::from(l.lps_mm).distance(*p);
-                        d(a).total_cmp(&d(b))
-                    })
-                    .map_or(Mark::Open, |l| l.mark)
+        list.lps
+            .iter()
+            .zip(&list.findings.findings)
+            .map(|(p, f)| {
+                let reach = LINK_MATCH_MM.max(0.5 * f.diameter_mm);
+                let nearest = |marks: &[FindingMark]| {
+                    marks
+                        .iter()
+                        .map(|l| (DVec3::from(l.lps_mm).distance(*p), l.mark))
+                        .filter(|(d, _)| *d <= reach)
+                        .min_by(|a, b| a.0.total_cmp(&b.0))
+                        .map(|(_, m)| m)
+                };
+                nearest(previous)
+                    .or_else(|| nearest(linked))
+                    .unwrap_or(Mark::Open)
             })
             .collect()
     }
@@ -454,6 +531,7 @@ impl FindingsState {
             )
             .collect();
         let more = list.map_or(0, |l| l.findings.findings.len().saturating_sub(rows.len()));
+        let pet_note = list.and_then(|l| l.pet_note.clone());
         // The PET's hot spots, as text (the list is borrowed no further).
         let pet_rows = list.and_then(|l| l.hot_spots.as_ref()).map(|spots| {
             let n = if self.show_all {
@@ -466,11 +544,7 @@ impl FindingsState {
                 .iter()
                 .take(n)
                 .map(|h| {
-                    let shape = match h.ct_round() {
-                        Some(true) => "round on CT",
-                        Some(false) => "not round",
-                        None => "outside the CT",
-                    };
+                    let shape = h.ct_shape();
                     (
                         format!(
                             "P{}. SUVpeak {:.1}, {:.0} ml, {shape}",
@@ -544,6 +618,10 @@ impl FindingsState {
         }
         if !rows.is_empty() {
             ui.label(egui::RichText::new("N / Shift+N: next / previous finding").weak());
+        }
+        if let Some(note) = pet_note {
+            ui.separator();
+            ui.label(note);
         }
         if let Some((title, rule, pet_rows)) = pet_rows {
             ui.separator();

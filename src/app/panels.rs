@@ -212,17 +212,6 @@ impl ShapecastApp {
                 }
             });
 
-        egui::CollapsingHeader::new("Findings")
-            .default_open(true)
-            .show(ui, |ui| {
-                let computing = self.computing();
-                let (go, controls) = self.findings.panel_ui(ui, self.generation, computing);
-                self.controls.extend(controls);
-                if let Some(p) = go {
-                    self.go_to_lps(p);
-                }
-            });
-
         egui::CollapsingHeader::new("Display")
             .default_open(true)
             .show(ui, |ui| {
@@ -311,6 +300,18 @@ impl ShapecastApp {
         egui::CollapsingHeader::new("Measure")
             .default_open(true)
             .show(ui, |ui| self.measure_ui(ui));
+
+        // Last: a list of up to 30 rows (and "more") pushes no control down.
+        egui::CollapsingHeader::new("Findings")
+            .default_open(true)
+            .show(ui, |ui| {
+                let computing = self.computing();
+                let (go, controls) = self.findings.panel_ui(ui, self.generation, computing);
+                self.controls.extend(controls);
+                if let Some(p) = go {
+                    self.go_to_lps(p);
+                }
+            });
     }
 
     /// The measuring tool and the list of measurements with their positions.

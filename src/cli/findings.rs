@@ -64,6 +64,11 @@ pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
     let preset = crate::cli::preset(&args.preset)?;
     let req = request(args.method, preset)?;
     let volume = load_volume(args.input.as_deref(), &args.dicomweb)?;
+    // The PET first: a wrong path or unit fails before the features' minutes.
+    let pet = match &args.pet {
+        Some(path) => Some(load_pet(path)?),
+        None => None,
+    };
     let started = std::time::Instant::now();
     let (components, notes, backend) = compute_components(&volume, &req, args.backend, false)?;
     for n in &notes {
@@ -71,41 +76,32 @@ pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
     }
     let features_s = started.elapsed().as_secs_f64();
     let started = std::time::Instant::now();
-    let found = findings::find(&Grid::of(&volume), &volume.to_f32(), &components[2], preset)?;
+    let grid = Grid::of(&volume);
+    let hu = volume.to_f32();
+    let found = findings::find(&grid, &hu, &components[2], preset)?;
     let findings_s = started.elapsed().as_secs_f64();
     let shown = if args.all {
         found.findings.len()
     } else {
         SHOWN
     };
-    let pet = match &args.pet {
-        Some(path) => {
-            let loaded = io::load(&read_input(path)?)
-                .with_context(|| format!("loading the PET {}", path.display()))?;
-            for n in &loaded.notes {
-                eprintln!("note: PET: {n}");
-            }
-            let pet = loaded.volume;
-            if pet.modality != crate::volume::Modality::Pt {
-                eprintln!(
-                    "warning: --pet {}: its modality is {}, not PT; its values are taken as SUV",
-                    path.display(),
-                    pet.modality.as_str()
-                );
-            }
-            let started = std::time::Instant::now();
-            let spots = hot_spots::hot_spots(
-                &pet,
-                Some(&CtShape {
-                    ct: &volume,
-                    blobness: &components[2],
-                    reference: found.reference,
-                }),
-            );
-            Some((pet, spots, started.elapsed().as_secs_f64()))
-        }
-        None => None,
-    };
+    let pet = pet.map(|pet| {
+        let started = std::time::Instant::now();
+        let spots = hot_spots::hot_spots(
+            &pet,
+            Some(&CtShape {
+                ct: &volume,
+                blobness: &components[2],
+                reference: findings::reference(
+                    &grid,
+                    &hu,
+                    &components[2],
+                    findings::Gate::SoftTissue,
+                ),
+            }),
+        );
+        (pet, spots, started.elapsed().as_secs_f64())
+    });
     if args.json {
         let mut out = to_json(&volume, &found, shown);
         if let Some((pet, spots, seconds)) = &pet {
@@ -165,6 +161,30 @@ pub fn to_json(volume: &Volume, found: &Findings, shown: usize) -> serde_json::V
         "noise_hu": found.noise_hu,
         "dropped": {"outside": found.outside, "dense": found.dense, "small": found.small},
     })
+}
+
+/// The PET of `--pet`, in SUV (hot spots are cut in SUV: a PET in another unit is refused by
+/// name).
+fn load_pet(path: &std::path::Path) -> anyhow::Result<Volume> {
+    let loaded = io::load(&read_input(path)?)
+        .with_context(|| format!("loading the PET {}", path.display()))?;
+    for n in &loaded.notes {
+        eprintln!("note: PET: {n}");
+    }
+    let pet = loaded.volume;
+    if pet.unit() != "SUV" {
+        bail!(
+            "--pet {}: its values are in {} (modality {}), not SUV: hot spots are cut in SUV (docs/science.md, \"PET hot spots\")",
+            path.display(),
+            if pet.unit().is_empty() {
+                "no known unit"
+            } else {
+                pet.unit()
+            },
+            pet.modality.as_str()
+        );
+    }
+    Ok(pet)
 }
 
 /// Adds the PET's part to the findings' JSON: each listed CT finding's `suv_peak` (the 1 cm³
@@ -246,11 +266,7 @@ pub fn hot_spot_table(pet: &Volume, spots: &HotSpots, all: bool) -> String {
             format!("{:.1}, {:.1}, {:.1}", h.lps_mm.x, h.lps_mm.y, h.lps_mm.z),
             h.volume_ml,
             h.ct_score.map_or("-".to_owned(), |s| format!("{s:.2}")),
-            match h.ct_round() {
-                Some(true) => "round on CT",
-                Some(false) => "not round",
-                None => "outside the CT",
-            }
+            h.ct_shape()
         );
     }
     let more = spots.spots.len().saturating_sub(shown);

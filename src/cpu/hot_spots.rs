@@ -10,14 +10,15 @@
 //!    `1.5 x mean + 2 x SD`. A PET without such a region (cropped, or no liver in view) has no
 //!    reference; then the threshold is SUV [`FALLBACK_SUV`], stated as such.
 //! 2. **Spots.** Local maxima of the SUV above the threshold, strongest first; each grows its
-//!    region (26-connected voxels at or above half its peak and above the threshold); a weaker
-//!    maximum inside an earlier region is merged into it. SUVpeak is the mean of the voxels
-//!    whose centres lie within the 1 cm³ sphere about the peak; a spot is kept when its SUVpeak
-//!    is above the threshold (PERCIST's measurable lesion).
+//!    region (26-connected voxels at or above half its peak and above the threshold); a
+//!    maximum whose region reaches an earlier spot's is merged into it. SUVpeak is the mean of
+//!    the voxels whose centres lie within the hottest 1 cm³ sphere centred in the spot, and the
+//!    spot is where that sphere is; a spot is kept when its SUVpeak is above the threshold
+//!    (PERCIST's measurable lesion). Values must be SUV (the caller checks the unit).
 //! 3. **CT shape.** Where the CT holds the spot, the CT blobness's largest value within the
-//!    spot's radius (at least 5 mm) of its peak, over the CT findings' reference for the preset
-//!    (the feature's 99.9th percentile over the preset's domain): "round on CT" at 1 or more,
-//!    where a CT finding's score starts.
+//!    spot's radius (at least 5 mm) of it, over the blobness's 99.9th percentile in the CT's
+//!    soft tissue ([`crate::cpu::findings::reference`]): "round on CT" at 1 or more, where a
+//!    lymph-node finding's score starts.
 
 use std::collections::{HashMap, HashSet};
 
@@ -70,7 +71,7 @@ impl Reference {
 pub struct HotSpot {
     /// 1 for the strongest SUVpeak.
     pub rank: usize,
-    /// The peak, on the PET's grid and in patient space (LPS mm).
+    /// The centre of its hottest 1 cm³ sphere, on the PET's grid and in patient space (LPS mm).
     pub pet_voxel: [usize; 3],
     pub lps_mm: DVec3,
     pub suv_max: f64,
@@ -84,9 +85,19 @@ pub struct HotSpot {
 
 impl HotSpot {
     /// "round on CT" (the CT's blobness at the spot scores 1 or more), "not round", or `None`
-    /// where the CT does not reach.
+    /// where the CT does not reach or has no reference.
     pub fn ct_round(&self) -> Option<bool> {
         self.ct_score.map(|s| s >= 1.0)
+    }
+
+    /// The CT shape in words, as the list shows it.
+    pub fn ct_shape(&self) -> &'static str {
+        match (self.ct_blobness, self.ct_round()) {
+            (None, _) => "outside the CT",
+            (Some(_), None) => "CT shape unknown",
+            (Some(_), Some(true)) => "round on CT",
+            (Some(_), Some(false)) => "not round",
+        }
     }
 }
 
@@ -219,7 +230,7 @@ fn find_liver(pet: &Volume, suv: &[f32]) -> Option<(DVec3, f64, f64)> {
     // sphere's voxels about 3 mm apart: a whole-body PET stays a matter of seconds. The chosen
     // sphere's statistics are then taken from all its voxels.
     let step: [usize; 3] =
-        std::array::from_fn(|a| ((7.5 / pet.spacing_mm[a]).floor() as usize).max(1));
+        std::array::from_fn(|a| ((7.5 / pet.spacing_mm[a]).round() as usize).max(1));
     let stride: [i64; 3] =
         std::array::from_fn(|a| ((3.0 / pet.spacing_mm[a]).round() as i64).max(1));
     let all = sphere_offsets(pet.spacing_mm, LIVER_SPHERE_RADIUS_MM);

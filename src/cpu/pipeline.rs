@@ -180,10 +180,9 @@ impl Request {
             .filter(|&a| grid.dims[a] > 1)
             .map(|a| grid.spacing_mm[a])
             .fold(0.0, f64::max);
-        let from_preset = self
-            .sigmas_mm
-            .as_ref()
-            .is_none_or(|s| *s == self.preset.sigmas_mm());
+        // The preset's scales are those of a request that names none (the app names its
+        // scales only once the user changed them; the CLI with --sigma-mm).
+        let from_preset = self.sigmas_mm.is_none();
         let mut dropped = Vec::new();
         let sigmas_mm = if from_preset
             && matches!(self.method, Method::Hessian | Method::Li | Method::Frangi)
@@ -392,12 +391,9 @@ mod tests {
             "{:?}",
             r.notes
         );
-        // The same list given explicitly (the app's) is the preset's.
+        // Scales a user names stay, even the preset's own list (with the warning).
         req.sigmas_mm = Some(Preset::LungNodules.sigmas_mm());
-        assert_eq!(
-            req.resolve(&thick).expect("resolves").sigmas_mm,
-            r.sigmas_mm
-        );
+        assert_eq!(req.resolve(&thick).expect("resolves").sigmas_mm.len(), 6);
         // A user's own scales stay, with the warning.
         req.sigmas_mm = Some(vec![1.0, 2.0]);
         let own = req.resolve(&thick).expect("resolves");
