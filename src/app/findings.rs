@@ -221,20 +221,32 @@ impl FindingsState {
                     method_name(method)
                 ));
             } else {
-                self.reading = Some(Reading {
-                    generation,
-                    source: entry.id,
-                    pet: pet_now,
-                    method,
-                    preset: entry.request.preset,
-                    dims: entry.texture.dims,
-                    pending: PendingTexture::start(
-                        gpu,
-                        &entry.texture.texture,
-                        entry.texture.dims,
-                        FEATURE_TEXEL_BYTES,
-                    ),
-                });
+                match PendingTexture::try_start(
+                    gpu,
+                    &entry.texture.texture,
+                    entry.texture.dims,
+                    FEATURE_TEXEL_BYTES,
+                ) {
+                    Ok(pending) => {
+                        self.reading = Some(Reading {
+                            generation,
+                            source: entry.id,
+                            pet: pet_now,
+                            method,
+                            preset: entry.request.preset,
+                            dims: entry.texture.dims,
+                            pending,
+                        });
+                    }
+                    // A whole-body volume's features can exceed one readback buffer (slab
+                    // readback is open work): said once, the viewer goes on without a list.
+                    Err(e) => {
+                        let message = format!("findings: not listed for this volume: {e}");
+                        self.message = Some(message.clone());
+                        self.failed = Some((generation, entry.id, pet_now));
+                        return Some(message);
+                    }
+                }
             }
         }
         let r = self.reading.as_mut()?;

@@ -15,6 +15,8 @@ pub enum ReadbackError {
     Range(String),
     #[error("waiting for the GPU failed: {0}")]
     Poll(#[from] wgpu::PollError),
+    #[error("{bytes} bytes to read back, more than one buffer of this device holds ({max} bytes)")]
+    TooLarge { bytes: u64, max: u64 },
 }
 
 /// Copies `size` bytes of `src` into a staging buffer and returns them once mapped.
@@ -166,6 +168,26 @@ pub struct PendingTexture {
 }
 
 impl PendingTexture {
+    /// [`Self::start`] when the padded copy fits one buffer of the device (a whole volume's
+    /// texture may not: wgpu's validation would fail on it), else [`ReadbackError::TooLarge`].
+    pub fn try_start(
+        ctx: &GpuContext,
+        texture: &wgpu::Texture,
+        size: [u32; 3],
+        bytes_per_texel: u32,
+    ) -> Result<Self, ReadbackError> {
+        let [w, h, d] = size;
+        let padded = u64::from(w * bytes_per_texel)
+            .div_ceil(u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT))
+            * u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let bytes = padded * u64::from(h) * u64::from(d);
+        let max = ctx.limits.max_buffer_size;
+        if bytes > max {
+            return Err(ReadbackError::TooLarge { bytes, max });
+        }
+        Ok(Self::start(ctx, texture, size, bytes_per_texel))
+    }
+
     /// Records and submits the copy of `size` texels of `texture` (which needs `COPY_SRC`),
     /// `bytes_per_texel` each, and starts mapping them.
     pub fn start(
