@@ -22,7 +22,7 @@ used), on ../shared/data/ct/lung2_image.nrrd and its label:
   percentile (nearest rank), and 1 + the number of 26-connected groups of lung voxels above the
   lesion's peak.
 
-Writes docs/reproduction/conspicuity_independent.json, which tests/cpu_real_ct_conspicuity.rs
+Writes docs/reproduction/conspicuity_independent.json, which tests/cpu/real_ct_conspicuity.rs
 checks against Shapecast's own study. `--image` may also be a folder of DICOM slices and
 `--label` a NIfTI: `--image ../shared/data/series/ct-chest-lung-kernel --label
 docs/reproduction/lung_pet_ct_dx_label.nii.gz --out docs/reproduction/

@@ -18,7 +18,7 @@ Needs: pip install scikit-image nibabel numpy scipy. The default input is
 ../shared/data/ct/aorta_ct_cropped.nii.gz (a real contrast CT at 1.5 mm isotropic, from the
 TotalSegmentator tests) at sigma 3 mm: no axis is refined (1.5 mm <= sigma), so the comparison
 is with the native-grid Hessian. Also writes hessian_vs_skimage.json, which
-tests/cpu_vs_skimage.rs checks.
+tests/cpu/vs_skimage.rs checks.
 """
 import argparse
 import os

@@ -13,7 +13,7 @@ lower lung beside the hilum (files 1-14 to 1-18). The rule, one seed and three s
    6 mm leave it; the 6-connected part that holds the seed is the label.
 
 It marks 24.9 ml, 47 x 42 x 40 mm. Writes docs/reproduction/lung_pet_ct_dx_label.nii.gz
-(uint8, the series' grid and geometry), which tests/cpu_real_ct_conspicuity.rs and
+(uint8, the series' grid and geometry), which tests/cpu/real_ct_conspicuity.rs and
 `shapecast reproduce` read with the series. Needs: pip install numpy scipy pydicom nibabel.
 """
 import argparse

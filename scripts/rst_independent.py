@@ -27,7 +27,7 @@ centre half a slice along z, between two slices (evaluated exactly there), for t
 issue names and spheres of radius 3, 4.7 and 7 mm (R = max(8, r + 5) mm, so that rays from the
 centre leave the sphere).
 Prints a table and writes docs/reproduction/rst_independent.json, which
-tests/cpu_rst_invariance.rs checks Shapecast's CPU RST against.
+tests/cpu/rst_invariance.rs checks Shapecast's CPU RST against.
 Needs: pip install numpy scipy.
 """
 import argparse

@@ -20,7 +20,7 @@
 //! `textureLoad`s and the twin's weights in f32 (the bit-level twin tests); [`Rst::with_options`]
 //! with [`RstOptions::hardware_filtering`] reads it with one `textureSampleLevel` through a linear
 //! clamp-to-edge sampler (texture coordinates `(voxel + 0.5) / dims`, positions clamped onto the
-//! slab first, as the twin clamps them), within a tolerance of the twin (tests/gpu_rst.rs).
+//! slab first, as the twin clamps them), within a tolerance of the twin (tests/gpu/rst.rs).
 //! The filtered path keeps the rgba32float texture and needs FLOAT32_FILTERABLE
 //! (`float32-filterable` in WebGPU), which [`crate::gpu::context`] requests wherever the adapter
 //! offers it (lavapipe does; Chrome exposes it since version 119 where the GPU can); without it the
@@ -29,7 +29,7 @@
 //! the CT range (the transfer function's ramp is 10-30 HU) and would change the slab's memory and
 //! the gradient kernel's output format; a device without the feature loses speed, not precision.
 //! Measured on lavapipe (sphere next to cylinder, 42 rays, R 15 mm, dr 0.25 mm, Li features,
-//! ~2,265 ray samples per voxel; `time_exact_against_hardware_filtering` in tests/gpu_rst.rs):
+//! ~2,265 ray samples per voxel; `time_exact_against_hardware_filtering` in tests/gpu/rst.rs):
 //! 48^3 voxels 4.47 s of CPU time exact, 2.34 s filtered (1.9x); 64^3 10.5 s and 5.44 s (1.9x).
 //!
 //! Sizing a slab for it: the rays read [`RstRays::halo_slices`] slices of (I, g) beyond each side
@@ -339,7 +339,7 @@ impl RstDispatch {
 pub struct RstOptions {
     /// Read (I, g) with one hardware-filtered `textureSampleLevel` per ray step instead of 8
     /// `textureLoad`s: faster, but the texture unit's interpolation weights (8 fractional bits
-    /// on many GPUs) make it agree with the CPU twin only within a tolerance (tests/gpu_rst.rs,
+    /// on many GPUs) make it agree with the CPU twin only within a tolerance (tests/gpu/rst.rs,
     /// `filtered_bounds`: with the consistent rule, eigenvalues within 5e-3 of the largest
     /// |eigenvalue| and 99% of voxels within 1e-3; looser for the paper's rule). Honoured
     /// only where the device has FLOAT32_FILTERABLE (see [`Rst::hardware_filtering_available`]);

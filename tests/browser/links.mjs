@@ -285,6 +285,14 @@ async function waitStatus(page, pred, what, arg = null, timeout = 180000) {
   }
   return status(page);
 }
+// The MIP drawn in full (not the coarse frame nor the bands that refine it) and the features
+// done: a picture a screenshot can compare, instead of a sleep that a slow machine outruns.
+async function waitPicture(page, what) {
+  return waitStatus(page, () => {
+    const s = window.shapecastStatus;
+    return s?.mip === 'done' && ['done', 'none', 'failed'].includes(s?.features?.state ?? 'none');
+  }, `${what}: the finished picture`);
+}
 const idle = (s) => s && (s.phase === 'ready' || s.phase === 'error') && s.volume;
 async function waitReady(page, what) {
   return waitStatus(page, () => {
@@ -498,17 +506,21 @@ try {
       // Away from every control, and past the "copied" note, before the screenshot.
       await page.mouse.move(5, 795);
       await page.waitForTimeout(2500);
+      await waitPicture(page, 'the original view');
       shotA = await page.screenshot({ path: path.join(outDir, 'link-original.png') });
     });
     await withBrowser([...baseArgs, ...webgpuArgs], async (page) => {
       await page.goto(link);
       let s = await waitReady(page, 'the linked view');
-      s = await waitStatus(page, (want) => JSON.stringify(window.shapecastStatus?.view) === want, 'the same view', JSON.stringify(viewA), 30000);
+      // The link's mode starts its features after the volume is ready: wait for both.
+      s = await waitStatus(page, (want) => JSON.stringify(window.shapecastStatus?.view) === want
+        && window.shapecastStatus?.features?.state === 'done', 'the same view, its features done', JSON.stringify(viewA));
       check('round trip: the link opens an equal view', JSON.stringify(s?.view) === JSON.stringify(viewA),
         `${JSON.stringify(s?.view)}\n    vs ${JSON.stringify(viewA)}`);
       check('round trip: features computed in the opened view', s?.features?.method === 'li' && s?.features?.state === 'done', JSON.stringify(s?.features));
       await page.mouse.move(5, 795);
       await page.waitForTimeout(1500);
+      await waitPicture(page, 'the opened view');
       const shotB = await page.screenshot({ path: path.join(outDir, 'link-opened.png') });
       const d = pngDiff(shotA, shotB);
       check('round trip: the screenshots match', d.fraction < 0.005,

@@ -1,5 +1,5 @@
-//! Random hard symmetric 3x3 matrices for the eigenvalue solvers' tests (tests/cpu_eigen.rs,
-//! tests/gpu_eigen.rs), and how a solver's answer is scored against the f64 Jacobi reference.
+//! Random hard symmetric 3x3 matrices for the eigenvalue solvers' tests (tests/cpu/eigen.rs,
+//! tests/gpu/eigen.rs), and how a solver's answer is scored against the f64 Jacobi reference.
 #![allow(dead_code)]
 
 /// A seeded generator (splitmix64), the same numbers on every platform.

@@ -1,4 +1,4 @@
-//! Helpers shared by the GPU feature-kernel tests (tests/gpu_hessian.rs, tests/gpu_resample.rs):
+//! Helpers shared by the GPU feature-kernel tests (tests/gpu/hessian.rs, tests/gpu/resample.rs):
 //! small phantoms, upload / record / read back, and error measures against the CPU twins.
 #![allow(dead_code)]
 

@@ -10,7 +10,7 @@ use std::time::Instant;
 const TRUNK_VERSION: &str = "0.21.14";
 /// Debian packages the checks need: lavapipe (Vulkan on the CPU) for the GPU tests, Chromium for
 /// the browser test, and Orthanc with its DICOMweb plugin (ServeFolders comes with orthanc), the
-/// real archive that tests/dicomweb_orthanc.rs and tests/browser/pacs.mjs start on a free
+/// real archive that tests/io/dicomweb_orthanc.rs and tests/browser/pacs.mjs start on a free
 /// 127.0.0.1 port.
 const APT_PACKAGES: &[&str] = &[
     "mesa-vulkan-drivers",

@@ -160,7 +160,7 @@ fn agreement(
         format!("the {name} row cannot be compared (a number is missing).")
     } else if same_rank && worst <= tolerance {
         format!(
-            "the table's {name} row agrees within {:.2}% and to the rank (tests/cpu_real_ct_conspicuity.rs checks {:.0}%).",
+            "the table's {name} row agrees within {:.2}% and to the rank (tests/cpu/real_ct_conspicuity.rs checks {:.0}%).",
             100.0 * worst,
             100.0 * tolerance
         )
@@ -336,7 +336,7 @@ fn study(md: &mut String, case: &Case) -> anyhow::Result<cs::LesionStudy> {
     );
     let _ = writeln!(
         md,
-        "The rank counts the blobs (26-connected groups of lung voxels outside the zone) above the lesion's peak. {} {}\n\nThe study took {elapsed:.0} s (tests/cpu_real_ct_conspicuity.rs runs it and bounds both ratios and ranks).\n",
+        "The rank counts the blobs (26-connected groups of lung voxels outside the zone) above the lesion's peak. {} {}\n\nThe study took {elapsed:.0} s (tests/cpu/real_ct_conspicuity.rs runs it and bounds both ratios and ranks).\n",
         verdict("The RST", &s.rst_li),
         verdict("The Hessian", &s.hessian_li),
     );

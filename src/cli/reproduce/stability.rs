@@ -177,7 +177,7 @@ pub fn section_thick_slices(md: &mut String, dir: &Path) {
         let hi = three.iter().copied().fold(0.0, f64::max);
         let _ = writeln!(
             md,
-            "\nSpread (max / min) over 0.5, 0.7 x 0.7 x 2.5 and 0.9 mm: {:.3} (the issue asks <= 1.10). At 5 mm slices the sphere lies in one slice and its neighbours' partial volume, and blobness is {:.2} of the thin value; refining z by 2, 4 or 8 before the RST gave 7.43, 6.80 and 6.05 (and at 2.5 mm 10.71 and 9.34 for 2 and 4), so no refinement helps the RST (tests/cpu_rst_invariance.rs).\n",
+            "\nSpread (max / min) over 0.5, 0.7 x 0.7 x 2.5 and 0.9 mm: {:.3} (the issue asks <= 1.10). At 5 mm slices the sphere lies in one slice and its neighbours' partial volume, and blobness is {:.2} of the thin value; refining z by 2, 4 or 8 before the RST gave 7.43, 6.80 and 6.05 (and at 2.5 mm 10.71 and 9.34 for 2 and 4), so no refinement helps the RST (tests/cpu/rst_invariance.rs).\n",
             hi / lo,
             b[3] / b[0]
         );
@@ -208,7 +208,7 @@ fn eigen_order_on_thick_slices(md: &mut String) {
         .count();
     let _ = writeln!(
         md,
-        "`features --method hessian --eigen` on that sphere at 0.6 x 0.6 x 5 mm (the lymph-node preset's sigma {sigmas} mm, those below half the slice spacing dropped; z refined by {}): {unsorted} of {} voxels not sorted by magnitude (tests/gpu_real_ct.rs checks the same on the three real CTs, on CPU and GPU).\n",
+        "`features --method hessian --eigen` on that sphere at 0.6 x 0.6 x 5 mm (the lymph-node preset's sigma {sigmas} mm, those below half the slice spacing dropped; z refined by {}): {unsorted} of {} voxels not sorted by magnitude (tests/gpu/real_ct.rs checks the same on the three real CTs, on CPU and GPU).\n",
         factors[2],
         grid.len()
     );
@@ -326,7 +326,7 @@ fn thick_slice_independent(md: &mut String, dir: &Path) {
             .to_owned()
     } else if worst <= 0.01 {
         format!(
-            "Shapecast and the independent implementation agree within {:.2}% at all {compared} points, every sphere, spacing and position (tests/cpu_rst_invariance.rs checks 1%), so the thick-slice loss is the definition's and not this code's.",
+            "Shapecast and the independent implementation agree within {:.2}% at all {compared} points, every sphere, spacing and position (tests/cpu/rst_invariance.rs checks 1%), so the thick-slice loss is the definition's and not this code's.",
             100.0 * worst
         )
     } else {

@@ -2,7 +2,7 @@
 //! blobness of a 10 mm sphere (0.5 mm voxels, 100 HU) falls with noise, and its spread over
 //! noise draws is reported (it does not shrink with more rays; see below).
 
-mod cpu_common;
+use crate::cpu_common;
 
 use cpu_common::{Rendered, blobness, rst_eigen};
 use shapecast::cpu::{RstParams, ray_set};

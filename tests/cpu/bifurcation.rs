@@ -3,7 +3,7 @@
 //! their Hessian blobness (sigma = r), more at a 1 mm gap than at 3 mm, within 0.06 of what
 //! docs/reproduction.md reports (crotch, beside a branch, in front of the branch point).
 
-mod cpu_common;
+use crate::cpu_common;
 
 use cpu_common::{Rendered, blobness, rst_eigen};
 use shapecast::cpu::RstParams;

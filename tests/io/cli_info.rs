@@ -1,7 +1,7 @@
 //! `shapecast info` end to end: text and JSON output for a DICOM folder, and a one-line error
 //! with a non-zero exit status for a file that is not a volume. Uses tests/data only.
 
-mod common;
+use crate::common;
 
 use std::process::Command;
 

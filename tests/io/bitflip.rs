@@ -27,7 +27,7 @@
 //! keeps the sets whose label contains `text` (the whole sweep of everything takes days on two
 //! cores; it is run by hand file by file).
 
-mod common;
+use crate::common;
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};

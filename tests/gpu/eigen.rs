@@ -3,9 +3,9 @@
 //! matrices (tests/eigen_common), and on the Hessians of a real CT crop, where the CPU's closed
 //! form is checked against the same reference so that a disagreement names the wrong solver.
 
-mod common;
-mod eigen_common;
-mod gpu_common;
+use crate::common;
+use crate::eigen_common;
+use crate::gpu_common;
 
 use eigen_common::{Rng, hard_matrix, relative_error, sorted_by_magnitude};
 use gpu_common::*;

@@ -1002,7 +1002,8 @@ fn opacity_lengths_are_the_twins() {
     assert!((l - 0.6 * f64::sqrt(rho2)).abs() < 1e-12);
 }
 
-/// A measurement, not a check (run by hand: `cargo test --test gpu_rst -- --ignored --nocapture`;
+/// A measurement, not a check (run by hand: `cargo test --test gpu -- --ignored --nocapture
+/// rst::time_gpu_rst_against_the_cpu_twin`;
 /// `GPU_ONLY=1` skips the CPU twin): the RST features (Li map) of a 48^3 sphere-next-to-cylinder
 /// phantom, 42 rays, R 15 mm, dr 0.25 mm, on the test adapter and with the threaded CPU twin
 /// (`rst_features`). Wall time and the process's CPU time are printed: on a shared machine the
@@ -1120,8 +1121,8 @@ fn time_gpu_rst_against_the_cpu_twin() {
     );
 }
 
-/// A measurement, not a check (run by hand: `cargo test --test gpu_rst -- --ignored --nocapture
-/// time_exact_against_hardware_filtering`; `RST_BENCH_SIZE=64` for 64^3): the RST features (Li
+/// A measurement, not a check (run by hand: `cargo test --test gpu -- --ignored --nocapture
+/// rst::time_exact_against_hardware_filtering`; `RST_BENCH_SIZE=64` for 64^3): the RST features (Li
 /// map) of a 48^3 sphere-next-to-cylinder phantom at the defaults (42 rays, R 15 mm, dr 0.25 mm)
 /// with the exact fetch (8 `textureLoad`s per step) and the hardware-filtered one (one
 /// `textureSampleLevel`), each run twice in alternation; wall and process CPU time of each run.

@@ -4,14 +4,13 @@
 //! bounded memory: a counting allocator measures the bytes this thread has allocated at its
 //! peak during each load.
 
-mod common;
+use crate::common;
 
 use std::io::Write;
 
 use shapecast::io::{self, InputFile, Limits, LoadError, Loaded};
 
-#[path = "common/counting.rs"]
-mod counting;
+use crate::counting;
 use counting::peak_during;
 
 const MIB: usize = 1 << 20;

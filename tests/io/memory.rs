@@ -5,8 +5,7 @@
 //! whose bytes cannot be avoided) the loaders add at most the voxels to the input. Each file
 //! is built here in a temporary folder; a counting allocator measures each load.
 
-#[path = "common/counting.rs"]
-mod counting;
+use crate::counting;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

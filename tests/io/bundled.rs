@@ -1,7 +1,7 @@
 //! Loader tests on the small copies in tests/data, so that they run on a fresh clone without
-//! ../shared. Expected values as in io_loaders.rs (SimpleITK 2.5.7, nibabel 5.4.2, pydicom 3.0.2).
+//! ../shared. Expected values as in tests/io/loaders.rs (SimpleITK 2.5.7, nibabel 5.4.2, pydicom 3.0.2).
 
-mod common;
+use crate::common;
 
 use shapecast::io::{self, InputFile};
 

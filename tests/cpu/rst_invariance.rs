@@ -1,7 +1,7 @@
 //! RST smoothness and invariance with the consistent opacity rule (issue 4, "Checked by"):
 //! radius sweep, voxel spacing, step length, contrast and orientation.
 
-mod cpu_common;
+use crate::cpu_common;
 
 use cpu_common::{Rendered, blobness, cv, rst_eigen, vesselness};
 use shapecast::cpu::RstParams;

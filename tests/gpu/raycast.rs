@@ -487,7 +487,7 @@ fn hardware_filtering_matches_the_twin_within_tolerance() {
 }
 
 /// The frame time of the MIP for a 256^3 volume at 768x768 (a benchmark, not a timed test):
-/// `cargo test --test gpu_raycast -- --ignored --nocapture bench`. Synthetic spheres and
+/// `cargo test --test gpu -- --ignored --nocapture raycast::bench`. Synthetic spheres and
 /// cylinders with synthetic features (the features' content does not change the cost: every
 /// sample loads them). Each frame turns the view by 2 degrees, as a drag does, and waits for
 /// the GPU.

@@ -2,7 +2,7 @@
 //! RST on a sphere, a cylinder, a slab, a dark sphere and an airway, and the Hessian against the
 //! closed-form gamma-normalised values of a Gaussian-smoothed sphere and cylinder.
 
-mod cpu_common;
+use crate::cpu_common;
 
 use cpu_common::{Rendered, rst_eigen};
 use shapecast::cpu::RstParams;

@@ -3,7 +3,7 @@
 //! reports the factor; its MIP's brightest pixel picks the hottest voxel; a PET fused over its
 //! study's CT reports the SUV at the picked point.
 
-mod common;
+use crate::common;
 
 use std::process::Command;
 

@@ -3,7 +3,7 @@
 //! roots of either sign, near-triple roots, exact repeats, zeros, block-diagonal and diagonal
 //! matrices, scales 1e-6..1e6 and a dynamic range of 1e7 within a matrix.
 
-mod eigen_common;
+use crate::eigen_common;
 
 use eigen_common::{Rng, hard_matrix, relative_error, sorted_by_magnitude};
 use shapecast::cpu::eigen::{eigenvalues_jacobi, eigenvalues_sorted};

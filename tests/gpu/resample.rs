@@ -3,7 +3,7 @@
 //! in y and z with their whole-grid origins), several components at once; input voxels survive
 //! the round trip bit for bit.
 
-mod gpu_common;
+use crate::gpu_common;
 
 use gpu_common::*;
 use shapecast::compute::resample::{Resample, ResampleGeometry};

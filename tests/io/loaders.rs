@@ -3,7 +3,7 @@
 //! run by hand; each expectation says which). Files in an encoding Shapecast cannot decode must
 //! fail with a message that names it. Reads ../shared/data through `common::shared_data`.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

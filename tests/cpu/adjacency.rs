@@ -1,7 +1,7 @@
 //! Adjacency (issue 4, "Checked by"; paper fig. 4, 5): a nodule r = 4 mm beside a vessel
 //! r = 3 mm keeps its RST blobness but loses its Hessian blobness at sigma = r.
 
-mod cpu_common;
+use crate::cpu_common;
 
 use cpu_common::{Rendered, blobness, rst_eigen};
 use shapecast::cpu::RstParams;

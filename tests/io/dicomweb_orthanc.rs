@@ -6,7 +6,7 @@
 //! Two tests need neither: a connection refused, and an instance cut short by a tiny local
 //! server.
 
-mod common;
+use crate::common;
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};

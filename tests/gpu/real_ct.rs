@@ -2,7 +2,7 @@
 //! method (issue 13, item 4): below 1e-3 of the largest value except at rare decision ties
 //! (see `check`).
 
-mod common;
+use crate::common;
 
 use shapecast::compute::pipeline::{FeatureJob, JobOptions};
 use shapecast::cpu::Grid;
@@ -69,8 +69,8 @@ fn errors(gpu: &[Vec<f32>; 3], cpu: &[Vec<f32>; 3]) -> (Vec<f64>, f64) {
 
 /// GPU against CPU for each method: at most one voxel in 5000 (and at most 2) may differ by
 /// more than 1e-3 of the largest value. That much is left for decision ties, which f32 and f64
-/// may decide either way (not checked voxel by voxel here; tests/gpu_eigen.rs and
-/// tests/gpu_hessian.rs do that on the kernels): the eq. 1 map jumps where |l1| = |l2| with opposite signs (V = |l1| or
+/// may decide either way (not checked voxel by voxel here; tests/gpu/eigen.rs and
+/// tests/gpu/hessian.rs do that on the kernels): the eq. 1 map jumps where |l1| = |l2| with opposite signs (V = |l1| or
 /// 0), and multi-scale eigenvalues where two scales' norms tie. The 99.9th percentile must stay
 /// below 1e-4. Eigenvalue outputs must be sorted by magnitude at every voxel, on both sides
 /// (issue 13: features are taken back from a refined grid by subsampling, never interpolated). Measured on the crops below: no voxel above 1e-3
@@ -157,7 +157,7 @@ fn chest_ct_1_5_mm_eigenvalues() {
 /// shared-exponent feature texels is within 2 grey levels (of 255) of the MIP drawn from the
 /// 8-byte half floats they replaced, on the real features of the 5 mm chest CT (RST, lung
 /// preset, and the Hessian), from three directions, through the ray caster's CPU twin (exact
-/// to the GPU, tested in gpu_raycast.rs).
+/// to the GPU, tested in tests/gpu/raycast.rs).
 #[test]
 fn compact_feature_texels_keep_the_mip_within_two_grey_levels() {
     use shapecast::cpu::Preset;

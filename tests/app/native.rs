@@ -6,7 +6,7 @@
 //! a dropped folder (a DICOM series) loads, and a folder of several series lists them and
 //! loads the one clicked.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

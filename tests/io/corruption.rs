@@ -4,7 +4,7 @@
 //! Bounded (a fixed, deterministic set of mutations and a 16 MiB voxel cap) so that the whole
 //! file runs in well under a minute on two cores.
 
-mod common;
+use crate::common;
 
 use std::io::{Read, Write};
 use std::panic::{AssertUnwindSafe, catch_unwind};

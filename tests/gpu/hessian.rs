@@ -3,7 +3,7 @@
 //! its CPU twin in `shapecast::cpu` on a 13 x 17 x 11 phantom with 0.6 x 0.8 x 1.1 mm voxels.
 //! Every test prints what it measured.
 
-mod gpu_common;
+use crate::gpu_common;
 
 use gpu_common::*;
 use shapecast::compute::gaussian::{Gaussian, SeparableKernel};

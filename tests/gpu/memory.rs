@@ -6,7 +6,7 @@
 //! read-only storage buffer (`kernel::params_buffer`). One test in its own binary, so that no
 //! other test's allocations run beside it.
 
-mod gpu_common;
+use crate::gpu_common;
 
 use gpu_common::*;
 use shapecast::compute::gaussian::{Gaussian, SeparableKernel};

@@ -4,7 +4,7 @@
 //! among the lung's blobs (`shapecast::cpu::conspicuity`; docs/reproduction.md, the same study
 //! as `shapecast reproduce`). Plus the lung mask and the ranking on a synthetic chest.
 
-mod common;
+use crate::common;
 
 use shapecast::cpu::Grid;
 use shapecast::cpu::conspicuity::{

@@ -1,0 +1,20 @@
+//! The CPU references (src/cpu), checked against the equations, analytic phantoms and independent
+//! implementations; one binary so that the suite links once.
+
+#[path = "../common/mod.rs"]
+mod common;
+#[path = "../cpu_common/mod.rs"]
+mod cpu_common;
+#[path = "../eigen_common/mod.rs"]
+mod eigen_common;
+
+mod adjacency;
+mod analytic;
+mod bifurcation;
+mod eigen;
+mod noise;
+mod phantoms;
+mod real_ct_conspicuity;
+mod rst_invariance;
+mod structure_tensor;
+mod vs_skimage;
