@@ -140,6 +140,19 @@ pub struct Volume {
 }
 
 impl Volume {
+    /// Whether the values look like Hounsfield units of a CT: told so by the file, or air at
+    /// about -1000 HU present (`range`, the values' minimum and maximum) in a volume of unknown
+    /// modality.
+    pub fn looks_like_ct(&self, range: Option<(f32, f32)>) -> bool {
+        match self.modality {
+            Modality::Ct => true,
+            Modality::Unknown => {
+                range.is_some_and(|(lo, hi)| (-1100.0..=-900.0).contains(&lo) && hi > 100.0)
+            }
+            Modality::Mr | Modality::Pt | Modality::Phantom => false,
+        }
+    }
+
     /// An axis-aligned volume (identity direction, origin at 0) holding physical values as f32.
     pub fn from_f32(dims: [usize; 3], spacing_mm: [f64; 3], values: Vec<f32>) -> Self {
         debug_assert_eq!(values.len(), dims[0] * dims[1] * dims[2]);

@@ -20,7 +20,7 @@ use crate::cpu::pipeline::Method;
 use crate::cpu::tf::Preset;
 use crate::gpu::GpuContext;
 use crate::gpu::readback::PendingTexture;
-use crate::gpu::volume_texture::{FEATURE_TEXEL_BYTES, decode_feature_texels};
+use crate::gpu::volume_texture::{FEATURE_TEXEL_BYTES, decode_feature_texels, decode_rgb9e5};
 use crate::volume::Volume;
 
 use super::features::{FeatureEntry, method_name};
@@ -266,16 +266,21 @@ impl FindingsState {
                 return Some(message);
             }
         };
-        let blob: Vec<f32> = decode_feature_texels(&bytes).map(|t| t[2]).collect();
-        drop(bytes);
+        let blob = blobness_in_place(bytes);
         let started = web_time::Instant::now();
         let grid = Grid::of(volume);
         if r.dims.map(|d| d as usize) != volume.dims {
             self.failed = Some(key); // features of another volume (not within a generation)
             return None;
         }
-        let hu = volume.to_f32();
-        match find(&grid, &hu, &blob, r.preset) {
+        // The CT's values read through its own voxels (no f32 copy), unless some are not
+        // finite: then the copy every computation sees (`Volume::to_f32` replaces them).
+        let copy = (volume.non_finite_count() > 0).then(|| volume.to_f32());
+        let hu: &dyn crate::cpu::Samples = match &copy {
+            Some(v) => v,
+            None => volume,
+        };
+        match find(&grid, hu, blob.as_f32(), r.preset) {
             Ok(findings) => {
                 let world = volume.world_from_voxel();
                 let lps: Vec<DVec3> = findings
@@ -300,11 +305,11 @@ impl FindingsState {
                         pet,
                         Some(&CtShape {
                             ct: volume,
-                            blobness: &blob,
+                            blobness: blob.as_f32(),
                             reference: crate::cpu::findings::reference(
                                 &grid,
-                                &hu,
-                                &blob,
+                                hu,
+                                blob.as_f32(),
                                 crate::cpu::findings::Gate::SoftTissue,
                             ),
                         }),
@@ -744,9 +749,56 @@ pub fn draw_one(painter: &egui::Painter, m: &Marker, p: egui::Pos2, r: f32) {
     );
 }
 
+/// The blobness of a read-back feature texture (Rgb9e5 texels, `B` the third), as f32s written
+/// over the texels they come from: one allocation of 4 bytes a voxel instead of the texels and
+/// a copy (the findings of a large CT are made in the tab).
+enum Blobness {
+    /// The read-back bytes, each texel replaced by its blobness (an f32, little-endian).
+    InPlace(Vec<u8>),
+    /// Where the allocation is not aligned for f32 (no allocator gives that for a buffer this
+    /// large, but nothing promises it): a copy.
+    Copied(Vec<f32>),
+}
+
+impl Blobness {
+    fn as_f32(&self) -> &[f32] {
+        match self {
+            Self::InPlace(bytes) => bytemuck::cast_slice(bytes),
+            Self::Copied(v) => v,
+        }
+    }
+}
+
+fn blobness_in_place(mut bytes: Vec<u8>) -> Blobness {
+    bytes.truncate(bytes.len() / 4 * 4);
+    if bytemuck::try_cast_slice::<u8, f32>(&bytes).is_err() {
+        return Blobness::Copied(decode_feature_texels(&bytes).map(|t| t[2]).collect());
+    }
+    for texel in bytes.chunks_exact_mut(4) {
+        let [_, _, b] = decode_rgb9e5(u32::from_le_bytes([texel[0], texel[1], texel[2], texel[3]]));
+        texel.copy_from_slice(&b.to_le_bytes());
+    }
+    Blobness::InPlace(bytes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn blobness_is_decoded_over_its_texels() {
+        let texels: Vec<[f32; 3]> = (0..1000)
+            .map(|i| [i as f32 * 0.5, 3.0, (i % 37) as f32 * 1.7 + 0.01])
+            .collect();
+        let bytes: Vec<u8> = texels
+            .iter()
+            .flat_map(|&t| crate::gpu::volume_texture::encode_rgb9e5(t).to_le_bytes())
+            .collect();
+        let want: Vec<f32> = decode_feature_texels(&bytes).map(|t| t[2]).collect();
+        let got = blobness_in_place(bytes);
+        assert!(matches!(got, Blobness::InPlace(_)));
+        assert_eq!(got.as_f32(), want.as_slice());
+    }
 
     #[test]
     fn marks_round_trip_as_text() {

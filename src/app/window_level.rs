@@ -1,7 +1,7 @@
 //! Display window (width and level) of the grey values: the CT presets radiologists know, a
 //! default per modality, and the change a right-button drag makes.
 
-use crate::volume::{Modality, Volume};
+use crate::volume::Volume;
 
 /// A display window in physical units (HU for CT).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -94,16 +94,9 @@ impl WindowPreset {
     }
 }
 
-/// Whether the values look like Hounsfield units of a CT: told so by the file, or air at about
-/// -1000 HU present in a volume of unknown modality.
+/// Whether the values look like Hounsfield units of a CT ([`Volume::looks_like_ct`]).
 pub fn looks_like_ct(volume: &Volume, range: Option<(f32, f32)>) -> bool {
-    match volume.modality {
-        Modality::Ct => true,
-        Modality::Unknown => {
-            range.is_some_and(|(lo, hi)| (-1100.0..=-900.0).contains(&lo) && hi > 100.0)
-        }
-        Modality::Mr | Modality::Pt | Modality::Phantom => false,
-    }
+    volume.looks_like_ct(range)
 }
 
 /// The window a volume opens with: the abdomen (soft-tissue) window for CT, 0-10 for a PET in
@@ -149,6 +142,7 @@ fn percentiles(volume: &Volume, p_lo: f64, p_hi: f64) -> Option<(f32, f32)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::volume::Modality;
 
     #[test]
     fn bounds_round_trip() {

@@ -12,7 +12,7 @@ use crate::cpu::hot_spots::{self, CtShape, HotSpots};
 use crate::cpu::pipeline::{Method, Request};
 use crate::cpu::{FeatureMap, Grid};
 use crate::io;
-use crate::volume::Volume;
+use crate::volume::{Modality, Volume};
 
 #[derive(clap::Args, Debug)]
 pub struct FindingsArgs {
@@ -64,6 +64,21 @@ pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
     let preset = crate::cli::preset(&args.preset)?;
     let req = request(args.method, preset)?;
     let volume = load_volume(args.input.as_deref(), &args.dicomweb)?;
+    // Findings' gates read HU (lung air, soft tissue, dense above 700 HU): an MR or a PET has
+    // none, and its list would be noise. (A file that does not say, such as a NIfTI, is taken
+    // at its word: its values may well be HU.)
+    if matches!(volume.modality, Modality::Mr | Modality::Pt) {
+        anyhow::bail!(
+            "{}: findings read Hounsfield units and this volume is {} ({}), not a CT; give the CT (a PET goes with it as --pet)",
+            volume.source,
+            volume.modality.as_str(),
+            if volume.unit().is_empty() {
+                "no known unit".to_string()
+            } else {
+                format!("values in {}", volume.unit())
+            }
+        );
+    }
     // The PET first: a wrong path or unit fails before the features' minutes.
     let pet = match &args.pet {
         Some(path) => Some(load_pet(path)?),

@@ -19,7 +19,7 @@
 use super::pipeline::{Method, Request, RequestError, compute};
 use super::rst::{DEFAULT_SIGMA_G_MM, GradientVolume, RstParams, rst_eigen_at};
 use super::tf::{NOISE_BAND_HU, Preset, TransferFunction, auto_transfer_function};
-use super::{FeatureMap, Grid, gaussian, map_eigenvalues, parallel, rays};
+use super::{FeatureMap, Grid, Samples, gaussian, map_eigenvalues, parallel, rays};
 
 /// Lung air is below this (HU); parenchyma is about -850, soft tissue above -100.
 pub const LUNG_AIR_BELOW_HU: f32 = -400.0;
@@ -96,56 +96,97 @@ impl Region {
 }
 
 /// The lung mask of a CT in HU (module documentation, steps 1 to 3).
-pub fn lung_mask(grid: &Grid, hu: &[f32]) -> Vec<bool> {
-    let [nx, ny, nz] = grid.dims;
-    let air: Vec<bool> = hu.iter().map(|&v| v < LUNG_AIR_BELOW_HU).collect();
+///
+/// One byte a voxel besides the result (a state per voxel; a component is flood-filled once to
+/// learn its size and whether it touches the border, and once more to mark it as lung), so
+/// that the viewer can make a findings list of a large CT in the tab.
+pub fn lung_mask<H: Samples + ?Sized>(grid: &Grid, hu: &H) -> Vec<bool> {
+    // Not air; air not reached yet; air of a measured component; air of the lungs. Distinct
+    // components never touch (they would be one), so a second flood from a seed stays in its own.
+    const OTHER: u8 = 0;
+    const AIR: u8 = 1;
+    const MEASURED: u8 = 2;
+    const LUNG: u8 = 3;
     let voxel_ml = grid.spacing_mm.iter().product::<f64>() / 1000.0;
-    let mut lung = vec![false; grid.len()];
-    let mut label = vec![u32::MAX; grid.len()];
-    let mut stack = Vec::new();
-    let mut members = Vec::new();
+    let mut state: Vec<u8> = (0..grid.len())
+        .map(|n| {
+            if hu.at(n) < LUNG_AIR_BELOW_HU {
+                AIR
+            } else {
+                OTHER
+            }
+        })
+        .collect();
+    let mut queue = std::collections::VecDeque::new();
     for seed in 0..grid.len() {
-        if !air[seed] || label[seed] != u32::MAX {
+        if state[seed] != AIR {
             continue;
         }
-        // One 6-connected component of air, flood-filled from `seed`.
-        members.clear();
-        stack.push(seed);
-        label[seed] = 0;
-        let mut touches_border = false;
-        while let Some(n) = stack.pop() {
-            members.push(n);
-            let [i, j, k] = grid.ijk(n);
-            touches_border |= i == 0 || j == 0 || i + 1 == nx || j + 1 == ny;
-            for (di, dj, dk) in NEIGHBOURS_6 {
-                let (Some(a), Some(b), Some(c)) = (
-                    i.checked_add_signed(di),
-                    j.checked_add_signed(dj),
-                    k.checked_add_signed(dk),
-                ) else {
-                    continue;
-                };
-                if a >= nx || b >= ny || c >= nz {
-                    continue;
-                }
-                let m = grid.index(a, b, c);
-                if air[m] && label[m] == u32::MAX {
-                    label[m] = 0;
-                    stack.push(m);
-                }
-            }
-        }
-        if !touches_border && members.len() as f64 * voxel_ml >= LUNG_MIN_ML {
-            for &n in &members {
-                lung[n] = true;
-            }
+        // One 6-connected component of air, flood-filled from `seed`: its size and whether it
+        // touches the in-plane border.
+        let (count, touches_border) = flood(grid, &mut state, &mut queue, seed, AIR, MEASURED);
+        if !touches_border && count as f64 * voxel_ml >= LUNG_MIN_ML {
+            flood(grid, &mut state, &mut queue, seed, MEASURED, LUNG);
         }
     }
+    drop(queue);
+    // In place (a Vec's own allocation, u8 to bool).
+    let mut lung: Vec<bool> = state.into_iter().map(|s| s == LUNG).collect();
     let hole_max_voxels = LUNG_HOLE_MAX_MM2 / (grid.spacing_mm[0] * grid.spacing_mm[1]);
-    for k in 0..nz {
+    for k in 0..grid.dims[2] {
         fill_small_holes(grid, &mut lung, k, hole_max_voxels);
     }
     lung
+}
+
+/// Flood-fills the 6-connected voxels of state `from` reachable from `seed` (which has state
+/// `from`), setting them to `to`: how many there were and whether one lies on the in-plane
+/// border of the volume.
+fn flood(
+    grid: &Grid,
+    state: &mut [u8],
+    queue: &mut std::collections::VecDeque<usize>,
+    seed: usize,
+    from: u8,
+    to: u8,
+) -> (usize, bool) {
+    let [nx, ny, _] = grid.dims;
+    let mut count = 0;
+    let mut touches_border = false;
+    state[seed] = to;
+    queue.push_back(seed);
+    // Breadth first: the queue holds a front (a surface), where a stack can hold most of a
+    // large component (the air around a body is a third of a CT).
+    while let Some(n) = queue.pop_front() {
+        count += 1;
+        let [i, j, _] = grid.ijk(n);
+        touches_border |= i == 0 || j == 0 || i + 1 == nx || j + 1 == ny;
+        for_each_neighbour_6(grid, n, |m| {
+            if state[m] == from {
+                state[m] = to;
+                queue.push_back(m);
+            }
+        });
+    }
+    (count, touches_border)
+}
+
+/// Calls `f` with each of voxel `n`'s 6-connected neighbours inside the grid.
+fn for_each_neighbour_6(grid: &Grid, n: usize, mut f: impl FnMut(usize)) {
+    let [nx, ny, nz] = grid.dims;
+    let [i, j, k] = grid.ijk(n);
+    for (di, dj, dk) in NEIGHBOURS_6 {
+        let (Some(a), Some(b), Some(c)) = (
+            i.checked_add_signed(di),
+            j.checked_add_signed(dj),
+            k.checked_add_signed(dk),
+        ) else {
+            continue;
+        };
+        if a < nx && b < ny && c < nz {
+            f(grid.index(a, b, c));
+        }
+    }
 }
 
 const NEIGHBOURS_6: [(isize, isize, isize); 6] = [

@@ -24,11 +24,11 @@
 
 use std::collections::HashMap;
 
-use super::Grid;
 use super::conspicuity::lung_mask;
 use super::tf::{
     NOISE_BAND_HU, Preset, TransferFunction, auto_transfer_function, estimate_noise_sigma,
 };
+use super::{Grid, Samples};
 
 /// Regions of mean HU above this are bone, metal or undiluted contrast, not nodules or nodes.
 pub const DENSE_ABOVE_HU: f64 = 700.0;
@@ -135,34 +135,28 @@ pub enum FindingsError {
 /// The findings of `feature` (a blobness on `grid`) in the CT `hu`, for `preset` (module
 /// documentation). The regions' HU band is the preset's transfer function refined by the CT's
 /// own noise ([`auto_transfer_function`] of the noise of `hu` itself, which the regions read).
-pub fn find(
+pub fn find<H: Samples + ?Sized>(
     grid: &Grid,
-    hu: &[f32],
+    hu: &H,
     feature: &[f32],
     preset: Preset,
 ) -> Result<Findings, FindingsError> {
-    if hu.len() != grid.len() || feature.len() != grid.len() {
+    if hu.count() != grid.len() || feature.len() != grid.len() {
         return Err(FindingsError::Length {
             feature: feature.len(),
-            hu: hu.len(),
+            hu: hu.count(),
             grid: grid.len(),
         });
     }
     let gate = Gate::of(preset);
     let noise_hu = estimate_noise_sigma(grid, hu, NOISE_BAND_HU);
     let tf = auto_transfer_function(preset.transfer_function(), noise_hu);
-    let domain = Domain {
-        gate,
-        grid,
-        hu,
-        lung: lung_mask(grid, hu),
-        outside: outside_air(grid, hu),
-    };
-    let reference = percentile_999(
+    let domain = Domain::new(gate, grid, hu);
+    let reference = percentile_999(|| {
         (0..grid.len())
             .filter(|&n| domain.contains(n))
-            .map(|n| feature[n]),
-    );
+            .map(|n| feature[n])
+    });
     let mut result = Findings {
         gate,
         reference,
@@ -205,10 +199,10 @@ pub fn find(
             radius_mm.min(2.0 * halo_mm + grid.spacing_mm.iter().fold(0.0f64, |a, &b| a.max(b)));
         // Voxels of an earlier candidate's region are a border: regions never overlap.
         let region = grow(grid, peak, reach_mm, |n| {
-            let v = f64::from(hu[n]);
+            let v = f64::from(hu.at(n));
             band.0 <= v && v <= band.1 && !owner.contains_key(&n)
         });
-        let values = region.voxels.iter().map(|&n| f64::from(hu[n]));
+        let values = region.voxels.iter().map(|&n| f64::from(hu.at(n)));
         let mean_hu = values.clone().sum::<f64>() / region.voxels.len() as f64;
         let max_hu = values.fold(f64::NEG_INFINITY, f64::max);
         let voxel_ml = grid.spacing_mm.iter().product::<f64>() / 1000.0;
@@ -256,22 +250,16 @@ pub fn find(
 
 /// The feature's 99.9th percentile over a gate's domain on this CT: score 1 of its findings.
 /// (PET hot spots read the CT's shape against the soft tissue's, whatever the preset.)
-pub fn reference(grid: &Grid, hu: &[f32], feature: &[f32], gate: Gate) -> f32 {
-    if hu.len() != grid.len() || feature.len() != grid.len() {
+pub fn reference<H: Samples + ?Sized>(grid: &Grid, hu: &H, feature: &[f32], gate: Gate) -> f32 {
+    if hu.count() != grid.len() || feature.len() != grid.len() {
         return 0.0;
     }
-    let domain = Domain {
-        gate,
-        grid,
-        hu,
-        lung: lung_mask(grid, hu),
-        outside: outside_air(grid, hu),
-    };
-    percentile_999(
+    let domain = Domain::new(gate, grid, hu);
+    percentile_999(|| {
         (0..grid.len())
             .filter(|&n| domain.contains(n))
-            .map(|n| feature[n]),
-    )
+            .map(|n| feature[n])
+    })
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -281,21 +269,42 @@ enum Owner {
 }
 
 /// Where a gate's findings may lie, on one CT.
-struct Domain<'a> {
+struct Domain<'a, H: Samples + ?Sized> {
     gate: Gate,
     grid: &'a Grid,
-    hu: &'a [f32],
+    hu: &'a H,
+    /// The lung mask; empty for the body gate, which does not read it.
     lung: Vec<bool>,
-    /// The air around the body ([`outside_air`]).
+    /// The air around the body ([`outside_air`]); empty for the lung gate.
     outside: Vec<bool>,
 }
 
-impl Domain<'_> {
+impl<'a, H: Samples + ?Sized> Domain<'a, H> {
+    /// The masks `gate` reads, and only those (a byte a voxel each): the lung for the lung and
+    /// soft-tissue gates, the air around the body for the soft-tissue and body gates.
+    fn new(gate: Gate, grid: &'a Grid, hu: &'a H) -> Self {
+        let lung = match gate {
+            Gate::Lung | Gate::SoftTissue => lung_mask(grid, hu),
+            Gate::Body => Vec::new(),
+        };
+        let outside = match gate {
+            Gate::SoftTissue | Gate::Body => outside_air(grid, hu),
+            Gate::Lung => Vec::new(),
+        };
+        Self {
+            gate,
+            grid,
+            hu,
+            lung,
+            outside,
+        }
+    }
+
     /// Whether voxel `n` counts towards the reference percentile.
     fn contains(&self, n: usize) -> bool {
         match self.gate {
             Gate::Lung => self.lung[n],
-            Gate::SoftTissue => !self.lung[n] && !self.outside[n] && self.hu[n] >= AIR_BELOW_HU,
+            Gate::SoftTissue => !self.lung[n] && !self.outside[n] && self.hu.at(n) >= AIR_BELOW_HU,
             Gate::Body => !self.outside[n],
         }
     }
@@ -307,7 +316,7 @@ impl Domain<'_> {
             Gate::Lung => lung[peak] || lung_contact(grid, lung, region) >= LUNG_CONTACT_MIN,
             Gate::SoftTissue => {
                 !lung[peak]
-                    && self.hu[peak] >= AIR_BELOW_HU
+                    && self.hu.at(peak) >= AIR_BELOW_HU
                     && (SOFT_TISSUE_HU.0..=SOFT_TISSUE_HU.1).contains(&core)
                     && !near(grid, outside, peak, SKIN_MARGIN_MM)
             }
@@ -357,11 +366,11 @@ fn distance_mm(grid: &Grid, a: [usize; 3], b: [usize; 3]) -> f64 {
 }
 
 /// The mean HU of the (up to) 3 x 3 x 3 voxels around `n`.
-fn core_hu(grid: &Grid, hu: &[f32], n: usize) -> f64 {
-    let mut sum = f64::from(hu[n]);
+fn core_hu<H: Samples + ?Sized>(grid: &Grid, hu: &H, n: usize) -> f64 {
+    let mut sum = f64::from(hu.at(n));
     let mut count = 1.0;
     for m in neighbours(grid, n, &NEIGHBOURS_26) {
-        sum += f64::from(hu[m]);
+        sum += f64::from(hu.at(m));
         count += 1.0;
     }
     sum / count
@@ -411,39 +420,77 @@ fn local_maxima(grid: &Grid, feature: &[f32], threshold: f32) -> Vec<usize> {
         .collect()
 }
 
-/// The nearest-rank 99.9th percentile of `values` (0 when there are none).
-fn percentile_999(values: impl Iterator<Item = f32>) -> f32 {
-    let mut v: Vec<f32> = values.filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
+/// The nearest-rank 99.9th percentile of the finite values `values()` yields (0 when there
+/// are none), in the order of `f32::total_cmp`. Exact, and in constant memory: the values are
+/// read twice (a histogram of the upper 16 bits of an order-preserving key, then one of the
+/// lower 16 bits within the bucket that holds the rank), never collected, so that the viewer can
+/// make a findings list of a large CT in the tab.
+fn percentile_999<I: Iterator<Item = f32>>(values: impl Fn() -> I) -> f32 {
+    // Unsigned keys in the order of total_cmp: negative floats flipped, positive ones offset.
+    let key = |x: f32| {
+        let b = x.to_bits();
+        if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+    };
+    let value = |k: u32| f32::from_bits(if k >> 31 == 1 { k & 0x7fff_ffff } else { !k });
+    let finite = || values().filter(|x| x.is_finite()).map(key);
+    let mut high = vec![0u64; 1 << 16];
+    let mut n = 0u64;
+    for k in finite() {
+        high[(k >> 16) as usize] += 1;
+        n += 1;
+    }
+    if n == 0 {
         return 0.0;
     }
-    let k = ((0.999 * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
-    *v.select_nth_unstable_by(k, f32::total_cmp).1
+    // 0-based nearest rank.
+    let rank = ((0.999 * n as f64).ceil() as u64).clamp(1, n) - 1;
+    let (bucket, rest) = nth_bucket(&high, rank);
+    drop(high);
+    let mut low = vec![0u64; 1 << 16];
+    for k in finite().filter(|k| (k >> 16) as usize == bucket) {
+        low[(k & 0xffff) as usize] += 1;
+    }
+    let (within, _) = nth_bucket(&low, rest);
+    value(((bucket as u32) << 16) | within as u32)
+}
+
+/// The bucket of `counts` that holds the 0-based `rank`, and the rank within it.
+fn nth_bucket(counts: &[u64], mut rank: u64) -> (usize, u64) {
+    for (b, &c) in counts.iter().enumerate() {
+        if rank < c {
+            return (b, rank);
+        }
+        rank -= c;
+    }
+    (counts.len() - 1, 0)
 }
 
 /// Air (below [`AIR_BELOW_HU`]) 6-connected to a voxel on the volume's in-plane border: the
 /// air around the body.
-pub fn outside_air(grid: &Grid, hu: &[f32]) -> Vec<bool> {
+pub fn outside_air<H: Samples + ?Sized>(grid: &Grid, hu: &H) -> Vec<bool> {
     let [nx, ny, nz] = grid.dims;
     let mut outside = vec![false; grid.len()];
-    let mut stack = Vec::new();
+    // Breadth first from one border voxel at a time: the queue holds a front, where a stack
+    // (or every border voxel queued at once) can hold a large part of the air.
+    let mut queue = std::collections::VecDeque::new();
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
                 let border = i == 0 || j == 0 || i + 1 == nx || j + 1 == ny;
                 let n = grid.index(i, j, k);
-                if border && hu[n] < AIR_BELOW_HU && !outside[n] {
-                    outside[n] = true;
-                    stack.push(n);
+                if !border || outside[n] || hu.at(n) >= AIR_BELOW_HU {
+                    continue;
                 }
-            }
-        }
-    }
-    while let Some(n) = stack.pop() {
-        for m in neighbours(grid, n, &NEIGHBOURS_6) {
-            if !outside[m] && hu[m] < AIR_BELOW_HU {
-                outside[m] = true;
-                stack.push(m);
+                outside[n] = true;
+                queue.push_back(n);
+                while let Some(n) = queue.pop_front() {
+                    for m in neighbours(grid, n, &NEIGHBOURS_6) {
+                        if !outside[m] && hu.at(m) < AIR_BELOW_HU {
+                            outside[m] = true;
+                            queue.push_back(m);
+                        }
+                    }
+                }
             }
         }
     }
@@ -554,6 +601,49 @@ mod tests {
     }
 
     #[test]
+    fn the_percentile_is_the_nearest_rank_of_the_sorted_values() {
+        let sorted = |v: &[f32]| {
+            let mut f: Vec<f32> = v.iter().copied().filter(|x| x.is_finite()).collect();
+            if f.is_empty() {
+                return 0.0;
+            }
+            let k = ((0.999 * f.len() as f64).ceil() as usize).clamp(1, f.len()) - 1;
+            *f.select_nth_unstable_by(k, f32::total_cmp).1
+        };
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as f32 / (1u64 << 31) as f32
+        };
+        let cases: Vec<Vec<f32>> = vec![
+            vec![],
+            vec![f32::NAN, f32::INFINITY],
+            vec![3.0],
+            vec![-0.0, 0.0, -0.0],
+            (0..5000).map(|_| next() * 200.0 - 100.0).collect(),
+            (0..20_000)
+                .map(|i| if i % 3 == 0 { 0.0 } else { next() * 1e-3 })
+                .collect(),
+            (0..3000)
+                .map(|i| [1.0, 2.0, f32::NAN, -5.0][i % 4])
+                .collect(),
+            (0..10_000).map(|_| (next() * 60.0 - 30.0).exp2()).collect(),
+        ];
+        for v in cases {
+            let want = sorted(&v);
+            let got = percentile_999(|| v.iter().copied());
+            assert_eq!(
+                got.to_bits(),
+                want.to_bits(),
+                "{} values: {got} vs {want}",
+                v.len()
+            );
+        }
+    }
+
+    #[test]
     fn maxima_of_one_structure_are_one_finding_ranked_by_their_peak() {
         let (grid, mut hu) = chest([60, 60, 40], [2.0; 3]);
         let mut feature = vec![0.0f32; grid.len()];
@@ -595,12 +685,13 @@ mod tests {
     #[test]
     fn a_feature_of_the_wrong_size_is_an_error_and_an_empty_volume_has_no_findings() {
         let grid = Grid::new([4, 4, 4], [1.0; 3]);
-        let err = find(&grid, &[0.0; 64], &[0.0; 63], Preset::LungNodules);
+        let err = find(&grid, &[0.0f32; 64][..], &[0.0; 63], Preset::LungNodules);
         assert!(matches!(
             err,
             Err(FindingsError::Length { feature: 63, .. })
         ));
-        let none = find(&grid, &[0.0; 64], &[0.0; 64], Preset::LymphNodes).expect("same lengths");
+        let none =
+            find(&grid, &[0.0f32; 64][..], &[0.0; 64], Preset::LymphNodes).expect("same lengths");
         assert!(none.findings.is_empty());
     }
 }

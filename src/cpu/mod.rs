@@ -45,6 +45,47 @@ pub use rst::{
 pub use structure_tensor::{structure_tensor_eigen, structure_tensor_features};
 pub use tf::{Preset, TransferFunction, auto_transfer_function, estimate_noise_sigma};
 
+/// Physical values at linear voxel indices (i fastest): a slice of f32, or a volume's compact
+/// voxels read through its rescale, so that a computation over a CT (a findings list, the lung
+/// mask, the noise) needs no f32 copy of it.
+pub trait Samples {
+    fn count(&self) -> usize;
+    fn at(&self, n: usize) -> f32;
+}
+
+impl Samples for [f32] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+    #[inline]
+    fn at(&self, n: usize) -> f32 {
+        self[n]
+    }
+}
+
+impl Samples for Vec<f32> {
+    fn count(&self) -> usize {
+        self.len()
+    }
+    #[inline]
+    fn at(&self, n: usize) -> f32 {
+        self[n]
+    }
+}
+
+/// The stored values ([`crate::volume::Volume::value`]): where a voxel is not finite this is
+/// not what [`crate::volume::Volume::to_f32`] gives (it replaces such voxels); a caller that
+/// must agree with it reads through the volume only when `non_finite_count()` is 0.
+impl Samples for crate::volume::Volume {
+    fn count(&self) -> usize {
+        self.voxel_count()
+    }
+    #[inline]
+    fn at(&self, n: usize) -> f32 {
+        self.value(n)
+    }
+}
+
 /// The sampling grid of a volume: voxel counts and spacing (mm) per axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Grid {

@@ -1,7 +1,7 @@
 //! The opacity transfer function (paper eq. 3), the noise estimator, the automatic transfer
 //! function and the presets (docs/science.md, RST item 8 and "Presets").
 
-use super::Grid;
+use super::{Grid, Samples};
 
 /// Piecewise-linear opacity transfer function of the intensity difference d (HU).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,7 +43,11 @@ pub const NOISE_WINDOW: usize = 11;
 /// sigma_s: the noise standard deviation of `smoothed` (the intensity the rays read), as the
 /// median over in-plane (i, j) 11 x 11 windows, tiled without overlap on every slice, of the
 /// standard deviation in each window that lies wholly inside `band`. `None` if no window does.
-pub fn estimate_noise_sigma(grid: &Grid, smoothed: &[f32], band: (f32, f32)) -> Option<f64> {
+pub fn estimate_noise_sigma<S: Samples + ?Sized>(
+    grid: &Grid,
+    smoothed: &S,
+    band: (f32, f32),
+) -> Option<f64> {
     let mut sigmas = Vec::new();
     for k in 0..grid.dims[2] {
         sigmas.extend(noise_window_sigmas(grid, smoothed, band, k));
@@ -58,7 +62,12 @@ pub fn noise_window_counts(dims: [usize; 3]) -> [usize; 2] {
 }
 
 /// The standard deviations of slice `k`'s windows that lie wholly inside `band`.
-pub fn noise_window_sigmas(grid: &Grid, smoothed: &[f32], band: (f32, f32), k: usize) -> Vec<f64> {
+pub fn noise_window_sigmas<S: Samples + ?Sized>(
+    grid: &Grid,
+    smoothed: &S,
+    band: (f32, f32),
+    k: usize,
+) -> Vec<f64> {
     let w = NOISE_WINDOW;
     let [nwx, nwy] = noise_window_counts(grid.dims);
     let mut sigmas = Vec::new();
@@ -67,7 +76,7 @@ pub fn noise_window_sigmas(grid: &Grid, smoothed: &[f32], band: (f32, f32), k: u
             let (mut s, mut s2) = (0.0f64, 0.0f64);
             for j in j0..j0 + w {
                 for i in i0..i0 + w {
-                    let v = smoothed[grid.index(i, j, k)];
+                    let v = smoothed.at(grid.index(i, j, k));
                     if !(v >= band.0 && v <= band.1) {
                         continue 'window;
                     }

@@ -419,3 +419,22 @@ fn findings_list_the_demo_spheres_once_each_with_their_sizes() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("blobness"));
 }
+
+/// `findings` on an MR: refused by name before any features are computed (its values are not
+/// HU, which every gate reads).
+#[test]
+fn findings_refuse_an_mr_by_name() {
+    let mr = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/dicom/emri_small_RLE.dcm");
+    let out = bin()
+        .arg("findings")
+        .arg(&mr)
+        .args(["--method", "hessian", "--backend", "cpu"])
+        .output()
+        .expect("run shapecast");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("Hounsfield") && err.contains("MR") && err.contains("emri_small_RLE"),
+        "{err}"
+    );
+}

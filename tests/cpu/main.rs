@@ -1,8 +1,11 @@
 //! The CPU references (src/cpu), checked against the equations, analytic phantoms and independent
-//! implementations; one binary so that the suite links once.
+//! implementations; one binary so that the suite links once. The counting allocator (per thread) counts every
+//! allocation of this binary.
 
 #[path = "../common/mod.rs"]
 mod common;
+#[path = "../common/counting.rs"]
+mod counting;
 #[path = "../cpu_common/mod.rs"]
 mod cpu_common;
 #[path = "../eigen_common/mod.rs"]
@@ -12,6 +15,7 @@ mod adjacency;
 mod analytic;
 mod bifurcation;
 mod eigen;
+mod findings_memory;
 mod noise;
 mod phantoms;
 mod real_ct_conspicuity;
