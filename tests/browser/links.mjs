@@ -48,9 +48,12 @@ let skipped = 0;
 function check(name, ok, detail = '') {
   if (ok) passed += 1;
   else failed += 1;
-  console.log(`${ok ? 'ok  ' : 'FAIL'} - ${name}${detail ? `: ${detail}` : ''}`);
+  // [seconds since the start]: where a slow run spends its time.
+  const t = ((Date.now() - STARTED) / 1000).toFixed(0).padStart(4);
+  console.log(`${ok ? 'ok  ' : 'FAIL'} [${t} s] - ${name}${detail ? `: ${detail}` : ''}`);
   return ok;
 }
+const STARTED = Date.now();
 function skip(name, why) {
   skipped += 1;
   console.log(`skip - ${name}: ${why}`);

@@ -37,13 +37,16 @@ const timeoutMs = Number(process.env.SHAPECAST_BROWSER_TIMEOUT_MS ?? 600000);
 
 let passed = 0;
 let failed = 0;
+const STARTED = Date.now();
 function check(name, ok, detail = '') {
+  // [seconds since the start]: where a slow run spends its time.
+  const t = ((Date.now() - STARTED) / 1000).toFixed(0).padStart(4);
   if (ok) {
     passed += 1;
-    console.log(`ok   - ${name}${detail ? `: ${detail}` : ''}`);
+    console.log(`ok   [${t} s] - ${name}${detail ? `: ${detail}` : ''}`);
   } else {
     failed += 1;
-    console.log(`FAIL - ${name}${detail ? `: ${detail}` : ''}`);
+    console.log(`FAIL [${t} s] - ${name}${detail ? `: ${detail}` : ''}`);
   }
 }
 

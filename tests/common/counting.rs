@@ -11,9 +11,13 @@ struct Counting;
 thread_local! {
     static LIVE: Cell<usize> = const { Cell::new(0) };
     static PEAK: Cell<usize> = const { Cell::new(0) };
+    /// Allocations (and reallocations) made, ever: a measure of work that a loaded machine
+    /// cannot change, where a clock can.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
 }
 
 fn note_alloc(size: usize) {
+    let _ = ALLOCATIONS.try_with(|a| a.set(a.get().wrapping_add(1)));
     let _ = LIVE.try_with(|live| {
         let now = live.get().saturating_add(size);
         live.set(now);
@@ -62,4 +66,13 @@ pub fn peak_during<R>(f: impl FnOnce() -> R) -> (R, usize) {
     let r = f();
     let peak = PEAK.with(Cell::get);
     (r, peak.saturating_sub(base))
+}
+
+/// Runs `f` and returns its result with the peak of bytes allocated by this thread above what
+/// was live when it started, and how many allocations it made.
+pub fn peak_and_allocations_during<R>(f: impl FnOnce() -> R) -> (R, usize, usize) {
+    let before = ALLOCATIONS.with(Cell::get);
+    let (r, peak) = peak_during(f);
+    let allocations = ALLOCATIONS.with(Cell::get).wrapping_sub(before);
+    (r, peak, allocations)
 }
