@@ -108,8 +108,9 @@ pub struct PetStatus {
 /// The findings of the displayed blobness (`window.shapecastStatus.findings`).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FindingsStatus {
-    /// "none", "reading" (the features being read back), "linked" (a link's list, waiting for
-    /// the features) or "done".
+    /// "not asked" (no list until the reader asks: the panel's "List findings", N, a link's
+    /// marks), "none", "reading" (the features being read back), "linked" (a link's list,
+    /// waiting for the features) or "done".
     pub state: String,
     /// Findings made (the list shows the first 30 until "more").
     pub total: usize,

@@ -156,9 +156,18 @@ pub struct FindingsState {
     show_all: bool,
     /// Why there is no list (not a CT, a method without blobness, a failed read).
     pub message: Option<String>,
+    /// The reader asked for findings (the panel's button, N, a link with marks): lists are made
+    /// from then on, for this volume and the next. Until then none is, so that a reader who
+    /// does not use them pays neither the readback nor the seconds a large CT's list takes.
+    asked: bool,
 }
 
 impl FindingsState {
+    /// Lists are made from now on ([`Self::asked`]).
+    pub fn ask(&mut self) {
+        self.asked = true;
+    }
+
     /// Forgets the list (a new volume).
     pub fn clear(&mut self) {
         self.reading = None;
@@ -171,6 +180,8 @@ impl FindingsState {
 
     /// A link's marks for the volume of `generation`.
     pub fn set_linked(&mut self, generation: u64, marks: Vec<FindingMark>) {
+        // A link that carries marks asks for the list they belong to.
+        self.asked |= !marks.is_empty();
         self.linked = (!marks.is_empty()).then_some((generation, marks));
         // A list already made (a link opened on the volume shown) takes the marks at once.
         if let Some(l) = self.list.as_ref().filter(|l| l.generation == generation) {
@@ -220,7 +231,8 @@ impl FindingsState {
                     "findings read blobness: show Hessian, Li or RST ({} has none)",
                     method_name(method)
                 ));
-            } else {
+            } else if self.asked {
+                // (Until asked, no list: the panel's button, N or a link's marks ask.)
                 match PendingTexture::try_start(
                     gpu,
                     &entry.texture.texture,
@@ -422,6 +434,8 @@ impl FindingsState {
         let rows = self.rows(generation);
         let n = rows.len();
         if n == 0 {
+            // N before any list: the reader asks for one.
+            self.asked = true;
             return None;
         }
         let start = self.current.filter(|&c| c < n);
@@ -493,6 +507,7 @@ impl FindingsState {
     ) -> (Option<DVec3>, Vec<(String, egui::Rect)>) {
         let mut go = None;
         let mut controls = Vec::new();
+        let mut ask = false;
         if let Some(m) = &self.message {
             ui.label(egui::RichText::new(m).weak());
         }
@@ -519,6 +534,13 @@ impl FindingsState {
             }
             None if self.busy() => {
                 ui.label("reading the features…");
+            }
+            None if !self.asked && self.message.is_none() => {
+                let r = ui
+                    .button("List findings")
+                    .on_hover_text("rank the round candidates of the features shown (N goes to the next); a large CT takes a few seconds");
+                controls.push(("findings:list".to_owned(), r.rect));
+                ask = r.clicked();
             }
             None if !rows.is_empty() => {
                 ui.label("from the link; the list is made when the features are computed");
@@ -651,6 +673,7 @@ impl FindingsState {
                 }
             }
         }
+        self.asked |= ask;
         (go, controls)
     }
 
@@ -662,6 +685,8 @@ impl FindingsState {
             "done"
         } else if self.linked.as_ref().is_some_and(|(g, _)| *g == generation) {
             "linked"
+        } else if !self.asked {
+            "not asked"
         } else {
             "none"
         };

@@ -956,6 +956,11 @@ impl ShapecastApp {
         }
     }
 
+    /// Asks for findings (as the panel's "List findings" does), for tests and automation.
+    pub fn list_findings(&mut self) {
+        self.findings.ask();
+    }
+
     /// The findings of the shown volume, for tests and automation.
     pub fn findings_status(&self) -> crate::status::FindingsStatus {
         self.findings.status(self.generation)

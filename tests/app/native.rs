@@ -1010,6 +1010,17 @@ fn findings_list_the_demo_spheres_and_n_skips_the_dismissed() {
     let Some(mut harness) = harness(start()) else {
         return;
     };
+    // No list until the reader asks: the panel's button.
+    run_until(&mut harness, "the features", 400, |app| {
+        app.status()
+            .features
+            .as_ref()
+            .is_some_and(|f| f.state == "done")
+    });
+    harness.run_steps(2);
+    assert_eq!(harness.state().findings_status().state, "not asked");
+    scroll_side_panel_down(&mut harness);
+    click_control(&mut harness, "findings:list");
     run_until(&mut harness, "findings listed", 400, |app| {
         app.findings_status().state == "done"
     });
@@ -1133,6 +1144,7 @@ fn findings_list_the_pet_hot_spots_and_a_click_goes_to_one() {
     }) else {
         return;
     };
+    harness.state_mut().list_findings();
     run_until(&mut harness, "hot spots listed", 600, |app| {
         let f = app.findings_status();
         f.state == "done" && !f.hot_spots.is_empty()

@@ -288,6 +288,17 @@ async function waitStatus(page, pred, what, arg = null, timeout = 180000) {
   }
   return status(page);
 }
+// The status once its view has stayed the same for half a second (at most ~10 s).
+async function stableView(page) {
+  let s = await status(page);
+  for (let i = 0; i < 20; i += 1) {
+    await page.waitForTimeout(500);
+    const t = await status(page);
+    if (JSON.stringify(t?.view) === JSON.stringify(s?.view)) return t;
+    s = t;
+  }
+  return s;
+}
 // The MIP drawn in full (not the coarse frame nor the bands that refine it) and the features
 // done: a picture a screenshot can compare, instead of a sleep that a slow machine outruns.
 async function waitPicture(page, what) {
@@ -489,7 +500,8 @@ try {
       // On the slider's rail (the rest of the control is its value and label).
       await click(page, 'gain:0', 0.4, 0.5);
       await page.waitForTimeout(500);
-      s = await status(page);
+      // The view once it has settled (a zoom or a window drag can still be moving it).
+      s = await stableView(page);
       const v = s.view;
       check('round trip: the drag turned the MIP', JSON.stringify(v.rot) !== JSON.stringify(before.rot), `${JSON.stringify(before.rot)} -> ${JSON.stringify(v.rot)}`);
       check('round trip: the wheel zoomed it', v.zoom > before.zoom, `${before.zoom} -> ${v.zoom}`);
@@ -503,7 +515,9 @@ try {
       const copied = await page.evaluate(() => navigator.clipboard.readText()).catch((e) => `clipboard: ${e}`);
       s = await status(page);
       check('"Copy link" copies the link to this view', copied === s.link && copied.includes(`${SUB}#v=1&url=`), copied.slice(0, 160));
-      check('window.shapecastStatus.view is the link\'s state', JSON.stringify(s.view) === JSON.stringify(v));
+      const changed = Object.keys({ ...v, ...s.view }).filter((k) => JSON.stringify(v[k]) !== JSON.stringify(s.view?.[k]));
+      check('window.shapecastStatus.view is the link\'s state', changed.length === 0,
+        changed.map((k) => `${k}: ${JSON.stringify(v[k])} -> ${JSON.stringify(s.view?.[k])}`).join('; '));
       link = copied;
       viewA = s.view;
       // Away from every control, and past the "copied" note, before the screenshot.
