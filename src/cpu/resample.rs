@@ -1,7 +1,7 @@
 //! Refinement of thick axes by an integer factor before the Hessian features, and the features
 //! taken back at the input voxel centres by subsampling (docs/science.md, "Thick slices").
 //!
-//! The rule (measured, see ARCHITECTURE.md and docs/reproduction.md): only the Hessian family
+//! The rule (measured, see docs/reproduction.md): only the Hessian family
 //! refines, and only an axis whose spacing exceeds the smallest scale, by
 //! `f = ceil(spacing / sigma_min)` (at most [`MAX_REFINEMENT`]), so that the sampled Gaussian
 //! derivative kernels span at least one voxel per sigma. The refined grid keeps every input

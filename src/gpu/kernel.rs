@@ -1,7 +1,7 @@
 //! What every compute kernel module shares: the grid of the slab it works on, storage buffers of
 //! `f32` and tables, parameter structs, textures, bind groups, and workgroup counts.
 //!
-//! Conventions every kernel follows (ARCHITECTURE.md, "GPU kernels"):
+//! Conventions every kernel follows (ARCHITECTURE.md, its `src/gpu` entry and invariants):
 //! - A volume on the GPU is a storage buffer of `f32`, voxel `i` fastest
 //!   (`index = i + nx * (j + ny * k)`), physical units; several components of one volume are
 //!   stored component-major in one buffer (`c * n + index`).
