@@ -1093,7 +1093,7 @@ impl ShapecastApp {
         self.notes = notes;
         self.notes.extend(volume.warnings.iter().cloned());
         let range = volume.value_range();
-        let is_ct = window_level::looks_like_ct(&volume, range);
+        let is_ct = volume.looks_like_ct(range);
         // Without a preset asked for (URL, command line), open on the one that fits what was
         // loaded, and say which (the demo CTA keeps the vessels preset it starts with).
         if self.options.preset.is_none()

@@ -94,16 +94,11 @@ impl WindowPreset {
     }
 }
 
-/// Whether the values look like Hounsfield units of a CT ([`Volume::looks_like_ct`]).
-pub fn looks_like_ct(volume: &Volume, range: Option<(f32, f32)>) -> bool {
-    volume.looks_like_ct(range)
-}
-
 /// The window a volume opens with: the abdomen (soft-tissue) window for CT, 0-10 for a PET in
 /// SUV, otherwise the 1st to 99.5th percentile of the values (MR has no units; phantoms have low contrast).
 pub fn default_window(volume: &Volume) -> Window {
     let range = volume.value_range();
-    if looks_like_ct(volume, range) {
+    if volume.looks_like_ct(range) {
         return WindowPreset::Abdomen.window();
     }
     // A PET in SUV opens on 0-10 SUV, as nuclear-medicine viewers do.

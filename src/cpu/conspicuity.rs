@@ -159,34 +159,20 @@ fn flood(
     // large component (the air around a body is a third of a CT).
     while let Some(n) = queue.pop_front() {
         count += 1;
-        let [i, j, _] = grid.ijk(n);
-        touches_border |= i == 0 || j == 0 || i + 1 == nx || j + 1 == ny;
-        for_each_neighbour_6(grid, n, |m| {
+        let ijk = grid.ijk(n);
+        touches_border |= ijk[0] == 0 || ijk[1] == 0 || ijk[0] + 1 == nx || ijk[1] + 1 == ny;
+        for (di, dj, dk) in NEIGHBOURS_6 {
+            let Some([a, b, c]) = neighbour(grid, ijk, [di, dj, dk]) else {
+                continue;
+            };
+            let m = grid.index(a, b, c);
             if state[m] == from {
                 state[m] = to;
                 queue.push_back(m);
             }
-        });
-    }
-    (count, touches_border)
-}
-
-/// Calls `f` with each of voxel `n`'s 6-connected neighbours inside the grid.
-fn for_each_neighbour_6(grid: &Grid, n: usize, mut f: impl FnMut(usize)) {
-    let [nx, ny, nz] = grid.dims;
-    let [i, j, k] = grid.ijk(n);
-    for (di, dj, dk) in NEIGHBOURS_6 {
-        let (Some(a), Some(b), Some(c)) = (
-            i.checked_add_signed(di),
-            j.checked_add_signed(dj),
-            k.checked_add_signed(dk),
-        ) else {
-            continue;
-        };
-        if a < nx && b < ny && c < nz {
-            f(grid.index(a, b, c));
         }
     }
+    (count, touches_border)
 }
 
 const NEIGHBOURS_6: [(isize, isize, isize); 6] = [
