@@ -7,8 +7,9 @@
 // linear sampler instead, see `sample_ig`), accumulates the opacity
 // with the consistent rule or the paper's, stops a ray after the step where alpha >= 0.99, and
 // writes the symmetrised tensor Ts = (T + T^T) / N_R, its eigenvalues, its features, or the
-// number of samples taken, for the slices out_z0 .. out_z0 + out_nz only (and, to split a slice
-// into smaller dispatches, only its rows row0 .. row0 + n_rows; the output layout is the same).
+// number of samples taken, for the out_nz slices out_z0, out_z0 + z_stride, ... only (and, to
+// split a slice into smaller dispatches, only its rows row0 .. row0 + n_rows; the output layout
+// is the same). z_stride > 1 when the slab was refined along z (`GradientVolume::refined`).
 //
 // Positions are in slab voxel units: the voxel (i, j, k) at (i, j, k); a ray's step in voxels,
 // dr * r_a / s_a, and its opacity length L_i are computed on the CPU in f64 (the twin's
@@ -49,7 +50,10 @@ struct Params {
     // Rows (j) of the output slices this dispatch computes.
     row0: u32,
     n_rows: u32,
-    _pad: vec2<u32>,
+    // Slab slices from one output slice to the next: 1, or z's refinement factor (the slab is
+    // refined, the output is its input voxels).
+    z_stride: u32,
+    _pad: u32,
 }
 
 struct Ray {
@@ -147,12 +151,13 @@ fn rst(@builtin(global_invocation_id) gid: vec3<u32>) {
         || gid.z >= params.out_nz {
         return;
     }
-    let x = vec3<f32>(f32(gid.x), f32(j), f32(params.out_z0 + gid.z));
+    let z = params.out_z0 + gid.z * params.z_stride;
+    let x = vec3<f32>(f32(gid.x), f32(j), f32(z));
     // The centre is a voxel: with HARDWARE_FILTERING read it exactly (one load), as the trilinear
     // weights (1, 0, ...) of the exact path do.
     var centre: vec4<f32>;
     if HARDWARE_FILTERING {
-        centre = load(gid.x, j, params.out_z0 + gid.z);
+        centre = load(gid.x, j, z);
     } else {
         centre = sample_ig(x);
     }

@@ -19,7 +19,7 @@ use crate::cpu::hot_spots::{CtShape, HotSpots, hot_spots};
 use crate::cpu::pipeline::Method;
 use crate::cpu::tf::Preset;
 use crate::gpu::GpuContext;
-use crate::gpu::readback::PendingTexture;
+use crate::gpu::readback::PendingSlabs;
 use crate::gpu::volume_texture::{FEATURE_TEXEL_BYTES, decode_feature_texels, decode_rgb9e5};
 use crate::volume::Volume;
 
@@ -117,6 +117,11 @@ impl FindingList {
 }
 
 /// Which PET volume (its allocation; a new PET is a new one).
+/// The largest readback of the features per frame: 32 MiB (a 512 x 512 x 32 slab), so that a
+/// whole-body texture (2 GB at 2,000 slices) is read over frames within any device's buffer limit
+/// and never as a second whole copy in flight.
+const READBACK_SLAB_BYTES: u64 = 32 << 20;
+
 fn pet_key(pet: Option<&std::sync::Arc<Volume>>) -> Option<usize> {
     pet.map(|p| std::sync::Arc::as_ptr(p) as usize)
 }
@@ -128,7 +133,7 @@ struct Reading {
     method: Method,
     preset: Preset,
     dims: [u32; 3],
-    pending: PendingTexture,
+    pending: PendingSlabs,
 }
 
 /// What the viewer draws for a finding.
@@ -233,11 +238,12 @@ impl FindingsState {
                 ));
             } else if self.asked {
                 // (Until asked, no list: the panel's button, N or a link's marks ask.)
-                match PendingTexture::try_start(
+                match PendingSlabs::start(
                     gpu,
                     &entry.texture.texture,
                     entry.texture.dims,
                     FEATURE_TEXEL_BYTES,
+                    READBACK_SLAB_BYTES,
                 ) {
                     Ok(pending) => {
                         self.reading = Some(Reading {
@@ -250,8 +256,8 @@ impl FindingsState {
                             pending,
                         });
                     }
-                    // A whole-body volume's features can exceed one readback buffer (slab
-                    // readback is open work): said once, the viewer goes on without a list.
+                    // Only when one slice exceeds a buffer: said once, the viewer goes on
+                    // without a list.
                     Err(e) => {
                         let message = format!("findings: not listed for this volume: {e}");
                         self.message = Some(message.clone());

@@ -534,6 +534,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         while z < slab.dims[2] {
             let nz = per.min(slab.dims[2] - z);
             let dispatch = RstDispatch {
+                z_stride: 1,
                 grid: slab,
                 out_z0: z,
                 out_nz: nz,
@@ -549,6 +550,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         let count_out = f32_buffer(d, "bench rst count", plane * u64::from(nz));
         timed(&ctx, |e| {
             let dispatch = RstDispatch {
+                z_stride: 1,
                 grid: slab,
                 out_z0: mid,
                 out_nz: nz,

@@ -67,7 +67,8 @@ struct Params {
     trans_stop: f32,
     row0: u32,
     n_rows: u32,
-    _pad: [u32; 2],
+    z_stride: u32,
+    _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 80);
 
@@ -184,12 +185,27 @@ impl RstRays {
         spacing_mm: [f64; 3],
         sigma_g_mm: f64,
     ) -> Result<Self, RstConfigError> {
+        Self::refined(ctx, params, spacing_mm, spacing_mm, sigma_g_mm)
+    }
+
+    /// [`Self::new`] for a gradient volume on a grid of `spacing_mm` refined from data acquired
+    /// at `acquired_spacing_mm` (`GradientVolume::refined` in the twin): steps in refined
+    /// voxels, opacity lengths from the acquired spacing.
+    pub fn refined(
+        ctx: &GpuContext,
+        params: &RstParams,
+        spacing_mm: [f64; 3],
+        acquired_spacing_mm: [f64; 3],
+        sigma_g_mm: f64,
+    ) -> Result<Self, RstConfigError> {
         let n = params.rays.len();
         if n == 0 || n > MAX_RAYS {
             return Err(RstConfigError::RayCount(n));
         }
-        if !spacing_mm.iter().all(|s| s.is_finite() && *s > 0.0) {
-            return Err(RstConfigError::BadSpacing(spacing_mm));
+        for spacing in [spacing_mm, acquired_spacing_mm] {
+            if !spacing.iter().all(|s| s.is_finite() && *s > 0.0) {
+                return Err(RstConfigError::BadSpacing(spacing));
+            }
         }
         if !(sigma_g_mm.is_finite() && sigma_g_mm >= 0.0) {
             return Err(RstConfigError::BadSigma(sigma_g_mm));
@@ -207,7 +223,7 @@ impl RstRays {
             return Err(RstConfigError::BadTransferFunction { d_min, d_max });
         }
         let steps = params.steps();
-        let grid = crate::cpu::Grid::new([1, 1, 1], spacing_mm);
+        let acquired = crate::cpu::Grid::new([1, 1, 1], acquired_spacing_mm);
         let mut rays = Vec::with_capacity(n);
         let mut max_rz = 0.0f64;
         for (index, r) in params.rays.iter().enumerate() {
@@ -216,7 +232,7 @@ impl RstRays {
             if !unit {
                 return Err(RstConfigError::BadRay { index, dir: *r });
             }
-            let len = opacity_length_mm(&grid, sigma_g_mm, *r);
+            let len = opacity_length_mm(&acquired, sigma_g_mm, *r);
             max_rz = max_rz.max(r[2].abs());
             rays.push(GpuRay {
                 dir_len: [r[0] as f32, r[1] as f32, r[2] as f32, len as f32],
@@ -299,6 +315,10 @@ pub struct RstDispatch {
     pub out_z0: u32,
     /// Number of output slices; the output buffer holds `nx * ny * out_nz` voxels per component.
     pub out_nz: u32,
+    /// Slab slices from one output slice to the next (output slice `k` is slab slice
+    /// `out_z0 + k * z_stride`): 1, or the refinement factor of z, so that a refined slab is
+    /// evaluated at its input voxels only.
+    pub z_stride: u32,
     /// `Some([j0, nj])`: compute only the rows `j0 .. j0 + nj` of the output slices (the rest of
     /// the output buffer is left as it is), to split a slice into smaller dispatches where the
     /// device is slow (lavapipe: ~30 s for one 512 x 512 slice at the defaults). `None`: all rows.
@@ -313,6 +333,7 @@ impl RstDispatch {
             grid,
             out_z0,
             out_nz,
+            z_stride: 1,
             rows: None,
             output,
         }
@@ -488,7 +509,8 @@ impl Rst {
     }
 
     /// Records the RST of the output slices of `params.grid` into `out` (component-major,
-    /// `c * out_voxels + i + nx * (j + ny * (k - out_z0))`). Nothing is submitted.
+    /// `c * out_voxels + i + nx * (j + ny * k)` for output slice `k`, slab slice
+    /// `out_z0 + k * z_stride`). Nothing is submitted.
     pub fn record(
         &self,
         ctx: &GpuContext,
@@ -501,8 +523,11 @@ impl Rst {
         voxel_count(grid)?;
         check_packed(inputs.volume, grid, wgpu::TextureUsages::TEXTURE_BINDING)?;
         let nz = grid.dims[2];
-        let end = u64::from(params.out_z0) + u64::from(params.out_nz);
-        if params.out_nz == 0 || end > u64::from(nz) {
+        // One past the last slab slice read as an output slice.
+        let end = u64::from(params.out_z0)
+            + u64::from(params.out_nz.saturating_sub(1)) * u64::from(params.z_stride)
+            + 1;
+        if params.out_nz == 0 || params.z_stride == 0 || end > u64::from(nz) {
             return Err(RecordError::OutputRange {
                 z0: params.out_z0,
                 nz: params.out_nz,
@@ -548,7 +573,8 @@ impl Rst {
             trans_stop: (1.0 - ALPHA_STOP) as f32,
             row0,
             n_rows,
-            _pad: [0; 2],
+            z_stride: params.z_stride,
+            _pad: 0,
         };
         let params_buf = params_buffer(&ctx.device, "rst params", &gpu_params);
         let ray_bytes = u64::from(rays.n_rays) * std::mem::size_of::<GpuRay>() as u64;

@@ -37,7 +37,10 @@ pub use gaussian::{
 };
 pub use hessian::{hessian_at, hessian_volume};
 pub use rays::ray_set;
-pub use resample::{refine_linear, refined_grid, refinement_factors, resample_linear, subsample};
+pub use resample::{
+    refine_linear, refined_grid, refinement_factors, resample_linear, rst_refinement_factors,
+    subsample,
+};
 pub use rst::{
     GradientVolume, OpacityRule, RstParams, consistent_ray, ray_lengths_mm, rst_eigen,
     rst_eigen_at, rst_features, rst_tensor_at,

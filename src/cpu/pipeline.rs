@@ -1,12 +1,15 @@
 //! The whole CPU feature computation for one volume, as `shapecast features` runs it: preset
-//! defaults, thick axes refined by an integer factor for the Hessian (cpu::resample), the
-//! automatic transfer function, the chosen method, and the result taken at the input's voxels
-//! (docs/science.md, "Thick slices" and "Conventions of the command line and the app").
+//! defaults, thick axes refined by an integer factor for the Hessian and z for the RST
+//! (cpu::resample), the automatic transfer function, the chosen method, and the result taken at
+//! the input's voxels (docs/science.md, "Thick slices" and "Conventions of the command line and
+//! the app").
 
 use super::features::{
     FeatureMap, HessianMethod, hessian_eigen_multiscale, hessian_features_multiscale,
 };
-use super::resample::{refine_linear, refined_grid, refinement_factors, subsample};
+use super::resample::{
+    refine_linear, refined_grid, refinement_factors, rst_refinement_factors, subsample,
+};
 use super::rst::{
     DEFAULT_SIGMA_G_MM, DEFAULT_STEP_MM, GradientVolume, OpacityRule, RstParams, rst_eigen,
     rst_features,
@@ -199,6 +202,9 @@ impl Request {
         let sigma_min = sigmas_mm.iter().copied().fold(f64::INFINITY, f64::min);
         let factors = match self.method {
             Method::Hessian | Method::Li | Method::Frangi => refinement_factors(grid, sigma_min),
+            Method::Rst if self.rule == OpacityRule::Consistent => {
+                rst_refinement_factors(grid, self.step_mm.unwrap_or(DEFAULT_STEP_MM))
+            }
             Method::Gst | Method::Rst => [1; 3],
         };
         let compute = refined_grid(grid, factors);
@@ -219,10 +225,17 @@ impl Request {
             ));
         }
         if compute != *grid {
-            notes.push(format!(
-                "thick axes refined for the Hessian by {factors:?} ({:?} mm -> {:.3?} mm); features taken at the input voxels",
-                grid.spacing_mm, compute.spacing_mm
-            ));
+            notes.push(if self.method == Method::Rst {
+                format!(
+                    "slices refined for the rays by {factors:?} ({:?} mm -> {:.3?} mm), opacity lengths from the acquired spacing; features at the input voxels",
+                    grid.spacing_mm, compute.spacing_mm
+                )
+            } else {
+                format!(
+                    "thick axes refined for the Hessian by {factors:?} ({:?} mm -> {:.3?} mm); features taken at the input voxels",
+                    grid.spacing_mm, compute.spacing_mm
+                )
+            });
         }
         // Scale warnings on the input grid, per axis: what the data can show at that scale.
         let (scale_name, scales): (&str, Vec<f64>) = match self.method {
@@ -326,7 +339,9 @@ pub fn compute(grid: &Grid, values: &[f32], req: &Request) -> Result<Outcome, Re
             }
         }
         Method::Rst => {
-            let gv = GradientVolume::new(&cgrid, &cvalues, req.sigma_g_mm);
+            // On the refined grid; L_i and the output from the acquired one.
+            let mut gv = GradientVolume::new(&cgrid, &cvalues, req.sigma_g_mm);
+            gv.acquired = *grid;
             let tf = match req.tf {
                 Some(tf) => tf,
                 None => {
@@ -357,7 +372,8 @@ pub fn compute(grid: &Grid, values: &[f32], req: &Request) -> Result<Outcome, Re
             }
         }
     };
-    let components = if cgrid == *grid {
+    // The RST is evaluated at the input voxels only (`GradientVolume::acquired`).
+    let components = if cgrid == *grid || req.method == Method::Rst {
         comps
     } else {
         comps.map(|c| subsample(&cgrid, &c, resolved.factors, grid))

@@ -20,7 +20,13 @@ pub const ALPHA_STOP: f64 = 0.99;
 /// The smoothed intensity I and its gradient g (HU/mm) on the grid the rays read.
 #[derive(Clone, Debug)]
 pub struct GradientVolume {
+    /// The grid of `intensity` and `gradient`: the acquired grid, or it refined along thick axes
+    /// ([`Self::refined`]).
     pub grid: Grid,
+    /// The grid the data were acquired on: its spacing sets the opacity lengths L_i (the blur
+    /// of the data, which refinement does not sharpen), and features are computed at its voxels
+    /// (voxel `i` is voxel `f i` of `grid`, at the same mm position).
+    pub acquired: Grid,
     pub sigma_g_mm: f64,
     pub intensity: Vec<f32>,
     pub gradient: Vec<[f32; 3]>,
@@ -47,10 +53,21 @@ impl GradientVolume {
         });
         Self {
             grid: *grid,
+            acquired: *grid,
             sigma_g_mm,
             intensity,
             gradient,
         }
+    }
+
+    /// The rays' (I, g) on `grid` refined by the integer `factors` (linear between the acquired
+    /// voxels, [`super::resample::refine_linear`]), then smoothed and differenced as [`Self::new`]
+    /// on the refined grid; `acquired` stays `grid` (docs/science.md, "Thick slices").
+    pub fn refined(grid: &Grid, values: &[f32], sigma_g_mm: f64, factors: [usize; 3]) -> Self {
+        let (fine, fine_values) = super::resample::refine_linear(grid, values, factors);
+        let mut gv = Self::new(&fine, &fine_values, sigma_g_mm);
+        gv.acquired = *grid;
+        gv
     }
 
     /// Trilinear (I, g) at a grid-mm position; positions outside are clamped onto the grid
@@ -196,7 +213,7 @@ pub fn consistent_ray(
     let (i_centre, g_centre) = centre;
     let dr = p.step_mm;
     let k_max = p.steps();
-    let l_mm = opacity_length_mm(&gv.grid, gv.sigma_g_mm, r);
+    let l_mm = opacity_length_mm(&gv.acquired, gv.sigma_g_mm, r);
     let mut acc = [0.0f64; 3];
     let mut alpha_prev = 0.0f64;
     let mut f_prev = 0.0f64;
@@ -238,13 +255,14 @@ pub fn rst_eigen_at(gv: &GradientVolume, x_mm: [f64; 3], p: &RstParams) -> [f64;
     eigenvalues_sorted(&rst_tensor_at(gv, x_mm, p))
 }
 
-/// Runs `f` on the RST eigenvalues at every voxel centre and stores three components.
+/// Runs `f` on the RST eigenvalues at every voxel centre of the acquired grid and stores three
+/// components.
 fn per_voxel(
     gv: &GradientVolume,
     p: &RstParams,
     f: impl Fn([f64; 3]) -> [f64; 3] + Sync + Send,
 ) -> Components3 {
-    let grid = gv.grid;
+    let grid = gv.acquired;
     let per: Vec<[f32; 3]> = parallel::map_indices(grid.len(), |idx| {
         let x = grid.position_mm(grid.ijk(idx));
         f(rst_eigen_at(gv, x, p)).map(|v| v as f32)
@@ -252,12 +270,12 @@ fn per_voxel(
     std::array::from_fn(|c| per.iter().map(|v| v[c]).collect())
 }
 
-/// `[V, A, B]` of the RST at every voxel.
+/// `[V, A, B]` of the RST at every voxel of the acquired grid.
 pub fn rst_features(gv: &GradientVolume, p: &RstParams, map: FeatureMap) -> Components3 {
     per_voxel(gv, p, |l| map_eigenvalues(l, map))
 }
 
-/// RST eigenvalues `[l0, l1, l2]` at every voxel.
+/// RST eigenvalues `[l0, l1, l2]` at every voxel of the acquired grid.
 pub fn rst_eigen(gv: &GradientVolume, p: &RstParams) -> Components3 {
     per_voxel(gv, p, |l| l)
 }

@@ -196,6 +196,17 @@ impl PendingTexture {
         size: [u32; 3],
         bytes_per_texel: u32,
     ) -> Self {
+        Self::start_at(ctx, texture, 0, size, bytes_per_texel)
+    }
+
+    /// [`Self::start`] for the box of `size` whose first slice is `z0`.
+    pub fn start_at(
+        ctx: &GpuContext,
+        texture: &wgpu::Texture,
+        z0: u32,
+        size: [u32; 3],
+        bytes_per_texel: u32,
+    ) -> Self {
         let [w, h, d] = size;
         let row = w * bytes_per_texel;
         let padded =
@@ -204,7 +215,10 @@ impl PendingTexture {
         let read =
             PendingRead::start_with(ctx, bytes.max(4), "texture readback", |encoder, staging| {
                 encoder.copy_texture_to_buffer(
-                    texture.as_image_copy(),
+                    wgpu::TexelCopyTextureInfo {
+                        origin: wgpu::Origin3d { x: 0, y: 0, z: z0 },
+                        ..texture.as_image_copy()
+                    },
                     wgpu::TexelCopyBufferInfo {
                         buffer: staging,
                         layout: wgpu::TexelCopyBufferLayout {
@@ -244,6 +258,106 @@ impl PendingTexture {
 
     fn unpad(&self, bytes: &[u8]) -> Vec<u8> {
         unpad(bytes, self.row, self.padded, self.rows)
+    }
+}
+
+/// A texture read back in slabs of whole slices, each copy within `max_bytes` (a volume's
+/// features may exceed one buffer of the device: WebGPU's default 256 MiB is a 512 x 512 x 256
+/// Rgb9e5 texture): one slab in flight at a time, polled per frame, the texels gathered into one
+/// tightly packed array (x fastest) as they arrive.
+pub struct PendingSlabs {
+    texture: wgpu::Texture,
+    size: [u32; 3],
+    bytes_per_texel: u32,
+    /// Slices per slab.
+    slab: u32,
+    /// The first slice not yet asked for.
+    next_z: u32,
+    current: Option<PendingTexture>,
+    out: Vec<u8>,
+}
+
+impl PendingSlabs {
+    /// Starts reading `size` texels of `texture` (which needs `COPY_SRC`) from its origin,
+    /// `bytes_per_texel` each, in slabs of at most `max_bytes` (and the device's buffer limit).
+    /// [`ReadbackError::TooLarge`] when one slice does not fit.
+    pub fn start(
+        ctx: &GpuContext,
+        texture: &wgpu::Texture,
+        size: [u32; 3],
+        bytes_per_texel: u32,
+        max_bytes: u64,
+    ) -> Result<Self, ReadbackError> {
+        let [w, h, d] = size;
+        let padded = u64::from(w * bytes_per_texel)
+            .div_ceil(u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT))
+            * u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let slice = (padded * u64::from(h)).max(1);
+        let max = max_bytes.min(ctx.limits.max_buffer_size);
+        if slice > max {
+            return Err(ReadbackError::TooLarge { bytes: slice, max });
+        }
+        let slab = (max / slice).clamp(1, u64::from(d.max(1))) as u32;
+        let total = u64::from(w) * u64::from(h) * u64::from(d) * u64::from(bytes_per_texel);
+        let mut this = Self {
+            texture: texture.clone(),
+            size,
+            bytes_per_texel,
+            slab,
+            next_z: 0,
+            current: None,
+            out: Vec::with_capacity(usize::try_from(total).unwrap_or(0)),
+        };
+        this.start_next(ctx);
+        Ok(this)
+    }
+
+    /// Slabs the whole read takes.
+    pub fn slabs(&self) -> u32 {
+        self.size[2].div_ceil(self.slab.max(1))
+    }
+
+    fn start_next(&mut self, ctx: &GpuContext) {
+        let [w, h, d] = self.size;
+        if self.next_z >= d {
+            return;
+        }
+        let n = self.slab.min(d - self.next_z);
+        self.current = Some(PendingTexture::start_at(
+            ctx,
+            &self.texture,
+            self.next_z,
+            [w, h, n],
+            self.bytes_per_texel,
+        ));
+        self.next_z += n;
+    }
+
+    /// All the texels once every slab arrived; `None` while one is in flight (never blocks).
+    /// A slab that arrived starts the next.
+    pub fn poll(&mut self, ctx: &GpuContext) -> Option<Result<Vec<u8>, ReadbackError>> {
+        let bytes = self.current.as_mut()?.poll(ctx)?;
+        self.current = None;
+        match bytes {
+            Ok(b) => self.out.extend_from_slice(&b),
+            Err(e) => return Some(Err(e)),
+        }
+        if self.next_z < self.size[2] {
+            self.start_next(ctx);
+            return None;
+        }
+        Some(Ok(std::mem::take(&mut self.out)))
+    }
+
+    /// Native only: waits for every slab.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn wait(mut self, ctx: &GpuContext) -> Result<Vec<u8>, ReadbackError> {
+        loop {
+            if let Some(done) = self.poll(ctx) {
+                return done;
+            }
+            ctx.device.poll(wgpu::PollType::wait_indefinitely())?;
+        }
     }
 }
 

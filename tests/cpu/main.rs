@@ -21,4 +21,5 @@ mod phantoms;
 mod real_ct_conspicuity;
 mod rst_invariance;
 mod structure_tensor;
+mod thick_slices;
 mod vs_skimage;

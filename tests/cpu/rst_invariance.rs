@@ -99,9 +99,9 @@ fn cylinder_along_an_axis_and_a_diagonal_agree() {
 }
 
 /// Blobness of one physical sphere through the pipeline users run (`cpu::pipeline::compute`,
-/// the same rule as the GPU job: the RST is never resampled), at the voxel nearest its centre,
-/// for thin, thick and very thick slices (issue 13: spread max / min <= 1.10 where the slices
-/// resolve the sphere).
+/// the same rule as the GPU job: thick slices refined for the rays, L_i from the acquired
+/// spacing), at the voxel nearest its centre, for thin, thick and very thick slices (spread
+/// max / min <= 1.10 where the slices resolve the sphere; >= 0.85 of the thin value at 5 mm).
 #[test]
 fn blobness_through_the_pipeline_at_thin_and_thick_slices() {
     use shapecast::cpu::pipeline::{Method, Request, compute};
@@ -124,7 +124,7 @@ fn blobness_through_the_pipeline_at_thin_and_thick_slices() {
         println!("spacing {spacing:?}: blobness {v:.3} at voxel {centre:?}");
         b.push(v);
     }
-    // 0.5 iso, 0.7 x 0.7 x 2.5 and 0.9 iso: within 10% (the issue's spread <= 1.10).
+    // 0.5 iso, 0.7 x 0.7 x 2.5 and 0.9 iso: within 10%.
     let three = [b[0], b[1], b[2]];
     let (lo, hi) = three.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &v| {
         (lo.min(v), hi.max(v))
@@ -132,13 +132,11 @@ fn blobness_through_the_pipeline_at_thin_and_thick_slices() {
     println!("spread over 0.5 / 0.7x0.7x2.5 / 0.9 mm: {:.3}", hi / lo);
     assert!(lo > 5.0, "{b:?}");
     assert!(hi / lo <= 1.10, "spread {:.3}: {b:?}", hi / lo);
-    // 5 mm slices: a 9.4 mm sphere lies in one slice and its neighbours' partial volume, so the
-    // data hold about half the z gradient. Measured, not fixed: refining z by 2, 4 or 8 before
-    // the RST gave 7.43, 6.80, 6.05 (and at 2.5 mm 10.71 and 9.34 for 2 and 4, against 12.42
-    // unrefined), so no refinement rule helps; the RST runs on the input grid.
+    // 5 mm slices refined by 5 for the rays: unrefined the sphere kept 0.51 (a 10 mm ramp of
+    // trilinear reading along z); a lower bound, so that a better reading never fails it.
     let thick = b[3] / b[0];
     println!("5 mm slices: {thick:.3} of the 0.5 mm value");
-    assert!((0.4..=0.7).contains(&thick), "{thick}");
+    assert!(thick >= 0.85, "{thick}");
 }
 
 /// The CPU RST against an independent implementation of SCIENCE.md's consistent rule

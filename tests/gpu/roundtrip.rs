@@ -38,3 +38,39 @@ fn too_large_volume_is_refused_with_a_message() {
     let message = err.to_string();
     assert!(message.contains("8192"), "{message}");
 }
+
+/// A feature texture read back in slabs of whole slices (what the findings do where one buffer
+/// cannot hold the volume's features: WebGPU's 256 MiB is a 512 x 512 x 256 texture) gives the
+/// texels of one whole read, in order, and refuses only a slice larger than the limit.
+#[test]
+fn a_texture_read_in_slabs_equals_one_whole_read() {
+    use shapecast::gpu::readback::{PendingSlabs, PendingTexture, ReadbackError};
+    use shapecast::gpu::volume_texture::FeatureTexture;
+    let Some(ctx) = shapecast::gpu::context::test_context() else {
+        return;
+    };
+    // Odd sizes: rows padded to 256 bytes, a last slab shorter than the others.
+    let dims = [70u32, 33, 29];
+    let n = dims.iter().map(|&d| d as usize).product::<usize>();
+    let comps: [Vec<f32>; 3] =
+        std::array::from_fn(|c| (0..n).map(|i| (i * (c + 1) % 997) as f32 + 0.5).collect());
+    let tex = FeatureTexture::from_components(&ctx, dims, &comps, "slabs").expect("texture");
+    let whole = PendingTexture::start(&ctx, &tex.texture, dims, 4)
+        .wait(&ctx)
+        .expect("whole read");
+    assert_eq!(whole.len(), n * 4);
+    // One padded slice is 512 x 33 bytes: slabs of 4 slices, 8 of them.
+    let slice = 512 * 33;
+    let slabs = PendingSlabs::start(&ctx, &tex.texture, dims, 4, 4 * slice + 100).expect("slabs");
+    assert_eq!(slabs.slabs(), 8);
+    let read = slabs.wait(&ctx).expect("slab read");
+    assert!(read == whole, "slab read differs from the whole read");
+    // A limit below one slice is refused with the sizes, not read in part.
+    match PendingSlabs::start(&ctx, &tex.texture, dims, 4, slice - 1) {
+        Err(ReadbackError::TooLarge { bytes, max }) => {
+            assert_eq!((bytes, max), (slice, slice - 1));
+        }
+        Err(e) => panic!("unexpected error {e}"),
+        Ok(_) => panic!("a slice larger than the limit was accepted"),
+    }
+}

@@ -198,6 +198,7 @@ fn run_rst_rows(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("rst") });
     for w in bounds.windows(2) {
         let d = RstDispatch {
+            z_stride: 1,
             rows: Some([w[0], w[1] - w[0]]),
             ..*dispatch
         };
@@ -391,6 +392,7 @@ fn tensor_matches_the_twin_on_an_output_sub_range() {
         let inputs = GpuInputs::upload(&ctx, &c.gv, 0, c.grid.dims[2]);
         let rays = RstRays::new(&ctx, &p, c.grid.spacing_mm, SIGMA_G_MM).expect("rays");
         let dispatch = RstDispatch {
+            z_stride: 1,
             grid: slab_of(&c.grid),
             out_z0: z0 as u32,
             out_nz: nz as u32,
@@ -443,6 +445,7 @@ fn eigenvalues_and_features_match_the_twin() {
             .collect();
         let scale = largest(&cpu_eigen);
         let mut dispatch = RstDispatch {
+            z_stride: 1,
             grid: slab_of(&c.grid),
             out_z0: z0 as u32,
             out_nz: nz as u32,
@@ -492,6 +495,7 @@ fn sample_count_mode_counts_ray_steps() {
     let inputs = GpuInputs::upload(&ctx, &c.gv, 0, c.grid.dims[2]);
     let mut p = params(42, 6.0, OpacityRule::Consistent);
     let dispatch = RstDispatch {
+        z_stride: 1,
         grid: slab_of(&c.grid),
         out_z0: 5,
         out_nz: 4,
@@ -556,6 +560,7 @@ fn slab_with_its_halo_matches_the_whole_volume() {
         let intensity = f32_buffer_init(&ctx.device, "I", &c.gv.intensity[z0 * plane..z1 * plane]);
         let packed = packed_texture(&ctx, &slab, "packed").expect("texture");
         let dispatch = RstDispatch {
+            z_stride: 1,
             grid: slab,
             out_z0: (out0 - z0) as u32,
             out_nz: out_n as u32,
@@ -834,6 +839,7 @@ fn bad_dispatches_are_errors() {
     let p = params(26, 3.0, OpacityRule::Consistent);
     let rays = RstRays::new(&ctx, &p, c.grid.spacing_mm, SIGMA_G_MM).expect("rays");
     let ok = RstDispatch {
+        z_stride: 1,
         grid: slab_of(&c.grid),
         out_z0: 10,
         out_nz: 5,
@@ -857,6 +863,7 @@ fn bad_dispatches_are_errors() {
     assert!(matches!(
         record(
             &RstDispatch {
+                z_stride: 1,
                 rows: Some([15, 5]),
                 ..ok
             },
@@ -867,6 +874,7 @@ fn bad_dispatches_are_errors() {
     assert!(matches!(
         record(
             &RstDispatch {
+                z_stride: 1,
                 rows: Some([3, 0]),
                 ..ok
             },
@@ -877,6 +885,7 @@ fn bad_dispatches_are_errors() {
     assert_eq!(
         record(
             &RstDispatch {
+                z_stride: 1,
                 rows: Some([14, 5]),
                 ..ok
             },
@@ -894,6 +903,7 @@ fn bad_dispatches_are_errors() {
         Err(RecordError::BufferTooSmall { .. })
     ));
     let other_spacing = RstDispatch {
+        z_stride: 1,
         grid: SlabGrid::new(ok.grid.dims, [0.6, 0.6, 1.0]),
         ..ok
     };
@@ -902,6 +912,7 @@ fn bad_dispatches_are_errors() {
         Err(RecordError::SpacingMismatch { .. })
     ));
     let larger_slab = RstDispatch {
+        z_stride: 1,
         grid: SlabGrid::new([21, 19, 16], ok.grid.spacing_mm),
         ..ok
     };
@@ -920,6 +931,7 @@ fn bad_dispatches_are_errors() {
         Err(RecordError::NotStorage { .. })
     ));
     let no_voxels = RstDispatch {
+        z_stride: 1,
         grid: SlabGrid::new([0, 19, 15], ok.grid.spacing_mm),
         ..ok
     };
@@ -1037,6 +1049,7 @@ fn time_gpu_rst_against_the_cpu_twin() {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         for z0 in slices.step_by(4) {
             let d = RstDispatch {
+                z_stride: 1,
                 grid: slab,
                 out_z0: z0,
                 out_nz: 4.min(nz - z0),
@@ -1061,6 +1074,7 @@ fn time_gpu_rst_against_the_cpu_twin() {
     let gpu_cpu_s = process_cpu_s() - cpu0;
     // Ray samples actually taken (early termination), per voxel.
     let count_dispatch = RstDispatch {
+        z_stride: 1,
         grid: slab,
         out_z0: 0,
         out_nz: nz,
@@ -1083,6 +1097,7 @@ fn time_gpu_rst_against_the_cpu_twin() {
     let cpu_cpu_s = process_cpu_s() - cpu0;
     // Sanity: the same features (whole volume, one dispatch).
     let full = RstDispatch {
+        z_stride: 1,
         grid: slab,
         out_z0: 0,
         out_nz: nz,

@@ -20,11 +20,13 @@ pub(super) struct Buffers {
     /// Six tensor components (Hessian); I, gx, gy, gz (RST); I, gx, gy, gz and six tensor
     /// components (structure tensor).
     pub(super) work: Vec<wgpu::Buffer>,
-    /// Features of the core on the compute grid, component-major (3, or 4 for eigenvalues).
+    /// Features of the core on the compute grid, component-major (3, or 4 for eigenvalues); the
+    /// RST's at the core's input slices only.
     pub(super) out_core: wgpu::Buffer,
     /// One RST dispatch's output block.
     pub(super) chunk_out: Option<wgpu::Buffer>,
-    /// Features on the input grid (only when the grids differ).
+    /// Features on the input grid (only when the grids differ and the method's features are
+    /// subsampled: not the RST's).
     pub(super) out_in: Option<wgpu::Buffer>,
     /// Noise windows, small.
     pub(super) small: wgpu::Buffer,
@@ -110,10 +112,20 @@ impl Buffers {
         let in_n = all().map(Brick::input_len).max().unwrap_or(1);
         let slab_n = all().map(Brick::slab_len).max().unwrap_or(1);
         let rows = |b: &Brick| (b.slab_c[0].len() * b.slab_c[1].len()) as u64;
-        // Features of a brick's core slices, whole brick planes.
+        // The RST writes its features at the input voxels only (z's refinement is its rays'):
+        // nothing to subsample.
+        let subsampled = resampled && req.method != Method::Rst;
+        // Features of a brick's core slices (the RST's: its input slices), whole brick planes.
         let core_n = bricks
             .iter()
-            .map(|b| rows(b) * b.core_c[2].len() as u64)
+            .map(|b| {
+                let slices = if req.method == Method::Rst {
+                    b.out[2].len()
+                } else {
+                    b.core_c[2].len()
+                };
+                rows(b) * slices as u64
+            })
             .max()
             .unwrap_or(1);
         let out_n = bricks.iter().map(Brick::out_len).max().unwrap_or(1);
@@ -150,7 +162,7 @@ impl Buffers {
             out_core: f32_buffer(d, "brick features", out_components * core_n),
             chunk_out: (req.method == Method::Rst)
                 .then(|| f32_buffer(d, "RST block", 3 * plane_n * rst_slices as u64)),
-            out_in: resampled.then(|| f32_buffer(d, "features on the input grid", 3 * out_n)),
+            out_in: subsampled.then(|| f32_buffer(d, "features on the input grid", 3 * out_n)),
             small: f32_buffer(d, "noise windows", noise_n),
             norm: crate::compute::eigen_features::norm_buffer(ctx),
         }

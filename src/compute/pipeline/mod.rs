@@ -8,7 +8,8 @@
 //! [`FeatureJob::run_blocking`] drives it to the end.
 //!
 //! What it computes is `crate::cpu::pipeline::compute` (the CPU reference), from the same
-//! [`Request::resolve`]: thick axes refined by integer factors for the Hessian, the automatic
+//! [`Request::resolve`]: thick axes refined by integer factors for the Hessian (z for the RST's
+//! rays, which are cast at the input voxels only), the automatic
 //! transfer function from the noise of the whole volume, Frangi's c over the whole volume per
 //! scale, the multi-scale maximum, and results taken at the input voxels. Bricks (whole rows,
 //! tiled in y and z) come from [`crate::compute::slab::plan`], sized from the device's binding
@@ -642,7 +643,8 @@ impl FeatureJob {
             let left = self.tasks.len() + usize::from(self.pending.is_some());
             let fraction = if self.request.method == Method::Rst {
                 // The rays are nearly all the work: the fraction of core rows cast.
-                let rows = |s: usize| self.slabs[s].core_c[1].len() * self.slabs[s].core_c[2].len();
+                // Output slices are the input voxels (`out`) of the core.
+                let rows = |s: usize| self.slabs[s].core_c[1].len() * self.slabs[s].out[2].len();
                 let total: usize = (0..self.slabs.len()).map(rows).sum();
                 let ahead: usize = self
                     .tasks
@@ -1317,33 +1319,39 @@ impl FeatureJob {
                 tf,
                 rule: self.request.rule,
             };
-            let rays = RstRays::new(
+            // Steps on the (refined) compute grid, opacity lengths from the input spacing.
+            let rays = RstRays::refined(
                 ctx,
                 &params,
                 self.compute.spacing_mm,
+                self.input.spacing_mm,
                 self.request.sigma_g_mm,
             )?;
             self.kernels.rays = Some(rays);
             self.tf = Some(tf);
         }
-        // Slices `first..last` of the compute grid, rows `j0..j0 + nj` of the brick's core.
+        // The core's output slices are its input voxels: compute slices `zc.start + f k` for
+        // k < n_out (f, z's refinement, is 1 unless the slices were refined for the rays).
+        // This step: output slices `dz..dz + count`, rows `j0..j0 + nj` of the brick's core.
         let (zc, yc) = (&slab.core_c[2], &slab.core_c[1]);
-        if zc.is_empty() || yc.is_empty() {
+        let f = self.factors[2].max(1);
+        let n_out = slab.out[2].len();
+        if zc.is_empty() || yc.is_empty() || n_out == 0 {
             return Ok(true);
         }
         let nx = self.compute.dims[0].max(1) as u64;
         let core_plane = nx * yc.len() as u64;
         let voxels = self.rst_pace.work(nx as f64, self.rst_max_step as f64) as u64;
         let (dz, j0) = self.rst_cursor;
-        let first = zc.start + dz;
-        let (last, nj) = if j0 == 0 && voxels >= core_plane {
+        let first = zc.start + f * dz;
+        let (count, nj) = if j0 == 0 && voxels >= core_plane {
             let slices = ((voxels / core_plane.max(1)) as usize)
                 .clamp(1, self.rst_slices_per_step)
-                .min(zc.end - first);
-            (first + slices, yc.len())
+                .min(n_out - dz);
+            (slices, yc.len())
         } else {
             let rows = ((voxels / nx) as usize).clamp(1, yc.len() - j0);
-            (first + 1, rows)
+            (1, rows)
         };
         let y_local = to_u32(yc.start - slab.slab_c[1].start);
         let rows = [y_local + to_u32(j0), to_u32(nj)];
@@ -1351,9 +1359,9 @@ impl FeatureJob {
             "brick {}/{}: RST, slices {}-{} of {}",
             s + 1,
             self.slabs.len(),
-            first + 1,
-            last,
-            self.compute.dims[2]
+            slab.out[2].start + dz + 1,
+            slab.out[2].start + dz + count,
+            self.input.dims[2]
         );
         let (Some(rst), Some(rays)) = (&self.kernels.rst, &self.kernels.rays) else {
             return Err(PipelineError::Missing("RST kernel"));
@@ -1365,9 +1373,10 @@ impl FeatureJob {
             RstOutput::Features(self.request.rst_map)
         };
         let dispatch = RstDispatch {
+            z_stride: to_u32(f),
             grid,
             out_z0: to_u32(first - slab.slab_c[2].start),
-            out_nz: to_u32(last - first),
+            out_nz: to_u32(count),
             rows: Some(rows),
             output,
         };
@@ -1380,14 +1389,15 @@ impl FeatureJob {
             .as_ref()
             .ok_or(PipelineError::Missing("RST output buffer"))?;
         rst.record(ctx, encoder, &inputs, &dispatch, chunk)?;
-        // Into the core's component-major block (whole brick planes; rows outside the core are
-        // never read): the slices computed, or within one slice only the rows computed.
+        // Into the core's component-major block of output slices (whole brick planes, one per
+        // input slice of the core; rows outside the core are never read): the slices computed,
+        // or within one slice only the rows computed.
         let row = u64::from(grid.dims[0]);
         let plane = row * u64::from(grid.dims[1]);
-        let n_chunk = plane * (last - first) as u64;
-        let n_core = plane * zc.len() as u64;
-        let at = plane * (first - zc.start) as u64;
-        let (skip, len) = if last - first == 1 {
+        let n_chunk = plane * count as u64;
+        let n_core = plane * n_out as u64;
+        let at = plane * dz as u64;
+        let (skip, len) = if count == 1 {
             (u64::from(rows[0]) * row, u64::from(rows[1]) * row)
         } else {
             (0, n_chunk)
@@ -1402,13 +1412,13 @@ impl FeatureJob {
             );
         }
         self.rst_pace
-            .submitted((nj as u64 * nx * (last - first) as u64) as f64);
+            .submitted((nj as u64 * nx * count as u64) as f64);
         self.rst_cursor = if j0 + nj < yc.len() {
             (dz, j0 + nj)
         } else {
-            (last - zc.start, 0)
+            (dz + count, 0)
         };
-        Ok(self.rst_cursor.0 >= zc.len())
+        Ok(self.rst_cursor.0 >= n_out)
     }
 
     /// Where brick `s`'s features lie in the buffer [`Self::record_deliver`] packs from, and
@@ -1427,12 +1437,13 @@ impl FeatureJob {
                 z0,
             }
         } else {
-            // The core's slices with the brick's halo rows.
+            // The core's slices with the brick's halo rows (its input slices: the compute
+            // grid's when nothing was refined, the RST's output slices when z was).
             PackBox {
                 src_dims: [
                     to_u32(self.compute.dims[0]),
                     to_u32(b.slab_c[1].len()),
-                    to_u32(b.core_c[2].len()),
+                    to_u32(b.out[2].len()),
                 ],
                 src_y0: to_u32(b.core_c[1].start - b.slab_c[1].start),
                 ny,
