@@ -13,10 +13,11 @@ used), on ../shared/data/ct/lung2_image.nrrd and its label:
   mass's radius); eigenvalues by numpy's eigvalsh, sorted by magnitude;
 - Li blobness B = |l2|^2 / |l0| where all three eigenvalues are negative, the maximum over scales;
 - RST Li blobness at the input voxels: SCIENCE.md's consistent rule with the lung preset
-  (42 rays, R = 25 mm, dr = 0.25 mm, sigma_g = 0.7 mm, TF 100/300 HU), z refined linearly by
-  ceil(s_z / max(4 dr, s_min)) (at most 8) before scipy's Gaussian smoothing and np.gradient on
-  the refined grid, rays read by map_coordinates (order 1), the opacity lengths L_i from the
-  acquired spacing (docs/science.md, "Thick slices"), numpy's eigvalsh;
+  (42 rays, R = 25 mm, dr = 0.25 mm, sigma_g = 0.7 mm, TF 100/300 HU), scipy's Gaussian
+  smoothing, np.gradient, map_coordinates (order 1), numpy's eigvalsh; with --refine-rst, z
+  refined linearly by ceil(s_z / max(4 dr, s_min)) (at most 8) before the smoothing, the opacity
+  lengths L_i from the acquired spacing (`features --refine-slices`; docs/science.md, "Thick
+  slices");
 - the lung: air below -400 HU, 6-connected parts of at least 100 ml touching no in-plane border,
   in-slice holes up to pi 15^2 mm^2 filled; the lesion's zone, the label grown by 10 mm (Euclidean
   distance in mm), left out;
@@ -140,17 +141,17 @@ def li_blobness(crop, spacing, f, sigmas, probe):
     return prefix, at_probe
 
 
-def rst_li(vol, spacing, pts_vox, tf, radius_mm, step_mm=0.25, sigma_g=0.7, chunk=20000):
+def rst_li(vol, spacing, pts_vox, tf, radius_mm, step_mm=0.25, sigma_g=0.7, chunk=20000, refine=False):
     """Consistent-rule RST Li blobness (SCIENCE.md, RST items 1-6; eq. 2) at integer voxels
     `pts_vox` (n x 3) of `vol`: 42 rays, trilinear (I, g), opacity as extinction with
     L_i = 0.6 rho(r_i), each step weighted by the opacity it adds, a ray stopped after the step
-    that reaches 0.99. Rays of many voxels are stepped together. z is refined by an integer f
+    that reaches 0.99. Rays of many voxels are stepped together. With `refine`, z is refined by an integer f
     (linear between the input slices, slice i at refined slice f i) before the smoothing; L_i
     comes from the input spacing."""
     s = np.asarray(spacing)
     f = 1
     target = max(4 * step_mm, min(spacing))
-    if vol.shape[2] > 1 and spacing[2] > target:
+    if refine and vol.shape[2] > 1 and spacing[2] > target:
         f = min(8, math.ceil(spacing[2] / target - 1e-9))
     nz = vol.shape[2]
     zf = np.arange((nz - 1) * f + 1) / f
@@ -208,6 +209,8 @@ def main():
     ap.add_argument("--label", default=os.path.join(data, "lung2_label.nrrd"))
     ap.add_argument("--out", default=os.path.join(root, "docs", "reproduction",
                                                   "conspicuity_independent.json"))
+    ap.add_argument("--refine-rst", action="store_true",
+                    help="refine z for the RST's rays (features --refine-slices)")
     args = ap.parse_args()
     t0 = time.time()
     hu, spacing = load(args.image)
@@ -257,7 +260,7 @@ def main():
     pts = np.argwhere(les | others)
     t_rst = time.time()
     values = rst_li(crop, spacing, pts + np.array([rlo[a] - clo[a] for a in range(3)]),
-                    RST_TF_HU, RST_RADIUS_MM)
+                    RST_TF_HU, RST_RADIUS_MM, refine=args.refine_rst)
     rst_feat = np.zeros(les.shape)
     rst_feat[tuple(pts.T)] = values
     rst_seconds = time.time() - t_rst

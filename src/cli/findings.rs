@@ -43,6 +43,10 @@ pub struct FindingsArgs {
     pub all: bool,
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
+    /// RST: refine thick slices for the rays (as `features --refine-slices`; on the lung CTs
+    /// measured it ranked the lesion lower: docs/science.md, "Thick slices").
+    #[arg(long)]
+    pub refine_slices: bool,
 }
 
 /// The request whose blobness the findings read (the RST's Li map, as the viewer's).
@@ -62,7 +66,8 @@ pub fn request(method: Method, preset: crate::cpu::Preset) -> anyhow::Result<Req
 
 pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
     let preset = crate::cli::preset(&args.preset)?;
-    let req = request(args.method, preset)?;
+    let mut req = request(args.method, preset)?;
+    req.refine_slices = args.refine_slices;
     let volume = load_volume(args.input.as_deref(), &args.dicomweb)?;
     // Findings' gates read HU (lung air, soft tissue, dense above 700 HU): an MR or a PET has
     // none, and its list would be noise. (A file that does not say, such as a NIfTI, is taken

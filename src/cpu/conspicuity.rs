@@ -481,10 +481,7 @@ pub fn lesion_study(
         tf,
         ..RstParams::paper_defaults()
     };
-    // The slices refined for the rays as the pipeline refines them (docs/science.md, "Thick
-    // slices"); the positions below are the crop's voxels, the same mm on the refined grid.
-    let factors = super::resample::rst_refinement_factors(&cgrid, params.step_mm);
-    let gv = GradientVolume::refined(&cgrid, &cvalues, DEFAULT_SIGMA_G_MM, factors);
+    let gv = GradientVolume::new(&cgrid, &cvalues, DEFAULT_SIGMA_G_MM);
     let rgrid = region.grid(grid);
     let rst_b: Vec<f32> = parallel::map_indices(rgrid.len(), |r| {
         let ijk = rgrid.ijk(r);

@@ -5,10 +5,10 @@
 //! - The Hessian family refines an axis whose spacing exceeds the smallest scale, by
 //!   `f = ceil(spacing / sigma_min)` (at most [`MAX_REFINEMENT`]), so that the sampled Gaussian
 //!   derivative kernels span at least one voxel per sigma ([`refinement_factors`]).
-//! - The RST (consistent rule) refines the slice axis z until its spacing is at most four ray
-//!   steps or the finest spacing ([`rst_refinement_factors`]); its opacity lengths L_i still
-//!   come from the acquired spacing (refinement adds no sharpness), and it is evaluated at the
-//!   input voxels only. The structure tensor and the paper's literal rule run on the input grid.
+//! - The RST (consistent rule), when asked (`Request::refine_slices`), refines the slice axis z
+//!   until its spacing is at most four ray steps or the finest spacing
+//!   ([`rst_refinement_factors`]); its opacity lengths L_i still come from the acquired spacing
+//!   (refinement adds no sharpness), and it is evaluated at the input voxels only. The structure tensor and the paper's literal rule run on the input grid.
 //!
 //! The refined grid keeps every input voxel centre as a grid point (voxel `i` becomes voxel
 //! `f * i`), values between them are linear along that axis, and the features are read back at

@@ -1,6 +1,6 @@
 //! The RST on thick slices (issue 33): spheres of radius 3, 4.7 and 7 mm, centre on a slice and
 //! halfway between two, at 0.5 iso, 0.7 x 0.7 x 2.5, 0.9 iso and 0.6 x 0.6 x 5 mm, blobness at
-//! the same physical point; thick axes refined as the pipeline refines them, L_i from the
+//! the same physical point; thick axes refined as `--refine-slices` refines them, L_i from the
 //! acquired spacing.
 
 use crate::cpu_common;
@@ -50,6 +50,13 @@ fn the_pipeline_refines_thick_slices_for_the_rays() {
     assert_eq!(rule([0.6, 0.6, 5.0], 0.5), [1, 1, 3]);
     // Isotropic grids and thin slices as they are.
     assert_eq!(rule([0.9; 3], 0.25), [1; 3]);
+    // The pipeline refines for the rays only when asked (`features --refine-slices`).
+    use shapecast::cpu::pipeline::{Method, Request};
+    let grid = Grid::new([64, 64, 20], [0.6, 0.6, 5.0]);
+    let mut req = Request::new(Method::Rst);
+    assert_eq!(req.resolve(&grid).expect("request").factors, [1; 3]);
+    req.refine_slices = true;
+    assert_eq!(req.resolve(&grid).expect("request").factors, [1, 1, 5]);
     assert_eq!(rule([1.5; 3], 0.25), [1; 3]);
     assert_eq!(rule([0.7, 0.7, 1.0], 0.25), [1; 3]);
 }

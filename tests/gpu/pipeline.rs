@@ -197,7 +197,8 @@ fn rst_matches_the_cpu_with_the_automatic_transfer_function() {
 #[test]
 fn rst_on_refined_slices_matches_the_cpu_in_bricks_and_in_paced_rows() {
     let Some(ctx) = test_context() else { return };
-    // 2.5 mm slices at dr 0.5 mm: z refined by 2 for the rays (docs/science.md, "Thick slices"),
+    // 2.5 mm slices at dr 0.5 mm, --refine-slices: z refined by 2 for the rays (docs/science.md,
+    // "Thick slices"),
     // features at the input voxels; the automatic transfer function measured on the refined
     // grid as the twin measures it.
     let volume = scene([0.8, 0.8, 2.5], 5.0);
@@ -205,6 +206,11 @@ fn rst_on_refined_slices_matches_the_cpu_in_bricks_and_in_paced_rows() {
     req.rays = Some(26);
     req.radius_mm = Some(5.0);
     req.step_mm = Some(0.5);
+    assert_eq!(
+        req.resolve(&Grid::of(&volume)).expect("request").factors,
+        [1; 3]
+    );
+    req.refine_slices = true;
     let resolved = req.resolve(&Grid::of(&volume)).expect("request");
     assert_eq!(resolved.factors, [1, 1, 2]);
     check_method(&ctx, &volume, &req, 1e-2, Some((1e-3, 0.995)));

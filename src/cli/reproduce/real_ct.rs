@@ -182,7 +182,7 @@ fn rst(json: &serde_json::Value, ours: Option<&Conspicuity>) -> String {
     };
     let num = |k: &str| h[k].as_f64().unwrap_or(f64::NAN);
     format!(
-        " Its RST Li study (its own ray caster from SCIENCE.md's consistent rule: 42 rays, R = 25 mm, dr = 0.25 mm, TF 100/300 HU, z refined for the rays by the same rule with L_i from the acquired spacing, trilinear (I, g) by scipy's `map_coordinates`; {:.0} s) gives lesion peak {peak:.2}, lung p99.9 {:.2}, ratio **{:.2}**, rank **{}**, strongest lung voxel {:.2}: {}",
+        " Its RST Li study (its own ray caster from SCIENCE.md's consistent rule: 42 rays, R = 25 mm, dr = 0.25 mm, TF 100/300 HU, trilinear (I, g) by scipy's `map_coordinates`; {:.0} s) gives lesion peak {peak:.2}, lung p99.9 {:.2}, ratio **{:.2}**, rank **{}**, strongest lung voxel {:.2}: {}",
         json["rst"]["seconds"].as_f64().unwrap_or(f64::NAN),
         num("lung_p999"),
         num("ratio"),
@@ -278,7 +278,7 @@ fn study(md: &mut String, case: &Case) -> anyhow::Result<cs::LesionStudy> {
     let d = lesion_box.dims();
     let _ = writeln!(
         md,
-        "{}; chest CT {} x {} x {} at {:.3} x {:.3} x {:.1} mm, HU) with {}, a mass of {:.0} x {:.0} x {:.0} mm ({:.0} ml) {}. Lung mask (`cpu::conspicuity::lung_mask`): voxels below {} HU, their 6-connected components that touch no in-plane border and hold at least {} ml, holes up to {:.0} mm^2 per axial slice filled (vessels, nodules); the lesion's zone (the label grown by {} mm) is left out of the lung. Evaluated on the label's box grown by {} mm (voxels {:?} to {:?}, {} lung voxels outside the zone), features computed on a crop reaching the kernels' and the rays' support beyond it. Lung preset: Hessian Li blobness at sigma {} mm (the preset's 1.5-9 mm less the scales below half the slice spacing; z refined by {} as the pipeline does), RST Li blobness with 42 rays, R = 25 mm, dr = 0.25 mm, z refined for the rays as the pipeline does, transfer function {:.0}/{:.0} HU (the preset's, the noise of the whole volume being {}).\n",
+        "{}; chest CT {} x {} x {} at {:.3} x {:.3} x {:.1} mm, HU) with {}, a mass of {:.0} x {:.0} x {:.0} mm ({:.0} ml) {}. Lung mask (`cpu::conspicuity::lung_mask`): voxels below {} HU, their 6-connected components that touch no in-plane border and hold at least {} ml, holes up to {:.0} mm^2 per axial slice filled (vessels, nodules); the lesion's zone (the label grown by {} mm) is left out of the lung. Evaluated on the label's box grown by {} mm (voxels {:?} to {:?}, {} lung voxels outside the zone), features computed on a crop reaching the kernels' and the rays' support beyond it. Lung preset: Hessian Li blobness at sigma {} mm (the preset's 1.5-9 mm less the scales below half the slice spacing; z refined by {} as the pipeline does), RST Li blobness with 42 rays, R = 25 mm, dr = 0.25 mm, transfer function {:.0}/{:.0} HU (the preset's, the noise of the whole volume being {}).\n",
         case.source,
         grid.dims[0],
         grid.dims[1],

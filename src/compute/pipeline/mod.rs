@@ -9,7 +9,7 @@
 //!
 //! What it computes is `crate::cpu::pipeline::compute` (the CPU reference), from the same
 //! [`Request::resolve`]: thick axes refined by integer factors for the Hessian (z for the RST's
-//! rays, which are cast at the input voxels only), the automatic
+//! rays with `refine_slices`, cast at the input voxels only), the automatic
 //! transfer function from the noise of the whole volume, Frangi's c over the whole volume per
 //! scale, the multi-scale maximum, and results taken at the input voxels. Bricks (whole rows,
 //! tiled in y and z) come from [`crate::compute::slab::plan`], sized from the device's binding
