@@ -136,15 +136,17 @@ struct Reading {
     pending: PendingSlabs,
 }
 
-/// What the viewer draws for a finding.
+/// What the viewer draws for a finding or a PET hot spot.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Marker {
     pub lps_mm: DVec3,
-    /// The finding's number (its rank).
+    /// The finding's number (its rank), or the hot spot's (drawn "P1", "P2", ...).
     pub number: usize,
     pub radius_mm: f64,
     pub mark: Mark,
     pub current: bool,
+    /// A PET hot spot (`cpu::hot_spots`) rather than a CT finding.
+    pub hot_spot: bool,
 }
 
 /// The findings of the volume shown.
@@ -474,6 +476,37 @@ impl FindingsState {
                     .map_or(5.0, |f| (0.5 * f.diameter_mm).max(3.0)),
                 mark,
                 current: self.current == Some(i),
+                hot_spot: false,
+            })
+            .chain(self.hot_spot_markers(generation))
+            .collect()
+    }
+
+    /// The PET's hot spots listed (as many as the panel shows), each a ring of its volume's
+    /// equivalent sphere (at least 3 mm), so that the panes show where the SUV is high beside
+    /// the CT's findings.
+    fn hot_spot_markers(&self, generation: u64) -> Vec<Marker> {
+        let Some(spots) = self.list(generation).and_then(|l| l.hot_spots.as_ref()) else {
+            return Vec::new();
+        };
+        let n = if self.show_all {
+            spots.spots.len()
+        } else {
+            SHOWN
+        };
+        spots
+            .spots
+            .iter()
+            .take(n)
+            .map(|h| Marker {
+                lps_mm: h.lps_mm,
+                number: h.rank,
+                radius_mm: (3.0 * h.volume_ml * 1000.0 / (4.0 * std::f64::consts::PI))
+                    .cbrt()
+                    .max(3.0),
+                mark: Mark::Open,
+                current: false,
+                hot_spot: true,
             })
             .collect()
     }
@@ -762,19 +795,37 @@ pub fn draw_markers(
     }
 }
 
-/// One marker: a ring of radius `r` px at `p`, its number beside it, coloured by its mark.
+/// One marker: a ring of radius `r` px at `p`, its number beside it, coloured by its mark (a
+/// PET hot spot: magenta, dashed, numbered "P1", "P2", ... as in the panel).
 pub fn draw_one(painter: &egui::Painter, m: &Marker, p: egui::Pos2, r: f32) {
     let colour = match m.mark {
+        _ if m.hot_spot => egui::Color32::from_rgb(240, 80, 230),
         Mark::Open => egui::Color32::from_rgb(255, 170, 40),
         Mark::Confirmed => egui::Color32::from_rgb(90, 230, 90),
         Mark::Dismissed => egui::Color32::from_gray(130),
     };
     let width = if m.current { 2.5 } else { 1.5 };
-    painter.circle_stroke(p, r, egui::Stroke::new(width, colour));
+    if m.hot_spot {
+        // Dashed: 16 arcs, so that a hot spot on a finding stays visible beside its ring.
+        let n = 16;
+        for k in 0..n {
+            let a0 = std::f32::consts::TAU * k as f32 / n as f32;
+            let a1 = a0 + 0.6 * std::f32::consts::TAU / n as f32;
+            let at = |a: f32| p + r * egui::vec2(a.cos(), a.sin());
+            painter.line_segment([at(a0), at(a1)], egui::Stroke::new(width, colour));
+        }
+    } else {
+        painter.circle_stroke(p, r, egui::Stroke::new(width, colour));
+    }
+    let label = if m.hot_spot {
+        format!("P{}", m.number)
+    } else {
+        m.number.to_string()
+    };
     painter.text(
         p + egui::vec2(r * 0.75 + 2.0, -r * 0.75 - 2.0),
         egui::Align2::LEFT_BOTTOM,
-        m.number.to_string(),
+        label,
         egui::FontId::proportional(if m.current { 15.0 } else { 13.0 }),
         colour,
     );

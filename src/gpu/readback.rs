@@ -177,10 +177,7 @@ impl PendingTexture {
         bytes_per_texel: u32,
     ) -> Result<Self, ReadbackError> {
         let [w, h, d] = size;
-        let padded = u64::from(w * bytes_per_texel)
-            .div_ceil(u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT))
-            * u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let bytes = padded * u64::from(h) * u64::from(d);
+        let bytes = padded_row_bytes(w, bytes_per_texel) * u64::from(h) * u64::from(d);
         let max = ctx.limits.max_buffer_size;
         if bytes > max {
             return Err(ReadbackError::TooLarge { bytes, max });
@@ -289,10 +286,7 @@ impl PendingSlabs {
         max_bytes: u64,
     ) -> Result<Self, ReadbackError> {
         let [w, h, d] = size;
-        let padded = u64::from(w * bytes_per_texel)
-            .div_ceil(u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT))
-            * u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let slice = (padded * u64::from(h)).max(1);
+        let slice = (padded_row_bytes(w, bytes_per_texel) * u64::from(h)).max(1);
         let max = max_bytes.min(ctx.limits.max_buffer_size);
         if slice > max {
             return Err(ReadbackError::TooLarge { bytes: slice, max });
@@ -359,6 +353,13 @@ impl PendingSlabs {
             ctx.device.poll(wgpu::PollType::wait_indefinitely())?;
         }
     }
+}
+
+/// Bytes of one row of `w` texels as a texture copy lays it out (wgpu's 256-byte alignment).
+fn padded_row_bytes(w: u32, bytes_per_texel: u32) -> u64 {
+    (u64::from(w) * u64::from(bytes_per_texel))
+        .div_ceil(u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT))
+        * u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
 }
 
 /// The first `row` bytes of each of the first `rows` rows of `padded` bytes.

@@ -1170,4 +1170,26 @@ fn findings_list_the_pet_hot_spots_and_a_click_goes_to_one() {
     let at = harness.state().crosshair_lps_mm().expect("crosshair");
     let d = at.distance(glam::DVec3::from(first.lps_mm));
     assert!(d <= 2.5, "crosshair {d} mm from the hot spot");
+    // The axial pane, now through the hot spot, rings it in magenta ("P1"), which neither the
+    // CT's grey, the hot-iron PET nor the findings' orange rings draw.
+    harness.run_steps(3);
+    let image = harness.render().expect("render");
+    save(&image, "app_findings_pet_rings.png");
+    let axial = harness
+        .state()
+        .pane_rect(SliceKind::Axial)
+        .expect("axial pane");
+    let mut magenta = 0;
+    for y in axial.top().ceil() as u32..axial.bottom().floor() as u32 {
+        for x in axial.left().ceil() as u32..axial.right().floor() as u32 {
+            if x < image.width() && y < image.height() {
+                let p = image.get_pixel(x, y);
+                magenta += usize::from(p[0] > 180 && p[2] > 180 && p[1] < 140);
+            }
+        }
+    }
+    assert!(
+        magenta > 20,
+        "{magenta} magenta pixels: no hot-spot ring in the axial pane"
+    );
 }
