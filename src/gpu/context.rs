@@ -138,6 +138,14 @@ impl GpuContext {
         )
     }
 
+    /// Natively, runs the callbacks of work the GPU finished (queue-done and map callbacks run
+    /// only when the device is polled or something is submitted), without waiting; in the
+    /// browser they run by themselves and this does nothing.
+    pub fn poll_callbacks(&self) {
+        #[cfg(not(target_arch = "wasm32"))]
+        let _ = self.device.poll(wgpu::PollType::Poll);
+    }
+
     /// A human-readable report of the adapter and the limits that matter for volumes.
     pub fn describe(&self) -> String {
         let l = &self.limits;

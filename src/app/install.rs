@@ -1,0 +1,187 @@
+//! From a loaded volume to the displayed one: its texture written over frames (`Uploading`),
+//! the scene, the panes and the features reset for it, a failed load reported with the previous
+//! volume kept.
+
+use super::*;
+
+impl ShapecastApp {
+    /// Makes a loaded volume the displayed one (or says why it cannot be shown), with the
+    /// series list of the files it came from (`None`: files of one series, another format, a
+    /// phantom, an archive's retrieval). A volume the GPU refused changes nothing. Its texture
+    /// is written over frames (`Uploading`); a small volume is installed in this frame.
+    pub(super) fn install(&mut self, loaded: crate::io::Loaded, series: Option<load::SeriesSet>) {
+        let Some(gpu) = &self.gpu else { return };
+        let patient = loaded.patient;
+        let mut volume = loaded.volume;
+        let mut notes = loaded.notes;
+        // Larger than one 3D texture of this device: a reduced copy, said so (the file is
+        // unchanged; features are computed on what is shown).
+        let max = gpu.limits.max_texture_dimension_3d as usize;
+        if max > 0 && volume.dims.iter().any(|&d| d > max) {
+            let factors = volume.dims.map(|d| d.div_ceil(max));
+            let before = volume.dims;
+            volume = volume.reduced(factors);
+            notes.push(format!(
+                "{before:?} voxels exceed this GPU's largest 3D texture ({max} per side): shown and computed as {:?} voxels, averaged {factors:?}",
+                volume.dims
+            ));
+        }
+        let (render, upload) = match RenderVolume::create(gpu, &volume) {
+            Ok(r) => r,
+            Err(e) => {
+                self.loading_origin = None;
+                return self.load_failed(format!("{}: {e}", volume.source));
+            }
+        };
+        self.uploading = Some(Uploading {
+            patient,
+            notes,
+            volume,
+            series,
+            origin: self.loading_origin.take(),
+            render,
+            upload,
+        });
+        self.advance_upload();
+    }
+
+    /// Stops uploading a volume when another load begins: the newer one is what the user asked
+    /// for last, and a link's view waits for it, not for the older one.
+    pub(super) fn cancel_upload(&mut self) {
+        if self.uploading.take().is_some() {
+            self.load_progress = None;
+        }
+    }
+
+    /// A load failed: a link's view that waited for the series it named (asked for once
+    /// already) is dropped with a note rather than applied later to another series.
+    pub(super) fn load_failed(&mut self, message: String) {
+        if self.pending_view.as_ref().is_some_and(|p| p.series_asked) {
+            self.pending_view = None;
+            self.notes
+                .push("the link's series did not load, so its view was not applied".to_owned());
+        }
+        self.error(message);
+    }
+
+    /// Writes the next slabs of the volume being uploaded (about `UPLOAD_SECONDS_PER_FRAME`),
+    /// and installs it after the last.
+    pub(super) fn advance_upload(&mut self) {
+        let (Some(gpu), Some(up)) = (&self.gpu, &mut self.uploading) else {
+            return;
+        };
+        // Natively the queue's callbacks (which count the slabs in flight) run only when the
+        // device is polled or something is submitted: poll, so that a frame that ended with
+        // every slab in flight does not wait for ever (in the browser they run by themselves).
+        gpu.poll_callbacks();
+        let started = web_time::Instant::now();
+        // Slabs while the frame's time lasts and the GPU keeps up (`ready`: a bounded number
+        // in flight, so a slow device does not queue the whole volume in shared memory).
+        while up.upload.ready() {
+            if up.upload.step(gpu, &up.volume, &up.render) {
+                if let Some(up) = self.uploading.take() {
+                    self.load_progress = None;
+                    self.finish_install(up);
+                }
+                return;
+            }
+            if started.elapsed().as_secs_f64() >= UPLOAD_SECONDS_PER_FRAME {
+                break;
+            }
+        }
+        let fraction = up.upload.fraction(&up.render);
+        self.load_progress = Some((
+            fraction,
+            format!(
+                "uploading {} to the GPU ({:.0}%)",
+                up.volume.source,
+                100.0 * fraction
+            ),
+        ));
+    }
+
+    /// Makes an uploaded volume the displayed one.
+    pub(super) fn finish_install(&mut self, up: Uploading) {
+        let Uploading {
+            patient,
+            notes,
+            volume,
+            series,
+            origin,
+            render,
+            upload: _,
+        } = up;
+        self.generation += 1;
+        self.window = window_level::default_window(&volume);
+        self.crosshair = volume.dims.map(|d| d / 2);
+        self.hover = None;
+        self.features.clear();
+        self.findings.clear();
+        self.measure.list.clear();
+        self.measure.last_pick = None;
+        self.probe = probe::ProbeState::default();
+        self.notes = notes;
+        self.notes.extend(volume.warnings.iter().cloned());
+        let range = volume.value_range();
+        let is_ct = volume.looks_like_ct(range);
+        // Without a preset asked for (URL, command line), open on the one that fits what was
+        // loaded, and say which (the demo CTA keeps the vessels preset it starts with).
+        if self.options.preset.is_none()
+            && volume.modality != crate::volume::Modality::Phantom
+            && !volume.source.contains(demo::DEMO_FILE)
+        {
+            let (preset, why) = preset_for(&volume, is_ct);
+            if preset != self.applied.preset {
+                self.params = FeatureParams::from_preset(preset);
+                self.applied = self.params.clone();
+            }
+            self.notes.push(why);
+        }
+        self.scene = Some(Scene {
+            is_ct,
+            volume: Arc::new(volume),
+            render,
+            generation: self.generation,
+            origin,
+        });
+        self.pacs.patient = patient;
+        self.pending_camera = None;
+        // The list goes with the volume shown.
+        self.series.set = series;
+        // The PET that came with a CT (a PET/CT study's folder) is read next, over it.
+        self.pet.clear();
+        if let (Some(set), Some(scene)) = (&self.series.set, &self.scene) {
+            self.pet.start_with(set, &scene.volume, self.generation);
+        }
+        #[cfg(not(target_arch = "wasm32"))]
+        if let Some(paths) = self.options.pet.take()
+            && let Some(scene) = &self.scene
+            && scene.volume.modality != crate::volume::Modality::Pt
+        {
+            self.pet
+                .start_source(LoadSource::Paths(paths), self.generation);
+        }
+        // A PET/CT link's PET (`&pet=URL`): downloaded once the CT it goes over is shown.
+        if !self.options.pet_urls.is_empty()
+            && let Some(scene) = &self.scene
+            && scene.volume.modality != crate::volume::Modality::Pt
+        {
+            let urls = std::mem::take(&mut self.options.pet_urls);
+            self.pet.urls = urls.clone();
+            self.pet.awaiting(self.generation);
+            #[cfg(target_arch = "wasm32")]
+            web_fetch::fetch_pet_urls(urls, self.generation);
+            #[cfg(not(target_arch = "wasm32"))]
+            self.error(format!(
+                "{}: a PET by URL opens in the browser; natively give --pet PATH",
+                urls.join(", ")
+            ));
+        }
+        // A link's view for this volume replaces the defaults it just got (after loading the
+        // series it names, when that is another of these files).
+        self.apply_pending_view();
+        if self.options.compute_on_load {
+            self.ensure_features();
+        }
+    }
+}
