@@ -116,12 +116,12 @@ impl FindingList {
     }
 }
 
-/// Which PET volume (its allocation; a new PET is a new one).
 /// The largest readback of the features per frame: 32 MiB (a 512 x 512 x 32 slab), so that a
 /// whole-body texture (2 GB at 2,000 slices) is read over frames within any device's buffer limit
 /// and never as a second whole copy in flight.
 const READBACK_SLAB_BYTES: u64 = 32 << 20;
 
+/// Which PET volume (its allocation; a new PET is a new one).
 fn pet_key(pet: Option<&std::sync::Arc<Volume>>) -> Option<usize> {
     pet.map(|p| std::sync::Arc::as_ptr(p) as usize)
 }
@@ -211,9 +211,15 @@ impl FindingsState {
         entry: Option<&FeatureEntry>,
         pet: Option<&std::sync::Arc<Volume>>,
     ) -> Option<String> {
+        let pet_now = pet_key(pet);
+        // Hot spots of a PET no longer fused (removed or replaced) go at once, rings and rows,
+        // not when the next list arrives (which may be never: no features, no blobness).
+        if let Some(l) = self.list.as_mut().filter(|l| l.pet != pet_now) {
+            l.hot_spots = None;
+            l.pet_note = None;
+        }
         let entry = entry?;
         let method = entry.request.method;
-        let pet_now = pet_key(pet);
         // A PET fused after the list was made: the list is made again with its hot spots.
         let same =
             |g: u64, s: u64, p: Option<usize>| g == generation && s == entry.id && p == pet_now;

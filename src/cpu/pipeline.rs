@@ -213,8 +213,18 @@ impl Request {
             }
             Method::Gst | Method::Rst => [1; 3],
         };
+        // The RST's refinement is of z only: its output is laid out on the input's rows.
+        debug_assert!(self.method != Method::Rst || factors[..2] == [1, 1]);
         let compute = refined_grid(grid, factors);
         let mut notes = Vec::new();
+        if self.refine_slices
+            && !(self.method == Method::Rst && self.rule == OpacityRule::Consistent)
+        {
+            notes.push(
+                "--refine-slices refines for the RST's rays with the consistent rule only: ignored here"
+                    .to_owned(),
+            );
+        }
         if !capped.is_empty()
             && matches!(
                 self.method,

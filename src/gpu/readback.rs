@@ -17,6 +17,8 @@ pub enum ReadbackError {
     Poll(#[from] wgpu::PollError),
     #[error("{bytes} bytes to read back, more than one buffer of this device holds ({max} bytes)")]
     TooLarge { bytes: u64, max: u64 },
+    #[error("{bytes} bytes to read back, more than this tab or process could reserve")]
+    OutOfMemory { bytes: u64 },
 }
 
 /// Copies `size` bytes of `src` into a staging buffer and returns them once mapped.
@@ -293,6 +295,13 @@ impl PendingSlabs {
         }
         let slab = (max / slice).clamp(1, u64::from(d.max(1))) as u32;
         let total = u64::from(w) * u64::from(h) * u64::from(d) * u64::from(bytes_per_texel);
+        // Reserved once, and refused with a message where the tab (wasm32: 4 GiB of address
+        // space) or the process cannot hold it, instead of aborting on a failed allocation.
+        let mut out = Vec::new();
+        usize::try_from(total)
+            .ok()
+            .and_then(|n| out.try_reserve_exact(n).ok())
+            .ok_or(ReadbackError::OutOfMemory { bytes: total })?;
         let mut this = Self {
             texture: texture.clone(),
             size,
@@ -300,7 +309,7 @@ impl PendingSlabs {
             slab,
             next_z: 0,
             current: None,
-            out: Vec::with_capacity(usize::try_from(total).unwrap_or(0)),
+            out,
         };
         this.start_next(ctx);
         Ok(this)
@@ -330,7 +339,11 @@ impl PendingSlabs {
     /// All the texels once every slab arrived; `None` while one is in flight (never blocks).
     /// A slab that arrived starts the next.
     pub fn poll(&mut self, ctx: &GpuContext) -> Option<Result<Vec<u8>, ReadbackError>> {
-        let bytes = self.current.as_mut()?.poll(ctx)?;
+        let Some(current) = self.current.as_mut() else {
+            // Nothing in flight: every slab arrived (or the texture has no slices).
+            return Some(Ok(std::mem::take(&mut self.out)));
+        };
+        let bytes = current.poll(ctx)?;
         self.current = None;
         match bytes {
             Ok(b) => self.out.extend_from_slice(&b),
