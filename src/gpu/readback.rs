@@ -170,23 +170,6 @@ pub struct PendingTexture {
 }
 
 impl PendingTexture {
-    /// [`Self::start`] when the padded copy fits one buffer of the device (a whole volume's
-    /// texture may not: wgpu's validation would fail on it), else [`ReadbackError::TooLarge`].
-    pub fn try_start(
-        ctx: &GpuContext,
-        texture: &wgpu::Texture,
-        size: [u32; 3],
-        bytes_per_texel: u32,
-    ) -> Result<Self, ReadbackError> {
-        let [w, h, d] = size;
-        let bytes = padded_row_bytes(w, bytes_per_texel) * u64::from(h) * u64::from(d);
-        let max = ctx.limits.max_buffer_size;
-        if bytes > max {
-            return Err(ReadbackError::TooLarge { bytes, max });
-        }
-        Ok(Self::start(ctx, texture, size, bytes_per_texel))
-    }
-
     /// Records and submits the copy of `size` texels of `texture` (which needs `COPY_SRC`),
     /// `bytes_per_texel` each, and starts mapping them.
     pub fn start(

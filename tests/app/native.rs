@@ -871,18 +871,9 @@ fn a_pet_ct_folder_opens_the_ct_with_its_pet_fused() {
         .pane_rect(SliceKind::Axial)
         .expect("axial pane");
     let warm = |image: &image::RgbaImage| {
-        let mut n = 0;
-        for y in axial.top().ceil() as u32..axial.bottom().floor() as u32 {
-            for x in axial.left().ceil() as u32..axial.right().floor() as u32 {
-                if x < image.width() && y < image.height() {
-                    let p = image.get_pixel(x, y);
-                    n += usize::from(
-                        p[0] > p[1].saturating_add(40) && p[0] > p[2].saturating_add(40),
-                    );
-                }
-            }
-        }
-        n
+        pixels_where(image, axial, |p| {
+            p[0] > p[1].saturating_add(40) && p[0] > p[2].saturating_add(40)
+        })
     };
     let fused = warm(&image);
     assert!(fused > 100, "{fused} hot-iron pixels in the axial pane");
@@ -1127,6 +1118,23 @@ fn findings_list_the_demo_spheres_and_n_skips_the_dismissed() {
     assert_eq!(again, marks);
 }
 
+/// Pixels of `image` inside `rect` (a pane) for which `pred` holds.
+fn pixels_where(
+    image: &image::RgbaImage,
+    rect: egui::Rect,
+    pred: impl Fn(&image::Rgba<u8>) -> bool,
+) -> usize {
+    let mut n = 0;
+    for y in rect.top().ceil() as u32..rect.bottom().floor() as u32 {
+        for x in rect.left().ceil() as u32..rect.right().floor() as u32 {
+            if x < image.width() && y < image.height() {
+                n += usize::from(pred(image.get_pixel(x, y)));
+            }
+        }
+    }
+    n
+}
+
 /// Findings with a PET fused (STS_001: CT and the PET cropped around the sarcoma): the panel
 /// lists the PET's hot spots with their CT shape, cut at SUV 2.5 since the crop holds no liver;
 /// a click on the first moves the crosshair to it.
@@ -1179,15 +1187,7 @@ fn findings_list_the_pet_hot_spots_and_a_click_goes_to_one() {
         .state()
         .pane_rect(SliceKind::Axial)
         .expect("axial pane");
-    let mut magenta = 0;
-    for y in axial.top().ceil() as u32..axial.bottom().floor() as u32 {
-        for x in axial.left().ceil() as u32..axial.right().floor() as u32 {
-            if x < image.width() && y < image.height() {
-                let p = image.get_pixel(x, y);
-                magenta += usize::from(p[0] > 180 && p[2] > 180 && p[1] < 140);
-            }
-        }
-    }
+    let magenta = pixels_where(&image, axial, |p| p[0] > 180 && p[2] > 180 && p[1] < 140);
     assert!(
         magenta > 20,
         "{magenta} magenta pixels: no hot-spot ring in the axial pane"

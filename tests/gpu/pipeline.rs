@@ -182,30 +182,31 @@ fn structure_tensor_matches_the_cpu() {
     check_method(&ctx, &volume, &req, 1e-3, None);
 }
 
+/// A small RST request (26 rays, R 5 mm, dr 0.5 mm) with the automatic transfer function.
+fn small_rst() -> Request {
+    let mut req = Request::new(Method::Rst);
+    req.rays = Some(26);
+    req.radius_mm = Some(5.0);
+    req.step_mm = Some(0.5);
+    req
+}
+
 #[test]
 fn rst_matches_the_cpu_with_the_automatic_transfer_function() {
     let Some(ctx) = test_context() else { return };
     // Noise so that the automatic transfer function has windows to measure (0..100 HU band).
     let volume = scene([0.9, 0.9, 1.5], 5.0);
-    let mut req = Request::new(Method::Rst);
-    req.rays = Some(26);
-    req.radius_mm = Some(5.0);
-    req.step_mm = Some(0.5);
-    check_method(&ctx, &volume, &req, 1e-2, Some((1e-3, 0.995)));
+    check_method(&ctx, &volume, &small_rst(), 1e-2, Some((1e-3, 0.995)));
 }
 
 #[test]
 fn rst_on_refined_slices_matches_the_cpu_in_bricks_and_in_paced_rows() {
     let Some(ctx) = test_context() else { return };
     // 2.5 mm slices at dr 0.5 mm, --refine-slices: z refined by 2 for the rays (docs/science.md,
-    // "Thick slices"),
-    // features at the input voxels; the automatic transfer function measured on the refined
-    // grid as the twin measures it.
+    // "Thick slices"), features at the input voxels; the automatic transfer function measured on
+    // the refined grid as the twin measures it.
     let volume = scene([0.8, 0.8, 2.5], 5.0);
-    let mut req = Request::new(Method::Rst);
-    req.rays = Some(26);
-    req.radius_mm = Some(5.0);
-    req.step_mm = Some(0.5);
+    let mut req = small_rst();
     assert_eq!(
         req.resolve(&Grid::of(&volume)).expect("request").factors,
         [1; 3]
