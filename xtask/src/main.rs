@@ -150,8 +150,16 @@ fn ensure_trunk() -> Result {
     if version.split_whitespace().nth(1) == Some(TRUNK_VERSION) {
         return Ok(());
     }
-    eprintln!("xtask: installing trunk {TRUNK_VERSION} (about 12 minutes on 2 cores, once)");
-    run(Command::new("cargo").args(["install", "--locked", &format!("trunk@{TRUNK_VERSION}")]))
+    eprintln!("xtask: installing trunk {TRUNK_VERSION} (several minutes on 2 cores, once)");
+    // Trunk's own release profile is fat LTO in one codegen unit: most of its build time, for
+    // a tool that only runs cargo and copies files. A plain optimised build instead, without
+    // the update check (it asks crates.io; trunk runs offline here).
+    run(Command::new("cargo")
+        .args(["install", "--locked", &format!("trunk@{TRUNK_VERSION}")])
+        .args(["--no-default-features", "--features", "rustls"])
+        .env("CARGO_PROFILE_RELEASE_LTO", "false")
+        .env("CARGO_PROFILE_RELEASE_CODEGEN_UNITS", "16")
+        .env("CARGO_PROFILE_RELEASE_OPT_LEVEL", "2"))
 }
 
 /// The wasm-bindgen version Cargo.lock pins; the CLI must match it exactly.
@@ -186,7 +194,11 @@ fn ensure_wasm_bindgen() -> Result {
     }
     eprintln!("xtask: installing wasm-bindgen-cli {want}");
     // Without --locked: the CLI's own lock file may pin crates newer than this toolchain allows.
-    run(Command::new("cargo").args(["install", "wasm-bindgen-cli", "--version", &want]))
+    run(Command::new("cargo")
+        .args(["install", "wasm-bindgen-cli", "--version", &want])
+        .env("CARGO_PROFILE_RELEASE_LTO", "false")
+        .env("CARGO_PROFILE_RELEASE_CODEGEN_UNITS", "16")
+        .env("CARGO_PROFILE_RELEASE_OPT_LEVEL", "2"))
 }
 
 fn dpkg_installed(package: &str) -> bool {
