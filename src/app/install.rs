@@ -153,6 +153,8 @@ impl ShapecastApp {
         if let (Some(set), Some(scene)) = (&self.series.set, &self.scene) {
             self.pet.start_with(set, &scene.volume, self.generation);
         }
+        // ... and an archive's PET/CT study's PET series, retrieved over its CT.
+        self.pacs_retrieve_pet(self.generation);
         #[cfg(not(target_arch = "wasm32"))]
         if let Some(paths) = self.options.pet.take()
             && let Some(scene) = &self.scene
@@ -184,4 +186,54 @@ impl ShapecastApp {
             self.ensure_features();
         }
     }
+}
+
+impl ShapecastApp {
+    /// Reads `source` as the PET of the CT shown and fuses it over it, replacing a PET shown
+    /// (what `view CT --pet PET` does once the CT is shown). Nothing without a volume shown.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn open_pet(&mut self, source: LoadSource) {
+        if self.scene.is_some() {
+            self.pet.clear();
+            self.pet.start_source(source, self.generation);
+        }
+    }
+}
+
+/// The preset that fits a loaded volume, and a sentence saying why: lung nodules when a CT holds
+/// lung (more than 5% of its voxels between -950 and -600 HU), lymph nodes / soft tissue for
+/// other CT; for a volume without Hounsfield units, the default with a warning that the presets'
+/// transfer functions are in HU.
+pub fn preset_for(volume: &crate::volume::Volume, is_ct: bool) -> (Preset, String) {
+    if !is_ct {
+        return (
+            Preset::default(),
+            format!(
+                "preset: {} (the presets' transfer functions and thresholds are CT Hounsfield units; this volume has none, so set the transfer function to its contrast)",
+                features::preset_label(Preset::default())
+            ),
+        );
+    }
+    let n = volume.voxel_count();
+    let stride = (n / 200_000).max(1);
+    let (mut lung, mut seen) = (0usize, 0usize);
+    for i in (0..n).step_by(stride) {
+        let v = volume.value(i);
+        seen += 1;
+        lung += usize::from((-950.0..=-600.0).contains(&v));
+    }
+    let fraction = lung as f64 / seen.max(1) as f64;
+    let preset = if fraction > 0.05 {
+        Preset::LungNodules
+    } else {
+        Preset::LymphNodes
+    };
+    (
+        preset,
+        format!(
+            "preset: {} ({:.0}% of the voxels are lung, -950..-600 HU); change it under Features",
+            features::preset_label(preset),
+            100.0 * fraction
+        ),
+    )
 }

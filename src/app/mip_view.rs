@@ -776,22 +776,7 @@ impl MipView {
             .render(gpu, &scene, &self.camera, settings, target, rows)
             .map_err(|e| e.to_string())?;
         if resized {
-            let mut renderer = render_state.renderer.write();
-            match self.texture_ids[slot] {
-                Some(id) => renderer.update_egui_texture_from_wgpu_texture(
-                    &gpu.device,
-                    &target.view,
-                    wgpu::FilterMode::Linear,
-                    id,
-                ),
-                None => {
-                    self.texture_ids[slot] = Some(renderer.register_native_texture(
-                        &gpu.device,
-                        &target.view,
-                        wgpu::FilterMode::Linear,
-                    ));
-                }
-            }
+            show_texture(render_state, gpu, &target.view, &mut self.texture_ids[slot]);
         }
         Ok(())
     }
@@ -861,6 +846,29 @@ impl MipView {
                 font,
                 egui::Color32::from_rgb(255, 90, 90),
             );
+        }
+    }
+}
+
+/// Shows a GPU texture in egui under `id`: registered the first time, pointed at the new view
+/// after (a texture made again at another size). Both image panes go through here.
+pub fn show_texture(
+    render_state: &eframe::egui_wgpu::RenderState,
+    gpu: &GpuContext,
+    view: &wgpu::TextureView,
+    id: &mut Option<egui::TextureId>,
+) {
+    let mut renderer = render_state.renderer.write();
+    match *id {
+        Some(id) => renderer.update_egui_texture_from_wgpu_texture(
+            &gpu.device,
+            view,
+            wgpu::FilterMode::Linear,
+            id,
+        ),
+        None => {
+            *id =
+                Some(renderer.register_native_texture(&gpu.device, view, wgpu::FilterMode::Linear));
         }
     }
 }

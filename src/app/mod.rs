@@ -7,6 +7,7 @@
 //! the previous volume.
 
 pub mod demo;
+mod external;
 pub mod features;
 pub mod findings;
 mod install;
@@ -24,10 +25,10 @@ mod panes;
 mod pet;
 pub mod picture;
 mod probe;
+mod publish;
 mod series_list;
 mod share;
 pub mod slices;
-pub mod url_params;
 pub mod view_link;
 #[cfg(target_arch = "wasm32")]
 mod web_fetch;
@@ -44,15 +45,15 @@ use crate::cpu::tf::Preset;
 use crate::gpu::GpuContext;
 use crate::gpu::volume_texture::{IntensityUpload, RenderVolume};
 use crate::render::slice::{Overlay, SliceRenderer};
-use crate::status::{
-    AdapterStatus, AppStatus, CrosshairStatus, FeatureStatus, PetStatus, Phase, VolumeStatus,
-};
+use crate::status::{AdapterStatus, AppStatus, Phase};
 use crate::volume::Volume;
 
 pub use features::{DisplayMode, FeatureDisplay, FeatureEntry, FeatureParams, JobOutcome};
+pub use install::preset_for;
 pub use load::{LoadSource, SeriesSet};
 pub use options::{AppOptions, StartWith};
 pub use pacs::PacsTarget;
+pub use panes::{Layout, PaneId};
 pub use slices::SliceKind;
 pub use view_link::{ViewSource, ViewState};
 pub use window_level::{Window, WindowPreset};
@@ -101,44 +102,6 @@ pub fn run_native(options: AppOptions) -> anyhow::Result<()> {
         Box::new(move |cc| Ok(Box::new(ShapecastApp::with_options(cc, options)))),
     )
     .map_err(|e| anyhow::anyhow!("could not open the viewer window: {e}"))
-}
-
-/// The panes a layout can show.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PaneId {
-    Mip,
-    Slice(SliceKind),
-}
-
-impl PaneId {
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Mip => "mip",
-            Self::Slice(k) => k.name(),
-        }
-    }
-}
-
-/// How the panes are arranged.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Layout {
-    /// The MIP large on the left, the three slice panes stacked on the right (the arrangement
-    /// the paper's clinicians preferred: a separate viewport beside the linked slices).
-    MipAndSlices,
-    /// MIP, axial / coronal, sagittal in a 2x2 grid.
-    Grid,
-    /// One pane, maximised.
-    Single(PaneId),
-}
-
-impl Layout {
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::MipAndSlices => "mip+slices",
-            Self::Grid => "grid",
-            Self::Single(p) => p.name(),
-        }
-    }
 }
 
 /// The loaded volume and its intensity texture.
@@ -596,130 +559,6 @@ impl ShapecastApp {
         ));
     }
 
-    /// Files dropped on the window (native) or read by the page (web).
-    fn take_external_files(&mut self, ctx: &egui::Context) {
-        #[cfg(not(target_arch = "wasm32"))]
-        {
-            let (dropped, hovering) =
-                ctx.input(|i| (i.raw.dropped_files.clone(), !i.raw.hovered_files.is_empty()));
-            self.drop_hover = hovering;
-            if !dropped.is_empty() {
-                let paths: Vec<std::path::PathBuf> = dropped
-                    .iter()
-                    .map(|f| f.path().to_path_buf())
-                    .filter(|p| !p.as_os_str().is_empty())
-                    .collect();
-                if paths.len() == dropped.len() {
-                    self.open(LoadSource::Paths(paths));
-                } else {
-                    let mut files = Vec::new();
-                    for f in &dropped {
-                        let name = f.path().display().to_string();
-                        match f.bytes() {
-                            Ok(bytes) => files.push(crate::io::InputFile::new(name, bytes)),
-                            Err(e) => return self.error(format!("{name}: cannot read: {e}")),
-                        }
-                    }
-                    let label = format!("{} dropped files", files.len());
-                    self.open(LoadSource::Files { label, files });
-                }
-            }
-        }
-        #[cfg(target_arch = "wasm32")]
-        {
-            let _ = ctx;
-            for event in web_files::take_events() {
-                match event {
-                    web_files::WebEvent::Hover(on) => self.drop_hover = on,
-                    web_files::WebEvent::Progress {
-                        verb,
-                        label,
-                        done,
-                        total,
-                    } => {
-                        // Files being read or downloaded: a newer load than one uploading.
-                        self.cancel_upload();
-                        let f = if total > 0.0 {
-                            (done / total) as f32
-                        } else {
-                            0.0
-                        };
-                        let what = if total > 0.0 {
-                            format!(
-                                "{verb} {label} ({:.1} of {:.1} MB)",
-                                done / 1e6,
-                                total / 1e6
-                            )
-                        } else if done > 0.0 {
-                            format!("{verb} {label} ({:.1} MB)", done / 1e6)
-                        } else {
-                            format!("{verb} {label}")
-                        };
-                        self.load_progress = Some((0.5 * f, what));
-                    }
-                    web_files::WebEvent::Files {
-                        label,
-                        files,
-                        origin,
-                    } => {
-                        self.open_from(LoadSource::Files { label, files }, Some(origin));
-                    }
-                    web_files::WebEvent::Loaded {
-                        loaded,
-                        series,
-                        origin,
-                    } => {
-                        self.load_progress = None;
-                        self.series.loading = None;
-                        // Another series of the files shown came from where they did.
-                        self.loading_origin =
-                            origin.or_else(|| self.scene.as_ref().and_then(|s| s.origin.clone()));
-                        self.install(*loaded, series);
-                    }
-                    web_files::WebEvent::PetLoaded { loaded, generation } => {
-                        let ct = self.scene.as_ref().map(|s| s.volume.as_ref());
-                        if let Some(message) =
-                            self.pet
-                                .install(loaded.volume, ct, generation, self.gpu.as_ref())
-                        {
-                            self.error(message);
-                        }
-                        self.pet_arrived();
-                    }
-                    web_files::WebEvent::PetFiles {
-                        label,
-                        files,
-                        generation,
-                    } => {
-                        // Only for the CT it was asked for (a newer CT drops it unread).
-                        if self.pet.awaits(generation) {
-                            self.pet
-                                .start_source(LoadSource::Files { label, files }, generation);
-                        }
-                    }
-                    web_files::WebEvent::PetFailed {
-                        message,
-                        generation,
-                    } => {
-                        if self.pet.failed(generation) {
-                            self.error(format!("PET: {message}"));
-                        }
-                    }
-                    web_files::WebEvent::Failed { message } => {
-                        self.load_progress = None;
-                        self.series.loading = None;
-                        self.load_failed(message);
-                    }
-                    web_files::WebEvent::Cancelled { label } => {
-                        self.load_progress = None;
-                        self.notes.push(format!("{label}: download cancelled"));
-                    }
-                    web_files::WebEvent::Link { fragment } => self.open_link(&fragment),
-                }
-            }
-        }
-    }
-
     /// Advances loading, uploading and computing by one step each.
     fn advance(&mut self, frame_s: f64) {
         if self.uploading.is_some() {
@@ -837,131 +676,6 @@ impl ShapecastApp {
             opacity: self.display.opacity,
         })
     }
-
-    fn update_status(&mut self) {
-        let view = self.view_state();
-        let link = format!("{}#{}", share::page_address(), view.fragment());
-        if self.status.link != link {
-            self.status.link = link;
-            self.status.view_json = view.json();
-        }
-        self.status.notice = self.link_notice();
-        self.status.controls = self
-            .controls
-            .iter()
-            .map(|(n, r)| (n.clone(), [r.left(), r.top(), r.width(), r.height()]))
-            .collect();
-        let movie = self.movie_progress();
-        let pet_status = self.pet.layer.as_ref().map(|p| PetStatus {
-            dims: p.volume.dims,
-            spacing_mm: p.volume.spacing_mm,
-            unit: p.unit().to_owned(),
-            suv_factor: p.volume.pet.as_ref().and_then(|x| x.suv_factor),
-            at_crosshair: self
-                .scene
-                .as_ref()
-                .and_then(|sc| p.value_at_ct_voxel(&sc.volume, self.crosshair)),
-            window: p.window,
-            opacity: p.opacity,
-            visible: p.visible,
-        });
-        let mip_state = if self.scene.is_some() {
-            self.mip_view.picture_state()
-        } else {
-            "none"
-        };
-        let pet_mip_state = if self.pet.layer.is_none() {
-            "none"
-        } else if self.pet_mip.lags(&self.mip_view.camera) {
-            // Drawn with the shape MIP's camera of the frame before: the next frame redraws it.
-            "refining"
-        } else {
-            self.pet_mip.picture_state()
-        };
-        let s = &mut self.status;
-        s.pet = pet_status;
-        s.pet_loading = self.pet.loading();
-        s.mip = mip_state.to_owned();
-        s.pet_mip = pet_mip_state.to_owned();
-        s.findings = self.findings.status(self.generation);
-        s.volume = self.scene.as_ref().map(|sc| VolumeStatus {
-            dims: sc.volume.dims,
-            spacing_mm: sc.volume.spacing_mm,
-            origin_mm: sc.volume.origin_mm,
-            direction: sc.volume.direction.to_cols_array(),
-            source: sc.volume.source.clone(),
-            modality: sc.volume.modality.as_str().to_owned(),
-        });
-        s.crosshair = self.scene.as_ref().map(|sc| {
-            let [i, j, k] = self.crosshair;
-            let p = sc
-                .volume
-                .world_from_voxel()
-                .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64));
-            CrosshairStatus {
-                voxel: self.crosshair,
-                lps_mm: [p.x, p.y, p.z],
-            }
-        });
-        let request = self.mode.method().map(|m| self.applied.request(m));
-        let (state, fraction) = match &request {
-            None => ("none", 1.0),
-            Some(r) if self.features.find(r).is_some() => ("done", 1.0),
-            Some(r) if self.features.running_request() == Some(r) => {
-                ("running", self.features.progress().map_or(0.0, |(f, _)| f))
-            }
-            Some(r) => match self.features.outcome(r) {
-                Some(JobOutcome::Cancelled) => ("cancelled", 0.0),
-                Some(JobOutcome::Failed(_)) => ("failed", 0.0),
-                _ => ("none", 0.0),
-            },
-        };
-        s.features = Some(FeatureStatus {
-            method: self.mode.name().to_owned(),
-            preset: self.applied.preset.name().to_owned(),
-            state: state.to_owned(),
-            fraction,
-            cached: self.features.len(),
-        });
-        s.layout = self.layout.name().to_owned();
-        s.error = self.errors.last().cloned();
-        s.series = series_list::status_of(&self.series);
-
-        let computing = self.features.running_request().is_some();
-        if let Some((f, what)) = &self.load_progress {
-            s.phase = Phase::Loading;
-            s.progress = *f;
-            s.task = Some(what.clone());
-        } else if computing {
-            s.phase = Phase::Computing;
-            let (f, stage) = self.features.progress().unwrap_or((0.0, ""));
-            s.progress = f;
-            s.task = Some(format!(
-                "computing {} features: {stage}{}",
-                self.features
-                    .running_request()
-                    .map_or("", |r| features::method_name(r.method)),
-                panels::time_left(self.features.timing())
-            ));
-        } else if let Some((done, frames)) = movie {
-            // Saving a movie leaves the viewer ready; the task says how far it is.
-            s.phase = Phase::Ready;
-            s.progress = done as f32 / frames.max(1) as f32;
-            s.task = Some(format!("saving the movie: frame {done} of {frames}"));
-        } else {
-            s.task = None;
-            s.progress = 1.0;
-            s.phase = if self.gpu.is_none() || (self.scene.is_none() && !self.errors.is_empty()) {
-                Phase::Error
-            } else {
-                Phase::Ready
-            };
-        }
-        if self.gpu.is_none() {
-            s.phase = Phase::Error;
-            s.error = Some("eframe started without a wgpu renderer".to_owned());
-        }
-    }
 }
 
 impl ShapecastApp {
@@ -1052,42 +766,4 @@ fn default_mip_window(scene: &Scene, slice_window: Window) -> (f32, f32) {
     } else {
         slice_window.range()
     }
-}
-
-/// The preset that fits a loaded volume, and a sentence saying why: lung nodules when a CT holds
-/// lung (more than 5% of its voxels between -950 and -600 HU), lymph nodes / soft tissue for
-/// other CT; for a volume without Hounsfield units, the default with a warning that the presets'
-/// transfer functions are in HU.
-pub fn preset_for(volume: &crate::volume::Volume, is_ct: bool) -> (Preset, String) {
-    if !is_ct {
-        return (
-            Preset::default(),
-            format!(
-                "preset: {} (the presets' transfer functions and thresholds are CT Hounsfield units; this volume has none, so set the transfer function to its contrast)",
-                features::preset_label(Preset::default())
-            ),
-        );
-    }
-    let n = volume.voxel_count();
-    let stride = (n / 200_000).max(1);
-    let (mut lung, mut seen) = (0usize, 0usize);
-    for i in (0..n).step_by(stride) {
-        let v = volume.value(i);
-        seen += 1;
-        lung += usize::from((-950.0..=-600.0).contains(&v));
-    }
-    let fraction = lung as f64 / seen.max(1) as f64;
-    let preset = if fraction > 0.05 {
-        Preset::LungNodules
-    } else {
-        Preset::LymphNodes
-    };
-    (
-        preset,
-        format!(
-            "preset: {} ({:.0}% of the voxels are lung, -950..-600 HU); change it under Features",
-            features::preset_label(preset),
-            100.0 * fraction
-        ),
-    )
 }

@@ -98,12 +98,17 @@ impl AppOptions {
                 .map(|(_, v)| web_files::absolute_url(v.trim()))
                 .collect();
             if let Some(base) = param("dicomweb").filter(|b| !b.trim().is_empty()) {
-                o.start = StartWith::DicomWeb(PacsTarget {
-                    base: base.trim().to_owned(),
-                    study: param("study").unwrap_or_default().trim().to_owned(),
-                    series: param("series")
+                // VolView's form too: a URL into the study or series (`.../studies/UID`).
+                let (base, study, series) = crate::io::dicomweb::split_target(&base);
+                let given = |k: &str| {
+                    param(k)
                         .map(|s| s.trim().to_owned())
-                        .filter(|s| !s.is_empty()),
+                        .filter(|s| !s.is_empty())
+                };
+                o.start = StartWith::DicomWeb(PacsTarget {
+                    base,
+                    study: given("study").or(study).unwrap_or_default(),
+                    series: given("series").or(series),
                 });
             }
             if let Some(m) = param("method").and_then(|m| DisplayMode::from_name(&m)) {

@@ -3,6 +3,44 @@
 
 use super::*;
 
+/// The panes a layout can show.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PaneId {
+    Mip,
+    Slice(SliceKind),
+}
+
+impl PaneId {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Mip => "mip",
+            Self::Slice(k) => k.name(),
+        }
+    }
+}
+
+/// How the panes are arranged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// The MIP large on the left, the three slice panes stacked on the right (the arrangement
+    /// the paper's clinicians preferred: a separate viewport beside the linked slices).
+    MipAndSlices,
+    /// MIP, axial / coronal, sagittal in a 2x2 grid.
+    Grid,
+    /// One pane, maximised.
+    Single(PaneId),
+}
+
+impl Layout {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::MipAndSlices => "mip+slices",
+            Self::Grid => "grid",
+            Self::Single(p) => p.name(),
+        }
+    }
+}
+
 impl ShapecastApp {
     /// The panes of the current layout, each in its rectangle.
     pub(super) fn panes_ui(&mut self, ui: &mut egui::Ui, frame: &eframe::Frame) {
@@ -295,7 +333,16 @@ impl ShapecastApp {
             self.restore_camera(ui.ctx());
         }
         if window_drag != egui::Vec2::ZERO {
-            self.window = self.window.dragged(window_drag);
+            // The slices show the PET alone: the drag sets the PET's window (in SUV), as on
+            // its MIP; otherwise the CT's.
+            match &mut self.pet.layer {
+                Some(pet) if pet.visible && pet.alone => {
+                    pet.window = Window::from_bounds(pet.window)
+                        .dragged(window_drag)
+                        .bounds();
+                }
+                _ => self.window = self.window.dragged(window_drag),
+            }
         }
         for e in errors {
             self.error(e);

@@ -30,6 +30,8 @@ pub struct PetLayer {
     /// How much the PET covers the CT where it is hot, 0..1.
     pub opacity: f32,
     pub visible: bool,
+    /// The slice panes show the PET alone (inverted grey, as its MIP) instead of fused.
+    pub alone: bool,
     /// What the user should know (a frame of reference that differs, no SUV).
     pub notes: Vec<String>,
     /// The PET's own 3D texture, for its MIP (`None` where the GPU refused it).
@@ -56,6 +58,7 @@ impl PetLayer {
             window,
             opacity: 0.5,
             visible: true,
+            alone: false,
             notes,
             render: None,
         }
@@ -71,6 +74,9 @@ impl PetLayer {
         }
         if let Some(v) = view.visible {
             self.visible = v;
+        }
+        if let Some(a) = view.alone {
+            self.alone = a;
         }
     }
 
@@ -92,6 +98,7 @@ impl PetLayer {
         OverlayKey {
             window: self.window,
             opacity: self.opacity,
+            alone: self.alone,
             volume: Arc::as_ptr(&self.volume) as usize,
         }
     }
@@ -99,7 +106,9 @@ impl PetLayer {
     /// The fused overlay of one CT slice: RGBA, one pixel per CT voxel of the slice, laid out as
     /// the slice kernel lays out its image (row `y` is `vertical`, column `x` is `across`), so
     /// that it is drawn with the slice's own rectangle and texture coordinates. Transparent
-    /// where the PET is cold or absent.
+    /// where the PET is cold or absent. With [`PetLayer::alone`] the PET's slice instead, in
+    /// inverted grey as its MIP (opaque; white where it is cold or outside the PET's field),
+    /// read at the CT's points so that crosshair, rulers and ROIs stay where they are.
     pub fn overlay(&self, ct: &Volume, axes: PaneAxes, slice: usize) -> egui::ColorImage {
         let (w, h) = (ct.dims[axes.across], ct.dims[axes.vertical]);
         // PET continuous voxel index from CT voxel index: one affine map for the whole slice.
@@ -117,6 +126,16 @@ impl PetLayer {
                     .volume
                     .value_at_continuous(pet_from_ct.transform_point3(DVec3::from(p)));
                 pixels.push(match value {
+                    _ if self.alone => {
+                        let t = value.map_or(0.0, |v| (v - lo) / span);
+                        let t = if t.is_finite() {
+                            t.clamp(0.0, 1.0)
+                        } else {
+                            0.0
+                        };
+                        let g = ((1.0 - t) * 255.0).round() as u8;
+                        egui::Color32::from_gray(g)
+                    }
                     Some(v) => {
                         let t = (v - lo) / span;
                         let [r, g, b] = hot_iron(t);
@@ -137,6 +156,7 @@ impl PetLayer {
 pub struct OverlayKey {
     window: (f32, f32),
     opacity: f32,
+    alone: bool,
     /// The PET volume (its allocation): a new PET makes a new overlay.
     volume: usize,
 }
@@ -403,6 +423,8 @@ impl PetState {
             window: Some(l.window),
             opacity: Some(l.opacity),
             visible: Some(l.visible),
+            // Absent unless set, so that a link without it stays as it was.
+            alone: l.alone.then_some(true),
         })
     }
 
@@ -530,6 +552,12 @@ impl PetState {
         ));
         let r = ui.checkbox(&mut layer.visible, "show the PET");
         controls.push(("pet-visible".to_owned(), r.rect));
+        let r = ui
+            .checkbox(&mut layer.alone, "PET alone on the slices")
+            .on_hover_text(
+                "The slice panes show the PET in inverted grey instead of fused over the CT",
+            );
+        controls.push(("pet-alone".to_owned(), r.rect));
         let unit = layer.unit().to_owned();
         let (mut lo, mut hi) = layer.window;
         // The sliders' ranges hold the window set (a link's, a PET's own values below 0 or
@@ -552,6 +580,15 @@ impl PetState {
         if hi > lo {
             layer.window = (lo, hi);
         }
+        ui.horizontal_wrapped(|ui| {
+            for (label, window) in window_presets(&unit, range) {
+                let r = ui.selectable_label(layer.window == window, label);
+                if r.clicked() {
+                    layer.window = window;
+                }
+                controls.push((format!("pet-preset:{label}"), r.rect));
+            }
+        });
         let r = ui.add(egui::Slider::new(&mut layer.opacity, 0.0..=1.0).text("opacity"));
         controls.push(("pet-opacity".to_owned(), r.rect));
         for n in &layer.notes {
@@ -559,6 +596,23 @@ impl PetState {
         }
         controls
     }
+}
+
+/// The PET window presets a nuclear-medicine reader expects: SUV 0-5 (lymph nodes, lesions
+/// beside the mediastinal blood pool), 0-10 (the default), 0-20 (the hot organs: brain,
+/// bladder) and the volume's whole range; a PET without SUV gets its whole range only.
+fn window_presets(unit: &str, range: (f32, f32)) -> Vec<(&'static str, (f32, f32))> {
+    let full = (range.0.min(0.0), range.1.max(range.0.min(0.0) + 1.0));
+    let mut presets = Vec::new();
+    if unit == "SUV" {
+        presets.extend([
+            ("0-5", (0.0, 5.0)),
+            ("0-10", (0.0, 10.0)),
+            ("0-20", (0.0, 20.0)),
+        ]);
+    }
+    presets.push(("full", full));
+    presets
 }
 
 #[cfg(test)]
@@ -600,6 +654,21 @@ mod tests {
     /// a PET of 4 mm voxels offset from a CT of 1 mm voxels lights up the CT pixels where the
     /// PET is hot, and is transparent outside the PET.
     #[test]
+    fn the_suv_presets_are_the_reader_s_windows_and_full_covers_the_volume() {
+        let suv = window_presets("SUV", (0.0, 37.5));
+        let labels: Vec<&str> = suv.iter().map(|p| p.0).collect();
+        assert_eq!(labels, ["0-5", "0-10", "0-20", "full"]);
+        assert_eq!(suv[1].1, (0.0, 10.0));
+        assert_eq!(suv[3].1, (0.0, 37.5));
+        // Counts (no SUV): the whole range only, from 0 or below, never an empty window.
+        assert_eq!(
+            window_presets("counts", (-2.0, 129_176.0)),
+            [("full", (-2.0, 129_176.0))]
+        );
+        assert_eq!(window_presets("counts", (5.0, 5.0)), [("full", (0.0, 5.0))]);
+    }
+
+    #[test]
     fn the_overlay_reads_the_pet_at_the_ct_s_points() {
         let mut ct = Volume::from_f32([40, 40, 5], [1.0, 1.0, 2.0], vec![0.0; 8000]);
         ct.modality = Modality::Ct;
@@ -622,6 +691,15 @@ mod tests {
         assert_eq!(at(0, 10), egui::Color32::TRANSPARENT);
         assert_eq!(layer.value_at_ct_voxel(&ct, [30, 10, 2]), Some(10.0));
         assert_eq!(layer.value_at_ct_voxel(&ct, [0, 10, 2]), None);
+        // The PET alone: opaque inverted grey, black where hot, white where cold or outside,
+        // on the same CT pixels (the crosshair and ROIs stay put).
+        let mut alone = layer;
+        alone.alone = true;
+        let image = alone.overlay(&ct, axes, 2);
+        let at = |x: usize, y: usize| image.pixels[x + 40 * y];
+        assert_eq!(at(30, 10), egui::Color32::from_gray(0));
+        assert_eq!(at(10, 10), egui::Color32::from_gray(255));
+        assert_eq!(at(0, 10), egui::Color32::from_gray(255));
     }
 
     #[test]

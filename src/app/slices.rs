@@ -773,22 +773,13 @@ impl SlicePane {
                 reuse,
             )
             .map_err(|e| format!("{} pane: {e}", self.kind.name()))?;
-        let mut renderer = inputs.render_state.renderer.write();
-        match self.texture_id {
-            Some(_) if reused_size == Some(image.size) => {}
-            Some(id) => renderer.update_egui_texture_from_wgpu_texture(
-                &inputs.gpu.device,
+        if self.texture_id.is_none() || reused_size != Some(image.size) {
+            super::mip_view::show_texture(
+                inputs.render_state,
+                inputs.gpu,
                 &image.view,
-                wgpu::FilterMode::Linear,
-                id,
-            ),
-            None => {
-                self.texture_id = Some(renderer.register_native_texture(
-                    &inputs.gpu.device,
-                    &image.view,
-                    wgpu::FilterMode::Linear,
-                ));
-            }
+                &mut self.texture_id,
+            );
         }
         self.image = Some(image);
         self.drawn = Some(key);

@@ -15,11 +15,11 @@ use super::Layout;
 use super::features::{DisplayMode, FeatureDisplay, FeatureParams};
 use super::findings::FindingMark;
 use super::measure::Measurement;
-use super::url_params::{encode, parse_params};
 use super::window_level::Window;
 use crate::cpu::features::FeatureMap;
 use crate::cpu::rays::RAY_COUNTS;
 use crate::cpu::tf::{Preset, TransferFunction};
+use crate::io::url::{encode, host_of, parse_params};
 use crate::render::camera::{Camera, MAX_ZOOM, MIN_ZOOM};
 use crate::render::raycast::Projection;
 
@@ -72,14 +72,6 @@ pub fn human_bytes(bytes: u64) -> String {
     }
 }
 
-/// The host part of a URL ("example.org:8080"), or the URL itself when it has none.
-pub fn host_of(url: &str) -> String {
-    url.split_once("://")
-        .map(|(_, rest)| rest.split(['/', '?', '#']).next().unwrap_or(rest))
-        .unwrap_or(url)
-        .to_owned()
-}
-
 /// Everything a link can carry. `None` fields are not in the link and leave the app as it is.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ViewState {
@@ -122,6 +114,8 @@ pub struct PetView {
     pub window: Option<(f32, f32)>,
     pub opacity: Option<f32>,
     pub visible: Option<bool>,
+    /// The slice panes show the PET alone (inverted grey) instead of fused over the CT.
+    pub alone: Option<bool>,
 }
 
 /// One field's value, written the same way into the fragment and the JSON.
@@ -300,6 +294,9 @@ impl ViewState {
             if let Some(on) = p.visible {
                 f.push(("peton", Value::Bool(on)));
             }
+            if let Some(alone) = p.alone {
+                f.push(("petalone", Value::Bool(alone)));
+            }
         }
         f
     }
@@ -330,36 +327,28 @@ impl ViewState {
 
     /// The same fields as a JSON object.
     pub fn json(&self) -> String {
-        let mut out = String::from("{");
-        for (n, (key, value)) in self.fields().into_iter().enumerate() {
-            if n > 0 {
-                out.push(',');
-            }
-            out.push_str(&json_string(key));
-            out.push(':');
-            match value {
-                Value::Text(s) => out.push_str(&json_string(&s)),
-                Value::Texts(v) => out.push_str(&format!(
-                    "[{}]",
-                    v.iter()
-                        .map(|s| json_string(s))
-                        .collect::<Vec<_>>()
-                        .join(",")
-                )),
-                Value::Num(n) => out.push_str(&n),
-                Value::Nums(v) => out.push_str(&format!("[{}]", v.join(","))),
-                Value::Bool(b) => out.push_str(if b { "true" } else { "false" }),
-                Value::Bools(v) => out.push_str(&format!(
-                    "[{}]",
-                    v.iter()
-                        .map(|&b| if b { "true" } else { "false" })
-                        .collect::<Vec<_>>()
-                        .join(",")
-                )),
-            }
-        }
-        out.push('}');
-        out
+        // Numbers as written in the link (their shortest exact form), read back as JSON
+        // numbers; the fields in the link's order (serde_json's `preserve_order`).
+        let number = |n: &str| -> serde_json::Value {
+            n.parse::<serde_json::Number>()
+                .map_or(serde_json::Value::Null, serde_json::Value::Number)
+        };
+        let map: serde_json::Map<String, serde_json::Value> = self
+            .fields()
+            .into_iter()
+            .map(|(key, value)| {
+                let value = match value {
+                    Value::Text(s) => serde_json::Value::String(s),
+                    Value::Texts(v) => v.into_iter().map(serde_json::Value::String).collect(),
+                    Value::Num(n) => number(&n),
+                    Value::Nums(v) => v.iter().map(|n| number(n)).collect(),
+                    Value::Bool(b) => serde_json::Value::Bool(b),
+                    Value::Bools(v) => v.into_iter().map(serde_json::Value::Bool).collect(),
+                };
+                (key.to_owned(), value)
+            })
+            .collect();
+        serde_json::Value::Object(map).to_string()
     }
 
     /// Reads a fragment (with or without its `#`). Returns what could be read and a message per
@@ -664,6 +653,7 @@ impl ViewState {
                     .filter(|o| (0.0..=1.0).contains(o))
             }),
             visible: f.read("peton", "0 or 1", |s| bools(s, 1).map(|b| b[0])),
+            alone: f.read("petalone", "0 or 1", |s| bools(s, 1).map(|b| b[0])),
         };
         if pet != PetView::default() {
             v.pet = Some(pet);
@@ -734,24 +724,6 @@ fn bools(s: &str, n: usize) -> Option<Vec<bool>> {
         })
         .collect::<Option<_>>()?;
     (v.len() == n).then_some(v)
-}
-
-fn json_string(s: &str) -> String {
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push('"');
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            '\n' => out.push_str("\\n"),
-            '\r' => out.push_str("\\r"),
-            '\t' => out.push_str("\\t"),
-            c if (c as u32) < 0x20 => out.push_str(&format!("\\u{:04x}", c as u32)),
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
 }
 
 #[cfg(test)]
@@ -825,6 +797,7 @@ mod tests {
                 window: Some((0.0, 7.5)),
                 opacity: Some(0.35),
                 visible: Some(true),
+                alone: Some(true),
             }),
             findings: Some(vec![
                 FindingMark {

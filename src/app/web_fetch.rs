@@ -16,9 +16,10 @@ use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
 use super::js_bytes::{self, Gathered, JsBytes};
-use super::view_link::{ViewSource, host_of};
+use super::view_link::ViewSource;
 use super::web_files::{WebEvent, js_error, push};
 use crate::io::InputFile;
+use crate::io::url::host_of;
 
 thread_local! {
     /// The running download's controller.
@@ -158,7 +159,7 @@ fn file_name(url: &str) -> String {
         .next()
         .filter(|s| !s.is_empty() && !s.contains(':'))
         .unwrap_or("download");
-    super::url_params::decode(last)
+    crate::io::url::decode(last)
 }
 
 /// Downloads `urls` in turn; `report`: the page's progress bar follows them (not for a PET

@@ -709,7 +709,7 @@ pub fn query_params() -> Vec<(String, String)> {
     let search = web_sys::window()
         .and_then(|w| w.location().search().ok())
         .unwrap_or_default();
-    super::url_params::parse_params(&search)
+    crate::io::url::parse_params(&search)
 }
 
 /// The page's fragment (a shared view), with its `#`.

@@ -20,8 +20,10 @@ pub const USER_ENV: &str = "SHAPECAST_DICOMWEB_USER";
 #[derive(clap::Args, Debug, Default, Clone)]
 pub struct DicomWebArgs {
     /// Read the volume from a DICOMweb archive instead of files: its root URL, e.g.
-    /// http://127.0.0.1:8042/dicom-web (Orthanc's DICOMweb plugin). Plain HTTP only.
-    #[arg(long, value_name = "BASE", requires = "study")]
+    /// http://127.0.0.1:8042/dicom-web (Orthanc's DICOMweb plugin), with --study; or a URL into
+    /// the study or series (BASE/studies/UID[/series/UID], as VolView links them). Plain HTTP
+    /// only.
+    #[arg(long, value_name = "BASE")]
     pub dicomweb: Option<String>,
     /// StudyInstanceUID of the study to open from --dicomweb.
     #[arg(long, value_name = "UID", requires = "dicomweb")]
@@ -65,10 +67,17 @@ impl DicomWebArgs {
 
     /// Resolves the study, lists its series when none is named, and retrieves the series.
     pub fn load(&self) -> anyhow::Result<Loaded> {
-        let (Some(base), Some(study)) = (&self.dicomweb, &self.study) else {
+        let Some(url) = &self.dicomweb else {
             anyhow::bail!("--dicomweb needs --study");
         };
-        let base = Base::parse(base)?;
+        // A URL into the study or series (`.../studies/UID[/series/UID]`) names them too.
+        let (base, url_study, url_series) = crate::io::dicomweb::split_target(url);
+        let Some(study) = self.study.clone().or(url_study) else {
+            anyhow::bail!("--dicomweb needs --study (or a URL into the study: BASE/studies/UID)");
+        };
+        let series = self.series.clone().or(url_series);
+        let study = &study;
+        let base = Base::parse(&base)?;
         let client = Client::new(base.clone(), self.auth()?)?;
         let hint = |e: DicomWebError| {
             let unauthorized = matches!(e, DicomWebError::Unauthorized { .. });
@@ -82,9 +91,7 @@ impl DicomWebArgs {
                 e.context(format!("DICOMweb {}", base.as_str()))
             }
         };
-        let resolved = client
-            .resolve(study, self.series.as_deref())
-            .map_err(hint)?;
+        let resolved = client.resolve(study, series.as_deref()).map_err(hint)?;
         let s = &resolved.study;
         let about: Vec<String> = [
             s.study_date.as_ref().map(|d| format!("date {d}")),
@@ -163,7 +170,11 @@ mod tests {
     fn flags_need_each_other() {
         let ok = T::try_parse_from(["t", "--dicomweb", "http://h/dw", "--study", "1.2"]);
         assert!(ok.is_ok_and(|t| t.d.is_set()));
-        assert!(T::try_parse_from(["t", "--dicomweb", "http://h/dw"]).is_err());
+        // The study may be in the URL (checked when loading: `load` says it is missing).
+        assert!(T::try_parse_from(["t", "--dicomweb", "http://h/dw/studies/1.2"]).is_ok());
+        let no_study = T::try_parse_from(["t", "--dicomweb", "http://h/dw"]).expect("parses");
+        let e = no_study.d.load().expect_err("no study").to_string();
+        assert!(e.contains("--dicomweb needs --study"), "{e}");
         assert!(T::try_parse_from(["t", "--study", "1.2"]).is_err());
         assert!(
             T::try_parse_from([

@@ -15,6 +15,7 @@ mod metaimage;
 pub mod nifti;
 mod nrrd;
 mod raw;
+pub mod url;
 pub mod zip;
 
 pub use dicom::{

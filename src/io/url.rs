@@ -1,27 +1,37 @@
-//! URL query and fragment values: percent-encoding as links write them, and decoding of
-//! `a=1&b=x%20y` strings (the page's query, a link's fragment) into (key, value) pairs.
+//! URL strings, the one place for them: percent-encoding (links, DICOMweb queries), decoding
+//! of `a=1&b=x%20y` strings (the page's query, a link's fragment) into (key, value) pairs, and
+//! the host part of a URL for messages. Strings only: no requests here.
 
-/// Percent-encodes everything but unreserved characters and a few that are safe and readable
-/// inside a fragment or query value (`/`, `:`, `@`, `,`), so a URL value stays legible.
-pub fn encode(s: &str) -> String {
+/// Percent-encodes everything but the unreserved characters (RFC 3986: letters, digits,
+/// `-._~`) and the bytes of `keep`.
+pub fn percent_encode(s: &str, keep: &[u8]) -> String {
     let mut out = String::with_capacity(s.len());
     for b in s.bytes() {
-        match b {
-            b'A'..=b'Z'
-            | b'a'..=b'z'
-            | b'0'..=b'9'
-            | b'-'
-            | b'.'
-            | b'_'
-            | b'~'
-            | b'/'
-            | b':'
-            | b'@'
-            | b',' => out.push(b as char),
-            _ => out.push_str(&format!("%{b:02X}")),
+        if b.is_ascii_alphanumeric() || b"-._~".contains(&b) || keep.contains(&b) {
+            out.push(char::from(b));
+        } else {
+            out.push_str(&format!("%{b:02X}"));
         }
     }
     out
+}
+
+/// Percent-encodes a link's value: everything but unreserved characters and a few that are
+/// safe and readable inside a fragment or query value (`/`, `:`, `@`, `,`), so a URL value
+/// stays legible.
+pub fn encode(s: &str) -> String {
+    percent_encode(s, b"/:@,")
+}
+
+/// The host part of an absolute URL ("example.org:8080"); `None` without a scheme.
+pub fn host_part(url: &str) -> Option<&str> {
+    let rest = url.split_once("://")?.1;
+    rest.split(['/', '?', '#']).next()
+}
+
+/// The host part of a URL ("example.org:8080"), or the URL itself when it has none.
+pub fn host_of(url: &str) -> String {
+    host_part(url).unwrap_or(url).to_owned()
 }
 
 /// Decodes `%XX` escapes and `+` (a space, as forms and `URLSearchParams` write it). Malformed
@@ -91,9 +101,11 @@ mod tests {
             ]
         );
         assert_eq!(decode(&encode("a b/ü?&=#%+")), "a b/ü?&=#%+");
-        assert_eq!(
-            super::super::view_link::host_of("https://h.org:8443/x?y"),
-            "h.org:8443"
-        );
+        assert_eq!(encode("a b/c:d@e,f*"), "a%20b/c:d@e,f%2A");
+        assert_eq!(percent_encode("Doe^J*", b"*"), "Doe%5EJ*");
+        assert_eq!(host_of("https://h.org:8443/x?y"), "h.org:8443");
+        assert_eq!(host_of("https://h.org#frag"), "h.org");
+        assert_eq!(host_of("/relative/path"), "/relative/path");
+        assert_eq!(host_part("/relative/path"), None);
     }
 }

@@ -7,6 +7,7 @@
 //! loads the one clicked.
 
 use crate::common;
+use crate::counting;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -885,6 +886,140 @@ fn a_pet_ct_folder_opens_the_ct_with_its_pet_fused() {
         hidden * 10 < fused,
         "{hidden} warm pixels with the PET hidden, {fused} shown"
     );
+    // Shown again, an SUV preset of the panel sets the PET's window; "PET alone" turns the
+    // slice panes into the PET's own slices (inverted grey: no hot iron, dark where hot), and
+    // the link carries both.
+    click_control(&mut harness, "pet-visible");
+    click_control(&mut harness, "pet-preset:0-5");
+    harness.run_steps(3);
+    assert_eq!(
+        harness.state().status().pet.as_ref().expect("PET").window,
+        (0.0, 5.0)
+    );
+    click_control(&mut harness, "pet-alone");
+    harness.run_steps(3);
+    let alone = harness.render().expect("render");
+    save(&alone, "app_pet_alone.png");
+    let grey_dark = pixels_where(&alone, axial, |p| {
+        p[0] < 128 && p[0].abs_diff(p[1]) < 4 && p[1].abs_diff(p[2]) < 4
+    });
+    let grey_white = pixels_where(&alone, axial, |p| p[0] > 250 && p[1] > 250 && p[2] > 250);
+    assert!(
+        warm(&alone) * 10 < fused && grey_dark > 20 && grey_white > 1000,
+        "PET alone: {} warm, {grey_dark} dark grey, {grey_white} white pixels",
+        warm(&alone)
+    );
+    let link = harness.state().status().link.clone();
+    assert!(
+        link.contains("petwin=0,5") && link.contains("petalone=1"),
+        "{link}"
+    );
+    // With the PET alone, a right drag on a slice pane sets the PET's window (wider, in SUV),
+    // not the CT's.
+    let ct_window = harness.state().window();
+    let start = axial.center();
+    let press = |pos, pressed| egui::Event::PointerButton {
+        pos,
+        button: egui::PointerButton::Secondary,
+        pressed,
+        modifiers: egui::Modifiers::NONE,
+    };
+    harness.hover_at(start);
+    harness.event(press(start, true));
+    harness.run_steps(1);
+    for t in 1..=4 {
+        harness.hover_at(start + egui::vec2(20.0 * t as f32, 0.0));
+        harness.run_steps(1);
+    }
+    harness.event(press(start + egui::vec2(80.0, 0.0), false));
+    harness.run_steps(2);
+    let (lo, hi) = harness.state().status().pet.as_ref().expect("PET").window;
+    assert!(hi - lo > 5.5, "PET window after the drag: {lo}..{hi}");
+    assert_eq!(harness.state().window(), ct_window, "the CT's window stays");
+}
+
+/// Whole-body sizes: a PET of 200 x 200 x 700 (float Bq/ml, 112 MB of voxels) over a CT
+/// larger than it (512 x 512 x 120) is read, uploaded for its MIP and fused over the slice
+/// panes, and what stays in memory afterwards is the PET's own voxels and the panes'
+/// overlays: no CT-sized copy of the PET (that would be 126 MB more) and no second copy of
+/// its voxels. The peak while it arrives is printed.
+#[test]
+fn a_whole_body_pet_adds_its_own_voxels_and_no_ct_sized_copy() {
+    use shapecast::volume::Volume;
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("whole-body-pet");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let (ct_path, pet_path) = (dir.join("ct.nii"), dir.join("pet.nii"));
+    let ct_dims = [512, 512, 120];
+    let ct = Volume::from_f32(
+        ct_dims,
+        [0.8, 0.8, 2.5],
+        (0..ct_dims.iter().product::<usize>())
+            .map(|i| ((i * 7) % 1200) as f32 - 1000.0)
+            .collect(),
+    );
+    std::fs::write(
+        &ct_path,
+        shapecast::io::nifti::write_volume("ct.nii", &ct).expect("NIfTI"),
+    )
+    .expect("write the CT");
+    drop(ct);
+    let pet_dims = [200, 200, 700];
+    let pet_voxels = pet_dims.iter().product::<usize>();
+    // Background 2,000 Bq/ml, a hot sphere of 40,000 in the CT's field.
+    let pet = Volume::from_f32(
+        pet_dims,
+        [4.0, 4.0, 4.0],
+        (0..pet_voxels)
+            .map(|i| {
+                let (x, y, z) = (i % 200, (i / 200) % 200, i / 40_000);
+                let d2 = (x as f32 - 50.0).powi(2)
+                    + (y as f32 - 50.0).powi(2)
+                    + (z as f32 - 40.0).powi(2);
+                if d2 < 25.0 { 40_000.0 } else { 2_000.0 }
+            })
+            .collect(),
+    );
+    std::fs::write(
+        &pet_path,
+        shapecast::io::nifti::write_volume("pet.nii", &pet).expect("NIfTI"),
+    )
+    .expect("write the PET");
+    drop(pet);
+    let Some(mut harness) = harness(intensity_only(StartWith::Paths(vec![ct_path]))) else {
+        return;
+    };
+    assert_eq!(harness.state().volume().expect("the CT").dims, ct_dims);
+    harness.run_steps(3);
+    let before = counting::live();
+    let ((), peak) = counting::peak_during(|| {
+        harness
+            .state_mut()
+            .open_pet(LoadSource::Paths(vec![pet_path.clone()]));
+        run_until(&mut harness, "the whole-body PET fused", 400, |app| {
+            app.status().pet.is_some() && !app.status().pet_loading
+        });
+        harness.run_steps(5);
+    });
+    let added = counting::live().saturating_sub(before);
+    let status = harness.state().status().clone();
+    assert_eq!(status.error, None);
+    assert_eq!(status.pet.as_ref().expect("the PET").dims, pet_dims);
+    let voxel_bytes = pet_voxels * 4;
+    let mb = |b: usize| b as f64 / 1e6;
+    eprintln!(
+        "whole-body PET: voxels {:.1} MB, kept {:.1} MB, peak while it arrived {:.1} MB",
+        mb(voxel_bytes),
+        mb(added),
+        mb(peak)
+    );
+    // Its voxels, plus the three panes' overlays (a 512 x 512 RGBA image each) and slack.
+    assert!(
+        added <= voxel_bytes + 16_000_000,
+        "the PET kept {:.1} MB for {:.1} MB of voxels",
+        mb(added),
+        mb(voxel_bytes)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The PET MIP beside the shape MIP: inverted grey (hot is dark), and a click on its darkest

@@ -8,8 +8,10 @@
 //  1. `?dicomweb=/dicom-web&study=UID` (no series): the chest CT series is chosen, retrieved
 //     and shown, `ready`; its geometry equals the same files opened with the folder input (both
 //     times printed); the status bar's link carries dicomweb/study/series; the head CT's
-//     study opens the same way and its features are computed;
+//     study opens the same way, all 93 slices although the archive caps its QIDO answers at
+//     41 (LimitFindInstances), and its features are computed;
 //  2. `&series=UID` of the oblique MR: its geometry (direction included) equals the folder's;
+//     a PET/CT study (../shared/data/petct, two series) opens its CT and fuses its PET in SUV;
 //     "Open from PACS…" driven as a person would: patient ID typed, Search, the study, its
 //     preselected series opened;
 //  3. `#token=...`: sent as a header only: the address bar drops it, no request URL and no
@@ -43,6 +45,8 @@ const t0 = Date.now();
 const CT = 'series/ct-chest-lung-kernel';
 const MR = 'series/mr-prostate-adc-oblique';
 const HEAD = 'series/ct-head-64px';
+// A PET/CT study: the CT (cropped) and the PET of one study, uploaded as two series.
+const PETCT = 'petct/sts-cropped/STS_001';
 const TOKEN = 'pacs-test-token-8c1f';
 const USER = 'shapecast';
 const PASSWORD = 'test-password';
@@ -117,6 +121,10 @@ async function startOrthanc({ auth }) {
     HttpCompressionEnabled: false,
     Plugins: [path.join(pluginDir, dicomweb), path.join(pluginDir, serveFolders)],
     DicomWeb: { Enable: true, Root: '/dicom-web/' },
+    // Answers capped as many archives cap them: the head CT's 93 instances are listed 41 at a
+    // time by QIDO, and the page must complete the list (the series metadata) to open them all.
+    LimitFindInstances: 40,
+    LimitFindResults: 40,
     // The site served by the archive itself (README, "Open from a PACS").
     ServeFolders: { Extensions: { '.wasm': 'application/wasm' }, Folders: { '/shapecast': dist } },
   };
@@ -320,6 +328,8 @@ try {
   const ct = await upload(open, CT);
   const mr = await upload(open, MR);
   const head = await upload(open, HEAD);
+  const petctCt = await upload(open, `${PETCT}/CT`);
+  const petctPet = await upload(open, `${PETCT}/PET`);
   console.log(`Orthanc (pid ${open.child.pid}) at ${open.url}: CT study ${ct.study}, MR series ${mr.series}`);
   const site = `${open.url}/shapecast/index.html`;
 
@@ -362,7 +372,7 @@ try {
   await withBrowser(async (page) => {
     await page.goto(`${site}?dicomweb=/dicom-web&study=${head.study}&method=li`);
     const s = await waitReady(page, 'the head CT with features');
-    check('the head CT is retrieved and its features computed', s?.phase === 'ready'
+    check('the head CT is retrieved whole (93 of 93 from an archive that lists 41 at a time) and its features computed', s?.phase === 'ready'
       && JSON.stringify(s?.volume?.dims) === '[64,64,93]' && s?.features?.state === 'done',
     `${JSON.stringify(s?.volume?.dims)}; features ${JSON.stringify(s?.features)}; error ${s?.error}`);
     await page.screenshot({ path: path.join(outDir, 'pacs-head-li.png'), timeout: 120000 }).catch((e) => console.log(`  no screenshot: ${e.message.split('\n')[0]}`));
@@ -377,6 +387,23 @@ try {
     const byPacs = geometry(s);
     const byFolder = await folderGeometry(page, MR);
     check('MR: DICOMweb gives the geometry (direction too) the folder gives', byPacs === byFolder && byPacs !== 'null', `${byPacs} vs ${byFolder}`);
+  });
+
+  // ---- 2a. A PET/CT study: the CT opens, its PET series is retrieved and fused over it ------
+  await withBrowser(async (page) => {
+    await page.goto(`${site}?dicomweb=/dicom-web&study=${petctCt.study}&method=intensity`);
+    const s = await waitStatus(page, () => window.shapecastStatus?.pet?.unit === 'SUV'
+      || window.shapecastStatus?.phase === 'error', 'the PET/CT study with its PET');
+    check('PET/CT study: the CT opens (primary) and its PET series is fused in SUV',
+      petctCt.study === petctPet.study && s?.volume?.modality === 'CT'
+      && JSON.stringify(s?.volume?.dims) === '[198,202,59]'
+      && (s?.link ?? '').includes(`series=${petctCt.series}`)
+      && s?.pet?.unit === 'SUV' && JSON.stringify(s?.pet?.dims) === '[41,43,59]'
+      && s?.pet?.suv_factor > 0 && typeof s?.pet?.at_crosshair === 'number',
+    `volume ${s?.volume?.modality} ${JSON.stringify(s?.volume?.dims)}, pet ${JSON.stringify(s?.pet)}; error ${s?.error}`);
+    await waitStatus(page, () => window.shapecastStatus?.mip === 'done' && window.shapecastStatus?.pet_mip === 'done',
+      'both MIPs drawn in full');
+    await page.screenshot({ path: path.join(outDir, 'pacs-pet-ct.png'), timeout: 120000 }).catch((e) => console.log(`  no screenshot: ${e.message.split('\n')[0]}`));
   });
 
   // ---- 2b. Open from PACS…: search by patient ID, pick the study, open the series -------------

@@ -58,6 +58,11 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static ALLOCATOR: Counting = Counting;
 
+/// Bytes allocated by this thread and not yet freed.
+pub fn live() -> usize {
+    LIVE.with(Cell::get)
+}
+
 /// Runs `f` and returns its result with the peak of bytes allocated by this thread above what
 /// was live when it started.
 pub fn peak_during<R>(f: impl FnOnce() -> R) -> (R, usize) {

@@ -92,6 +92,12 @@ impl Drop for Orthanc {
 impl Orthanc {
     /// Starts Orthanc with the DICOMweb plugin (and HTTP Basic authentication if `auth`).
     fn start(auth: bool) -> Option<Self> {
+        Self::start_with(auth, None)
+    }
+
+    /// ... and with its answers capped at `limit` instances and results, as many archives are
+    /// configured (`LimitFindInstances`, `LimitFindResults`).
+    fn start_with(auth: bool, limit: Option<u32>) -> Option<Self> {
         let (binary, plugin) = orthanc_install()?;
         static N: AtomicUsize = AtomicUsize::new(0);
         let dir = std::env::temp_dir().join(format!(
@@ -114,6 +120,8 @@ impl Orthanc {
             "HttpCompressionEnabled": false,
             "Plugins": [plugin],
             "DicomWeb": { "Enable": true, "Root": "/dicom-web/" },
+            "LimitFindInstances": limit.unwrap_or(0),
+            "LimitFindResults": limit.unwrap_or(0),
         });
         let config_path = dir.join("orthanc.json");
         std::fs::write(
@@ -503,6 +511,60 @@ fn orthanc_listing_retrieval_geometry_and_messages() {
         !ok && stderr.contains("study 1.2.3.4.5 not found"),
         "{stderr}"
     );
+}
+
+/// An archive whose QIDO answers are capped (`LimitFindInstances: 40`; Orthanc then lists 41
+/// of the head CT's 93 instances and ignores `offset` past its cap): the client and
+/// `shapecast info --dicomweb BASE/studies/UID/series/UID` (VolView's link form) complete the
+/// list from the series metadata and open all 93 slices, never 41.
+#[test]
+fn orthanc_with_capped_answers_opens_whole_series() {
+    let Some(series_root) = common::shared_data("series") else {
+        return;
+    };
+    let Some(orthanc) = Orthanc::start_with(false, Some(40)) else {
+        return;
+    };
+    let head = series_files(&series_root.join("ct-head-64px"));
+    assert_eq!(head.len(), 93);
+    orthanc.upload(&head);
+    let (study, series) = uids(&head[0]);
+    let base = orthanc.base();
+    let capped = format!(
+        "{}/studies/{study}/series/{series}/instances",
+        base.as_str()
+    );
+    let listed: serde_json::Value = serde_json::from_slice(
+        &orthanc
+            .agent
+            .get(&capped)
+            .call()
+            .expect("QIDO")
+            .body_mut()
+            .read_to_vec()
+            .expect("QIDO body"),
+    )
+    .expect("QIDO JSON");
+    let n = listed.as_array().map_or(0, Vec::len);
+    assert!(n < 93, "this Orthanc does not cap its answers ({n} listed)");
+    let client = Client::new(base.clone(), Auth::None).expect("client");
+    assert_eq!(
+        client
+            .list_instances(&study, &series)
+            .expect("listing")
+            .len(),
+        93
+    );
+    let loaded = client
+        .retrieve(&study, &series, &mut |_| {})
+        .expect("retrieve");
+    assert_eq!(loaded.volume.dims, [64, 64, 93]);
+    // The CLI, given the series as VolView links it (a URL into the series, no --study).
+    let into_series = format!("{}/studies/{study}/series/{series}", base.as_str());
+    let (ok, out, err) = shapecast(&["info", "--json", "--dicomweb", &into_series], &[]);
+    assert!(ok, "{err}");
+    let info: serde_json::Value = serde_json::from_str(&out).expect("info JSON");
+    assert_eq!(info["dims"], serde_json::json!([64, 64, 93]), "{out}");
 }
 
 #[test]

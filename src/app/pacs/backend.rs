@@ -118,7 +118,7 @@ mod web {
         let window = web_sys::window()?;
         let hash = window.location().hash().ok()?;
         let fragment = hash.trim_start_matches('#');
-        let params = crate::app::url_params::parse_params(fragment);
+        let params = crate::io::url::parse_params(fragment);
         let token = params
             .iter()
             .rev()

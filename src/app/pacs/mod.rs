@@ -1,7 +1,8 @@
 //! "Open from PACS…" and the page's `?dicomweb=BASE&study=UID[&series=UID]`: a study found in
 //! an archive over DICOMweb (QIDO-RS by patient ID, accession number and date), its series
 //! listed (the CT or MR series with the most instances preselected), one retrieved (WADO-RS,
-//! decoded as instances arrive) and installed like a drop. The archive's work runs outside the
+//! decoded as instances arrive) and installed like a drop. A PET/CT study opens its CT and then
+//! retrieves its PET series (the largest PT) to fuse over it, as a dropped PET/CT folder does. The archive's work runs outside the
 //! frame: `fetch` tasks on the web (`io::dicomweb::web`), a thread natively
 //! (`io::dicomweb::client`); their answers come back as [`Event`]s taken once per frame.
 //!
@@ -83,6 +84,14 @@ impl Inbox {
     }
 }
 
+/// A PET/CT study's PET on its way: its task, the generation of the CT it goes over, and the
+/// retrieval (cancelled when another CT is shown).
+struct PetRetrieval {
+    task: u64,
+    generation: u64,
+    running: backend::Task,
+}
+
 /// The dialog's state, the running task and the patient line.
 #[derive(Default)]
 pub(super) struct Pacs {
@@ -113,6 +122,8 @@ pub(super) struct Pacs {
     task: u64,
     running: Option<backend::Task>,
     inbox: Inbox,
+    /// The PET of a PET/CT study, retrieved after its CT is shown.
+    pet: Option<PetRetrieval>,
     /// The loaded study's patient (the line above the panes).
     pub patient: Option<Patient>,
     /// The window title set last (native).
@@ -374,6 +385,10 @@ impl ShapecastApp {
     /// Takes the archive's answers (once per frame).
     pub(super) fn pacs_frame(&mut self, ctx: &egui::Context) {
         for (task, event) in self.pacs.inbox.take() {
+            if self.pacs.pet.as_ref().is_some_and(|p| p.task == task) {
+                self.pacs_pet_event(event);
+                continue;
+            }
             if task != self.pacs.task {
                 continue;
             }
@@ -483,6 +498,77 @@ impl ShapecastApp {
             }
         }
         self.pacs_title(ctx);
+    }
+
+    /// A CT just shown from an archive's PET/CT study (the CT of `generation`): the study's
+    /// PET series is retrieved next and fused over it, as a dropped folder's PET is.
+    pub(super) fn pacs_retrieve_pet(&mut self, generation: u64) {
+        // A PET still on its way for an earlier CT is cancelled.
+        if let Some(old) = self.pacs.pet.take() {
+            old.running.cancel();
+        }
+        let Some(scene) = &self.scene else {
+            return;
+        };
+        let Some(ViewSource::DicomWeb { base, study, .. }) = &scene.origin else {
+            return;
+        };
+        if scene.volume.modality != crate::volume::Modality::Ct
+            || self.pacs.study.as_ref().map(|(_, s)| &s.study_uid) != Some(study)
+        {
+            return;
+        }
+        let Some(pet) = dicomweb::pet_series(&self.pacs.series) else {
+            return;
+        };
+        let target = PacsTarget {
+            base: base.clone(),
+            study: study.clone(),
+            series: Some(self.pacs.series[pet].series_uid.clone()),
+        };
+        let parsed = Base::parse(&target.base).and_then(|b| Ok((b, self.pacs.auth()?)));
+        let (base, auth) = match parsed {
+            Ok(x) => x,
+            Err(e) => return self.error(format!("PET: {e}")),
+        };
+        // Its own task: the dialog's next search or study does not cancel it, a new CT does.
+        self.pacs.task += 1;
+        let task = self.pacs.task;
+        self.pet.awaiting(generation);
+        let running = backend::retrieve(base, auth, target, task, self.pacs.inbox.clone());
+        self.pacs.pet = Some(PetRetrieval {
+            task,
+            generation,
+            running,
+        });
+    }
+
+    /// The archive's answer for a PET/CT study's PET: fused over its CT when that is still the
+    /// one shown; its progress shows as the PET's own "loading".
+    fn pacs_pet_event(&mut self, event: Event) {
+        let Event::Retrieved { result, .. } = event else {
+            return;
+        };
+        let Some(retrieval) = self.pacs.pet.take() else {
+            return;
+        };
+        match *result {
+            Ok(loaded) => {
+                let ct = self.scene.as_ref().map(|s| s.volume.as_ref());
+                if let Some(message) =
+                    self.pet
+                        .install(loaded.volume, ct, retrieval.generation, self.gpu.as_ref())
+                {
+                    self.error(message);
+                }
+                self.pet_arrived();
+            }
+            Err(e) => {
+                if self.pet.failed(retrieval.generation) {
+                    self.error(format!("PET: {e}"));
+                }
+            }
+        }
     }
 
     /// Natively the window title names the patient too (the page's title never does: it is

@@ -11,7 +11,7 @@ use std::time::Duration;
 use super::multipart::{MultipartLimits, Part};
 use super::qido::{self, InstanceInfo, SeriesInfo, StudyInfo};
 use super::retrieve::{Fetch, InstanceResponse, Progress, Retrieval};
-use super::{Auth, Base, DicomWebError, Request, StudySearch, check_status};
+use super::{Auth, Base, DicomWebError, InstanceListing, Request, StudySearch, check_status};
 use crate::io::{Limits, Loaded};
 
 pub use super::MAX_JSON_BYTES;
@@ -53,16 +53,6 @@ impl UreqTransport {
     }
 }
 
-/// `host:port` of a URL, for messages.
-fn host_of(url: &str) -> String {
-    url.split_once("://")
-        .map_or(url, |(_, rest)| rest)
-        .split('/')
-        .next()
-        .unwrap_or(url)
-        .to_owned()
-}
-
 impl Transport for UreqTransport {
     fn get(&self, request: &Request) -> Result<HttpResponse, DicomWebError> {
         let url = request.url.as_str();
@@ -71,7 +61,7 @@ impl Transport for UreqTransport {
             req = req.header(*name, value);
         }
         let connect = |message: String| DicomWebError::Connect {
-            host: host_of(url),
+            host: crate::io::url::host_of(url),
             message,
         };
         let response = req.call().map_err(|e| match e {
@@ -225,14 +215,29 @@ impl<T: Transport> Client<T> {
         qido::parse_series(&url, &body)
     }
 
+    /// Every instance of the series, checked against its count and completed where the
+    /// archive caps its answers ([`InstanceListing`]); a series that stays short is refused.
     pub fn list_instances(
         &self,
         study: &str,
         series: &str,
     ) -> Result<Vec<InstanceInfo>, DicomWebError> {
-        let url = self.base.instances_query(study, series)?;
-        let body = self.get_json(url.clone(), &format!("series {series} of study {study}"))?;
-        qido::parse_instances(&url, &body)
+        // The series' own count (NumberOfSeriesRelatedInstances); without it, the list as given.
+        let expected = self.list_series(study).ok().and_then(|list| {
+            list.into_iter()
+                .find(|s| s.series_uid == series.trim())
+                .and_then(|s| s.instances)
+        });
+        let mut listing = InstanceListing::new(&self.base, study, series, expected)?;
+        let what = listing.what();
+        while let Some(url) = listing.next_url() {
+            let answer = self.get_json(url.clone(), &what);
+            match answer {
+                Ok(body) => listing.take(&url, Ok(&body))?,
+                Err(e) => listing.take(&url, Err(e))?,
+            }
+        }
+        listing.finish()
     }
 
     /// The study and the series to open: the one named, else the chooser's.
@@ -529,6 +534,40 @@ mod tests {
         assert!(
             e.starts_with(&format!("instance 2 of 3 ({SERIES}.1) failed 2 times"))
                 && e.contains("cut short"),
+            "{e}"
+        );
+    }
+
+    /// An archive that caps its QIDO answers (5 of 12 instances): the series metadata gives
+    /// the rest and the whole series opens; without metadata or pages it is refused, never
+    /// opened in part.
+    #[test]
+    fn a_capped_instance_list_is_completed_or_the_series_refused() {
+        let mut a = archive(12);
+        let instances = format!("http://archive/dw/studies/{STUDY}/series/{SERIES}/instances");
+        let full = a.answers[&instances].clone();
+        let all: serde_json::Value = serde_json::from_slice(&full.2).unwrap();
+        let capped = serde_json::Value::Array(all.as_array().unwrap()[..5].to_vec());
+        a.answers.get_mut(&instances).unwrap().2 = serde_json::to_vec(&capped).unwrap();
+        a.answers.insert(
+            format!("http://archive/dw/studies/{STUDY}/series/{SERIES}/metadata"),
+            full,
+        );
+        let loaded = client(a).retrieve(STUDY, SERIES, &mut |_| {}).unwrap();
+        assert_eq!(loaded.volume.dims, [5, 4, 12]);
+
+        let mut a = archive(12);
+        a.answers.get_mut(&instances).unwrap().2 = serde_json::to_vec(&capped).unwrap();
+        let e = client(a).retrieve(STUDY, SERIES, &mut |_| {}).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                DicomWebError::Incomplete {
+                    listed: 5,
+                    expected: 12,
+                    ..
+                }
+            ),
             "{e}"
         );
     }

@@ -5,6 +5,8 @@
 //! - this file: the archive's base URL, UIDs, credentials, the requests (URL, Accept,
 //!   Authorization) and what an HTTP status means;
 //! - `qido`: the QIDO-RS JSON of studies, series and instances, and the series chooser;
+//! - `listing`: a series' instance list checked against its count and completed from the
+//!   series metadata or QIDO pages where the archive caps its answers;
 //! - `multipart`: a push parser of WADO-RS `multipart/related; type="application/dicom"`
 //!   bodies, fed in chunks as they arrive;
 //! - `retrieve`: one series' retrieval as a state machine (which instance to ask for next,
@@ -17,14 +19,16 @@
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod client;
+pub mod listing;
 pub mod multipart;
 pub mod qido;
 pub mod retrieve;
 #[cfg(target_arch = "wasm32")]
 pub mod web;
 
+pub use listing::InstanceListing;
 pub use multipart::{MultipartParser, Part};
-pub use qido::{InstanceInfo, SeriesInfo, StudyInfo, choose_series};
+pub use qido::{InstanceInfo, SeriesInfo, StudyInfo, choose_series, pet_series};
 pub use retrieve::{Fetch, InstanceResponse, Progress, Retrieval};
 
 use crate::io::LoadError;
@@ -120,8 +124,30 @@ pub enum DicomWebError {
         source: Box<DicomWebError>,
     },
 
+    #[error(
+        "series {series} of study {study}: the archive listed {listed} of its {expected} instances{}; not opened in part",
+        also_tried(tried)
+    )]
+    Incomplete {
+        study: String,
+        series: String,
+        listed: usize,
+        /// NumberOfSeriesRelatedInstances.
+        expected: u64,
+        /// What else was asked, and what it answered.
+        tried: String,
+    },
+
     #[error("the retrieval was cancelled")]
     Cancelled,
+}
+
+fn also_tried(tried: &str) -> String {
+    if tried.is_empty() {
+        String::new()
+    } else {
+        format!(" (its answers are capped; also asked: {tried})")
+    }
 }
 
 fn unauthorized_message(status: u16, url: &str, credentials: Option<&str>) -> String {
@@ -218,8 +244,7 @@ impl Base {
 
     /// `host:port` of an absolute base, for messages.
     pub fn host(&self) -> Option<&str> {
-        let rest = self.url.split_once("://")?.1;
-        rest.split('/').next()
+        crate::io::url::host_part(&self.url)
     }
 
     /// `{base}/studies?StudyInstanceUID={study}`: the study's patient and date (an empty list
@@ -236,7 +261,7 @@ impl Base {
         for (key, value) in search.criteria()? {
             url.push_str(key);
             url.push('=');
-            url.push_str(&query_encode(&value));
+            url.push_str(&crate::io::url::percent_encode(&value, b"*"));
             url.push('&');
         }
         url.push_str(&format!("limit={}", StudySearch::LIMIT));
@@ -277,6 +302,26 @@ impl Base {
             self.url
         ))
     }
+}
+
+/// A DICOMweb URL as viewers link it (VolView's `?dicomweb=`, a copied WADO-RS path): the root
+/// with the study and series it points into, `.../studies/UID[/series/UID[/...]]` split into
+/// (root, study, series). A URL that points into no study is the root as it is.
+pub fn split_target(url: &str) -> (String, Option<String>, Option<String>) {
+    let url = url.trim().trim_end_matches('/');
+    let is_uid = |s: &str| check_uid("UID", s).is_ok();
+    if let Some(i) = url.rfind("/studies/") {
+        let (root, rest) = (&url[..i], &url[i + "/studies/".len()..]);
+        let mut parts = rest.split('/');
+        if let Some(study) = parts.next().filter(|s| is_uid(s)) {
+            let series = match (parts.next(), parts.next()) {
+                (Some("series"), Some(s)) if is_uid(s) => Some(s.to_owned()),
+                _ => None,
+            };
+            return (root.to_owned(), Some(study.to_owned()), series);
+        }
+    }
+    (url.to_owned(), None, None)
 }
 
 /// The series of `list` to open: the one named, else the chooser's (`qido::choose_series`);
@@ -375,19 +420,6 @@ impl StudySearch {
         }
         Ok(out)
     }
-}
-
-/// Percent-encodes a query value (everything but unreserved characters and the wildcards).
-fn query_encode(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for b in s.bytes() {
-        if b.is_ascii_alphanumeric() || b"-._~*".contains(&b) {
-            out.push(char::from(b));
-        } else {
-            out.push_str(&format!("%{b:02X}"));
-        }
-    }
-    out
 }
 
 /// Checks that a UID is digits and dots (1 to 64 characters), so that it can go into a URL
@@ -660,6 +692,40 @@ mod tests {
             let e = Base::parse(bad).unwrap_err();
             assert!(matches!(e, DicomWebError::InvalidBase { .. }), "{bad}: {e}");
         }
+    }
+
+    #[test]
+    fn a_url_into_a_study_or_series_is_split_into_root_study_and_series() {
+        let s = |u: &str| split_target(u);
+        assert_eq!(
+            s("http://h:8042/dicom-web"),
+            ("http://h:8042/dicom-web".to_owned(), None, None)
+        );
+        assert_eq!(
+            s("https://h/dw/studies/1.2.3/"),
+            ("https://h/dw".to_owned(), Some("1.2.3".to_owned()), None)
+        );
+        assert_eq!(
+            s("https://h/dw/studies/1.2.3/series/4.5/instances/6.7"),
+            (
+                "https://h/dw".to_owned(),
+                Some("1.2.3".to_owned()),
+                Some("4.5".to_owned())
+            )
+        );
+        assert_eq!(
+            s("/dicom-web/studies/1.2.3/series/4.5"),
+            (
+                "/dicom-web".to_owned(),
+                Some("1.2.3".to_owned()),
+                Some("4.5".to_owned())
+            )
+        );
+        // Not a UID after /studies/: left as it is (Base::parse says what is wrong).
+        assert_eq!(
+            s("https://h/studies/x"),
+            ("https://h/studies/x".to_owned(), None, None)
+        );
     }
 
     #[test]

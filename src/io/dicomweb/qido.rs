@@ -149,6 +149,20 @@ pub fn choose_series(series: &[SeriesInfo]) -> Option<usize> {
     best
 }
 
+/// The PET series of a PET/CT study, fused over its CT: the PT series with the most instances
+/// (the first of equals), if the study has one.
+pub fn pet_series(series: &[SeriesInfo]) -> Option<usize> {
+    let mut best: Option<usize> = None;
+    for (i, s) in series.iter().enumerate() {
+        if s.modality.as_deref() == Some("PT")
+            && best.is_none_or(|b| s.instances.unwrap_or(0) > series[b].instances.unwrap_or(0))
+        {
+            best = Some(i);
+        }
+    }
+    best
+}
+
 /// The objects of a QIDO-RS answer. An empty body (204 No Content) is no match.
 fn entries(url: &str, body: &[u8]) -> Result<Vec<Map<String, Value>>, DicomWebError> {
     let json_error = |message: String| DicomWebError::Json {
@@ -372,5 +386,26 @@ mod tests {
             choose_series(&[s("SEG", Some(1)), s("PT", Some(200))]),
             Some(1)
         );
+    }
+
+    #[test]
+    fn a_pet_ct_study_s_pet_is_its_largest_pt_series() {
+        let s = |m: &str, n: Option<u64>| SeriesInfo {
+            series_uid: "1".to_owned(),
+            modality: Some(m.to_owned()),
+            instances: n,
+            ..SeriesInfo::default()
+        };
+        assert_eq!(pet_series(&[s("CT", Some(300)), s("SR", Some(1))]), None);
+        let study = [
+            s("CT", Some(300)),
+            s("PT", Some(59)),
+            s("PT", Some(255)),
+            s("PT", Some(255)),
+        ];
+        // The CT opens; the larger PET (the first of equals) goes over it.
+        assert_eq!(choose_series(&study), Some(0));
+        assert_eq!(pet_series(&study), Some(2));
+        assert_eq!(pet_series(&[s("PT", None)]), Some(0));
     }
 }

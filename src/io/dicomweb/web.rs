@@ -21,7 +21,8 @@ use super::multipart::{MultipartLimits, Part};
 use super::qido::{self, InstanceInfo, SeriesInfo, StudyInfo};
 use super::retrieve::{Fetch, InstanceResponse, Progress, Retrieval};
 use super::{
-    Auth, Base, DEFAULT_PARALLEL, DicomWebError, MAX_JSON_BYTES, Request, StudySearch, check_status,
+    Auth, Base, DEFAULT_PARALLEL, DicomWebError, InstanceListing, MAX_JSON_BYTES, Request,
+    StudySearch, check_status,
 };
 use crate::io::{Limits, Loaded};
 
@@ -102,16 +103,28 @@ impl WebClient {
         qido::parse_series(&url, &body)
     }
 
+    /// Every instance of the series, checked against its count and completed where the
+    /// archive caps its answers ([`InstanceListing`]); a series that stays short is refused.
     pub async fn list_instances(
         &self,
         study: &str,
         series: &str,
     ) -> Result<Vec<InstanceInfo>, DicomWebError> {
-        let url = self.base.instances_query(study, series)?;
-        let body = self
-            .get_json(&url, &format!("series {series} of study {study}"))
-            .await?;
-        qido::parse_instances(&url, &body)
+        // The series' own count (NumberOfSeriesRelatedInstances); without it, the list as given.
+        let expected = self.list_series(study).await.ok().and_then(|list| {
+            list.into_iter()
+                .find(|s| s.series_uid == series.trim())
+                .and_then(|s| s.instances)
+        });
+        let mut listing = InstanceListing::new(&self.base, study, series, expected)?;
+        let what = listing.what();
+        while let Some(url) = listing.next_url() {
+            match self.get_json(&url, &what).await {
+                Ok(body) => listing.take(&url, Ok(&body))?,
+                Err(e) => listing.take(&url, Err(e))?,
+            }
+        }
+        listing.finish()
     }
 
     /// Retrieves one series (WADO-RS, instance by instance, several in flight, a failed one
