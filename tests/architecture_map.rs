@@ -755,8 +755,8 @@ const RULES: &[Rule] = &[
                 "the PET MIP draws with egui_wgpu",
             ),
             allow(
-                "src/app/movie.rs",
-                "`src/app/movie.rs`",
+                "src/app/export/movie.rs",
+                "`src/app/export/movie.rs`",
                 "textures it renders off-screen",
             ),
             // Exceptions to issue 30's rule (wgpu only in gpu, compute, render and the app's

@@ -73,7 +73,7 @@ impl ShapecastApp {
                         self.save_picture(ctx, pane);
                     } else if key == egui::Key::M {
                         if self.movie_progress().is_none() {
-                            self.save_movie(ctx, super::movie::MOVIE_FRAMES);
+                            self.save_movie(ctx, super::export::movie::MOVIE_FRAMES);
                         }
                     } else {
                         self.key(key);

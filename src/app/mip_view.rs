@@ -693,7 +693,7 @@ impl MipView {
         self.draw_overlay(&painter, rect);
         // Orthographic: one scale for the whole image (mm per full-resolution pixel).
         let mm_per_point = self.camera.mm_per_pixel(full) * f64::from(ppp);
-        super::picture::draw_scale_bar(&painter, rect, (1.0 / mm_per_point) as f32);
+        super::export::picture::draw_scale_bar(&painter, rect, (1.0 / mm_per_point) as f32);
 
         let hover_pixel = response.hover_pos().and_then(|p| self.pixel_at(p));
         self.update_hover(gpu, ui.ctx(), hover_pixel, response.dragged() || wheeled);

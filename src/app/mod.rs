@@ -7,6 +7,7 @@
 //! the previous volume.
 
 pub mod demo;
+pub mod export;
 mod external;
 pub mod features;
 pub mod findings;
@@ -17,13 +18,11 @@ mod keys;
 pub mod load;
 pub mod measure;
 pub mod mip_view;
-pub mod movie;
 mod options;
 mod pacs;
 mod panels;
 mod panes;
 mod pet;
-pub mod picture;
 mod probe;
 mod publish;
 mod series_list;
@@ -190,10 +189,8 @@ pub struct ShapecastApp {
     show_about: bool,
     /// The keyboard help ("?").
     show_keys: bool,
-    /// "Save picture": the picture being made and the last one.
-    picture: picture::PictureState,
-    /// "Save movie": the movie being made and the last one.
-    movie: movie::MovieState,
+    /// "Save picture" and "Save movie": what is being made and the last of each.
+    export: export::Export,
     drop_hover: bool,
     #[cfg(not(target_arch = "wasm32"))]
     open_path: String,
@@ -302,8 +299,7 @@ impl ShapecastApp {
             probe: probe::ProbeState::default(),
             show_about: false,
             show_keys: false,
-            picture: picture::PictureState::default(),
-            movie: movie::MovieState::default(),
+            export: export::Export::default(),
             drop_hover: false,
             #[cfg(not(target_arch = "wasm32"))]
             open_path: String::new(),

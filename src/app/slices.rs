@@ -640,7 +640,7 @@ impl SlicePane {
             painter.image(id, rect, axes.uv(), egui::Color32::WHITE);
         }
         self.draw_overlay(&painter, area, rect, axes, crosshair, w, h, volume);
-        super::picture::draw_scale_bar(&painter, area, rect.width() / size_mm.x.max(1e-6));
+        super::export::picture::draw_scale_bar(&painter, area, rect.width() / size_mm.x.max(1e-6));
         // Corner annotation: the slice index in the file, and the zoom when not fitted.
         let mut corner = format!("{} / {}", slice + 1, n_slices);
         if (self.view.zoom - 1.0).abs() > 1e-3 {

@@ -8,7 +8,7 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::{PaneId, ShapecastApp};
+use crate::app::{PaneId, ShapecastApp};
 
 /// A picture made: its file name and PNG bytes.
 #[derive(Clone, Debug, PartialEq)]
@@ -23,7 +23,7 @@ type ScreenshotSlot = Arc<Mutex<Option<Arc<egui::ColorImage>>>>;
 
 /// The picture being made and the last one made.
 #[derive(Default)]
-pub(super) struct PictureState {
+pub(in crate::app) struct PictureState {
     /// The pane asked for, and the screenshot when it arrives.
     pending: Option<(PaneId, ScreenshotSlot)>,
     /// The pane asked for and the frames to wait before the screenshot (the menu that asked
@@ -120,7 +120,7 @@ impl ShapecastApp {
     /// Asks for a picture of `pane` (made from the pixels of a frame or two later, once the
     /// menu that asked has closed).
     pub fn save_picture(&mut self, ctx: &egui::Context, pane: PaneId) {
-        self.picture.requested = Some((pane, 2));
+        self.export.picture.requested = Some((pane, 2));
         ctx.request_repaint();
     }
 
@@ -136,34 +136,34 @@ impl ShapecastApp {
                 repaint.request_repaint();
             }),
         ));
-        self.picture.pending = Some((pane, slot));
+        self.export.picture.pending = Some((pane, slot));
         ctx.request_repaint();
     }
 
     /// Natively, where pictures are written (the current folder unless set).
     #[cfg(not(target_arch = "wasm32"))]
     pub fn set_picture_dir(&mut self, dir: std::path::PathBuf) {
-        self.picture.dir = Some(dir);
+        self.export.picture.dir = Some(dir);
     }
 
     /// The last picture made (tests; the page downloads it, natively it is written to a file).
     pub fn last_picture(&self) -> Option<&Picture> {
-        self.picture.last.as_ref()
+        self.export.picture.last.as_ref()
     }
 
     /// Turns an arrived screenshot into the picture and hands it on.
-    pub(super) fn poll_picture(&mut self, ctx: &egui::Context) {
-        if let Some((pane, wait)) = self.picture.requested {
+    pub(in crate::app) fn poll_picture(&mut self, ctx: &egui::Context) {
+        if let Some((pane, wait)) = self.export.picture.requested {
             if wait == 0 {
-                self.picture.requested = None;
+                self.export.picture.requested = None;
                 self.take_screenshot(ctx, pane);
             } else {
-                self.picture.requested = Some((pane, wait - 1));
+                self.export.picture.requested = Some((pane, wait - 1));
                 ctx.request_repaint();
             }
             return;
         }
-        let Some((pane, slot)) = &self.picture.pending else {
+        let Some((pane, slot)) = &self.export.picture.pending else {
             return;
         };
         let image = match slot.lock() {
@@ -175,13 +175,13 @@ impl ShapecastApp {
             return;
         };
         let pane = *pane;
-        self.picture.pending = None;
+        self.export.picture.pending = None;
         let rect = match pane {
             PaneId::Mip => matches!(
                 self.layout,
-                super::Layout::Single(PaneId::Mip)
-                    | super::Layout::Grid
-                    | super::Layout::MipAndSlices
+                crate::app::Layout::Single(PaneId::Mip)
+                    | crate::app::Layout::Grid
+                    | crate::app::Layout::MipAndSlices
             )
             .then(|| self.mip_view.image_area())
             .filter(|r| r.is_positive()),
@@ -211,12 +211,12 @@ impl ShapecastApp {
             Ok(place) => self.notes.push(format!("picture saved: {place}")),
             Err(e) => self.error(format!("Save picture: {e}")),
         }
-        self.picture.last = Some(picture);
+        self.export.picture.last = Some(picture);
     }
 
     /// The loaded file's name without its extensions, letters and digits only (`shapecast`
     /// without a volume): the start of a picture's file name.
-    pub(super) fn file_stem(&self) -> String {
+    pub(in crate::app) fn file_stem(&self) -> String {
         self.volume()
             .map(|v| {
                 let name = v.source.rsplit(['/', '\\']).next().unwrap_or(&v.source);
@@ -232,25 +232,31 @@ impl ShapecastApp {
 
     /// Hands a file made here (a picture, a movie) to the user: a download in the page, a file
     /// in the pictures' folder natively. Says where it went.
-    pub(super) fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String> {
+    pub(in crate::app) fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String> {
         #[cfg(not(target_arch = "wasm32"))]
-        return deliver(name, bytes, self.picture.dir.as_deref());
+        return deliver(name, bytes, self.export.picture.dir.as_deref());
         #[cfg(target_arch = "wasm32")]
         deliver(name, bytes)
     }
 
     /// The "Save picture" menu: one entry per pane shown.
-    pub(super) fn save_picture_ui(&mut self, ui: &mut egui::Ui) {
+    pub(in crate::app) fn save_picture_ui(&mut self, ui: &mut egui::Ui) {
         ui.menu_button("Save picture", |ui| {
             ui.label("A PNG of a pane as shown, with its letters and scale bar:");
             for (label, pane) in [
                 ("MIP pane", PaneId::Mip),
-                ("Axial pane", PaneId::Slice(super::SliceKind::Axial)),
-                ("Coronal pane", PaneId::Slice(super::SliceKind::Coronal)),
-                ("Sagittal pane", PaneId::Slice(super::SliceKind::Sagittal)),
+                ("Axial pane", PaneId::Slice(crate::app::SliceKind::Axial)),
+                (
+                    "Coronal pane",
+                    PaneId::Slice(crate::app::SliceKind::Coronal),
+                ),
+                (
+                    "Sagittal pane",
+                    PaneId::Slice(crate::app::SliceKind::Sagittal),
+                ),
             ] {
                 let shown = match self.layout {
-                    super::Layout::Single(p) => p == pane,
+                    crate::app::Layout::Single(p) => p == pane,
                     _ => true,
                 };
                 if ui
@@ -269,7 +275,7 @@ impl ShapecastApp {
 /// Hands a PNG to the user: a download in the page.
 #[cfg(target_arch = "wasm32")]
 fn deliver(name: &str, bytes: &[u8]) -> Result<String, String> {
-    download(name, bytes).map_err(|e| super::web_files::js_error(&e))?;
+    download(name, bytes).map_err(|e| crate::app::web_files::js_error(&e))?;
     Ok(format!("{name} (your downloads)"))
 }
 

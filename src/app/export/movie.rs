@@ -14,7 +14,7 @@
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
-use super::ShapecastApp;
+use crate::app::ShapecastApp;
 use crate::gpu::readback::PendingTexture;
 use crate::gpu::volume_texture::FeatureTexture;
 use crate::render::camera::Camera;
@@ -161,7 +161,7 @@ impl Making {
 
 /// "Save movie": the movie being made, the one asked for and the last made.
 #[derive(Default)]
-pub(super) struct MovieState {
+pub(in crate::app) struct MovieState {
     making: Option<Making>,
     /// Frames asked for, started in the next frame (once the pane has drawn).
     requested: Option<u32>,
@@ -171,24 +171,24 @@ pub(super) struct MovieState {
 impl ShapecastApp {
     /// Asks for a movie of `frames` frames of a full turn of the MIP pane's view.
     pub fn save_movie(&mut self, ctx: &egui::Context, frames: u32) {
-        self.movie.requested = Some(frames.clamp(1, 3600));
+        self.export.movie.requested = Some(frames.clamp(1, 3600));
         ctx.request_repaint();
     }
 
     /// Stops the movie being made (nothing is saved).
     pub fn cancel_movie(&mut self) {
-        if self.movie.making.take().is_some() {
+        if self.export.movie.making.take().is_some() {
             self.notes.push("Save movie: cancelled".to_owned());
         }
-        self.movie.requested = None;
+        self.export.movie.requested = None;
     }
 
     /// `(frames encoded, frames)` of the movie being made.
     pub fn movie_progress(&self) -> Option<(u32, u32)> {
-        if let Some(m) = &self.movie.making {
+        if let Some(m) = &self.export.movie.making {
             return Some((m.encoded(), m.frames));
         }
-        self.movie.requested.map(|n| (0, n))
+        self.export.movie.requested.map(|n| (0, n))
     }
 
     /// The size of the MIP pane's full-resolution frame, pixels: a movie's frame size.
@@ -198,17 +198,17 @@ impl ShapecastApp {
 
     /// The last movie made (tests; the page downloads it, natively it is written to a file).
     pub fn last_movie(&self) -> Option<&Movie> {
-        self.movie.last.as_ref()
+        self.export.movie.last.as_ref()
     }
 
     /// Starts, advances and finishes the movie (once per frame, after the panes).
-    pub(super) fn advance_movie(&mut self, ctx: &egui::Context) {
-        if let Some(frames) = self.movie.requested.take()
+    pub(in crate::app) fn advance_movie(&mut self, ctx: &egui::Context) {
+        if let Some(frames) = self.export.movie.requested.take()
             && let Err(e) = self.start_movie(frames)
         {
             self.error(format!("Save movie: {e}"));
         }
-        if self.movie.making.is_none() {
+        if self.export.movie.making.is_none() {
             return;
         }
         ctx.request_repaint();
@@ -216,7 +216,7 @@ impl ShapecastApp {
             Ok(true) => {}
             Ok(false) => self.finish_movie(),
             Err(e) => {
-                self.movie.making = None;
+                self.export.movie.making = None;
                 self.error(format!("Save movie: {e}"));
             }
         }
@@ -232,7 +232,7 @@ impl ShapecastApp {
             .ok_or("the MIP pane has not been drawn yet; show it first")?;
         let features = self.shown_features().map(|f| f.texture.clone());
         let target = RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?;
-        self.movie.making = Some(Making {
+        self.export.movie.making = Some(Making {
             frames,
             camera: self.mip_view.camera,
             settings: self.mip_view.frame_settings(),
@@ -265,7 +265,7 @@ impl ShapecastApp {
         let features = request
             .and_then(|r| self.features.find(&r))
             .map(|e| &e.texture);
-        let Some(m) = &mut self.movie.making else {
+        let Some(m) = &mut self.export.movie.making else {
             return Ok(false);
         };
         if m.volume != scene.render.intensity {
@@ -334,7 +334,7 @@ impl ShapecastApp {
     }
 
     fn finish_movie(&mut self) {
-        let Some(m) = self.movie.making.take() else {
+        let Some(m) = self.export.movie.making.take() else {
             return;
         };
         let (frames, size) = (m.frames, m.target.size);
@@ -355,11 +355,11 @@ impl ShapecastApp {
             )),
             Err(e) => self.error(format!("Save movie: {e}")),
         }
-        self.movie.last = Some(movie);
+        self.export.movie.last = Some(movie);
     }
 
     /// The "Save movie" button (beside "Save picture").
-    pub(super) fn save_movie_ui(&mut self, ui: &mut egui::Ui) {
+    pub(in crate::app) fn save_movie_ui(&mut self, ui: &mut egui::Ui) {
         let r = ui
             .add_enabled(
                 self.scene.is_some() && self.movie_progress().is_none(),
@@ -376,7 +376,7 @@ impl ShapecastApp {
     }
 
     /// The status bar's progress of the movie being made, with its Cancel.
-    pub(super) fn movie_progress_ui(&mut self, ui: &mut egui::Ui) {
+    pub(in crate::app) fn movie_progress_ui(&mut self, ui: &mut egui::Ui) {
         let Some((done, frames)) = self.movie_progress() else {
             return;
         };

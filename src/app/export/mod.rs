@@ -1,0 +1,12 @@
+//! What leaves the app as a file: "Save picture" (a PNG of one pane, `picture`) and "Save movie"
+//! (a turntable APNG of the MIP drawn off-screen, `movie`), and their state in [`Export`].
+
+pub mod movie;
+pub mod picture;
+
+/// The picture and the movie being made, and the last of each.
+#[derive(Default)]
+pub(super) struct Export {
+    pub(super) picture: picture::PictureState,
+    pub(super) movie: movie::MovieState,
+}
