@@ -7,6 +7,7 @@ mod common;
 #[path = "../common/counting.rs"]
 mod counting;
 
+mod harness;
 mod mip_view;
 mod native;
 mod reading;

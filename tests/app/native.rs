@@ -8,6 +8,7 @@
 
 use crate::common;
 use crate::counting;
+use crate::harness::{click_control, drag, harness, intensity_only, pixels_where, run_until, save};
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -18,65 +19,6 @@ use shapecast::app::{
 };
 use shapecast::cpu::pipeline::Method;
 use shapecast::status::Phase;
-
-fn harness(options: AppOptions) -> Option<Harness<'static, ShapecastApp>> {
-    // The same adapter rule as the GPU tests: skip visibly without one, fail under CI=true.
-    shapecast::gpu::context::test_context()?;
-    let mut setup = egui_kittest::wgpu::default_wgpu_setup();
-    if let eframe::egui_wgpu::WgpuSetup::CreateNew(create) = &mut setup {
-        create.device_descriptor = Arc::new(shapecast::gpu::context::device_descriptor);
-    }
-    let mut harness = Harness::builder()
-        .with_size(egui::vec2(1280.0, 800.0))
-        .wgpu_setup(setup)
-        .build_eframe(move |cc| ShapecastApp::with_options(cc, options));
-    run_until(&mut harness, "ready", 60, |app| {
-        app.status().phase == Phase::Ready
-    });
-    harness.run_steps(2);
-    Some(harness)
-}
-
-/// Steps until `done`, or fails naming `what` after `max` frames and at least 120 s (GPU work
-/// runs asynchronously to the frames; lavapipe takes its time).
-fn run_until(
-    harness: &mut Harness<'static, ShapecastApp>,
-    what: &str,
-    max: usize,
-    done: impl Fn(&ShapecastApp) -> bool,
-) {
-    let started = std::time::Instant::now();
-    let mut frames = 0;
-    while frames < max || started.elapsed() < std::time::Duration::from_secs(120) {
-        harness.step();
-        frames += 1;
-        if done(harness.state()) {
-            return;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    panic!(
-        "not {what} after {max} frames: {:?}",
-        harness.state().status()
-    );
-}
-
-fn intensity_only(start: StartWith) -> AppOptions {
-    AppOptions {
-        start,
-        mode: DisplayMode::Intensity,
-        compute_on_load: false,
-        preset: None,
-        ..AppOptions::default()
-    }
-}
-
-fn save(image: &image::RgbaImage, name: &str) -> PathBuf {
-    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
-    image.save(&out).expect("save screenshot");
-    eprintln!("screenshot: {}", out.display());
-    out
-}
 
 /// Distinct grey levels and coloured pixels of the image inside `rect` (points = pixels here).
 fn region_stats(image: &image::RgbaImage, rect: egui::Rect) -> (usize, usize) {
@@ -243,21 +185,7 @@ fn slice_panes_scroll_link_and_window() {
     let w0 = harness.state().window();
     let start = coronal.center();
     let end = start + egui::vec2(80.0, 30.0);
-    let press = |pos, pressed| egui::Event::PointerButton {
-        pos,
-        button: egui::PointerButton::Secondary,
-        pressed,
-        modifiers: egui::Modifiers::NONE,
-    };
-    harness.hover_at(start);
-    harness.event(press(start, true));
-    harness.run_steps(1);
-    for t in 1..=4 {
-        harness.hover_at(start + (end - start) * (t as f32 / 4.0));
-        harness.run_steps(1);
-    }
-    harness.event(press(end, false));
-    harness.run_steps(2);
+    drag(&mut harness, egui::PointerButton::Secondary, start, end);
     let w1 = harness.state().window();
     assert!(
         w1.width > w0.width * 1.2,
@@ -486,27 +414,6 @@ fn scroll_side_panel_down(h: &mut Harness<'static, ShapecastApp>) {
     h.run_steps(10);
 }
 
-fn click_control(h: &mut Harness<'static, ShapecastApp>, name: &str) {
-    let at = h
-        .state()
-        .status()
-        .controls
-        .iter()
-        .find(|(n, _)| n == name)
-        .map(|(_, r)| egui::pos2(r[0] + 0.5 * r[2], r[1] + 0.5 * r[3]))
-        .unwrap_or_else(|| panic!("no control {name}: {:?}", h.state().status().controls));
-    h.hover_at(at);
-    for pressed in [true, false] {
-        h.event(egui::Event::PointerButton {
-            pos: at,
-            button: egui::PointerButton::Primary,
-            pressed,
-            modifiers: egui::Modifiers::NONE,
-        });
-    }
-    h.run_steps(1);
-}
-
 /// A folder holding three of ../shared/data's series (linked, in sub-folders) opens on the CT
 /// with the most images and lists all three with their counts; clicking another loads it with
 /// the geometry it has alone, and the list stays.
@@ -711,21 +618,12 @@ fn a_link_restores_the_view() {
     harness.drop_at(mip + egui::vec2(75.0, -30.0));
     harness.run_steps(2);
     let axial = control(&harness, "pane:axial").center();
-    let press = |pos, pressed| egui::Event::PointerButton {
-        pos,
-        button: egui::PointerButton::Secondary,
-        pressed,
-        modifiers: egui::Modifiers::NONE,
-    };
-    harness.hover_at(axial);
-    harness.event(press(axial, true));
-    harness.run_steps(1);
-    for t in 1..=4 {
-        harness.hover_at(axial + egui::vec2(10.0 * t as f32, 5.0 * t as f32));
-        harness.run_steps(1);
-    }
-    harness.event(press(axial + egui::vec2(40.0, 20.0), false));
-    harness.run_steps(2);
+    drag(
+        &mut harness,
+        egui::PointerButton::Secondary,
+        axial,
+        axial + egui::vec2(40.0, 20.0),
+    );
     harness.state_mut().set_layout(Layout::Grid);
     harness.run_steps(2);
     let view = harness.state().view_state();
@@ -918,21 +816,12 @@ fn a_pet_ct_folder_opens_the_ct_with_its_pet_fused() {
     // not the CT's.
     let ct_window = harness.state().window();
     let start = axial.center();
-    let press = |pos, pressed| egui::Event::PointerButton {
-        pos,
-        button: egui::PointerButton::Secondary,
-        pressed,
-        modifiers: egui::Modifiers::NONE,
-    };
-    harness.hover_at(start);
-    harness.event(press(start, true));
-    harness.run_steps(1);
-    for t in 1..=4 {
-        harness.hover_at(start + egui::vec2(20.0 * t as f32, 0.0));
-        harness.run_steps(1);
-    }
-    harness.event(press(start + egui::vec2(80.0, 0.0), false));
-    harness.run_steps(2);
+    drag(
+        &mut harness,
+        egui::PointerButton::Secondary,
+        start,
+        start + egui::vec2(80.0, 0.0),
+    );
     let (lo, hi) = harness.state().status().pet.as_ref().expect("PET").window;
     assert!(hi - lo > 5.5, "PET window after the drag: {lo}..{hi}");
     assert_eq!(harness.state().window(), ct_window, "the CT's window stays");
@@ -1251,23 +1140,6 @@ fn findings_list_the_demo_spheres_and_n_skips_the_dismissed() {
         .map(|f| f.mark.clone())
         .collect();
     assert_eq!(again, marks);
-}
-
-/// Pixels of `image` inside `rect` (a pane) for which `pred` holds.
-fn pixels_where(
-    image: &image::RgbaImage,
-    rect: egui::Rect,
-    pred: impl Fn(&image::Rgba<u8>) -> bool,
-) -> usize {
-    let mut n = 0;
-    for y in rect.top().ceil() as u32..rect.bottom().floor() as u32 {
-        for x in rect.left().ceil() as u32..rect.right().floor() as u32 {
-            if x < image.width() && y < image.height() {
-                n += usize::from(pred(image.get_pixel(x, y)));
-            }
-        }
-    }
-    n
 }
 
 /// Findings with a PET fused (STS_001: CT and the PET cropped around the sarcoma): the panel

@@ -8,112 +8,16 @@
 //! turn of the MIP; with the ruler, a click in the MIP measures in 3D. Screenshots are saved for
 //! a person to look at.
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use crate::harness::{drag, harness, intensity_only, run_until, save, wheel};
 
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable as _;
 use glam::{DMat3, DVec3};
 use shapecast::app::measure::{MeasureKind, Tool};
 use shapecast::app::slices::{PaneView, pane_axes};
-use shapecast::app::{AppOptions, DisplayMode, LoadSource, ShapecastApp, SliceKind, StartWith};
+use shapecast::app::{AppOptions, LoadSource, ShapecastApp, SliceKind, StartWith};
 use shapecast::app::{Window, WindowPreset};
-use shapecast::status::Phase;
 use shapecast::volume::Volume;
-
-fn harness(options: AppOptions) -> Option<Harness<'static, ShapecastApp>> {
-    let wants_volume = options.start != StartWith::Nothing;
-    // The same adapter rule as the GPU tests: skip visibly without one, fail under CI=true.
-    shapecast::gpu::context::test_context()?;
-    let mut setup = egui_kittest::wgpu::default_wgpu_setup();
-    if let eframe::egui_wgpu::WgpuSetup::CreateNew(create) = &mut setup {
-        create.device_descriptor = Arc::new(shapecast::gpu::context::device_descriptor);
-    }
-    let mut harness = Harness::builder()
-        .with_size(egui::vec2(1280.0, 800.0))
-        .wgpu_setup(setup)
-        .build_eframe(move |cc| ShapecastApp::with_options(cc, options));
-    run_until(&mut harness, "ready", 60, |app| {
-        app.status().phase == Phase::Ready && (app.volume().is_some() || !wants_volume)
-    });
-    harness.run_steps(2);
-    Some(harness)
-}
-
-/// Steps until `done`, or fails naming `what` after `max` frames and at least 120 s.
-fn run_until(
-    harness: &mut Harness<'static, ShapecastApp>,
-    what: &str,
-    max: usize,
-    done: impl Fn(&ShapecastApp) -> bool,
-) {
-    let started = std::time::Instant::now();
-    let mut frames = 0;
-    while frames < max || started.elapsed() < std::time::Duration::from_secs(120) {
-        harness.step();
-        frames += 1;
-        if done(harness.state()) {
-            return;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    panic!(
-        "not {what} after {max} frames: {:?}",
-        harness.state().status()
-    );
-}
-
-fn intensity_only(start: StartWith) -> AppOptions {
-    AppOptions {
-        start,
-        mode: DisplayMode::Intensity,
-        compute_on_load: false,
-        preset: None,
-        ..AppOptions::default()
-    }
-}
-
-fn save(image: &image::RgbaImage, name: &str) -> PathBuf {
-    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
-    image.save(&out).expect("save screenshot");
-    eprintln!("screenshot: {}", out.display());
-    out
-}
-
-fn wheel(harness: &mut Harness<'static, ShapecastApp>, lines: f32, modifiers: egui::Modifiers) {
-    harness.event(egui::Event::MouseWheel {
-        unit: egui::MouseWheelUnit::Line,
-        delta: egui::vec2(0.0, lines),
-        phase: egui::TouchPhase::Move,
-        source: egui::MouseWheelSource::Wheel,
-        modifiers,
-    });
-    harness.run_steps(2);
-}
-
-/// A left (or `button`) drag from `a` to `b` in a few moves.
-fn drag(
-    harness: &mut Harness<'static, ShapecastApp>,
-    button: egui::PointerButton,
-    a: egui::Pos2,
-    b: egui::Pos2,
-) {
-    let press = |pos, pressed| egui::Event::PointerButton {
-        pos,
-        button,
-        pressed,
-        modifiers: egui::Modifiers::NONE,
-    };
-    harness.hover_at(a);
-    harness.event(press(a, true));
-    harness.run_steps(1);
-    for t in 1..=4 {
-        harness.hover_at(a + (b - a) * (t as f32 / 4.0));
-        harness.run_steps(1);
-    }
-    harness.event(press(b, false));
-    harness.run_steps(2);
-}
 
 fn pane(h: &Harness<'static, ShapecastApp>, kind: SliceKind) -> egui::Rect {
     h.state().pane_rect(kind).expect("pane drawn")

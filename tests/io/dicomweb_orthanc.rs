@@ -807,7 +807,7 @@ fn an_instance_cut_short_is_asked_for_again_then_named() {
 /// the error asks for a token and the dialog opens.
 #[test]
 fn the_viewer_opens_a_study_and_shows_its_patient() {
-    use egui_kittest::Harness;
+    use crate::app_harness;
     use shapecast::app::{AppOptions, DisplayMode, PacsTarget, ShapecastApp, StartWith};
     use shapecast::status::Phase;
 
@@ -828,24 +828,9 @@ fn the_viewer_opens_a_study_and_shows_its_patient() {
             compute_on_load: false,
             ..AppOptions::default()
         };
-        let mut setup = egui_kittest::wgpu::default_wgpu_setup();
-        if let eframe::egui_wgpu::WgpuSetup::CreateNew(create) = &mut setup {
-            create.device_descriptor = Arc::new(shapecast::gpu::context::device_descriptor);
-        }
-        let mut harness = Harness::builder()
-            .with_size(egui::vec2(1280.0, 800.0))
-            .wgpu_setup(setup)
-            .build_eframe(move |cc| ShapecastApp::with_options(cc, options));
-        let started = Instant::now();
-        while !until(harness.state()) {
-            assert!(
-                started.elapsed() < Duration::from_secs(120),
-                "{:?}",
-                harness.state().status()
-            );
-            harness.step();
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        // The adapter was checked above.
+        let mut harness = app_harness::harness(options).expect("a GPU adapter");
+        app_harness::run_until(&mut harness, "the study's outcome", 60, until);
         harness.run_steps(2);
         harness
     };

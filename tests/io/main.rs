@@ -6,6 +6,9 @@
 mod common;
 #[path = "../common/counting.rs"]
 mod counting;
+// The app tests' harness, for the viewer opening a study from an archive.
+#[path = "../app/harness.rs"]
+mod app_harness;
 
 mod bitflip;
 mod bundled;

@@ -8,8 +8,15 @@
 
 use std::collections::HashSet;
 
-use super::qido::{self, InstanceInfo};
+use super::qido::{self, InstanceInfo, SeriesInfo};
 use super::{Base, DicomWebError, check_uid};
+
+/// NumberOfSeriesRelatedInstances of `series` in a study's series list, where the archive gave it.
+pub fn expected_count(list: &[SeriesInfo], series: &str) -> Option<u64> {
+    list.iter()
+        .find(|s| s.series_uid == series.trim())
+        .and_then(|s| s.instances)
+}
 
 /// Where the listing is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

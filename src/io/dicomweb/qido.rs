@@ -363,14 +363,19 @@ mod tests {
         );
     }
 
-    #[test]
-    fn chooser_prefers_the_largest_ct_or_mr() {
-        let s = |m: &str, n: Option<u64>| SeriesInfo {
+    /// A series of modality `m` with `n` instances.
+    fn series_of(m: &str, n: Option<u64>) -> SeriesInfo {
+        SeriesInfo {
             series_uid: "1".to_owned(),
             modality: Some(m.to_owned()),
             instances: n,
             ..SeriesInfo::default()
-        };
+        }
+    }
+
+    #[test]
+    fn chooser_prefers_the_largest_ct_or_mr() {
+        let s = series_of;
         assert_eq!(choose_series(&[]), None);
         assert_eq!(
             choose_series(&[
@@ -390,12 +395,7 @@ mod tests {
 
     #[test]
     fn a_pet_ct_study_s_pet_is_its_largest_pt_series() {
-        let s = |m: &str, n: Option<u64>| SeriesInfo {
-            series_uid: "1".to_owned(),
-            modality: Some(m.to_owned()),
-            instances: n,
-            ..SeriesInfo::default()
-        };
+        let s = series_of;
         assert_eq!(pet_series(&[s("CT", Some(300)), s("SR", Some(1))]), None);
         let study = [
             s("CT", Some(300)),

@@ -111,11 +111,8 @@ impl WebClient {
         series: &str,
     ) -> Result<Vec<InstanceInfo>, DicomWebError> {
         // The series' own count (NumberOfSeriesRelatedInstances); without it, the list as given.
-        let expected = self.list_series(study).await.ok().and_then(|list| {
-            list.into_iter()
-                .find(|s| s.series_uid == series.trim())
-                .and_then(|s| s.instances)
-        });
+        let expected = (self.list_series(study).await.ok())
+            .and_then(|list| super::listing::expected_count(&list, series));
         let mut listing = InstanceListing::new(&self.base, study, series, expected)?;
         let what = listing.what();
         while let Some(url) = listing.next_url() {
