@@ -105,10 +105,15 @@ impl AppOptions {
                         .map(|s| s.trim().to_owned())
                         .filter(|s| !s.is_empty())
                 };
+                // The URL's series goes with the URL's study only.
+                let (study, series) = match given("study") {
+                    Some(s) if Some(&s) != study.as_ref() => (s, given("series")),
+                    _ => (study.unwrap_or_default(), given("series").or(series)),
+                };
                 o.start = StartWith::DicomWeb(PacsTarget {
                     base,
-                    study: given("study").or(study).unwrap_or_default(),
-                    series: given("series").or(series),
+                    study,
+                    series,
                 });
             }
             if let Some(m) = param("method").and_then(|m| DisplayMode::from_name(&m)) {

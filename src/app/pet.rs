@@ -423,8 +423,7 @@ impl PetState {
             window: Some(l.window),
             opacity: Some(l.opacity),
             visible: Some(l.visible),
-            // Absent unless set, so that a link without it stays as it was.
-            alone: l.alone.then_some(true),
+            alone: Some(l.alone),
         })
     }
 

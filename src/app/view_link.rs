@@ -327,13 +327,13 @@ impl ViewState {
 
     /// The same fields as a JSON object.
     pub fn json(&self) -> String {
-        // Numbers as written in the link (their shortest exact form), read back as JSON
-        // numbers; the fields in the link's order (serde_json's `preserve_order`).
+        // Each value written by serde_json (numbers as the link writes them: their shortest
+        // exact form), the object assembled in the link's field order.
         let number = |n: &str| -> serde_json::Value {
             n.parse::<serde_json::Number>()
                 .map_or(serde_json::Value::Null, serde_json::Value::Number)
         };
-        let map: serde_json::Map<String, serde_json::Value> = self
+        let fields: Vec<String> = self
             .fields()
             .into_iter()
             .map(|(key, value)| {
@@ -345,10 +345,10 @@ impl ViewState {
                     Value::Bool(b) => serde_json::Value::Bool(b),
                     Value::Bools(v) => v.into_iter().map(serde_json::Value::Bool).collect(),
                 };
-                (key.to_owned(), value)
+                format!("{}:{value}", serde_json::Value::from(key))
             })
             .collect();
-        serde_json::Value::Object(map).to_string()
+        format!("{{{}}}", fields.join(","))
     }
 
     /// Reads a fragment (with or without its `#`). Returns what could be read and a message per

@@ -16,13 +16,14 @@ use crate::io::dicomweb::{Auth, Base, DicomWebError};
 /// other users of the machine; the environment is not).
 pub const TOKEN_ENV: &str = "SHAPECAST_DICOMWEB_TOKEN";
 pub const USER_ENV: &str = "SHAPECAST_DICOMWEB_USER";
+pub const CA_ENV: &str = "SHAPECAST_DICOMWEB_CA";
 
 #[derive(clap::Args, Debug, Default, Clone)]
 pub struct DicomWebArgs {
     /// Read the volume from a DICOMweb archive instead of files: its root URL, e.g.
     /// http://127.0.0.1:8042/dicom-web (Orthanc's DICOMweb plugin), with --study; or a URL into
-    /// the study or series (BASE/studies/UID[/series/UID], as VolView links them). Plain HTTP
-    /// only.
+    /// the study or series (BASE/studies/UID[/series/UID], as VolView links them). http:// or
+    /// https:// (see --ca).
     #[arg(long, value_name = "BASE")]
     pub dicomweb: Option<String>,
     /// StudyInstanceUID of the study to open from --dicomweb.
@@ -40,6 +41,10 @@ pub struct DicomWebArgs {
     /// RegisteredUsers); also SHAPECAST_DICOMWEB_USER.
     #[arg(long, value_name = "USER:PASS", requires = "dicomweb")]
     pub user: Option<String>,
+    /// For an https archive whose certificate a site's own CA signed: that CA's certificate(s)
+    /// as a PEM file, trusted instead of the public roots; also SHAPECAST_DICOMWEB_CA.
+    #[arg(long, value_name = "PEM", requires = "dicomweb")]
+    pub ca: Option<std::path::PathBuf>,
 }
 
 fn env(name: &str) -> Option<String> {
@@ -72,13 +77,25 @@ impl DicomWebArgs {
         };
         // A URL into the study or series (`.../studies/UID[/series/UID]`) names them too.
         let (base, url_study, url_series) = crate::io::dicomweb::split_target(url);
-        let Some(study) = self.study.clone().or(url_study) else {
-            anyhow::bail!("--dicomweb needs --study (or a URL into the study: BASE/studies/UID)");
+        // The URL's series goes with the URL's study only.
+        let (study, series) = match (&self.study, url_study) {
+            (Some(s), u) if Some(s) != u.as_ref() => (s.clone(), self.series.clone()),
+            (_, Some(u)) => (u, self.series.clone().or(url_series)),
+            (Some(s), None) => (s.clone(), self.series.clone()),
+            (None, None) => anyhow::bail!(
+                "--dicomweb needs --study (or a URL into the study: BASE/studies/UID)"
+            ),
         };
-        let series = self.series.clone().or(url_series);
         let study = &study;
         let base = Base::parse(&base)?;
-        let client = Client::new(base.clone(), self.auth()?)?;
+        let ca = match self.ca.clone().or_else(|| env(CA_ENV).map(Into::into)) {
+            Some(path) => Some(
+                std::fs::read(&path)
+                    .map_err(|e| anyhow::anyhow!("--ca {}: cannot read it: {e}", path.display()))?,
+            ),
+            None => None,
+        };
+        let client = Client::with_ca(base.clone(), self.auth()?, ca.as_deref())?;
         let hint = |e: DicomWebError| {
             let unauthorized = matches!(e, DicomWebError::Unauthorized { .. });
             let e = anyhow::Error::new(e);

@@ -263,7 +263,8 @@ fn shapecast(args: &[&str], env: &[(&str, &str)]) -> (bool, String, String) {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_shapecast"));
     cmd.args(args)
         .env_remove("SHAPECAST_DICOMWEB_TOKEN")
-        .env_remove("SHAPECAST_DICOMWEB_USER");
+        .env_remove("SHAPECAST_DICOMWEB_USER")
+        .env_remove("SHAPECAST_DICOMWEB_CA");
     for (k, v) in env {
         cmd.env(k, v);
     }
@@ -565,6 +566,118 @@ fn orthanc_with_capped_answers_opens_whole_series() {
     assert!(ok, "{err}");
     let info: serde_json::Value = serde_json::from_str(&out).expect("info JSON");
     assert_eq!(info["dims"], serde_json::json!([64, 64, 93]), "{out}");
+}
+
+/// A TLS front for a plain-HTTP server on 127.0.0.1 (as a hospital's gateway terminates TLS
+/// for its archive): one request per connection, forwarded with `Connection: close` and its
+/// answer sent back whole. Its certificate, for 127.0.0.1, is made on the spot; `ca_pem` is
+/// the certificate to trust.
+struct TlsFront {
+    port: u16,
+    ca_pem: String,
+}
+
+impl TlsFront {
+    fn start(upstream: u16) -> Self {
+        let cert = rcgen::generate_simple_self_signed(vec!["127.0.0.1".to_owned()])
+            .expect("a certificate");
+        let key = rustls::pki_types::PrivateKeyDer::Pkcs8(cert.key_pair.serialize_der().into());
+        let config = Arc::new(
+            rustls::ServerConfig::builder_with_provider(Arc::new(
+                rustls::crypto::ring::default_provider(),
+            ))
+            .with_safe_default_protocol_versions()
+            .expect("TLS versions")
+            .with_no_client_auth()
+            .with_single_cert(vec![cert.cert.der().clone()], key)
+            .expect("the server's certificate"),
+        );
+        let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+        let port = listener.local_addr().expect("address").port();
+        std::thread::spawn(move || {
+            for tcp in listener.incoming().flatten() {
+                let config = config.clone();
+                std::thread::spawn(move || Self::forward(tcp, config, upstream));
+            }
+        });
+        Self {
+            port,
+            ca_pem: cert.cert.pem(),
+        }
+    }
+
+    fn forward(tcp: TcpStream, config: Arc<rustls::ServerConfig>, upstream: u16) {
+        let Ok(conn) = rustls::ServerConnection::new(config) else {
+            return;
+        };
+        let mut tls = rustls::StreamOwned::new(conn, tcp);
+        let mut head = Vec::new();
+        let mut byte = [0u8; 1];
+        while !head.ends_with(b"\r\n\r\n") {
+            match tls.read(&mut byte) {
+                Ok(1) => head.push(byte[0]),
+                _ => return, // a refused handshake or a closed connection
+            }
+        }
+        let head = String::from_utf8_lossy(&head);
+        let mut request: String = head
+            .split("\r\n")
+            .filter(|l| !l.is_empty() && !l.to_ascii_lowercase().starts_with("connection:"))
+            .map(|l| format!("{l}\r\n"))
+            .collect();
+        request.push_str("Connection: close\r\n\r\n");
+        let Ok(mut up) = TcpStream::connect(("127.0.0.1", upstream)) else {
+            return;
+        };
+        let mut answer = Vec::new();
+        if up.write_all(request.as_bytes()).is_ok() && up.read_to_end(&mut answer).is_ok() {
+            let _ = tls.write_all(&answer);
+            tls.conn.send_close_notify();
+            let _ = tls.flush();
+        }
+    }
+}
+
+/// An https archive (Orthanc behind a TLS front with a certificate of the site's own CA):
+/// `info --dicomweb https://...` refuses it without that CA (naming the certificate problem)
+/// and opens the series with `--ca` (and with SHAPECAST_DICOMWEB_CA).
+#[test]
+fn an_https_archive_opens_with_the_site_s_ca() {
+    let Some(series_root) = common::shared_data("series") else {
+        return;
+    };
+    let Some(orthanc) = Orthanc::start(false) else {
+        return;
+    };
+    let mr = series_files(&series_root.join("mr-prostate-adc-oblique"));
+    orthanc.upload(&mr);
+    let (study, series) = uids(&mr[0]);
+    let front = TlsFront::start(orthanc.port);
+    let ca = orthanc.dir.join("ca.pem");
+    std::fs::write(&ca, &front.ca_pem).expect("write the CA");
+    let url = format!(
+        "https://127.0.0.1:{}/dicom-web/studies/{study}/series/{series}",
+        front.port
+    );
+    let (ok, _, err) = shapecast(&["info", "--json", "--dicomweb", &url], &[]);
+    assert!(!ok, "an unknown issuer was trusted");
+    assert!(
+        err.contains("cannot connect to 127.0.0.1") && err.to_lowercase().contains("certificate"),
+        "{err}"
+    );
+    let ca_path = ca.to_string_lossy().into_owned();
+    let (ok, out, err) = shapecast(
+        &["info", "--json", "--dicomweb", &url, "--ca", &ca_path],
+        &[],
+    );
+    assert!(ok, "{err}");
+    let info: serde_json::Value = serde_json::from_str(&out).expect("info JSON");
+    assert_eq!(info["dims"], serde_json::json!([256, 256, 20]), "{out}");
+    let (ok, _, err) = shapecast(
+        &["info", "--json", "--dicomweb", &url],
+        &[("SHAPECAST_DICOMWEB_CA", &ca_path)],
+    );
+    assert!(ok, "{err}");
 }
 
 #[test]

@@ -84,6 +84,10 @@ impl Inbox {
     }
 }
 
+/// The tag of a PET retrieval's task ids: their own range, apart from the dialog's tasks
+/// (`Pacs::task`), so that neither replaces nor receives the other's answers.
+const PET_TASK: u64 = 1 << 63;
+
 /// A PET/CT study's PET on its way: its task, the generation of the CT it goes over, and the
 /// retrieval (cancelled when another CT is shown).
 struct PetRetrieval {
@@ -124,6 +128,8 @@ pub(super) struct Pacs {
     inbox: Inbox,
     /// The PET of a PET/CT study, retrieved after its CT is shown.
     pet: Option<PetRetrieval>,
+    /// PET retrievals started (their task ids are `PET_TASK | n`).
+    pet_tasks: u64,
     /// The loaded study's patient (the line above the panes).
     pub patient: Option<Patient>,
     /// The window title set last (native).
@@ -385,8 +391,11 @@ impl ShapecastApp {
     /// Takes the archive's answers (once per frame).
     pub(super) fn pacs_frame(&mut self, ctx: &egui::Context) {
         for (task, event) in self.pacs.inbox.take() {
-            if self.pacs.pet.as_ref().is_some_and(|p| p.task == task) {
-                self.pacs_pet_event(event);
+            if task & PET_TASK != 0 {
+                // The PET's answers; a cancelled one's late answers are dropped.
+                if self.pacs.pet.as_ref().is_some_and(|p| p.task == task) {
+                    self.pacs_pet_event(event);
+                }
                 continue;
             }
             if task != self.pacs.task {
@@ -532,8 +541,8 @@ impl ShapecastApp {
             Err(e) => return self.error(format!("PET: {e}")),
         };
         // Its own task: the dialog's next search or study does not cancel it, a new CT does.
-        self.pacs.task += 1;
-        let task = self.pacs.task;
+        self.pacs.pet_tasks += 1;
+        let task = PET_TASK | self.pacs.pet_tasks;
         self.pet.awaiting(generation);
         let running = backend::retrieve(base, auth, target, task, self.pacs.inbox.clone());
         self.pacs.pet = Some(PetRetrieval {

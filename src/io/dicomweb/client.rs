@@ -1,4 +1,4 @@
-//! The native DICOMweb client: a blocking HTTP transport (ureq, plain HTTP) behind the
+//! The native DICOMweb client: a blocking HTTP(S) transport (ureq with rustls) behind the
 //! [`Transport`] trait, and the driver that runs a [`Retrieval`] with several instance requests
 //! in flight on a few threads while the calling thread decodes what arrives. This is the only
 //! code of `src/io` that does I/O; the page drives the same `Retrieval` with `fetch`.
@@ -30,15 +30,41 @@ pub trait Transport: Sync {
     fn get(&self, request: &Request) -> Result<HttpResponse, DicomWebError>;
 }
 
-/// Plain HTTP with ureq: one agent, its connections kept alive and shared by the threads.
-/// No TLS is built in, so `https://` bases are refused with a message.
+/// HTTP and HTTPS with ureq: one agent, its connections kept alive and shared by the threads.
+/// TLS (rustls) trusts Mozilla's roots, or only the CA certificates given.
 pub struct UreqTransport {
     agent: ureq::Agent,
 }
 
 impl UreqTransport {
     pub fn new(parallel: usize) -> Self {
+        Self::with_roots(parallel, ureq::tls::RootCerts::WebPki)
+    }
+
+    /// Trusting only the certificates of `ca_pem` (PEM, one or more: a site's own CA).
+    pub fn with_ca(parallel: usize, ca_pem: &[u8]) -> Result<Self, DicomWebError> {
+        let mut certs = Vec::new();
+        for item in ureq::tls::parse_pem(ca_pem) {
+            match item {
+                Ok(ureq::tls::PemItem::Certificate(c)) => certs.push(c),
+                Ok(_) => {}
+                Err(e) => return Err(DicomWebError::InvalidCa(format!("not PEM: {e}"))),
+            }
+        }
+        if certs.is_empty() {
+            return Err(DicomWebError::InvalidCa(
+                "no CERTIFICATE in the PEM given".to_owned(),
+            ));
+        }
+        Ok(Self::with_roots(
+            parallel,
+            ureq::tls::RootCerts::Specific(std::sync::Arc::new(certs)),
+        ))
+    }
+
+    fn with_roots(parallel: usize, roots: ureq::tls::RootCerts) -> Self {
         let config = ureq::Agent::config_builder()
+            .tls_config(ureq::tls::TlsConfig::builder().root_certs(roots).build())
             .http_status_as_error(false)
             .timeout_connect(Some(Duration::from_secs(10)))
             // An archive may transcode before it answers; once it sends, reads must progress.
@@ -66,8 +92,18 @@ impl Transport for UreqTransport {
         };
         let response = req.call().map_err(|e| match e {
             ureq::Error::Io(io) if is_connect_error(io.kind()) => connect(io.to_string()),
+            // rustls reports a certificate it does not trust as invalid data on the socket.
+            ureq::Error::Io(io)
+                if io.kind() == std::io::ErrorKind::InvalidData
+                    && url.to_ascii_lowercase().starts_with("https://") =>
+            {
+                connect(format!("TLS: {io}{CA_HINT}"))
+            }
             ureq::Error::ConnectionFailed => connect("the connection failed".to_owned()),
             ureq::Error::HostNotFound => connect("host not found".to_owned()),
+            // A certificate not trusted (or TLS refused) does not change by asking again.
+            ureq::Error::Rustls(tls) => connect(format!("TLS: {tls}{CA_HINT}")),
+            ureq::Error::Tls(tls) => connect(format!("TLS: {tls}")),
             other => DicomWebError::Transport {
                 url: url.to_owned(),
                 message: other.to_string(),
@@ -86,6 +122,9 @@ impl Transport for UreqTransport {
         })
     }
 }
+
+/// What a TLS failure message adds.
+const CA_HINT: &str = " (an archive whose certificate a site's own CA signed needs that CA: --ca FILE or SHAPECAST_DICOMWEB_CA)";
 
 fn is_connect_error(kind: std::io::ErrorKind) -> bool {
     use std::io::ErrorKind as K;
@@ -119,25 +158,24 @@ pub struct Client<T: Transport = UreqTransport> {
 }
 
 impl Client<UreqTransport> {
-    /// A client with the plain-HTTP transport. The base must be absolute and http://.
+    /// A client over HTTP or HTTPS (Mozilla's roots). The base must be absolute.
     pub fn new(base: Base, auth: Auth) -> Result<Self, DicomWebError> {
+        Self::with_ca(base, auth, None)
+    }
+
+    /// ... trusting only the CA certificates of `ca_pem` where given (a site's own CA).
+    pub fn with_ca(base: Base, auth: Auth, ca_pem: Option<&[u8]>) -> Result<Self, DicomWebError> {
         if base.is_relative() {
             return Err(DicomWebError::InvalidBase {
                 base: base.as_str().to_owned(),
-                reason: "a relative base works only from a page served by the archive; give http://host:port/path".to_owned(),
+                reason: "a relative base works only from a page served by the archive; give http(s)://host:port/path".to_owned(),
             });
         }
-        if base.as_str().to_ascii_lowercase().starts_with("https://") {
-            return Err(DicomWebError::InvalidBase {
-                base: base.as_str().to_owned(),
-                reason: "this build's native client speaks plain HTTP only (no TLS is built in); use http:// on a trusted network or through a local TLS-terminating proxy".to_owned(),
-            });
-        }
-        Ok(Self::with_transport(
-            UreqTransport::new(DEFAULT_PARALLEL),
-            base,
-            auth,
-        ))
+        let transport = match ca_pem {
+            Some(pem) => UreqTransport::with_ca(DEFAULT_PARALLEL, pem)?,
+            None => UreqTransport::new(DEFAULT_PARALLEL),
+        };
+        Ok(Self::with_transport(transport, base, auth))
     }
 }
 

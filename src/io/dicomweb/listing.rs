@@ -13,8 +13,9 @@ use super::{Base, DicomWebError, check_uid};
 
 /// NumberOfSeriesRelatedInstances of `series` in a study's series list, where the archive gave it.
 pub fn expected_count(list: &[SeriesInfo], series: &str) -> Option<u64> {
+    let series = check_uid("SeriesInstanceUID", series).ok()?;
     list.iter()
-        .find(|s| s.series_uid == series.trim())
+        .find(|s| s.series_uid == series)
         .and_then(|s| s.instances)
 }
 
@@ -47,6 +48,14 @@ pub struct InstanceListing {
     stage: Stage,
     /// QIDO pages asked for so far.
     pages: usize,
+    /// Entries the QIDO answers have given so far (the next page's offset: the metadata's
+    /// instances do not move it).
+    qido_entries: usize,
+    /// The series metadata answered and held nothing the QIDO list lacked: the list is all
+    /// the archive has, and a larger count is the archive's stale figure.
+    metadata_agrees: bool,
+    /// The first instance of the first QIDO answer.
+    first_sop: Option<String>,
     /// What the steps after the first met (a metadata request refused, a page that added
     /// nothing), for the message when the list stays short.
     tried: Vec<String>,
@@ -72,6 +81,9 @@ impl InstanceListing {
             seen: HashSet::new(),
             stage: Stage::Qido,
             pages: 0,
+            qido_entries: 0,
+            metadata_agrees: false,
+            first_sop: None,
             tried: Vec::new(),
         })
     }
@@ -101,20 +113,34 @@ impl InstanceListing {
         self.expected.is_none_or(|n| self.list.len() as u64 >= n)
     }
 
-    /// Adds the instances of an answer not seen before; how many were new.
-    fn add(&mut self, url: &str, body: &[u8]) -> Result<usize, DicomWebError> {
+    /// Adds the instances of an answer not seen before: (entries in the answer, new ones).
+    /// A QIDO page that starts where the first answer did is an archive ignoring the offset:
+    /// (0, 0).
+    fn add(&mut self, url: &str, body: &[u8]) -> Result<(usize, usize), DicomWebError> {
+        let entries = qido::parse_instances(url, body)?;
+        let first = entries.first().map(|i| i.sop_uid.clone());
+        if matches!(self.stage, Stage::Qido) {
+            self.first_sop = first;
+        } else if matches!(self.stage, Stage::Page { .. })
+            && first.is_some()
+            && first == self.first_sop
+        {
+            return Ok((0, 0));
+        }
+        let n = entries.len();
         let mut new = 0;
-        for i in qido::parse_instances(url, body)? {
+        for i in entries {
             if self.seen.insert(i.sop_uid.clone()) {
                 self.list.push(i);
                 new += 1;
             }
         }
-        Ok(new)
+        Ok((n, new))
     }
 
     /// The answer to the URL [`InstanceListing::next_url`] gave. The first query's failure is
-    /// the listing's; a later step that fails or adds nothing is noted and the next one tried.
+    /// the listing's, and so are a cancellation and refused credentials at any step; a later
+    /// step that fails otherwise or adds nothing is noted and the next one tried.
     pub fn take(
         &mut self,
         url: &str,
@@ -124,6 +150,13 @@ impl InstanceListing {
         if matches!(stage, Stage::Page { .. }) {
             self.pages += 1;
         }
+        let answer = match answer {
+            Err(e @ (DicomWebError::Cancelled | DicomWebError::Unauthorized { .. })) => {
+                return Err(e);
+            }
+            other => other,
+        };
+        // (entries, new), or None where the step failed.
         let added = match (stage, answer) {
             (Stage::Done, _) => return Ok(()),
             (Stage::Qido, answer) => Some(self.add(url, answer?)?),
@@ -139,26 +172,33 @@ impl InstanceListing {
                 None
             }
         };
+        if matches!(stage, Stage::Qido | Stage::Page { .. }) {
+            self.qido_entries += added.map_or(0, |(n, _)| n);
+        }
         self.stage = if self.complete() {
             Stage::Done
         } else {
-            match stage {
-                Stage::Qido => Stage::Metadata,
-                Stage::Metadata => Stage::Page {
-                    offset: self.list.len(),
+            match (stage, added) {
+                (Stage::Qido, _) => Stage::Metadata,
+                // The series' own metadata lists nothing more: that is the series.
+                (Stage::Metadata, Some((_, 0))) => {
+                    self.metadata_agrees = true;
+                    Stage::Done
+                }
+                (Stage::Metadata, _) => Stage::Page {
+                    offset: self.qido_entries,
                 },
-                Stage::Page { offset } => match added {
-                    Some(n) if n > 0 && self.pages < MAX_PAGES => Stage::Page {
-                        offset: self.list.len(),
-                    },
-                    Some(_) => {
-                        self.tried
-                            .push(format!("{url}: no instances beyond the {offset} listed"));
-                        Stage::Done
+                (Stage::Page { .. }, Some((n, _))) if n > 0 && self.pages < MAX_PAGES => {
+                    Stage::Page {
+                        offset: self.qido_entries,
                     }
-                    None => Stage::Done,
-                },
-                Stage::Done => Stage::Done,
+                }
+                (Stage::Page { offset }, Some(_)) => {
+                    self.tried
+                        .push(format!("{url}: no instances beyond the {offset} listed"));
+                    Stage::Done
+                }
+                (Stage::Page { .. } | Stage::Done, None) | (Stage::Done, _) => Stage::Done,
             }
         };
         Ok(())
@@ -173,7 +213,7 @@ impl InstanceListing {
             });
         }
         match self.expected {
-            Some(expected) if (self.list.len() as u64) < expected => {
+            Some(expected) if (self.list.len() as u64) < expected && !self.metadata_agrees => {
                 Err(DicomWebError::Incomplete {
                     study: self.study,
                     series: self.series,
@@ -311,6 +351,46 @@ mod tests {
         );
         let message = e.to_string();
         assert!(message.contains("51 of its 141"), "{message}");
+    }
+
+    #[test]
+    fn a_count_larger_than_the_series_is_the_archive_s_stale_figure_when_the_metadata_agrees() {
+        // 30 instances listed and in the metadata; the series' count still says 32.
+        let mut l = InstanceListing::new(&base(), STUDY, SERIES, Some(32)).unwrap();
+        let asked = drive(&mut l, |_| Ok(answer(0..30)));
+        assert_eq!(asked.len(), 2, "{asked:?}");
+        assert_eq!(l.finish().unwrap().len(), 30);
+    }
+
+    #[test]
+    fn pages_go_by_the_qido_list_not_the_metadata_s() {
+        // Capped at 10 by QIDO; a metadata answer that is itself partial and different (10..25);
+        // pages from offset 10 then 20 (QIDO entries seen), not 25.
+        let mut l = InstanceListing::new(&base(), STUDY, SERIES, Some(40)).unwrap();
+        let asked = drive(&mut l, |url| {
+            if url.ends_with("/metadata") {
+                return Ok(answer(10..25));
+            }
+            let offset = url
+                .split_once("?offset=")
+                .map_or(0, |(_, o)| o.parse::<usize>().unwrap());
+            Ok(answer(offset..(offset + 10).min(40)))
+        });
+        assert!(asked[2].ends_with("?offset=10"), "{asked:?}");
+        assert_eq!(l.finish().unwrap().len(), 40);
+    }
+
+    #[test]
+    fn a_cancellation_or_refused_credentials_end_the_listing_as_they_are() {
+        let mut l = InstanceListing::new(&base(), STUDY, SERIES, Some(93)).unwrap();
+        let url = l.next_url().unwrap();
+        l.take(&url, Ok(&answer(0..41))).unwrap();
+        let url = l.next_url().unwrap();
+        assert!(url.ends_with("/metadata"));
+        assert!(matches!(
+            l.take(&url, Err(DicomWebError::Cancelled)),
+            Err(DicomWebError::Cancelled)
+        ));
     }
 
     #[test]

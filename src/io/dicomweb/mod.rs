@@ -52,6 +52,9 @@ pub enum DicomWebError {
     #[error("credentials: {0}")]
     InvalidAuth(String),
 
+    #[error("CA certificates: {0}")]
+    InvalidCa(String),
+
     #[error("study search: {field} {value:?}: {reason}")]
     InvalidSearch {
         field: &'static str,
