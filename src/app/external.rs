@@ -13,7 +13,7 @@ impl ShapecastApp {
         {
             let (dropped, hovering) =
                 ctx.input(|i| (i.raw.dropped_files.clone(), !i.raw.hovered_files.is_empty()));
-            self.drop_hover = hovering;
+            self.windows.drop_hover = hovering;
             if !dropped.is_empty() {
                 let paths: Vec<std::path::PathBuf> = dropped
                     .iter()
@@ -41,7 +41,7 @@ impl ShapecastApp {
             let _ = ctx;
             for event in web_files::take_events() {
                 match event {
-                    web_files::WebEvent::Hover(on) => self.drop_hover = on,
+                    web_files::WebEvent::Hover(on) => self.windows.drop_hover = on,
                     web_files::WebEvent::Progress {
                         verb,
                         label,

@@ -112,9 +112,9 @@ impl ShapecastApp {
             upload: _,
         } = up;
         self.generation += 1;
-        self.window = window_level::default_window(&volume);
-        self.crosshair = volume.dims.map(|d| d / 2);
-        self.hover = None;
+        self.reading.window = window_level::default_window(&volume);
+        self.reading.crosshair = volume.dims.map(|d| d / 2);
+        self.reading.hover = None;
         self.features.clear();
         self.findings.clear();
         self.measure.list.clear();

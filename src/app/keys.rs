@@ -58,7 +58,9 @@ impl ShapecastApp {
         let events = ctx.input(|i| i.events.clone());
         for e in events {
             match e {
-                egui::Event::Text(t) if t == "?" => self.show_keys = !self.show_keys,
+                egui::Event::Text(t) if t == "?" => {
+                    self.windows.show_keys = !self.windows.show_keys
+                }
                 egui::Event::Key {
                     key,
                     pressed: true,
@@ -97,15 +99,16 @@ impl ShapecastApp {
         if let Some(n) = preset {
             let w = WindowPreset::ALL[n].window();
             // The presets set the MIP's grey window too.
-            self.window = w;
+            self.reading.window = w;
             self.mip_view.settings.window = w.bounds();
             return;
         }
         match key {
             Key::Num0 => {
                 if let Some(s) = &self.scene {
-                    self.window = super::window_level::default_window(&s.volume);
-                    self.mip_view.settings.window = super::default_mip_window(s, self.window);
+                    self.reading.window = super::window_level::default_window(&s.volume);
+                    self.mip_view.settings.window =
+                        super::default_mip_window(s, self.reading.window);
                 }
             }
             Key::D => self.measure.tool = Tool::Ruler,
@@ -138,7 +141,7 @@ impl ShapecastApp {
 
     /// The keyboard help window ("?").
     pub(super) fn keys_help_ui(&mut self, ctx: &egui::Context) {
-        let mut open = self.show_keys;
+        let mut open = self.windows.show_keys;
         egui::Window::new("Keys and mouse")
             .open(&mut open)
             .collapsible(false)
@@ -155,11 +158,11 @@ impl ShapecastApp {
                         }
                     });
             });
-        self.show_keys = open;
+        self.windows.show_keys = open;
     }
 
     /// Whether the keyboard help is shown.
     pub fn keys_help_shown(&self) -> bool {
-        self.show_keys
+        self.windows.show_keys
     }
 }

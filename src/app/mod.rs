@@ -18,6 +18,7 @@ mod keys;
 pub mod load;
 pub mod measure;
 pub mod mip_view;
+mod model;
 mod options;
 mod pacs;
 mod panels;
@@ -171,29 +172,19 @@ pub struct ShapecastApp {
     mode: DisplayMode,
     display: FeatureDisplay,
 
-    window: Window,
-    crosshair: [usize; 3],
-    hover: Option<[usize; 3]>,
-    layout: Layout,
-    /// The layout to go back to from a maximised pane.
-    multi_layout: Layout,
+    /// Grey window, crosshair, hover and layout.
+    reading: model::Reading,
     panes: [SlicePane; 3],
     slice_renderer: Option<SliceRenderer>,
     mip_view: MipView,
     /// The measuring tool and the measurements on the volume shown.
     measure: measure::Measurements,
-    /// The volume generation the MIP window was set for.
-    mip_window_for: Option<u64>,
     probe: probe::ProbeState,
 
-    show_about: bool,
-    /// The keyboard help ("?").
-    show_keys: bool,
+    /// "About & data", the keys' help, the drop hint, the "Open" path, "copied".
+    windows: model::Windows,
     /// "Save picture" and "Save movie": what is being made and the last of each.
     export: export::Export,
-    drop_hover: bool,
-    #[cfg(not(target_arch = "wasm32"))]
-    open_path: String,
 
     /// Where the volume being loaded comes from (becomes the scene's `origin`).
     loading_origin: Option<ViewSource>,
@@ -203,8 +194,6 @@ pub struct ShapecastApp {
     pending_camera: Option<(u64, crate::render::camera::Camera)>,
     /// Controls drawn this frame and where (for automation).
     controls: Vec<(String, egui::Rect)>,
-    /// When "Copy link" was last clicked (egui time), for its "copied" feedback.
-    link_copied_at: Option<f64>,
     /// "Open from PACS…", DICOMweb retrievals and the patient line.
     pacs: pacs::Pacs,
     /// The series of the files given, when they hold several.
@@ -286,28 +275,18 @@ impl ShapecastApp {
             applied: params.clone(),
             params,
             display: FeatureDisplay::default(),
-            window: WindowPreset::Abdomen.window(),
-            crosshair: [0; 3],
-            hover: None,
-            layout: Layout::MipAndSlices,
-            multi_layout: Layout::MipAndSlices,
+            reading: model::Reading::default(),
             panes: SliceKind::ALL.map(SlicePane::new),
             slice_renderer,
             mip_view: MipView::new(),
             measure: measure::Measurements::default(),
-            mip_window_for: None,
             probe: probe::ProbeState::default(),
-            show_about: false,
-            show_keys: false,
+            windows: model::Windows::default(),
             export: export::Export::default(),
-            drop_hover: false,
-            #[cfg(not(target_arch = "wasm32"))]
-            open_path: String::new(),
             loading_origin: None,
             pending_view,
             pending_camera: None,
             controls: Vec::new(),
-            link_copied_at: None,
             pacs: pacs::Pacs::default(),
             pet: pet::PetState::default(),
             pet_mip: pet::PetMip::default(),
@@ -320,12 +299,12 @@ impl ShapecastApp {
 
     /// The shared crosshair, voxel index.
     pub fn crosshair(&self) -> [usize; 3] {
-        self.crosshair
+        self.reading.crosshair
     }
 
     pub fn set_crosshair(&mut self, voxel: [usize; 3]) {
         if let Some(s) = &self.scene {
-            self.crosshair =
+            self.reading.crosshair =
                 std::array::from_fn(|a| voxel[a].min(s.volume.dims[a].saturating_sub(1)));
         }
     }
@@ -333,7 +312,7 @@ impl ShapecastApp {
     /// The crosshair in patient space (LPS, mm): the MIP's slab centre and marker.
     pub fn crosshair_lps_mm(&self) -> Option<glam::DVec3> {
         let v = self.volume()?;
-        let [i, j, k] = self.crosshair;
+        let [i, j, k] = self.reading.crosshair;
         Some(
             v.world_from_voxel()
                 .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64)),
@@ -346,11 +325,11 @@ impl ShapecastApp {
     }
 
     pub fn window(&self) -> Window {
-        self.window
+        self.reading.window
     }
 
     pub fn set_window(&mut self, window: Window) {
-        self.window = window;
+        self.reading.window = window;
     }
 
     /// Sets the fused PET's window (its display unit, SUV); nothing without a PET.
@@ -376,20 +355,20 @@ impl ShapecastApp {
     }
 
     pub fn layout(&self) -> Layout {
-        self.layout
+        self.reading.layout
     }
 
     pub fn set_layout(&mut self, layout: Layout) {
-        self.layout = layout;
+        self.reading.layout = layout;
         if !matches!(layout, Layout::Single(_)) {
-            self.multi_layout = layout;
+            self.reading.multi_layout = layout;
         }
     }
 
     /// The slice a pane shows (its index along the pane's fixed voxel axis).
     pub fn pane_slice(&self, kind: SliceKind) -> Option<usize> {
         let v = self.volume()?;
-        Some(self.crosshair[slices::pane_axes(v, kind).fixed])
+        Some(self.reading.crosshair[slices::pane_axes(v, kind).fixed])
     }
 
     /// Where a pane's image was drawn in the last frame (screen points).
@@ -403,7 +382,7 @@ impl ShapecastApp {
         let rect = self.pane_rect(kind)?;
         let axes = slices::pane_axes(v, kind);
         let (u, w) = axes.voxel_at(rect, pos, v.dims[axes.across], v.dims[axes.vertical])?;
-        let mut p = self.crosshair;
+        let mut p = self.reading.crosshair;
         p[axes.across] = u;
         p[axes.vertical] = w;
         Some(p)
@@ -412,7 +391,7 @@ impl ShapecastApp {
     /// Feature values (V, A, B) at the crosshair as last read back from the GPU.
     pub fn features_at_crosshair(&self) -> Option<[f32; 3]> {
         let entry = self.displayed_entry()?;
-        self.probe.value_at(entry.id, self.crosshair)
+        self.probe.value_at(entry.id, self.reading.crosshair)
     }
 
     /// Starts loading a volume (the current one stays until the new one is ready). A link to
@@ -634,7 +613,7 @@ impl ShapecastApp {
         if !v.is_finite() {
             return;
         }
-        self.crosshair = std::array::from_fn(|a| {
+        self.reading.crosshair = std::array::from_fn(|a| {
             (v[a].round().max(0.0) as usize).min(dims[a].saturating_sub(1))
         });
         self.mip_view.set_crosshair(Some(p));

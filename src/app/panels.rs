@@ -55,7 +55,7 @@ impl ShapecastApp {
             }
             ui.separator();
             ui.label("Layout:");
-            let before = self.layout;
+            let before = self.reading.layout;
             for (layout, label) in [
                 (Layout::MipAndSlices, "MIP + slices"),
                 (Layout::Grid, "2×2"),
@@ -67,12 +67,12 @@ impl ShapecastApp {
                     "Sagittal",
                 ),
             ] {
-                if ui.selectable_label(self.layout == layout, label).clicked() {
-                    self.layout = layout;
+                if ui.selectable_label(self.reading.layout == layout, label).clicked() {
+                    self.reading.layout = layout;
                 }
             }
-            if self.layout != before && !matches!(self.layout, Layout::Single(_)) {
-                self.multi_layout = self.layout;
+            if self.reading.layout != before && !matches!(self.reading.layout, Layout::Single(_)) {
+                self.reading.multi_layout = self.reading.layout;
             }
             ui.separator();
             self.copy_link_ui(ui);
@@ -80,7 +80,7 @@ impl ShapecastApp {
             self.save_movie_ui(ui);
             ui.separator();
             if ui.button("About & data").clicked() {
-                self.show_about = !self.show_about;
+                self.windows.show_about = !self.windows.show_about;
             }
         });
     }
@@ -118,13 +118,13 @@ impl ShapecastApp {
         ui.menu_button("Open", |ui| {
             ui.label("A file or a folder (DICOM series), or drop them on the window:");
             let r = ui.add(
-                egui::TextEdit::singleline(&mut self.open_path)
+                egui::TextEdit::singleline(&mut self.windows.open_path)
                     .hint_text("/path/to/volume.nii.gz or /path/to/dicom-folder")
                     .desired_width(360.0),
             );
             let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-            if (ui.button("Open").clicked() || enter) && !self.open_path.trim().is_empty() {
-                let path = std::path::PathBuf::from(self.open_path.trim());
+            if (ui.button("Open").clicked() || enter) && !self.windows.open_path.trim().is_empty() {
+                let path = std::path::PathBuf::from(self.windows.open_path.trim());
                 self.open(LoadSource::Paths(vec![path]));
                 ui.close();
             }
@@ -259,12 +259,12 @@ impl ShapecastApp {
                     for p in WindowPreset::ALL {
                         let w = p.window();
                         if ui
-                            .selectable_label(self.window == w, p.name())
+                            .selectable_label(self.reading.window == w, p.name())
                             .on_hover_text(format!("W {} L {}", w.width, w.level))
                             .clicked()
                         {
                             // The CT presets set the MIP's grey window too.
-                            self.window = w;
+                            self.reading.window = w;
                             self.mip_view.settings.window = w.bounds();
                         }
                     }
@@ -274,19 +274,19 @@ impl ShapecastApp {
                         .clicked()
                         && let Some(s) = &self.scene
                     {
-                        self.window = super::window_level::default_window(&s.volume);
+                        self.reading.window = super::window_level::default_window(&s.volume);
                     }
                 });
                 ui.horizontal(|ui| {
                     let l = ui.label("W");
                     ui.add(
-                        egui::DragValue::new(&mut self.window.width)
+                        egui::DragValue::new(&mut self.reading.window.width)
                             .range(1.0..=100_000.0)
                             .speed(2.0),
                     )
                     .labelled_by(l.id);
                     let l = ui.label("L");
-                    ui.add(egui::DragValue::new(&mut self.window.level).speed(2.0))
+                    ui.add(egui::DragValue::new(&mut self.reading.window.level).speed(2.0))
                         .labelled_by(l.id);
                 });
                 ui.label(
@@ -367,12 +367,12 @@ impl ShapecastApp {
             match (m.pane, m.in_pane(&scene.volume)) {
                 (Some(pane), Some(p)) => {
                     let axes = super::slices::pane_axes(&scene.volume, pane);
-                    self.crosshair[axes.fixed] = p.slice;
+                    self.reading.crosshair[axes.fixed] = p.slice;
                 }
                 // A ruler in 3D: its far end (the point picked in the MIP).
                 (None, _) => {
                     if let Some(v) = super::measure::nearest_voxel(&scene.volume, m.b_mm) {
-                        self.crosshair = v;
+                        self.reading.crosshair = v;
                     }
                 }
                 _ => {}
@@ -458,20 +458,22 @@ impl ShapecastApp {
             ui.separator();
             ui.label(format!(
                 "W {:.0} L {:.0}",
-                self.window.width, self.window.level
+                self.reading.window.width, self.reading.window.level
             ));
         });
         let mono = egui::TextStyle::Monospace;
         ui.horizontal(|ui| {
             ui.label(egui::RichText::new("mouse     ").text_style(mono.clone()));
-            if let Some(h) = self.hover {
+            if let Some(h) = self.reading.hover {
                 ui.label(egui::RichText::new(self.readout(h)).text_style(mono.clone()));
             }
         });
         ui.horizontal(|ui| {
             ui.label(egui::RichText::new("crosshair ").text_style(mono.clone()));
             if self.scene.is_some() {
-                ui.label(egui::RichText::new(self.readout(self.crosshair)).text_style(mono));
+                ui.label(
+                    egui::RichText::new(self.readout(self.reading.crosshair)).text_style(mono),
+                );
             }
         });
     }
@@ -491,7 +493,7 @@ impl ShapecastApp {
     }
 
     pub(super) fn about_ui(&mut self, ctx: &egui::Context) {
-        let mut open = self.show_about;
+        let mut open = self.windows.show_about;
         egui::Window::new("About & data")
             .open(&mut open)
             .default_width(520.0)
@@ -518,11 +520,11 @@ impl ShapecastApp {
                      right-drag (or ctrl-drag) for window/level; 'maximise' shows one pane alone.",
                 );
             });
-        self.show_about = open;
+        self.windows.show_about = open;
     }
 
     pub(super) fn drop_overlay(&self, ctx: &egui::Context) {
-        if !self.drop_hover {
+        if !self.windows.drop_hover {
             return;
         }
         let screen = ctx.content_rect();
@@ -563,9 +565,9 @@ impl ShapecastApp {
         let entry = self
             .displayed_request()
             .and_then(|r| self.features.find(&r));
-        let mut voxels = vec![self.crosshair];
-        if let Some(h) = self.hover
-            && h != self.crosshair
+        let mut voxels = vec![self.reading.crosshair];
+        if let Some(h) = self.reading.hover
+            && h != self.reading.crosshair
         {
             voxels.push(h);
         }

@@ -62,7 +62,7 @@ impl ShapecastApp {
             return;
         };
         let gap = 4.0;
-        let rects: Vec<(PaneId, egui::Rect)> = match self.layout {
+        let rects: Vec<(PaneId, egui::Rect)> = match self.reading.layout {
             Layout::MipAndSlices => {
                 let split = area.left() + area.width() * 0.58;
                 let mip = egui::Rect::from_min_max(
@@ -108,7 +108,7 @@ impl ShapecastApp {
             pane.image_rect = None;
             pane.area_rect = None;
         }
-        let maximised = matches!(self.layout, Layout::Single(_));
+        let maximised = matches!(self.reading.layout, Layout::Single(_));
         let entry = self
             .displayed_request()
             .and_then(|r| self.features.find(&r));
@@ -123,7 +123,7 @@ impl ShapecastApp {
             generation: scene.generation,
             features: entry.map(|e| (&e.texture, e.id)),
             overlay,
-            window: self.window.range(),
+            window: self.reading.window.range(),
             tool: self.measure.tool,
             measurements: &self.measure.list,
             unit: scene.unit(),
@@ -158,7 +158,12 @@ impl ShapecastApp {
                         match id {
                             PaneId::Slice(kind) => {
                                 if let Some(pane) = self.panes.iter_mut().find(|p| p.kind == kind) {
-                                    let r = pane.ui(ui, &inputs, &mut self.crosshair, maximised);
+                                    let r = pane.ui(
+                                        ui,
+                                        &inputs,
+                                        &mut self.reading.crosshair,
+                                        maximised,
+                                    );
                                     hover = hover.or(r.hovered);
                                     window_drag += r.window_drag;
                                     if r.toggle_maximise {
@@ -175,7 +180,7 @@ impl ShapecastApp {
                                 // hottest point along that ray.
                                 let whole = ui.available_rect_before_wrap();
                                 let image_top = self.mip_view.image_area().top();
-                                let [ci, cj, ck] = self.crosshair;
+                                let [ci, cj, ck] = self.reading.crosshair;
                                 let area = pet::MipArea {
                                     pane: whole,
                                     image_top,
@@ -208,7 +213,7 @@ impl ShapecastApp {
                                                     [q.x, q.y, q.z][a].round().max(0.0) as usize;
                                                 c.min(v[a].saturating_sub(1))
                                             });
-                                            self.crosshair = voxel;
+                                            self.reading.crosshair = voxel;
                                         }
                                         out.rest
                                     }
@@ -236,10 +241,10 @@ impl ShapecastApp {
                                     // The MIP has its own window (set per volume; its W fields
                                     // change it): a soft-tissue window saturates a CT's MIP, where
                                     // contrast, vessels and bone are what should stay apart.
-                                    if self.mip_window_for != Some(scene.generation) {
-                                        self.mip_window_for = Some(scene.generation);
+                                    if self.reading.mip_window_for != Some(scene.generation) {
+                                        self.reading.mip_window_for = Some(scene.generation);
                                         self.mip_view.settings.window =
-                                            default_mip_window(scene, self.window);
+                                            default_mip_window(scene, self.reading.window);
                                     }
                                     for c in 0..3 {
                                         self.mip_view.settings.channels[c].on =
@@ -247,7 +252,7 @@ impl ShapecastApp {
                                         self.mip_view.settings.channels[c].gain =
                                             self.display.gain[c];
                                     }
-                                    let [i, j, k] = self.crosshair;
+                                    let [i, j, k] = self.reading.crosshair;
                                     let centre = scene.volume.world_from_voxel().transform_point3(
                                         glam::DVec3::new(i as f64, j as f64, k as f64),
                                     );
@@ -288,8 +293,8 @@ impl ShapecastApp {
                                         t
                                     });
                                     if let Some(pick) = out.pick {
-                                        mip_click = Some((self.crosshair, pick));
-                                        self.crosshair = pick.voxel;
+                                        mip_click = Some((self.reading.crosshair, pick));
+                                        self.reading.crosshair = pick.voxel;
                                     }
                                     measure::draw_rulers_3d(
                                         &ui.painter_at(self.mip_view.image_area()),
@@ -305,7 +310,7 @@ impl ShapecastApp {
                     });
             });
         }
-        self.hover = hover;
+        self.reading.hover = hover;
         if let (Some(w), Some(layer)) = (pet_window, &mut self.pet.layer) {
             layer.window = w;
         }
@@ -341,7 +346,7 @@ impl ShapecastApp {
                         .dragged(window_drag)
                         .bounds();
                 }
-                _ => self.window = self.window.dragged(window_drag),
+                _ => self.reading.window = self.reading.window.dragged(window_drag),
             }
         }
         for e in errors {
@@ -349,10 +354,10 @@ impl ShapecastApp {
         }
         if let Some(id) = toggle {
             if maximised {
-                self.layout = self.multi_layout;
+                self.reading.layout = self.reading.multi_layout;
             } else {
-                self.multi_layout = self.layout;
-                self.layout = Layout::Single(id);
+                self.reading.multi_layout = self.reading.layout;
+                self.reading.layout = Layout::Single(id);
             }
         }
     }

@@ -28,7 +28,7 @@ impl ShapecastApp {
             at_crosshair: self
                 .scene
                 .as_ref()
-                .and_then(|sc| p.value_at_ct_voxel(&sc.volume, self.crosshair)),
+                .and_then(|sc| p.value_at_ct_voxel(&sc.volume, self.reading.crosshair)),
             window: p.window,
             opacity: p.opacity,
             visible: p.visible,
@@ -61,13 +61,13 @@ impl ShapecastApp {
             modality: sc.volume.modality.as_str().to_owned(),
         });
         s.crosshair = self.scene.as_ref().map(|sc| {
-            let [i, j, k] = self.crosshair;
+            let [i, j, k] = self.reading.crosshair;
             let p = sc
                 .volume
                 .world_from_voxel()
                 .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64));
             CrosshairStatus {
-                voxel: self.crosshair,
+                voxel: self.reading.crosshair,
                 lps_mm: [p.x, p.y, p.z],
             }
         });
@@ -91,7 +91,7 @@ impl ShapecastApp {
             fraction,
             cached: self.features.len(),
         });
-        s.layout = self.layout.name().to_owned();
+        s.layout = self.reading.layout.name().to_owned();
         s.error = self.errors.last().cloned();
         s.series = series_list::status_of(&self.series);
 

@@ -45,8 +45,8 @@ impl ShapecastApp {
             mip_window: scene.map(|_| self.mip_view.settings.window),
             projection: Some(self.mip_view.settings.projection),
             grey: Some(self.mip_view.settings.show_intensity),
-            window: scene.map(|_| self.window),
-            layout: Some(self.layout),
+            window: scene.map(|_| self.reading.window),
+            layout: Some(self.reading.layout),
             measurements: scene
                 .filter(|_| !self.measure.list.is_empty())
                 .map(|_| self.measure.measurements()),
@@ -202,14 +202,14 @@ impl ShapecastApp {
             self.display = d.clone();
         }
         if let Some(w) = view.window {
-            self.window = w;
+            self.reading.window = w;
         }
         if let Some(p) = view.crosshair_mm {
             let v = volume
                 .voxel_from_world()
                 .transform_point3(glam::DVec3::from_array(p));
             let voxel = [v.x, v.y, v.z];
-            self.crosshair = std::array::from_fn(|a| {
+            self.reading.crosshair = std::array::from_fn(|a| {
                 let max = volume.dims[a].saturating_sub(1) as f64;
                 voxel[a].round().clamp(0.0, max) as usize
             });
@@ -217,7 +217,7 @@ impl ShapecastApp {
         if let Some(w) = view.mip_window {
             self.mip_view.settings.window = w;
             // The MIP keeps this window rather than setting its default for the volume.
-            self.mip_window_for = Some(generation);
+            self.reading.mip_window_for = Some(generation);
         }
         if let Some(p) = view.projection {
             self.mip_view.settings.projection = p;
@@ -301,15 +301,15 @@ impl ShapecastApp {
         if r.clicked() {
             let link = self.link();
             ui.ctx().copy_text(link);
-            self.link_copied_at = Some(ui.ctx().input(|i| i.time));
+            self.windows.link_copied_at = Some(ui.ctx().input(|i| i.time));
         }
-        if let Some(t) = self.link_copied_at {
+        if let Some(t) = self.windows.link_copied_at {
             if ui.ctx().input(|i| i.time) - t < 2.0 {
                 ui.label(egui::RichText::new("copied").small());
                 ui.ctx()
                     .request_repaint_after(std::time::Duration::from_millis(500));
             } else {
-                self.link_copied_at = None;
+                self.windows.link_copied_at = None;
             }
         }
     }

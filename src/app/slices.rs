@@ -1027,7 +1027,7 @@ impl super::ShapecastApp {
     /// The voxel under the pointer: in a slice pane, or where the MIP pixel under it has its
     /// maximum.
     pub fn hovered_voxel(&self) -> Option<[usize; 3]> {
-        self.hover
+        self.reading.hover
     }
 
     /// What the MIP shows in its corner about the pixel under the pointer.
@@ -1053,7 +1053,7 @@ impl super::ShapecastApp {
         let axes = pane_axes(v, kind);
         let c = axes.coord_at(rect, pos, v.dims[axes.across], v.dims[axes.vertical]);
         let mut p = DVec3::ZERO;
-        p[axes.fixed] = self.crosshair[axes.fixed] as f64;
+        p[axes.fixed] = self.reading.crosshair[axes.fixed] as f64;
         p[axes.across] = c[0];
         p[axes.vertical] = c[1];
         Some(p)

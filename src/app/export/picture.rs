@@ -178,7 +178,7 @@ impl ShapecastApp {
         self.export.picture.pending = None;
         let rect = match pane {
             PaneId::Mip => matches!(
-                self.layout,
+                self.reading.layout,
                 crate::app::Layout::Single(PaneId::Mip)
                     | crate::app::Layout::Grid
                     | crate::app::Layout::MipAndSlices
@@ -255,7 +255,7 @@ impl ShapecastApp {
                     PaneId::Slice(crate::app::SliceKind::Sagittal),
                 ),
             ] {
-                let shown = match self.layout {
+                let shown = match self.reading.layout {
                     crate::app::Layout::Single(p) => p == pane,
                     _ => true,
                 };
