@@ -631,7 +631,19 @@ impl TlsFront {
         };
         let mut answer = Vec::new();
         if up.write_all(request.as_bytes()).is_ok() && up.read_to_end(&mut answer).is_ok() {
-            let _ = tls.write_all(&answer);
+            // The answer says the connection closes after it (the client must not reuse it).
+            let Some(end) = answer.windows(4).position(|w| w == b"\r\n\r\n") else {
+                return;
+            };
+            let head = String::from_utf8_lossy(&answer[..end]).into_owned();
+            let mut head: String = head
+                .split("\r\n")
+                .filter(|l| !l.to_ascii_lowercase().starts_with("connection:"))
+                .map(|l| format!("{l}\r\n"))
+                .collect();
+            head.push_str("Connection: close\r\n\r\n");
+            let _ = tls.write_all(head.as_bytes());
+            let _ = tls.write_all(&answer[end + 4..]);
             tls.conn.send_close_notify();
             let _ = tls.flush();
         }
@@ -984,6 +996,23 @@ fn the_viewer_opens_a_study_and_shows_its_patient() {
         let found = client.search_studies(&search).expect("search");
         assert!(found.iter().any(|s| s.study_uid == study), "{found:?}");
     }
+    // By patient name (a wildcard) and by modality: the MR study is found as MR, not as CT.
+    if let Some(name) = &patient.name {
+        let prefix: String = name.chars().take(3).collect();
+        let by_name = shapecast::io::dicomweb::StudySearch {
+            patient_name: format!("{prefix}*"),
+            modality: "MR".to_owned(),
+            ..Default::default()
+        };
+        let found = client.search_studies(&by_name).expect("search");
+        assert!(found.iter().any(|s| s.study_uid == study), "{found:?}");
+    }
+    let as_ct = shapecast::io::dicomweb::StudySearch {
+        modality: "CT".to_owned(),
+        ..Default::default()
+    };
+    let found = client.search_studies(&as_ct).expect("search");
+    assert!(!found.iter().any(|s| s.study_uid == study), "{found:?}");
     let nobody = shapecast::io::dicomweb::StudySearch {
         study_date: "19000101-19000102".to_owned(),
         ..Default::default()

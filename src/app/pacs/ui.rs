@@ -112,10 +112,22 @@ impl ShapecastApp {
                         "pacs-patient-id",
                     ),
                     (
+                        "Patient name",
+                        &mut self.pacs.search.patient_name,
+                        "e.g. DOE^JANE or DOE*",
+                        "pacs-patient-name",
+                    ),
+                    (
                         "Accession number",
                         &mut self.pacs.search.accession_number,
                         "",
                         "pacs-accession",
+                    ),
+                    (
+                        "Modality",
+                        &mut self.pacs.search.modality,
+                        "e.g. CT, MR or PT",
+                        "pacs-modality",
                     ),
                     (
                         "Study date",

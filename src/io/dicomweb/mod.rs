@@ -367,7 +367,11 @@ pub fn pick_series(
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct StudySearch {
     pub patient_id: String,
+    /// PatientName as DICOM writes it (`DOE^JANE`), `*` and `?` as wildcards (`DOE*`).
+    pub patient_name: String,
     pub accession_number: String,
+    /// ModalitiesInStudy: one modality (`CT`, `MR`, `PT`).
+    pub modality: String,
     /// `YYYYMMDD`, or a range `YYYYMMDD-YYYYMMDD` (either end may be left open).
     pub study_date: String,
 }
@@ -381,6 +385,7 @@ impl StudySearch {
         let mut out = Vec::new();
         for (field, key, value) in [
             ("patient ID", "PatientID", &self.patient_id),
+            ("patient name", "PatientName", &self.patient_name),
             (
                 "accession number",
                 "AccessionNumber",
@@ -403,6 +408,17 @@ impl StudySearch {
                 return Err(bad("holds a control character or a backslash"));
             }
             out.push((key, v.to_owned()));
+        }
+        let m = self.modality.trim().to_ascii_uppercase();
+        if !m.is_empty() {
+            if m.len() > 16 || !m.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
+                return Err(DicomWebError::InvalidSearch {
+                    field: "modality",
+                    value: m.chars().take(80).collect(),
+                    reason: "expected a modality code such as CT, MR or PT",
+                });
+            }
+            out.push(("ModalitiesInStudy", m));
         }
         let d = self.study_date.trim();
         if !d.is_empty() {
@@ -740,13 +756,23 @@ mod tests {
         );
         let s = StudySearch {
             patient_id: " Lung_Dx A0002* ".to_owned(),
+            patient_name: "DOE^J*".to_owned(),
             accession_number: "a&b=c?".to_owned(),
+            modality: " pt ".to_owned(),
             study_date: "20070101-".to_owned(),
         };
         assert_eq!(
             b.study_search(&s).unwrap(),
-            "/dicom-web/studies?PatientID=Lung_Dx%20A0002*&AccessionNumber=a%26b%3Dc%3F&StudyDate=20070101-&limit=100"
+            "/dicom-web/studies?PatientID=Lung_Dx%20A0002*&PatientName=DOE%5EJ*&AccessionNumber=a%26b%3Dc%3F&ModalitiesInStudy=PT&StudyDate=20070101-&limit=100"
         );
+        let e = b
+            .study_search(&StudySearch {
+                modality: "CT&MR".to_owned(),
+                ..StudySearch::default()
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("modality"), "{e}");
         for (date, ok) in [
             ("20070425", true),
             ("-20070425", true),
