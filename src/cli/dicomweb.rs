@@ -72,6 +72,12 @@ impl DicomWebArgs {
 
     /// Resolves the study, lists its series when none is named, and retrieves the series.
     pub fn load(&self) -> anyhow::Result<Loaded> {
+        self.open().map(|(loaded, _)| loaded)
+    }
+
+    /// [`Self::load`], and the archive with the study and series opened (to store results
+    /// back into).
+    pub fn open(&self) -> anyhow::Result<(Loaded, Archive)> {
         let Some(url) = &self.dicomweb else {
             anyhow::bail!("--dicomweb needs --study");
         };
@@ -168,7 +174,56 @@ impl DicomWebArgs {
             chosen.series_uid,
             started.elapsed().as_secs_f64()
         );
-        Ok(loaded)
+        let series = chosen.series_uid.clone();
+        Ok((
+            loaded,
+            Archive {
+                client,
+                study: study.clone(),
+                series,
+            },
+        ))
+    }
+}
+
+/// An archive and the series a command opened from it.
+pub struct Archive {
+    pub client: Client,
+    pub study: String,
+    pub series: String,
+}
+
+impl Archive {
+    /// Stores a rotation of the shape MIP into the study as a Secondary Capture series
+    /// (STOW-RS) and says so on stderr; returns the new series' UID.
+    pub fn store_rotation(
+        &self,
+        rotation: &crate::io::dicomweb::stow::Rotation<'_>,
+    ) -> anyhow::Result<String> {
+        use crate::io::dicomweb::stow;
+        let base = self.client.base().as_str().to_owned();
+        let source = self
+            .client
+            .source_series(&self.study, &self.series)
+            .with_context(|| format!("DICOMweb {base}: the source series' metadata"))?;
+        let instance = stow::secondary_capture(&source, rotation, &stow::DicomNow::now(), 9001)?;
+        let started = web_time::Instant::now();
+        let stored = self
+            .client
+            .store(&self.study, std::slice::from_ref(&instance))
+            .with_context(|| format!("DICOMweb {base}: storing the shape MIP"))?;
+        for w in &stored.warnings {
+            eprintln!("warning: the archive stored it with a warning: {w}");
+        }
+        eprintln!(
+            "stored {} frames ({:.1} MB) as series {} in study {} ({:.1} s)",
+            rotation.frames.len(),
+            instance.bytes.len() as f64 / 1e6,
+            instance.series_uid,
+            self.study,
+            started.elapsed().as_secs_f64()
+        );
+        Ok(instance.series_uid)
     }
 }
 

@@ -112,6 +112,11 @@ pub struct RenderArgs {
     /// (the first is the view asked for), as DIR/frame_0000.png ... into the --out folder.
     #[arg(long)]
     pub turntable: Option<u32>,
+    /// Store the --turntable frames back into the --dicomweb archive: a multi-frame true-colour
+    /// Secondary Capture series in the source study (SeriesDescription "Shapecast shape MIP,
+    /// ..."), referencing the source series; with the same credentials. --out is then optional.
+    #[arg(long, requires = "dicomweb", requires = "turntable")]
+    pub store: bool,
     /// Print, as JSON, where pixel PX,PY's maximum came from.
     #[arg(long, value_delimiter = ',')]
     pub pick: Option<Vec<u32>>,
@@ -330,17 +335,17 @@ pub fn compute_features(
 }
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    if args.out.is_none() && args.pick.is_none() && args.bench.is_none() {
-        bail!("nothing to do: give --out MIP.png, --pick PX,PY or --bench N");
+    if args.out.is_none() && args.pick.is_none() && args.bench.is_none() && !args.store {
+        bail!("nothing to do: give --out MIP.png, --pick PX,PY, --bench N or --store");
     }
     if let Some(n) = args.turntable {
         if !(1..=3600).contains(&n) {
             bail!("--turntable {n}: give 1 to 3600 frames");
         }
-        let Some(dir) = &args.out else {
-            bail!("--turntable needs --out DIR/ for its frames");
-        };
-        if dir.exists() && !dir.is_dir() {
+        if args.out.is_none() && !args.store {
+            bail!("--turntable needs --out DIR/ for its frames (or --store)");
+        }
+        if let Some(dir) = args.out.as_ref().filter(|d| d.exists() && !d.is_dir()) {
             bail!(
                 "--turntable writes frames into a folder; {} is a file",
                 dir.display()
@@ -357,10 +362,12 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     if !(args.zoom.is_finite() && args.zoom > 0.0) {
         bail!("--zoom must be positive");
     }
+    let mut archive = None;
     let volume = match &args.input {
         Some(input) => load_input(input, &args.spacing_mm)?,
         None => {
-            let loaded = args.dicomweb.load()?;
+            let (loaded, opened) = args.dicomweb.open()?;
+            archive = Some(opened);
             for n in &loaded.notes {
                 eprintln!("note: {n}");
             }
@@ -472,8 +479,8 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             frames,
         )?;
     }
-    if let (Some(n), Some(dir)) = (args.turntable, &args.out) {
-        turntable(
+    if let Some(n) = args.turntable {
+        let frames = turntable(
             &ctx,
             &caster,
             &scene,
@@ -481,8 +488,28 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             &settings,
             &mut target,
             n,
-            dir,
+            args.out.as_deref(),
         )?;
+        if let (true, Some(archive)) = (args.store, &archive) {
+            let rotation = crate::io::dicomweb::stow::Rotation {
+                width: size[0],
+                height: size[1],
+                frames: &frames,
+                description: rotation_description(args.method, preset),
+                derivation: format!(
+                    "Shapecast {}: maximum intensity projection of the {} features ({} preset) over the grey window {:.0}..{:.0}, {n} views {:.1} degrees apart about the vertical axis, starting {:?}",
+                    env!("CARGO_PKG_VERSION"),
+                    method_name(args.method),
+                    preset.name(),
+                    settings.window.0,
+                    settings.window.1,
+                    360.0 / f64::from(n),
+                    args.view
+                ),
+                step_deg: 360.0 / f64::from(n),
+            };
+            archive.store_rotation(&rotation)?;
+        }
     } else if let Some(out) = &args.out {
         let mut rgba = target.read_image_blocking(&ctx)?;
         if let Some(pet) = &pet {
@@ -523,8 +550,27 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The series' description after "Shapecast", e.g. "shape MIP, RST, lymph-nodes".
+fn rotation_description(method: RenderMethod, preset: Preset) -> String {
+    match method {
+        RenderMethod::Intensity => "MIP".to_owned(),
+        m => format!("shape MIP, {}, {}", method_name(m), preset.name()),
+    }
+}
+
+fn method_name(method: RenderMethod) -> &'static str {
+    match method {
+        RenderMethod::Intensity => "intensity",
+        RenderMethod::Hessian => "Hessian",
+        RenderMethod::Li => "Li",
+        RenderMethod::Frangi => "Frangi",
+        RenderMethod::Gst => "GST",
+        RenderMethod::Rst => "RST",
+    }
+}
+
 /// Frames `0..n` of a full turn: frame `f` is the view turned by `360 f / n` degrees about its
-/// vertical axis, written as `dir/frame_FFFF.png`.
+/// vertical axis, written as `dir/frame_FFFF.png` when a folder is given; returned as RGBA.
 #[allow(clippy::too_many_arguments)]
 fn turntable(
     ctx: &GpuContext,
@@ -534,31 +580,38 @@ fn turntable(
     settings: &RenderSettings,
     target: &mut RaycastTarget,
     n: u32,
-    dir: &std::path::Path,
-) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    dir: Option<&std::path::Path>,
+) -> anyhow::Result<Vec<Vec<u8>>> {
+    if let Some(dir) = dir {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let started = web_time::Instant::now();
+    let mut frames = Vec::with_capacity(n as usize);
     for f in 0..n {
         caster.render(ctx, scene, &camera.turntable(f, n), settings, target, ..)?;
         let rgba = target.read_image_blocking(ctx)?;
-        let out = dir.join(format!("frame_{f:04}.png"));
-        image::save_buffer(
-            &out,
-            &rgba,
-            target.size[0],
-            target.size[1],
-            image::ExtendedColorType::Rgba8,
-        )
-        .with_context(|| format!("writing {}", out.display()))?;
+        if let Some(dir) = dir {
+            let out = dir.join(format!("frame_{f:04}.png"));
+            image::save_buffer(
+                &out,
+                &rgba,
+                target.size[0],
+                target.size[1],
+                image::ExtendedColorType::Rgba8,
+            )
+            .with_context(|| format!("writing {}", out.display()))?;
+        }
+        frames.push(rgba);
     }
     eprintln!(
-        "turntable: {n} frames of {}x{} in {:.1} s -> {}/frame_0000.png ...",
+        "turntable: {n} frames of {}x{} in {:.1} s{}",
         target.size[0],
         target.size[1],
         started.elapsed().as_secs_f64(),
-        dir.display()
+        dir.map(|d| format!(" -> {}/frame_0000.png ...", d.display()))
+            .unwrap_or_default()
     );
-    Ok(())
+    Ok(frames)
 }
 
 fn bench(

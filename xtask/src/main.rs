@@ -11,12 +11,15 @@ const TRUNK_VERSION: &str = "0.21.14";
 /// Debian packages the checks need: lavapipe (Vulkan on the CPU) for the GPU tests, Chromium for
 /// the browser test, and Orthanc with its DICOMweb plugin (ServeFolders comes with orthanc), the
 /// real archive that tests/io/dicomweb_orthanc.rs and tests/browser/pacs.mjs start on a free
-/// 127.0.0.1 port.
+/// 127.0.0.1 port, and pydicom (with numpy), which reads back the DICOM Shapecast stores
+/// (tests/io/read_back.py).
 const APT_PACKAGES: &[&str] = &[
     "mesa-vulkan-drivers",
     "chromium",
     "orthanc",
     "orthanc-dicomweb",
+    "python3-pydicom",
+    "python3-numpy",
 ];
 const WASM_TARGET: &str = "wasm32-unknown-unknown";
 

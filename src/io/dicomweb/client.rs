@@ -25,9 +25,19 @@ pub struct HttpResponse {
     pub body: Box<dyn Read>,
 }
 
-/// A blocking HTTP GET. The native client uses [`UreqTransport`]; tests plug in their own.
+/// Blocking HTTP: GET, and POST for STOW-RS. The native client uses [`UreqTransport`]; tests
+/// plug in their own.
 pub trait Transport: Sync {
     fn get(&self, request: &Request) -> Result<HttpResponse, DicomWebError>;
+
+    /// A POST of `body` (its Content-Type among the request's headers).
+    fn post(&self, request: &Request, body: &[u8]) -> Result<HttpResponse, DicomWebError> {
+        let _ = body;
+        Err(DicomWebError::Transport {
+            url: request.url.clone(),
+            message: "this transport does not send (POST)".to_owned(),
+        })
+    }
 }
 
 /// HTTP and HTTPS with ureq: one agent, its connections kept alive and shared by the threads.
@@ -81,46 +91,61 @@ impl UreqTransport {
 
 impl Transport for UreqTransport {
     fn get(&self, request: &Request) -> Result<HttpResponse, DicomWebError> {
-        let url = request.url.as_str();
-        let mut req = self.agent.get(url);
+        let mut req = self.agent.get(&request.url);
         for (name, value) in &request.headers {
             req = req.header(*name, value);
         }
-        let connect = |message: String| DicomWebError::Connect {
-            host: crate::io::url::host_of(url),
-            message,
-        };
-        let response = req.call().map_err(|e| match e {
-            ureq::Error::Io(io) if is_connect_error(io.kind()) => connect(io.to_string()),
-            // rustls reports a certificate it does not trust as invalid data on the socket.
-            ureq::Error::Io(io)
-                if io.kind() == std::io::ErrorKind::InvalidData
-                    && url.to_ascii_lowercase().starts_with("https://") =>
-            {
-                connect(format!("TLS: {io}{CA_HINT}"))
-            }
-            ureq::Error::ConnectionFailed => connect("the connection failed".to_owned()),
-            ureq::Error::HostNotFound => connect("host not found".to_owned()),
-            // A certificate not trusted (or TLS refused) does not change by asking again.
-            ureq::Error::Rustls(tls) => connect(format!("TLS: {tls}{CA_HINT}")),
-            ureq::Error::Tls(tls) => connect(format!("TLS: {tls}")),
-            other => DicomWebError::Transport {
-                url: url.to_owned(),
-                message: other.to_string(),
-            },
-        })?;
-        let status = response.status().as_u16();
-        let content_type = response
-            .headers()
-            .get("content-type")
-            .and_then(|v| v.to_str().ok())
-            .map(str::to_owned);
-        Ok(HttpResponse {
-            status,
-            content_type,
-            body: Box::new(response.into_body().into_reader()),
-        })
+        answer(&request.url, req.call())
     }
+
+    fn post(&self, request: &Request, body: &[u8]) -> Result<HttpResponse, DicomWebError> {
+        let mut req = self.agent.post(&request.url);
+        for (name, value) in &request.headers {
+            req = req.header(*name, value);
+        }
+        answer(&request.url, req.send(body))
+    }
+}
+
+/// An answer, or the failure as a [`DicomWebError`] that names the host or URL.
+fn answer(
+    url: &str,
+    result: Result<ureq::http::Response<ureq::Body>, ureq::Error>,
+) -> Result<HttpResponse, DicomWebError> {
+    let connect = |message: String| DicomWebError::Connect {
+        host: crate::io::url::host_of(url),
+        message,
+    };
+    let response = result.map_err(|e| match e {
+        ureq::Error::Io(io) if is_connect_error(io.kind()) => connect(io.to_string()),
+        // rustls reports a certificate it does not trust as invalid data on the socket.
+        ureq::Error::Io(io)
+            if io.kind() == std::io::ErrorKind::InvalidData
+                && url.to_ascii_lowercase().starts_with("https://") =>
+        {
+            connect(format!("TLS: {io}{CA_HINT}"))
+        }
+        ureq::Error::ConnectionFailed => connect("the connection failed".to_owned()),
+        ureq::Error::HostNotFound => connect("host not found".to_owned()),
+        // A certificate not trusted (or TLS refused) does not change by asking again.
+        ureq::Error::Rustls(tls) => connect(format!("TLS: {tls}{CA_HINT}")),
+        ureq::Error::Tls(tls) => connect(format!("TLS: {tls}")),
+        other => DicomWebError::Transport {
+            url: url.to_owned(),
+            message: other.to_string(),
+        },
+    })?;
+    let status = response.status().as_u16();
+    let content_type = response
+        .headers()
+        .get("content-type")
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_owned);
+    Ok(HttpResponse {
+        status,
+        content_type,
+        body: Box::new(response.into_body().into_reader()),
+    })
 }
 
 /// What a TLS failure message adds.
@@ -273,6 +298,53 @@ impl<T: Transport> Client<T> {
             }
         }
         listing.finish()
+    }
+
+    /// The series a result derives from: its patient, study and instances, from the series'
+    /// WADO-RS metadata.
+    pub fn source_series(
+        &self,
+        study: &str,
+        series: &str,
+    ) -> Result<super::stow::SourceSeries, DicomWebError> {
+        let url = self.base.series_metadata_url(study, series)?;
+        let body = self.get_json(url.clone(), &format!("series {series}"))?;
+        super::stow::SourceSeries::from_metadata(&url, &body)
+    }
+
+    /// Stores instances into a study (STOW-RS), asking once more after a dropped connection
+    /// or a busy archive.
+    pub fn store(
+        &self,
+        study: &str,
+        instances: &[super::stow::Instance],
+    ) -> Result<super::stow::Stored, DicomWebError> {
+        let url = self.base.store_url(study)?;
+        let (content_type, body) = super::stow::request_body(instances);
+        let request = Request::stow(url.clone(), content_type, &self.auth);
+        let mut attempt = 0;
+        loop {
+            attempt += 1;
+            let result = self.transport.post(&request, &body).and_then(|response| {
+                let status = response.status;
+                let mut answer = Vec::new();
+                response
+                    .body
+                    .take(MAX_JSON_BYTES)
+                    .read_to_end(&mut answer)
+                    .map_err(|e| DicomWebError::Transport {
+                        url: url.clone(),
+                        message: format!("reading the answer: {e}"),
+                    })?;
+                super::stow::read_answer(&url, status, &answer, instances, &self.auth)
+            });
+            match result {
+                Err(e) if attempt < 2 && e.is_retryable() => {
+                    std::thread::sleep(Duration::from_millis(500));
+                }
+                other => return other,
+            }
+        }
     }
 
     /// The study and the series to open: the one named, else the chooser's.

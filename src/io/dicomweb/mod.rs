@@ -15,7 +15,9 @@
 //! - `client` (native only): the blocking HTTP transport (ureq) behind the [`client::Transport`]
 //!   trait and the driver that keeps several instance requests in flight;
 //! - `web` (wasm only): the page's transport, the browser's `fetch` with streamed bodies,
-//!   driving the same `Retrieval` from one async task.
+//!   driving the same `Retrieval` from one async task;
+//! - `stow`: results back into the archive (STOW-RS): the source series from its metadata, the
+//!   Secondary Capture of a shape MIP rotation, the request body and the archive's answer.
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod client;
@@ -23,6 +25,7 @@ pub mod listing;
 pub mod multipart;
 pub mod qido;
 pub mod retrieve;
+pub mod stow;
 #[cfg(target_arch = "wasm32")]
 pub mod web;
 
@@ -143,6 +146,17 @@ pub enum DicomWebError {
 
     #[error("the retrieval was cancelled")]
     Cancelled,
+
+    #[error("{what}: cannot be written as DICOM: {message}")]
+    Encode { what: String, message: String },
+
+    #[error("{url}: HTTP {status}: the archive refused to store {refused}")]
+    StoreRefused {
+        url: String,
+        status: u16,
+        /// The instances refused, with the archive's reasons.
+        refused: String,
+    },
 }
 
 fn also_tried(tried: &str) -> String {

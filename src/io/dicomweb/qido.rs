@@ -164,7 +164,7 @@ pub fn pet_series(series: &[SeriesInfo]) -> Option<usize> {
 }
 
 /// The objects of a QIDO-RS answer. An empty body (204 No Content) is no match.
-fn entries(url: &str, body: &[u8]) -> Result<Vec<Map<String, Value>>, DicomWebError> {
+pub(super) fn entries(url: &str, body: &[u8]) -> Result<Vec<Map<String, Value>>, DicomWebError> {
     let json_error = |message: String| DicomWebError::Json {
         url: url.to_owned(),
         message,
@@ -224,7 +224,7 @@ fn text(v: &Value) -> Option<String> {
     (!s.is_empty()).then_some(s)
 }
 
-fn string(o: &Map<String, Value>, tag: &str) -> Option<String> {
+pub(super) fn string(o: &Map<String, Value>, tag: &str) -> Option<String> {
     values(o, tag)?.first().and_then(text)
 }
 
@@ -244,13 +244,18 @@ fn number(o: &Map<String, Value>, tag: &str) -> Option<f64> {
     n.is_finite().then_some(n)
 }
 
-fn count(o: &Map<String, Value>, tag: &str) -> Option<u64> {
+pub(super) fn count(o: &Map<String, Value>, tag: &str) -> Option<u64> {
     number(o, tag)
         .filter(|n| *n >= 0.0 && n.fract() == 0.0 && *n < 1e15)
         .map(|n| n as u64)
 }
 
-fn uid(url: &str, o: &Map<String, Value>, tag: &str, name: &str) -> Result<String, DicomWebError> {
+pub(super) fn uid(
+    url: &str,
+    o: &Map<String, Value>,
+    tag: &str,
+    name: &str,
+) -> Result<String, DicomWebError> {
     let s = string(o, tag).ok_or_else(|| DicomWebError::Json {
         url: url.to_owned(),
         message: format!("an entry has no {name} ({tag})"),

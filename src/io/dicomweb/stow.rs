@@ -1,0 +1,821 @@
+//! STOW-RS: a reader's results back into the archive the study came from. Pure, as the rest of
+//! `dicomweb`: the source series read from its WADO-RS metadata, the DICOM instance Shapecast
+//! makes of the shape MIP's rotation (a multi-frame true-colour Secondary Capture in the source
+//! study, one frame per angle, the source series referenced), the STOW-RS request body, and what
+//! the archive answered. Natively `client::Client::store` sends it; the page sends the same bytes
+//! with `fetch`.
+//!
+//! UIDs are `2.25.` UUIDs (PS3.5 B.2), name-based (RFC 9562 version 5) on the source series,
+//! the kind of result, the creation time and the pixels, so no random source is needed in the
+//! page and two stores of different pictures never share a UID.
+
+use dicom_core::value::DataSetSequence;
+use dicom_core::{DataElement, PrimitiveValue, Tag, VR};
+use dicom_dictionary_std::{tags, uids};
+use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
+use serde_json::{Map, Value};
+
+use super::qido;
+use super::{Auth, Base, DicomWebError, Request, check_uid};
+
+/// The SeriesDescription of every series Shapecast stores begins with this.
+pub const DESCRIPTION_PREFIX: &str = "Shapecast";
+
+/// The patient and study attributes a derived series copies from its source (PS3.3 C.7.1.1,
+/// C.7.2.1), with their VRs; type 2 attributes are written empty where the source lacks them.
+const COPIED: [(Tag, VR, bool); 10] = [
+    (tags::PATIENT_NAME, VR::PN, true),
+    (tags::PATIENT_ID, VR::LO, true),
+    (tags::PATIENT_BIRTH_DATE, VR::DA, true),
+    (tags::PATIENT_SEX, VR::CS, true),
+    (tags::STUDY_DATE, VR::DA, true),
+    (tags::STUDY_TIME, VR::TM, true),
+    (tags::REFERRING_PHYSICIAN_NAME, VR::PN, true),
+    (tags::STUDY_ID, VR::SH, true),
+    (tags::ACCESSION_NUMBER, VR::SH, true),
+    (tags::STUDY_DESCRIPTION, VR::LO, false),
+];
+
+/// The most source instances referenced one by one (a longer series is referenced as a whole
+/// in ReferencedSeriesSequence and by its first instances in SourceImageSequence).
+const MAX_REFERENCED: usize = 10_000;
+
+/// A series a result derives from, as its WADO-RS metadata describes it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SourceSeries {
+    pub study_uid: String,
+    pub series_uid: String,
+    pub modality: Option<String>,
+    /// The copied patient and study attributes present in the source: (tag, value as text).
+    copied: Vec<(Tag, String)>,
+    /// (SOPClassUID, SOPInstanceUID) of each instance, as listed.
+    pub instances: Vec<(String, String)>,
+}
+
+impl SourceSeries {
+    /// Reads `.../series/UID/metadata` (a JSON array, one object per instance).
+    pub fn from_metadata(url: &str, body: &[u8]) -> Result<Self, DicomWebError> {
+        let entries = qido::entries(url, body)?;
+        let json_error = |message: String| DicomWebError::Json {
+            url: url.to_owned(),
+            message,
+        };
+        let first = entries
+            .first()
+            .ok_or_else(|| json_error("the series metadata lists no instance".to_owned()))?;
+        let study_uid = qido::uid(url, first, "0020000D", "StudyInstanceUID")?;
+        let series_uid = qido::uid(url, first, "0020000E", "SeriesInstanceUID")?;
+        let mut instances = Vec::with_capacity(entries.len().min(MAX_REFERENCED));
+        for e in &entries {
+            let series = qido::uid(url, e, "0020000E", "SeriesInstanceUID")?;
+            if series != series_uid {
+                return Err(json_error(format!(
+                    "the series metadata mixes series {series_uid} and {series}"
+                )));
+            }
+            if instances.len() < MAX_REFERENCED {
+                instances.push((
+                    qido::uid(url, e, "00080016", "SOPClassUID")?,
+                    qido::uid(url, e, "00080018", "SOPInstanceUID")?,
+                ));
+            }
+        }
+        let copied = COPIED
+            .iter()
+            .filter_map(|(tag, _, _)| {
+                let key = format!("{:04X}{:04X}", tag.group(), tag.element());
+                qido::string(first, &key).map(|v| (*tag, v))
+            })
+            .collect();
+        Ok(Self {
+            study_uid,
+            series_uid,
+            modality: qido::string(first, "00080060"),
+            copied,
+            instances,
+        })
+    }
+
+    /// The copied attribute `tag`, if the source has it.
+    pub fn attribute(&self, tag: Tag) -> Option<&str> {
+        self.copied
+            .iter()
+            .find(|(t, _)| *t == tag)
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+/// A rotation of the shape MIP to store: RGBA frames of one size, as the renderers give them.
+pub struct Rotation<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub frames: &'a [Vec<u8>],
+    /// After [`DESCRIPTION_PREFIX`] in SeriesDescription, e.g. "shape MIP, RST, lymph nodes".
+    pub description: String,
+    /// How the pictures were made (DerivationDescription): method, preset, windows, angles.
+    pub derivation: String,
+    /// Degrees between frames about the view's vertical axis.
+    pub step_deg: f64,
+}
+
+/// A DICOM instance made for the archive.
+#[derive(Clone, Debug)]
+pub struct Instance {
+    /// The Part 10 file: preamble, meta group, data set in explicit VR little endian.
+    pub bytes: Vec<u8>,
+    pub series_uid: String,
+    pub sop_instance_uid: String,
+    pub sop_class_uid: &'static str,
+}
+
+/// A date and time in DICOM's forms (DA `YYYYMMDD`, TM `HHMMSS.ffffff`), in UTC.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DicomNow {
+    pub date: String,
+    pub time: String,
+}
+
+impl DicomNow {
+    /// The clock now (UTC: a browser does not tell its time zone to code without asking).
+    pub fn now() -> Self {
+        let since = web_time::SystemTime::now()
+            .duration_since(web_time::SystemTime::UNIX_EPOCH)
+            .unwrap_or_default();
+        Self::from_unix(since.as_secs() as i64, since.subsec_micros())
+    }
+
+    pub fn from_unix(secs: i64, micros: u32) -> Self {
+        let days = secs.div_euclid(86_400);
+        let rest = secs.rem_euclid(86_400);
+        let (y, m, d) = civil_from_days(days);
+        Self {
+            date: format!("{y:04}{m:02}{d:02}"),
+            time: format!(
+                "{:02}{:02}{:02}.{micros:06}",
+                rest / 3600,
+                rest / 60 % 60,
+                rest % 60
+            ),
+        }
+    }
+}
+
+/// Howard Hinnant's civil_from_days: (year, month, day) of a day count from 1970-01-01.
+fn civil_from_days(z: i64) -> (i64, u32, u32) {
+    let z = z + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    (yoe + era * 400 + i64::from(m <= 2), m, d)
+}
+
+/// A `2.25.` UID from a version 5 UUID of `name`.
+pub fn uid_for(name: &str) -> String {
+    // The DICOM namespace has no registered UUID; any fixed namespace keeps names apart.
+    let id = uuid::Uuid::new_v5(&uuid::Uuid::NAMESPACE_OID, name.as_bytes());
+    format!("2.25.{}", id.as_u128())
+}
+
+/// FNV-1a over bytes: the pixels' share of a UID's name.
+fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+fn encode_error(message: String) -> DicomWebError {
+    DicomWebError::Encode {
+        what: "the Secondary Capture".to_owned(),
+        message,
+    }
+}
+
+fn put(obj: &mut InMemDicomObject, tag: Tag, vr: VR, value: &str) {
+    obj.put(text(tag, vr, value));
+}
+
+fn text(tag: Tag, vr: VR, value: &str) -> DataElement<InMemDicomObject> {
+    DataElement::new(tag, vr, PrimitiveValue::from(value))
+}
+
+fn reference(class: &str, instance: &str) -> InMemDicomObject {
+    InMemDicomObject::from_element_iter([
+        text(tags::REFERENCED_SOP_CLASS_UID, VR::UI, class),
+        text(tags::REFERENCED_SOP_INSTANCE_UID, VR::UI, instance),
+    ])
+}
+
+/// The rotation as a Multi-frame True Color Secondary Capture instance (PS3.3 A.8.5) in the
+/// source's study: one RGB frame per angle, played as a cine loop (FrameTime), the source
+/// series referenced (ReferencedSeriesSequence, SourceImageSequence), SeriesDescription
+/// beginning "Shapecast".
+pub fn secondary_capture(
+    source: &SourceSeries,
+    rotation: &Rotation<'_>,
+    now: &DicomNow,
+    series_number: u32,
+) -> Result<Instance, DicomWebError> {
+    let (w, h) = (rotation.width, rotation.height);
+    if w == 0 || h == 0 || w > u32::from(u16::MAX) || h > u32::from(u16::MAX) {
+        return Err(encode_error(format!(
+            "a {w} x {h} picture does not fit DICOM's Rows and Columns"
+        )));
+    }
+    let n = rotation.frames.len();
+    if n == 0 {
+        return Err(encode_error("no frames".to_owned()));
+    }
+    let frame_rgba = w as usize * h as usize * 4;
+    let mut pixels = Vec::with_capacity(frame_rgba / 4 * 3 * n + 1);
+    for (i, f) in rotation.frames.iter().enumerate() {
+        if f.len() != frame_rgba {
+            return Err(encode_error(format!(
+                "frame {i} has {} bytes, not the {frame_rgba} of {w} x {h} RGBA",
+                f.len()
+            )));
+        }
+        for px in f.chunks_exact(4) {
+            pixels.extend_from_slice(&px[..3]);
+        }
+    }
+    if pixels.len() > u32::MAX as usize - 2 {
+        return Err(encode_error(format!(
+            "{} bytes of pixels are more than one DICOM element holds",
+            pixels.len()
+        )));
+    }
+    if pixels.len() % 2 == 1 {
+        pixels.push(0); // OB values have even length
+    }
+    let name = format!(
+        "shapecast|secondary-capture|{}|{}{}|{:016x}|{}",
+        source.series_uid,
+        now.date,
+        now.time,
+        fnv1a(&pixels),
+        rotation.description
+    );
+    let series_uid = uid_for(&format!("{name}|series"));
+    let sop_instance_uid = uid_for(&format!("{name}|instance"));
+    let sop_class_uid = uids::MULTI_FRAME_TRUE_COLOR_SECONDARY_CAPTURE_IMAGE_STORAGE;
+
+    let mut obj = InMemDicomObject::new_empty();
+    // SOP common, patient, general study (copied), general series, SC equipment.
+    put(&mut obj, tags::SPECIFIC_CHARACTER_SET, VR::CS, "ISO_IR 192");
+    put(&mut obj, tags::SOP_CLASS_UID, VR::UI, sop_class_uid);
+    put(&mut obj, tags::SOP_INSTANCE_UID, VR::UI, &sop_instance_uid);
+    put(&mut obj, tags::INSTANCE_CREATION_DATE, VR::DA, &now.date);
+    put(&mut obj, tags::INSTANCE_CREATION_TIME, VR::TM, &now.time);
+    put(&mut obj, tags::TIMEZONE_OFFSET_FROM_UTC, VR::SH, "+0000");
+    for (tag, vr, type2) in COPIED {
+        match source.attribute(tag) {
+            Some(v) => put(&mut obj, tag, vr, v),
+            None if type2 => put(&mut obj, tag, vr, ""),
+            None => {}
+        }
+    }
+    put(
+        &mut obj,
+        tags::STUDY_INSTANCE_UID,
+        VR::UI,
+        &source.study_uid,
+    );
+    put(&mut obj, tags::MODALITY, VR::CS, "OT");
+    put(&mut obj, tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
+    put(
+        &mut obj,
+        tags::SERIES_NUMBER,
+        VR::IS,
+        &series_number.to_string(),
+    );
+    let description = format!("{DESCRIPTION_PREFIX} {}", rotation.description);
+    put(
+        &mut obj,
+        tags::SERIES_DESCRIPTION,
+        VR::LO,
+        &description.chars().take(64).collect::<String>(),
+    );
+    put(&mut obj, tags::SERIES_DATE, VR::DA, &now.date);
+    put(&mut obj, tags::SERIES_TIME, VR::TM, &now.time);
+    put(&mut obj, tags::MANUFACTURER, VR::LO, "Shapecast");
+    put(&mut obj, tags::CONVERSION_TYPE, VR::CS, "WSD");
+    put(
+        &mut obj,
+        tags::SECONDARY_CAPTURE_DEVICE_MANUFACTURER,
+        VR::LO,
+        "Shapecast",
+    );
+    put(
+        &mut obj,
+        tags::SECONDARY_CAPTURE_DEVICE_MANUFACTURER_MODEL_NAME,
+        VR::LO,
+        "Shapecast shape MIP",
+    );
+    put(
+        &mut obj,
+        tags::SECONDARY_CAPTURE_DEVICE_SOFTWARE_VERSIONS,
+        VR::LO,
+        env!("CARGO_PKG_VERSION"),
+    );
+    // General image, SC image, cine, multi-frame.
+    put(&mut obj, tags::INSTANCE_NUMBER, VR::IS, "1");
+    put(&mut obj, tags::PATIENT_ORIENTATION, VR::CS, "");
+    put(&mut obj, tags::CONTENT_DATE, VR::DA, &now.date);
+    put(&mut obj, tags::CONTENT_TIME, VR::TM, &now.time);
+    put(&mut obj, tags::IMAGE_TYPE, VR::CS, "DERIVED\\SECONDARY");
+    put(&mut obj, tags::BURNED_IN_ANNOTATION, VR::CS, "NO");
+    put(&mut obj, tags::RECOGNIZABLE_VISUAL_FEATURES, VR::CS, "NO");
+    put(&mut obj, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "00");
+    put(
+        &mut obj,
+        tags::DERIVATION_DESCRIPTION,
+        VR::ST,
+        &rotation.derivation.chars().take(1024).collect::<String>(),
+    );
+    put(&mut obj, tags::NUMBER_OF_FRAMES, VR::IS, &n.to_string());
+    // A turn in ten seconds at most, and at least ten frames a second.
+    let frame_ms = (10_000.0 / n as f64).min(100.0);
+    put(
+        &mut obj,
+        tags::FRAME_TIME,
+        VR::DS,
+        &format!("{frame_ms:.3}"),
+    );
+    put(
+        &mut obj,
+        tags::CINE_RATE,
+        VR::IS,
+        &format!("{:.0}", 1000.0 / frame_ms),
+    );
+    put(
+        &mut obj,
+        tags::RECOMMENDED_DISPLAY_FRAME_RATE,
+        VR::IS,
+        &format!("{:.0}", 1000.0 / frame_ms),
+    );
+    obj.put(DataElement::new(
+        tags::FRAME_INCREMENT_POINTER,
+        VR::AT,
+        PrimitiveValue::Tags(dicom_core::smallvec::smallvec![tags::FRAME_TIME]),
+    ));
+    put(&mut obj, tags::PHOTOMETRIC_INTERPRETATION, VR::CS, "RGB");
+    let us = |v: u16| PrimitiveValue::from(v);
+    for (tag, v) in [
+        (tags::SAMPLES_PER_PIXEL, 3),
+        (tags::PLANAR_CONFIGURATION, 0),
+        (tags::ROWS, h as u16),
+        (tags::COLUMNS, w as u16),
+        (tags::BITS_ALLOCATED, 8),
+        (tags::BITS_STORED, 8),
+        (tags::HIGH_BIT, 7),
+        (tags::PIXEL_REPRESENTATION, 0),
+    ] {
+        obj.put(DataElement::new(tag, VR::US, us(v)));
+    }
+    // The source: its series as a whole, and its instances one by one.
+    let refs: Vec<InMemDicomObject> = source
+        .instances
+        .iter()
+        .map(|(c, i)| reference(c, i))
+        .collect();
+    obj.put(DataElement::new(
+        tags::SOURCE_IMAGE_SEQUENCE,
+        VR::SQ,
+        DataSetSequence::from(refs.clone()),
+    ));
+    let series_item = InMemDicomObject::from_element_iter([
+        text(tags::SERIES_INSTANCE_UID, VR::UI, &source.series_uid),
+        DataElement::new(
+            tags::REFERENCED_INSTANCE_SEQUENCE,
+            VR::SQ,
+            DataSetSequence::from(refs),
+        ),
+    ]);
+    obj.put(DataElement::new(
+        tags::REFERENCED_SERIES_SEQUENCE,
+        VR::SQ,
+        DataSetSequence::from(vec![series_item]),
+    ));
+    obj.put(DataElement::new(
+        tags::PIXEL_DATA,
+        VR::OB,
+        PrimitiveValue::from(pixels),
+    ));
+
+    let file = obj
+        .with_meta(
+            FileMetaTableBuilder::new()
+                .transfer_syntax(uids::EXPLICIT_VR_LITTLE_ENDIAN)
+                .implementation_class_uid(IMPLEMENTATION_CLASS_UID)
+                .implementation_version_name(concat!("SHAPECAST_", env!("CARGO_PKG_VERSION"))),
+        )
+        .map_err(|e| encode_error(e.to_string()))?;
+    let mut bytes = Vec::new();
+    file.write_all(&mut bytes)
+        .map_err(|e| encode_error(e.to_string()))?;
+    Ok(Instance {
+        bytes,
+        series_uid,
+        sop_instance_uid,
+        sop_class_uid,
+    })
+}
+
+/// Shapecast's implementation class UID (a `2.25.` UUID of its name).
+const IMPLEMENTATION_CLASS_UID: &str = "2.25.196357845216954395718813542183469123123";
+
+/// A STOW-RS request body (PS3.18 10.5): `multipart/related; type="application/dicom"`, one
+/// part per instance. Returns (Content-Type, body).
+pub fn request_body(instances: &[Instance]) -> (String, Vec<u8>) {
+    let total: usize = instances.iter().map(|i| i.bytes.len() + 80).sum();
+    // A boundary that no instance holds.
+    let mut salt = instances
+        .iter()
+        .fold(0u64, |h, i| h ^ fnv1a(i.sop_instance_uid.as_bytes()));
+    let boundary = loop {
+        let b = format!("shapecast-{salt:016x}");
+        let needle = format!("--{b}");
+        if !instances.iter().any(|i| {
+            i.bytes
+                .windows(needle.len())
+                .any(|w| w == needle.as_bytes())
+        }) {
+            break b;
+        }
+        salt = salt.wrapping_mul(31).wrapping_add(7);
+    };
+    let mut body = Vec::with_capacity(total + 64);
+    for i in instances {
+        body.extend_from_slice(
+            format!("--{boundary}\r\nContent-Type: application/dicom\r\n\r\n").as_bytes(),
+        );
+        body.extend_from_slice(&i.bytes);
+        body.extend_from_slice(b"\r\n");
+    }
+    body.extend_from_slice(format!("--{boundary}--\r\n").as_bytes());
+    (
+        format!("multipart/related; type=\"application/dicom\"; boundary={boundary}"),
+        body,
+    )
+}
+
+/// What the archive stored.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Stored {
+    /// SOPInstanceUIDs the archive says it stored (ReferencedSOPSequence).
+    pub instances: Vec<String>,
+    /// Its RetrieveURL for the study or the instances, where it gives one.
+    pub retrieve_url: Option<String>,
+    /// Warnings it gave for stored instances (WarningReason), as text.
+    pub warnings: Vec<String>,
+}
+
+/// What failure reason codes mean (PS3.18 table 10.5.3-1 and PS3.4 annex B).
+fn failure_reason(code: u64) -> &'static str {
+    match code {
+        0xA700..=0xA7FF => "out of resources",
+        0xA900..=0xA9FF => "the data set does not match its SOP class",
+        0xC000..=0xCFFF => "the archive cannot understand it",
+        0x0110 => "processing failure",
+        0x0122 => "SOP class not supported",
+        0x0124 => "not authorized",
+        0xB000 => "coercion of data elements",
+        0xB006 => "elements discarded",
+        0xB007 => "the data set does not match its SOP class",
+        _ => "",
+    }
+}
+
+fn sop_items<'a>(o: &'a Map<String, Value>, tag: &str) -> Vec<&'a Map<String, Value>> {
+    o.get(tag)
+        .and_then(|a| a.get("Value"))
+        .and_then(Value::as_array)
+        .map(|v| v.iter().filter_map(Value::as_object).collect())
+        .unwrap_or_default()
+}
+
+fn reason_text(item: &Map<String, Value>, tag: &str) -> Option<String> {
+    let code = qido::count(item, tag)?;
+    let what = failure_reason(code);
+    Some(if what.is_empty() {
+        format!("reason 0x{code:04X}")
+    } else {
+        format!("reason 0x{code:04X}, {what}")
+    })
+}
+
+/// Reads the archive's answer to a STOW-RS request: 200 stored, 202 stored with warnings or
+/// some refused, 409 all refused (with FailedSOPSequence naming why); any refused instance is
+/// an error that names it and its reason.
+pub fn read_answer(
+    url: &str,
+    status: u16,
+    body: &[u8],
+    asked: &[Instance],
+    auth: &Auth,
+) -> Result<Stored, DicomWebError> {
+    let o = if body.iter().all(u8::is_ascii_whitespace) {
+        Map::new()
+    } else {
+        match serde_json::from_slice::<Value>(body) {
+            Ok(Value::Object(o)) => o,
+            // Some archives answer a list of one object.
+            Ok(Value::Array(a)) => a
+                .into_iter()
+                .find_map(|v| match v {
+                    Value::Object(o) => Some(o),
+                    _ => None,
+                })
+                .unwrap_or_default(),
+            _ if (200..300).contains(&status) => Map::new(),
+            _ => Map::new(),
+        }
+    };
+    let failed: Vec<String> = sop_items(&o, "00081198")
+        .into_iter()
+        .map(|item| {
+            let uid = qido::string(item, "00081155").unwrap_or_else(|| "?".to_owned());
+            match reason_text(item, "00081197") {
+                Some(r) => format!("{uid} ({r})"),
+                None => uid,
+            }
+        })
+        .collect();
+    if !failed.is_empty() || status == 409 {
+        return Err(DicomWebError::StoreRefused {
+            url: url.to_owned(),
+            status,
+            refused: if failed.is_empty() {
+                format!("{} instance(s)", asked.len())
+            } else {
+                failed.join(", ")
+            },
+        });
+    }
+    super::check_status(status, url, "the study to store into", auth)?;
+    let mut stored = Stored {
+        retrieve_url: qido::string(&o, "00081190"),
+        ..Default::default()
+    };
+    for item in sop_items(&o, "00081199") {
+        if let Some(uid) = qido::string(item, "00081155") {
+            stored.instances.push(uid);
+        }
+        if let Some(r) = reason_text(item, "00081196") {
+            stored.warnings.push(r);
+        }
+    }
+    // An archive that answers 200 with no list stored what it was given.
+    if stored.instances.is_empty() && o.is_empty() {
+        stored.instances = asked.iter().map(|i| i.sop_instance_uid.clone()).collect();
+    }
+    let missing: Vec<&str> = asked
+        .iter()
+        .map(|i| i.sop_instance_uid.as_str())
+        .filter(|u| !stored.instances.iter().any(|s| s == u))
+        .collect();
+    if !missing.is_empty() {
+        return Err(DicomWebError::StoreRefused {
+            url: url.to_owned(),
+            status,
+            refused: format!("{} (not in the archive's answer)", missing.join(", ")),
+        });
+    }
+    Ok(stored)
+}
+
+impl Base {
+    /// `{base}/studies/{study}`: where STOW-RS stores into a study.
+    pub fn store_url(&self, study: &str) -> Result<String, DicomWebError> {
+        let study = check_uid("StudyInstanceUID", study)?;
+        Ok(format!("{}/studies/{study}", self.as_str()))
+    }
+
+    /// `{base}/studies/{study}/series/{series}/metadata`: every instance's attributes.
+    pub fn series_metadata_url(&self, study: &str, series: &str) -> Result<String, DicomWebError> {
+        let study = check_uid("StudyInstanceUID", study)?;
+        let series = check_uid("SeriesInstanceUID", series)?;
+        Ok(format!(
+            "{}/studies/{study}/series/{series}/metadata",
+            self.as_str()
+        ))
+    }
+}
+
+impl Request {
+    /// A STOW-RS POST of a body of `content_type`.
+    pub fn stow(url: String, content_type: String, auth: &Auth) -> Self {
+        let mut headers = vec![
+            ("Accept", "application/dicom+json".to_owned()),
+            ("Content-Type", content_type),
+        ];
+        if let Some(a) = auth.header() {
+            headers.push(("Authorization", a));
+        }
+        Self { url, headers }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+mod tests {
+    use super::*;
+
+    const META: &str = r#"[
+      {"00080016":{"vr":"UI","Value":["1.2.840.10008.5.1.4.1.1.2"]},
+       "00080018":{"vr":"UI","Value":["1.2.3.1"]},
+       "00080060":{"vr":"CS","Value":["CT"]},
+       "00100010":{"vr":"PN","Value":[{"Alphabetic":"Doe^Jane"}]},
+       "00100020":{"vr":"LO","Value":["P-7"]},
+       "00080020":{"vr":"DA","Value":["20240102"]},
+       "0020000D":{"vr":"UI","Value":["1.2.3"]},
+       "0020000E":{"vr":"UI","Value":["1.2.3.4"]}},
+      {"00080016":{"vr":"UI","Value":["1.2.840.10008.5.1.4.1.1.2"]},
+       "00080018":{"vr":"UI","Value":["1.2.3.2"]},
+       "0020000D":{"vr":"UI","Value":["1.2.3"]},
+       "0020000E":{"vr":"UI","Value":["1.2.3.4"]}}
+    ]"#;
+
+    fn source() -> SourceSeries {
+        SourceSeries::from_metadata("u", META.as_bytes()).unwrap()
+    }
+
+    #[test]
+    fn the_source_series_from_its_metadata() {
+        let s = source();
+        assert_eq!(s.study_uid, "1.2.3");
+        assert_eq!(s.series_uid, "1.2.3.4");
+        assert_eq!(s.modality.as_deref(), Some("CT"));
+        assert_eq!(s.attribute(tags::PATIENT_NAME), Some("Doe^Jane"));
+        assert_eq!(s.attribute(tags::ACCESSION_NUMBER), None);
+        assert_eq!(s.instances.len(), 2);
+        assert_eq!(s.instances[1].1, "1.2.3.2");
+        let mixed = META.replacen("\"1.2.3.4\"]}}\n    ]", "\"1.2.3.5\"]}}\n    ]", 1);
+        let e = SourceSeries::from_metadata("u", mixed.as_bytes()).unwrap_err();
+        assert!(e.to_string().contains("mixes series"), "{e}");
+        assert!(SourceSeries::from_metadata("u", b"[]").is_err());
+    }
+
+    #[test]
+    fn dates_and_uids() {
+        let t = DicomNow::from_unix(1_732_838_400 + 3600 + 61, 5);
+        assert_eq!(t.date, "20241129");
+        assert_eq!(t.time, "010101.000005");
+        assert_eq!(DicomNow::from_unix(951_782_400, 0).date, "20000229");
+        let a = uid_for("a");
+        assert!(a.starts_with("2.25.") && a.len() <= 64, "{a}");
+        assert!(check_uid("u", &a).is_ok());
+        assert_ne!(a, uid_for("b"));
+        assert_eq!(a, uid_for("a"));
+        assert!(check_uid("u", IMPLEMENTATION_CLASS_UID).is_ok());
+    }
+
+    fn frames(n: usize, w: u32, h: u32) -> Vec<Vec<u8>> {
+        (0..n)
+            .map(|f| {
+                (0..w * h)
+                    .flat_map(|p| [f as u8, (p % 251) as u8, 7, 255])
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_secondary_capture_reads_back_frame_by_frame() {
+        let frames = frames(3, 5, 4);
+        let rotation = Rotation {
+            width: 5,
+            height: 4,
+            frames: &frames,
+            description: "shape MIP, RST".to_owned(),
+            derivation: "test".to_owned(),
+            step_deg: 120.0,
+        };
+        let now = DicomNow::from_unix(1_732_838_400, 0);
+        let made = secondary_capture(&source(), &rotation, &now, 9001).unwrap();
+        let obj = dicom_object::from_reader(&made.bytes[128..]).unwrap();
+        let get = |t: Tag| obj.element(t).unwrap().to_str().unwrap().trim().to_owned();
+        assert_eq!(get(tags::SOP_CLASS_UID), made.sop_class_uid);
+        assert_eq!(get(tags::STUDY_INSTANCE_UID), "1.2.3");
+        assert_eq!(get(tags::PATIENT_NAME), "Doe^Jane");
+        assert_eq!(get(tags::SERIES_INSTANCE_UID), made.series_uid);
+        assert!(get(tags::SERIES_DESCRIPTION).starts_with("Shapecast "));
+        assert_eq!(get(tags::NUMBER_OF_FRAMES), "3");
+        assert_eq!(obj.element(tags::ROWS).unwrap().to_int::<u16>().unwrap(), 4);
+        let px = obj.element(tags::PIXEL_DATA).unwrap().to_bytes().unwrap();
+        assert_eq!(px.len(), 3 * 5 * 4 * 3);
+        // Frame 2, pixel 6: [2, 6, 7].
+        let at = 2 * 60 + 6 * 3;
+        assert_eq!(&px[at..at + 3], &[2, 6, 7]);
+        let refs = obj.element(tags::REFERENCED_SERIES_SEQUENCE).unwrap();
+        let items = refs.items().unwrap();
+        assert_eq!(
+            items[0]
+                .element(tags::SERIES_INSTANCE_UID)
+                .unwrap()
+                .to_str()
+                .unwrap()
+                .trim_end_matches('\0'),
+            "1.2.3.4"
+        );
+        // Another picture, another UID.
+        let other = frames.iter().rev().cloned().collect::<Vec<_>>();
+        let again = secondary_capture(
+            &source(),
+            &Rotation {
+                frames: &other,
+                ..rotation
+            },
+            &now,
+            9001,
+        )
+        .unwrap();
+        assert_ne!(again.sop_instance_uid, made.sop_instance_uid);
+        assert!(
+            secondary_capture(
+                &source(),
+                &Rotation {
+                    width: 6,
+                    height: 4,
+                    frames: &frames,
+                    description: String::new(),
+                    derivation: String::new(),
+                    step_deg: 1.0
+                },
+                &now,
+                1
+            )
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn the_body_and_the_answers() {
+        let frames = frames(1, 2, 2);
+        let rotation = Rotation {
+            width: 2,
+            height: 2,
+            frames: &frames,
+            description: "x".to_owned(),
+            derivation: String::new(),
+            step_deg: 360.0,
+        };
+        let made = secondary_capture(&source(), &rotation, &DicomNow::from_unix(0, 0), 1).unwrap();
+        let (ct, body) = request_body(std::slice::from_ref(&made));
+        let boundary = ct.split("boundary=").nth(1).unwrap();
+        assert!(ct.starts_with("multipart/related; type=\"application/dicom\""));
+        let mut parser = super::super::MultipartParser::new(
+            Some(&ct),
+            "stow",
+            super::super::multipart::MultipartLimits::default(),
+        )
+        .unwrap();
+        let mut parts = Vec::new();
+        parser
+            .feed(&body, &mut |p| {
+                parts.push(p);
+                Ok(())
+            })
+            .unwrap();
+        parser
+            .finish(&mut |p| {
+                parts.push(p);
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(parts.len(), 1, "{boundary}");
+        assert_eq!(parts[0].bytes, made.bytes);
+
+        let ok = format!(
+            r#"{{"00081199":{{"vr":"SQ","Value":[{{"00081155":{{"vr":"UI","Value":["{}"]}}}}]}}}}"#,
+            made.sop_instance_uid
+        );
+        let asked = std::slice::from_ref(&made);
+        let stored = read_answer("u", 200, ok.as_bytes(), asked, &Auth::None).unwrap();
+        assert_eq!(stored.instances, vec![made.sop_instance_uid.clone()]);
+        let refused = format!(
+            r#"{{"00081198":{{"vr":"SQ","Value":[{{"00081155":{{"vr":"UI","Value":["{}"]}},"00081197":{{"vr":"US","Value":[43264]}}}}]}}}}"#,
+            made.sop_instance_uid
+        );
+        let e = read_answer("u", 409, refused.as_bytes(), asked, &Auth::None).unwrap_err();
+        let m = e.to_string();
+        assert!(m.contains("refused") && m.contains("0xA900"), "{m}");
+        let e = read_answer("u", 401, b"", asked, &Auth::None).unwrap_err();
+        assert!(matches!(e, DicomWebError::Unauthorized { .. }), "{e}");
+        let e = read_answer(
+            "u",
+            200,
+            b"{\"00081199\":{\"vr\":\"SQ\"}}",
+            asked,
+            &Auth::None,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("not in the archive's answer"), "{e}");
+    }
+}
