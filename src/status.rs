@@ -185,6 +185,10 @@ pub struct AppStatus {
     /// The same for the PET's MIP ("none" without a PET).
     pub pet_mip: String,
     pub findings: FindingsStatus,
+    /// "Store to PACS" is rendering or sending.
+    pub storing: bool,
+    /// SeriesInstanceUIDs stored into the archive since the app started, oldest first.
+    pub stored: Vec<String>,
 }
 
 impl AppStatus {
@@ -330,6 +334,9 @@ mod web {
         set(&obj, "pet_loading", status.pet_loading);
         set(&obj, "mip", status.mip.as_str());
         set(&obj, "pet_mip", status.pet_mip.as_str());
+        set(&obj, "storing", status.storing);
+        let stored: Array = status.stored.iter().map(|s| JsValue::from_str(s)).collect();
+        set(&obj, "stored", stored);
         let f = &status.findings;
         let findings = Object::new();
         set(&findings, "state", f.state.as_str());

@@ -169,6 +169,34 @@ pub struct FindingsState {
     asked: bool,
 }
 
+/// A finding the reader confirmed, for a report.
+pub struct Confirmed<'a> {
+    pub lps_mm: DVec3,
+    pub finding: &'a crate::cpu::findings::Finding,
+    pub preset: Preset,
+}
+
+impl FindingsState {
+    /// The findings of the list shown that the reader confirmed, strongest first.
+    pub fn confirmed(&self) -> Vec<Confirmed<'_>> {
+        let Some(list) = &self.list else {
+            return Vec::new();
+        };
+        list.findings
+            .findings
+            .iter()
+            .zip(&list.lps)
+            .zip(&list.marks)
+            .filter(|(_, m)| **m == Mark::Confirmed)
+            .map(|((f, p), _)| Confirmed {
+                lps_mm: *p,
+                finding: f,
+                preset: list.preset,
+            })
+            .collect()
+    }
+}
+
 impl FindingsState {
     /// Lists are made from now on ([`Self::asked`]).
     pub fn ask(&mut self) {

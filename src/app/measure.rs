@@ -281,6 +281,35 @@ fn ellipse_voxels(
     Some((out, radii, axes))
 }
 
+/// An ellipse's two axes in patient coordinates (LPS mm) on the slice its statistics are read
+/// on: the longer axis' two ends, then the shorter's (a DICOM SR ELLIPSE's four points).
+pub fn ellipse_axes_mm(volume: &Volume, m: &Measurement) -> Option<[DVec3; 4]> {
+    if m.kind != MeasureKind::Ellipse {
+        return None;
+    }
+    let p = m.in_pane(volume)?;
+    let axes = pane_axes(volume, m.pane?);
+    let centre = [0.5 * (p.a[0] + p.b[0]), 0.5 * (p.a[1] + p.b[1])];
+    let radii = [0.5 * (p.a[0] - p.b[0]).abs(), 0.5 * (p.a[1] - p.b[1]).abs()];
+    let world = volume.world_from_voxel();
+    let point = |du: f64, dv: f64| {
+        let mut v = DVec3::ZERO;
+        v[axes.fixed] = p.slice as f64;
+        v[axes.across] = centre[0] + du;
+        v[axes.vertical] = centre[1] + dv;
+        world.transform_point3(v)
+    };
+    let across = [point(-radii[0], 0.0), point(radii[0], 0.0)];
+    let vertical = [point(0.0, -radii[1]), point(0.0, radii[1])];
+    let length = |e: &[DVec3; 2]| (e[1] - e[0]).length();
+    let (major, minor) = if length(&across) >= length(&vertical) {
+        (across, vertical)
+    } else {
+        (vertical, across)
+    };
+    Some([major[0], major[1], minor[0], minor[1]])
+}
+
 /// What an ellipse reads on the PET fused over its CT (PERCIST's measures), in the PET's unit.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PetRegionStats {

@@ -26,6 +26,7 @@ mod panes;
 mod pet;
 mod probe;
 mod publish;
+pub mod report;
 mod series_list;
 mod share;
 pub mod slices;
@@ -48,6 +49,7 @@ use crate::render::slice::{Overlay, SliceRenderer};
 use crate::status::{AdapterStatus, AppStatus, Phase};
 use crate::volume::Volume;
 
+pub use export::movie::MOVIE_FRAMES;
 pub use features::{DisplayMode, FeatureDisplay, FeatureEntry, FeatureParams, JobOutcome};
 pub use install::preset_for;
 pub use load::{LoadSource, SeriesSet};

@@ -67,7 +67,9 @@ impl ShapecastApp {
                     "Sagittal",
                 ),
             ] {
-                if ui.selectable_label(self.reading.layout == layout, label).clicked() {
+                let r = ui.selectable_label(self.reading.layout == layout, label);
+                self.control(&format!("layout:{}", layout.name()), r.rect);
+                if r.clicked() {
                     self.reading.layout = layout;
                 }
             }

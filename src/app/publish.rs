@@ -46,12 +46,16 @@ impl ShapecastApp {
         } else {
             self.pet_mip.picture_state()
         };
+        let storing = self.storing_to_pacs() || self.movie_stores_to_pacs();
+        let stored = self.pacs_stored_series().to_vec();
         let s = &mut self.status;
         s.pet = pet_status;
         s.pet_loading = self.pet.loading();
         s.mip = mip_state.to_owned();
         s.pet_mip = pet_mip_state.to_owned();
         s.findings = self.findings.status(self.generation);
+        s.storing = storing;
+        s.stored = stored;
         s.volume = self.scene.as_ref().map(|sc| VolumeStatus {
             dims: sc.volume.dims,
             spacing_mm: sc.volume.spacing_mm,

@@ -70,6 +70,19 @@ impl DicomWebArgs {
         })
     }
 
+    /// A client of the archive at `base` with the credentials and CA given.
+    pub fn client_for(&self, base: &str) -> anyhow::Result<Client> {
+        let base = Base::parse(base)?;
+        let ca = match self.ca.clone().or_else(|| env(CA_ENV).map(Into::into)) {
+            Some(path) => Some(
+                std::fs::read(&path)
+                    .map_err(|e| anyhow::anyhow!("--ca {}: cannot read it: {e}", path.display()))?,
+            ),
+            None => None,
+        };
+        Ok(Client::with_ca(base, self.auth()?, ca.as_deref())?)
+    }
+
     /// Resolves the study, lists its series when none is named, and retrieves the series.
     pub fn load(&self) -> anyhow::Result<Loaded> {
         self.open().map(|(loaded, _)| loaded)
@@ -93,15 +106,8 @@ impl DicomWebArgs {
             ),
         };
         let study = &study;
-        let base = Base::parse(&base)?;
-        let ca = match self.ca.clone().or_else(|| env(CA_ENV).map(Into::into)) {
-            Some(path) => Some(
-                std::fs::read(&path)
-                    .map_err(|e| anyhow::anyhow!("--ca {}: cannot read it: {e}", path.display()))?,
-            ),
-            None => None,
-        };
-        let client = Client::with_ca(base.clone(), self.auth()?, ca.as_deref())?;
+        let client = self.client_for(&base)?;
+        let base = client.base().clone();
         let hint = |e: DicomWebError| {
             let unauthorized = matches!(e, DicomWebError::Unauthorized { .. });
             let e = anyhow::Error::new(e);
@@ -206,7 +212,12 @@ impl Archive {
             .client
             .source_series(&self.study, &self.series)
             .with_context(|| format!("DICOMweb {base}: the source series' metadata"))?;
-        let instance = stow::secondary_capture(&source, rotation, &stow::DicomNow::now(), 9001)?;
+        let instance = stow::secondary_capture(
+            &source,
+            rotation,
+            &stow::DicomNow::now(),
+            stow::ROTATION_SERIES_NUMBER,
+        )?;
         let started = web_time::Instant::now();
         let stored = self
             .client
@@ -222,6 +233,33 @@ impl Archive {
             instance.series_uid,
             self.study,
             started.elapsed().as_secs_f64()
+        );
+        Ok(instance.series_uid)
+    }
+
+    /// Stores a measurement report into the study (STOW-RS) and says so on stderr; returns the
+    /// new series' UID.
+    pub fn store_report(&self, report: &crate::io::dicomweb::sr::Report) -> anyhow::Result<String> {
+        use crate::io::dicomweb::{sr, stow};
+        let base = self.client.base().as_str().to_owned();
+        let source = self
+            .client
+            .source_series(&self.study, &self.series)
+            .with_context(|| format!("DICOMweb {base}: the source series' metadata"))?;
+        let instance = sr::measurement_report(
+            &source,
+            report,
+            &stow::DicomNow::now(),
+            stow::REPORT_SERIES_NUMBER,
+        )?;
+        self.client
+            .store(&self.study, std::slice::from_ref(&instance))
+            .with_context(|| format!("DICOMweb {base}: storing the report"))?;
+        eprintln!(
+            "stored the report ({} groups) as series {} in study {}",
+            report.groups.len(),
+            instance.series_uid,
+            self.study
         );
         Ok(instance.series_uid)
     }

@@ -215,6 +215,11 @@ pub fn load_volume(
         }
         None => dicomweb.load()?,
     };
+    Ok(loaded_volume(loaded))
+}
+
+/// A loaded volume, its loader's notes and warnings printed.
+pub fn loaded_volume(loaded: io::Loaded) -> std::sync::Arc<crate::volume::Volume> {
     for n in &loaded.notes {
         eprintln!("note: {n}");
     }
@@ -222,7 +227,7 @@ pub fn load_volume(
     for w in &volume.warnings {
         eprintln!("warning: {w}");
     }
-    Ok(volume)
+    volume
 }
 
 pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {

@@ -43,6 +43,11 @@ pub struct FindingsArgs {
     pub all: bool,
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
+    /// Store the findings listed (the first 30, or all with --all) back into the --dicomweb
+    /// archive as a DICOM Structured Report (TID 1500 measurement report, each candidate a
+    /// "Finding" group at its 3D point) in the source study, with the same credentials.
+    #[arg(long, requires = "dicomweb")]
+    pub store: bool,
     /// RST: refine thick slices for the rays (as `features --refine-slices`; on the lung CTs
     /// measured it ranked the lesion lower: docs/science.md, "Thick slices").
     #[arg(long)]
@@ -68,7 +73,12 @@ pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
     let preset = crate::cli::preset(&args.preset)?;
     let mut req = request(args.method, preset)?;
     req.refine_slices = args.refine_slices;
-    let volume = load_volume(args.input.as_deref(), &args.dicomweb)?;
+    let (volume, archive) = if args.store {
+        let (loaded, archive) = args.dicomweb.open()?;
+        (crate::cli::features::loaded_volume(loaded), Some(archive))
+    } else {
+        (load_volume(args.input.as_deref(), &args.dicomweb)?, None)
+    };
     // Findings' gates read HU (lung air, soft tissue, dense above 700 HU): an MR or a PET has
     // none, and its list would be noise. (A file that does not say, such as a NIfTI, is taken
     // at its word: its values may well be HU.)
@@ -143,6 +153,39 @@ pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
             preset.name(),
             args.method.name()
         );
+    }
+    if let Some(archive) = &archive {
+        let world = volume.world_from_voxel();
+        let groups: Vec<_> = found
+            .findings
+            .iter()
+            .take(shown)
+            .map(|f| {
+                let p = world.transform_point3(glam::DVec3::from(f.voxel.map(|v| v as f64)));
+                crate::app::report::finding_group(
+                    format!("candidate {}", f.rank),
+                    f,
+                    p,
+                    preset,
+                    volume.modality == Modality::Ct,
+                )
+            })
+            .collect();
+        if groups.is_empty() {
+            eprintln!("no findings: nothing stored");
+        } else {
+            let n = groups.len();
+            let report = crate::io::dicomweb::sr::Report {
+                description: format!(
+                    "findings, {} {} ({n} candidates)",
+                    args.method.name().to_uppercase(),
+                    preset.name()
+                ),
+                groups,
+                stable_key: None,
+            };
+            archive.store_report(&report)?;
+        }
     }
     Ok(())
 }

@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod batch;
 pub mod bench;
 pub mod dicomweb;
 pub mod features;
@@ -70,6 +71,9 @@ pub enum Command {
     Bench(bench::BenchArgs),
     /// Print a volume's dimensions, spacing, orientation, intensity range, modality and warnings.
     Info(info::InfoArgs),
+    /// The shape MIP and findings of every CT and MR series of a DICOMweb archive (or one shard
+    /// of them), stored back into each study; series already done are skipped.
+    Batch(batch::BatchArgs),
     /// Render a shape-encoding MIP to PNG (the viewer's ray caster); --pick PX,PY prints where
     /// a pixel's maximum came from.
     Render(render::RenderArgs),
@@ -139,6 +143,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Findings(args) => findings::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Render(args) => render::run(args),
+        Command::Batch(args) => batch::run(args),
         Command::Reproduce(args) => reproduce::run(args),
         Command::Info(args) => info::run(&args),
     }

@@ -136,7 +136,7 @@ pub struct RenderArgs {
     pub pet_opacity: f32,
 }
 
-fn parse_size(s: &str) -> anyhow::Result<[u32; 2]> {
+pub fn parse_size(s: &str) -> anyhow::Result<[u32; 2]> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .with_context(|| format!("--size {s:?}: expected WxH, e.g. 768x768"))?;
@@ -507,6 +507,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                     args.view
                 ),
                 step_deg: 360.0 / f64::from(n),
+                stable_key: None,
             };
             archive.store_rotation(&rotation)?;
         }
@@ -550,15 +551,57 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A full turn of the shape MIP from the anterior view, as `render --turntable` draws it with
+/// its defaults: `n` RGBA frames of `size`, the preset's grey window, every channel on.
+pub fn rotation_frames(
+    ctx: &GpuContext,
+    volume: &Volume,
+    features: Option<&FeatureTexture>,
+    preset: Preset,
+    size: [u32; 2],
+    n: u32,
+) -> anyhow::Result<Vec<Vec<u8>>> {
+    let render_volume = RenderVolume::upload(ctx, volume)?;
+    let camera = Camera::for_volume(
+        &render_volume.world_from_voxel,
+        render_volume.dims,
+        ViewPreset::Anterior,
+    );
+    let settings = RenderSettings {
+        window: default_window(volume, preset),
+        ..Default::default()
+    };
+    let caster = Raycaster::new(ctx)?;
+    let bricks = caster.intensity_bricks(ctx, &render_volume);
+    let feature_bricks = features.map(|f| caster.feature_bricks(ctx, f));
+    let scene = Scene {
+        volume: &render_volume,
+        features,
+        bricks: Some(&bricks),
+        feature_bricks: feature_bricks.as_ref(),
+    };
+    let mut target = RaycastTarget::new(ctx, size)?;
+    turntable(
+        ctx,
+        &caster,
+        &scene,
+        &camera,
+        &settings,
+        &mut target,
+        n,
+        None,
+    )
+}
+
 /// The series' description after "Shapecast", e.g. "shape MIP, RST, lymph-nodes".
-fn rotation_description(method: RenderMethod, preset: Preset) -> String {
+pub fn rotation_description(method: RenderMethod, preset: Preset) -> String {
     match method {
         RenderMethod::Intensity => "MIP".to_owned(),
         m => format!("shape MIP, {}, {}", method_name(m), preset.name()),
     }
 }
 
-fn method_name(method: RenderMethod) -> &'static str {
+pub fn method_name(method: RenderMethod) -> &'static str {
     match method {
         RenderMethod::Intensity => "intensity",
         RenderMethod::Hessian => "Hessian",

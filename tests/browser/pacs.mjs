@@ -186,6 +186,8 @@ function gateway(o) {
     if (mode || url.pathname.startsWith('/dicom-web/')) {
       const upstreamPath = mode ? req.url.slice(mode.length + 1) : req.url;
       const headers = { accept: req.headers.accept ?? '*/*' };
+      // STOW-RS: the body passed on as it came.
+      for (const h of ['content-type', 'content-length']) if (req.headers[h]) headers[h] = req.headers[h];
       if (req.headers.authorization !== `Bearer ${TOKEN}`) {
         res.writeHead(401, { 'www-authenticate': 'Bearer realm="pacs"', 'content-type': 'text/plain' }).end('unauthorized');
         return;
@@ -196,7 +198,7 @@ function gateway(o) {
       const cut = mode === 'flaky' && instance && gatewayLog.cut === null;
       if (cut) gatewayLog.cut = url.pathname;
       const forward = () => {
-        const up = http.request({ host: '127.0.0.1', port: o.port, path: upstreamPath, headers }, (r) => {
+        const up = http.request({ host: '127.0.0.1', port: o.port, path: upstreamPath, method: req.method, headers }, (r) => {
           res.writeHead(r.statusCode, r.headers);
           if (!cut) {
             r.pipe(res);
@@ -211,7 +213,8 @@ function gateway(o) {
           });
         });
         up.on('error', () => res.writeHead(502).end());
-        up.end();
+        if (req.method === 'POST') req.pipe(up);
+        else up.end();
       };
       if (mode === 'slow' && instance) setTimeout(forward, 500);
       else forward();
@@ -299,6 +302,33 @@ async function clickControl(page, name) {
   const r = s?.controls?.[name];
   if (!r) throw new Error(`no control ${name} in ${JSON.stringify(Object.keys(s?.controls ?? {}))}`);
   await page.mouse.click(r[0] + r[2] / 2, r[1] + r[3] / 2);
+}
+// Clicks "Store to PACS", waits for the series to be stored, and finds it in the study by QIDO:
+// a Secondary Capture (OT) series "Shapecast MIP" with the 36 frames of the turn.
+async function storeToPacs(page, o, target, name) {
+  const before = (await status(page))?.stored?.length ?? 0;
+  // A small window and the 2 x 2 layout: a small MIP pane keeps the 36 frames (each drawn at
+  // the pane's full resolution) to a few minutes on SwiftShader.
+  await clickControl(page, 'layout:grid');
+  await page.setViewportSize({ width: 720, height: 480 });
+  await page.waitForTimeout(1500);
+  await clickControl(page, 'store-pacs');
+  const s = await waitStatus(page, (n) => (window.shapecastStatus?.stored?.length ?? 0) > n || window.shapecastStatus?.error,
+    'the store', before, 480000);
+  const uid = s?.stored?.[before];
+  let listed = null;
+  let frames = null;
+  if (uid) {
+    const series = (await rest(o, 'GET', `/dicom-web/studies/${target.study}/series`)).json();
+    listed = series.find((x) => x['0020000E']?.Value?.[0] === uid);
+    const found = (await rest(o, 'POST', '/tools/find', JSON.stringify({ Level: 'Instance', Query: { SeriesInstanceUID: uid }, Expand: true }))).json();
+    frames = found?.[0]?.MainDicomTags?.NumberOfFrames ?? null;
+  }
+  check(name, !!uid && !s?.error && listed?.['00080060']?.Value?.[0] === 'OT'
+    && listed?.['0008103E']?.Value?.[0] === 'Shapecast MIP' && String(frames) === '36',
+    `${s?.error ?? ''} series ${uid}, ${JSON.stringify(listed?.['0008103E'])}, ${frames} frames`);
+  await page.screenshot({ path: path.join(outDir, 'pacs-stored.png') }).catch(() => {});
+  await page.setViewportSize({ width: 1280, height: 800 });
 }
 // Types into the egui text field just clicked, once the page's text input has the focus (keys
 // sent before that are lost on a slow machine), then lets a few frames pass.
@@ -453,6 +483,7 @@ try {
     await clickControl(page, 'pacs-retry');
     s = await waitStatus(page, () => window.shapecastStatus?.volume && window.shapecastStatus.phase === 'ready', 'the study with the typed token');
     check('401: with the token typed into the dialog the study opens (and the 401 message goes)', s?.phase === 'ready' && s?.volume?.dims?.[2] === 20 && !s?.error, s?.error ?? '');
+    await storeToPacs(page, locked, lockedMr, 'Store to PACS with the typed token: the MIP\'s turn is stored into the study (STOW-RS, through the gateway) and listed by QIDO');
   });
 
   // ---- 5. Progress and Cancel; a body cut short is asked for again -------------------------

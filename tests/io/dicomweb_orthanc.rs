@@ -776,6 +776,7 @@ fn orthanc_with_authentication() {
         description: "shape MIP, test".to_owned(),
         derivation: "a test".to_owned(),
         step_deg: 180.0,
+        stable_key: None,
     };
     let made = stow::secondary_capture(&source, &rotation, &stow::DicomNow::now(), 9001)
         .expect("the instance");
@@ -982,6 +983,106 @@ fn a_shape_mip_rotation_is_stored_back_into_its_study() {
             read["frame_time_ms"].as_f64().is_some_and(|t| t > 0.0),
             "{read}"
         );
+    }
+}
+
+/// `findings --dicomweb ... --store`: the candidates listed go into the study as a TID 1500
+/// measurement report (a Comprehensive 3D SR), which QIDO lists and pydicom reads back: one
+/// "Finding" group per candidate, its diameter and its 3D point as the JSON listed them.
+#[test]
+fn findings_go_back_as_a_measurement_report() {
+    let Some(series_root) = common::shared_data("series") else {
+        return;
+    };
+    let Some(orthanc) = Orthanc::start(false) else {
+        return;
+    };
+    let chest = series_files(&series_root.join("ct-chest-lung-kernel"));
+    orthanc.upload(&chest);
+    let (study, series) = uids(&chest[0]);
+    let url = orthanc.url("/dicom-web");
+    let (ok, out, err) = shapecast(
+        &[
+            "findings",
+            "--dicomweb",
+            &url,
+            "--study",
+            &study,
+            "--series",
+            &series,
+            "--method",
+            "hessian",
+            "--preset",
+            "lung-nodules",
+            "--backend",
+            "gpu",
+            "--json",
+            "--store",
+        ],
+        &[],
+    );
+    assert!(ok, "{err}");
+    let json: serde_json::Value = serde_json::from_str(&out).expect("findings JSON");
+    let list = json["findings"].as_array().expect("findings");
+    assert!(!list.is_empty(), "no findings on the chest CT: {err}");
+    assert!(
+        err.contains(&format!("stored the report ({} groups)", list.len())),
+        "{err}"
+    );
+    let listed = listed_series(&orthanc, &study);
+    let (sr, _, description) = listed
+        .iter()
+        .find(|s| s.1 == "SR")
+        .cloned()
+        .unwrap_or_else(|| panic!("no SR listed: {listed:?}"));
+    assert_eq!(
+        description,
+        format!(
+            "Shapecast findings, HESSIAN lung-nodules ({} candidates)",
+            list.len()
+        )
+    );
+    let path = orthanc.dir.join("findings.dcm");
+    std::fs::write(&path, instance_file(&orthanc, &sr)).expect("write the report");
+    let obj = dicom_object::open_file(&path).expect("dicom-rs reads it");
+    assert_eq!(
+        obj.element_by_name("SOPClassUID")
+            .ok()
+            .and_then(|e| e.to_str().ok())
+            .map(|s| s.trim_end_matches('\0').to_owned())
+            .as_deref(),
+        Some("1.2.840.10008.5.1.4.1.1.88.34")
+    );
+    let Some(read) = pydicom_read_back(&path) else {
+        return;
+    };
+    assert_eq!(read["evidence_series"], serde_json::json!(series), "{read}");
+    let groups = read["groups"].as_array().expect("groups");
+    assert_eq!(groups.len(), list.len());
+    let items = groups[0]["items"].as_array().expect("items");
+    let find = |name: &str| {
+        items
+            .iter()
+            .find(|i| i["concept"] == name)
+            .unwrap_or_else(|| panic!("no {name} in {items:?}"))
+    };
+    assert_eq!(find("Tracking Identifier")["text"], "candidate 1");
+    assert_eq!(find("Finding")["code"], "Nodule");
+    let diameter = find("Diameter");
+    let want = list[0]["diameter_mm"].as_f64().expect("diameter");
+    assert!(
+        (diameter["value"].as_f64().unwrap_or(0.0) - want).abs() < 0.01,
+        "{diameter} vs {want}"
+    );
+    let point = &diameter["items"][0];
+    assert_eq!(point["graphic_type"], "POINT");
+    let lps = list[0]["lps_mm"].as_array().expect("lps");
+    for (got, want) in point["points"].as_array().expect("points").iter().zip(lps) {
+        let (g, w) = (
+            got.as_f64().unwrap_or(f64::NAN),
+            want.as_f64().unwrap_or(0.0),
+        );
+        assert!((g - w).abs() < 0.01, "{point} vs {lps:?}");
     }
 }
 
@@ -1271,6 +1372,93 @@ fn the_viewer_opens_a_study_and_shows_its_patient() {
         assert!(!link.contains(secret.as_str()), "{link}");
         assert!(!app.status().view_json.contains(secret.as_str()));
     }
+    // "Store to PACS": the MIP's turn goes into the study as a Secondary Capture series, and
+    // an ellipse drawn on the axial pane as a measurement report (SR).
+    let mut harness = harness;
+    assert!(!harness.state().status().storing);
+    harness
+        .state_mut()
+        .set_tool(shapecast::app::measure::Tool::Ellipse);
+    let axial = harness
+        .state()
+        .status()
+        .controls
+        .iter()
+        .find(|(n, _)| n == "pane:axial")
+        .map(|(_, r)| *r)
+        .expect("the axial pane");
+    let at = |fx: f32, fy: f32| egui::pos2(axial[0] + fx * axial[2], axial[1] + fy * axial[3]);
+    app_harness::drag(
+        &mut harness,
+        egui::PointerButton::Primary,
+        at(0.45, 0.45),
+        at(0.6, 0.55),
+    );
+    assert_eq!(harness.state().measurements().len(), 1, "no ellipse drawn");
+    app_harness::click_control(&mut harness, "store-pacs");
+    assert!(
+        harness.state().status().storing,
+        "not storing after the click"
+    );
+    app_harness::run_until(&mut harness, "stored", 400, |app| {
+        !app.status().stored.is_empty() || !app.errors().is_empty()
+    });
+    harness.run_steps(2);
+    if let Ok(picture) = harness.render() {
+        app_harness::save(&picture, "app_store_pacs.png");
+    }
+    let app = harness.state();
+    assert!(app.errors().is_empty(), "{:?}", app.errors());
+    let stored = app.status().stored[0].clone();
+    assert_eq!(app.status().stored.len(), 2, "the rotation and the report");
+    let report = app.status().stored[1].clone();
+    let listed = listed_series(&orthanc, &study);
+    let sr = listed
+        .iter()
+        .find(|s| s.0 == report)
+        .unwrap_or_else(|| panic!("{report} not listed: {listed:?}"));
+    assert_eq!(
+        (sr.1.as_str(), sr.2.as_str()),
+        (
+            "SR",
+            "Shapecast measurements (0 rulers, 1 ellipses, 0 findings)"
+        )
+    );
+    let path = orthanc.dir.join("report.dcm");
+    std::fs::write(&path, instance_file(&orthanc, &report)).expect("write the report");
+    if let Some(read) = pydicom_read_back(&path) {
+        assert_eq!(read["template"], serde_json::json!("1500"), "{read}");
+        let groups = read["groups"].as_array().expect("groups");
+        assert_eq!(groups.len(), 1, "{read}");
+        let names: Vec<&str> = groups[0]["items"]
+            .as_array()
+            .expect("items")
+            .iter()
+            .filter_map(|i| i["concept"].as_str())
+            .collect();
+        // An MR's values have no unit to report: its ellipse reports its area.
+        for want in ["Tracking Identifier", "Image Region", "Area"] {
+            assert!(names.contains(&want), "{want} missing: {names:?}");
+        }
+        let region = groups[0]["items"]
+            .as_array()
+            .and_then(|items| items.iter().find(|i| i["concept"] == "Image Region"))
+            .expect("the region");
+        assert_eq!(region["graphic_type"], "ELLIPSE", "{region}");
+        assert_eq!(region["points"].as_array().map_or(0, Vec::len), 12);
+    }
+    let sc = listed
+        .iter()
+        .find(|s| s.0 == stored)
+        .unwrap_or_else(|| panic!("{stored} not listed: {listed:?}"));
+    assert_eq!((sc.1.as_str(), sc.2.as_str()), ("OT", "Shapecast MIP"));
+    let file = instance_file(&orthanc, &stored);
+    let obj = dicom_object::from_reader(&file[128..]).expect("a DICOM file");
+    let frames = obj
+        .element_by_name("NumberOfFrames")
+        .ok()
+        .and_then(|e| e.to_int::<u32>().ok());
+    assert_eq!(frames, Some(shapecast::app::MOVIE_FRAMES));
     drop(harness);
 
     let Some(locked) = Orthanc::start(true) else {

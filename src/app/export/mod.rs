@@ -1,5 +1,7 @@
-//! What leaves the app as a file: "Save picture" (a PNG of one pane, `picture`) and "Save movie"
-//! (a turntable APNG of the MIP drawn off-screen, `movie`), and their state in [`Export`].
+//! What leaves the app: "Save picture" (a PNG of one pane, `picture`), "Save movie" (a
+//! turntable APNG of the MIP drawn off-screen, `movie`) and "Store to PACS" (the same turn as a
+//! Secondary Capture series in the archive, `movie` then `app::pacs`), and their state in
+//! [`Export`].
 
 pub mod movie;
 pub mod picture;

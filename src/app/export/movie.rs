@@ -8,8 +8,13 @@
 //! progressive frames' [`FrameCost`]), a finished frame is copied back with `map_async`
 //! ([`PendingTexture`], polled in later frames, a few in flight) and encoded into the APNG as
 //! it arrives. The status bar shows the progress and a Cancel; a new volume stops it; features
-//! that arrive meanwhile (or another display mode) start it again from the first frame. Then the file is handed on as "Save picture" does (a download in the page,
-//! the pictures' folder natively).
+//! that arrive meanwhile (or another display mode) start it again from the first frame. Then
+//! the file is handed on as "Save picture" does (a download in the page, the pictures' folder
+//! natively).
+//!
+//! "Store to PACS" makes the same frames and keeps them instead of encoding them: they go back
+//! into the study the series came from as a multi-frame Secondary Capture (`app::pacs`,
+//! `io::dicomweb::stow`).
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
@@ -133,8 +138,51 @@ impl ApngWriter {
     }
 }
 
+/// Where a movie's frames go.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Destination {
+    /// An animated PNG, saved as a file.
+    File,
+    /// A Secondary Capture series in the archive's study (STOW-RS).
+    Pacs,
+}
+
+/// What takes the frames as they are read back.
+enum Sink {
+    Apng(ApngWriter),
+    /// RGBA frames kept for the archive.
+    Frames(Vec<Vec<u8>>),
+}
+
+impl Sink {
+    fn new(destination: Destination, size: [u32; 2], frames: u32) -> Result<Self, String> {
+        Ok(match destination {
+            Destination::File => Self::Apng(ApngWriter::new(size, frames, FPS)?),
+            Destination::Pacs => Self::Frames(Vec::with_capacity(frames as usize)),
+        })
+    }
+
+    fn written(&self) -> u32 {
+        match self {
+            Self::Apng(w) => w.written,
+            Self::Frames(f) => f.len() as u32,
+        }
+    }
+
+    fn push(&mut self, rgba: Vec<u8>) -> Result<(), String> {
+        match self {
+            Self::Apng(w) => w.push(&rgba),
+            Self::Frames(f) => {
+                f.push(rgba);
+                Ok(())
+            }
+        }
+    }
+}
+
 /// A movie being made.
 struct Making {
+    destination: Destination,
     frames: u32,
     camera: Camera,
     settings: RenderSettings,
@@ -150,12 +198,16 @@ struct Making {
     pane_frames: u64,
     /// Finished frames being read back, oldest first.
     reads: VecDeque<PendingTexture>,
-    writer: ApngWriter,
+    sink: Sink,
+    /// For the archive: the series shown when it started, and what the frames show.
+    source: Option<(String, String)>,
+    description: String,
+    derivation: String,
 }
 
 impl Making {
     fn encoded(&self) -> u32 {
-        self.writer.written
+        self.sink.written()
     }
 }
 
@@ -163,22 +215,37 @@ impl Making {
 #[derive(Default)]
 pub(in crate::app) struct MovieState {
     making: Option<Making>,
-    /// Frames asked for, started in the next frame (once the pane has drawn).
-    requested: Option<u32>,
+    /// Frames asked for and where they go, started in the next frame (once the pane has drawn).
+    requested: Option<(u32, Destination)>,
     last: Option<Movie>,
 }
 
 impl ShapecastApp {
     /// Asks for a movie of `frames` frames of a full turn of the MIP pane's view.
     pub fn save_movie(&mut self, ctx: &egui::Context, frames: u32) {
-        self.export.movie.requested = Some(frames.clamp(1, 3600));
+        self.export.movie.requested = Some((frames.clamp(1, 3600), Destination::File));
+        ctx.request_repaint();
+    }
+
+    /// Asks for the same turn of `frames` frames, stored into the archive's study the series
+    /// came from as a Secondary Capture series ("Store to PACS").
+    pub fn store_to_pacs(&mut self, ctx: &egui::Context, frames: u32) {
+        if self.pacs_source().is_none() {
+            return self.error(
+                "Store to PACS: the volume shown did not come from an archive (open it with \"Open from PACS…\")".to_owned(),
+            );
+        }
+        self.export.movie.requested = Some((frames.clamp(1, 3600), Destination::Pacs));
         ctx.request_repaint();
     }
 
     /// Stops the movie being made (nothing is saved).
     pub fn cancel_movie(&mut self) {
-        if self.export.movie.making.take().is_some() {
-            self.notes.push("Save movie: cancelled".to_owned());
+        if let Some(m) = self.export.movie.making.take() {
+            self.notes.push(match m.destination {
+                Destination::File => "Save movie: cancelled".to_owned(),
+                Destination::Pacs => "Store to PACS: cancelled".to_owned(),
+            });
         }
         self.export.movie.requested = None;
     }
@@ -188,7 +255,18 @@ impl ShapecastApp {
         if let Some(m) = &self.export.movie.making {
             return Some((m.encoded(), m.frames));
         }
-        self.export.movie.requested.map(|n| (0, n))
+        self.export.movie.requested.map(|(n, _)| (0, n))
+    }
+
+    /// Whether the frames being made (or asked for) go to the archive.
+    pub fn movie_stores_to_pacs(&self) -> bool {
+        self.export
+            .movie
+            .making
+            .as_ref()
+            .map(|m| m.destination)
+            .or(self.export.movie.requested.map(|(_, d)| d))
+            == Some(Destination::Pacs)
     }
 
     /// The size of the MIP pane's full-resolution frame, pixels: a movie's frame size.
@@ -203,10 +281,10 @@ impl ShapecastApp {
 
     /// Starts, advances and finishes the movie (once per frame, after the panes).
     pub(in crate::app) fn advance_movie(&mut self, ctx: &egui::Context) {
-        if let Some(frames) = self.export.movie.requested.take()
-            && let Err(e) = self.start_movie(frames)
+        if let Some((frames, destination)) = self.export.movie.requested.take()
+            && let Err(e) = self.start_movie(frames, destination)
         {
-            self.error(format!("Save movie: {e}"));
+            self.error(format!("{}: {e}", action(destination)));
         }
         if self.export.movie.making.is_none() {
             return;
@@ -216,13 +294,16 @@ impl ShapecastApp {
             Ok(true) => {}
             Ok(false) => self.finish_movie(),
             Err(e) => {
-                self.export.movie.making = None;
-                self.error(format!("Save movie: {e}"));
+                let what = self.export.movie.making.take().map(|m| m.destination);
+                self.error(format!(
+                    "{}: {e}",
+                    action(what.unwrap_or(Destination::File))
+                ));
             }
         }
     }
 
-    fn start_movie(&mut self, frames: u32) -> Result<(), String> {
+    fn start_movie(&mut self, frames: u32, destination: Destination) -> Result<(), String> {
         let (Some(gpu), Some(scene)) = (&self.gpu, &self.scene) else {
             return Err("no volume is shown".to_owned());
         };
@@ -232,10 +313,46 @@ impl ShapecastApp {
             .ok_or("the MIP pane has not been drawn yet; show it first")?;
         let features = self.shown_features().map(|f| f.texture.clone());
         let target = RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?;
+        let source = match destination {
+            Destination::File => None,
+            Destination::Pacs => Some(
+                self.pacs_source()
+                    .map(|(_, study, series)| (study, series))
+                    .ok_or("the volume shown did not come from an archive")?,
+            ),
+        };
+        let settings = self.mip_view.frame_settings();
+        let request = self.mip_view.mode.as_ref().and(self.displayed_request());
+        let description = match &request {
+            Some(r) => format!(
+                "shape MIP, {}, {}",
+                r.method.name().to_uppercase(),
+                r.preset.name()
+            ),
+            None => "MIP".to_owned(),
+        };
+        let derivation = format!(
+            "Shapecast {}: {}, the MIP pane's view turned a full turn about the screen's vertical axis in {frames} frames; grey window {:.0}..{:.0}",
+            env!("CARGO_PKG_VERSION"),
+            match &request {
+                Some(r) => format!(
+                    "maximum intensity projection of the {} features ({} preset) over the grey",
+                    r.method.name().to_uppercase(),
+                    r.preset.name()
+                ),
+                None => "maximum intensity projection".to_owned(),
+            },
+            settings.window.0,
+            settings.window.1
+        );
         self.export.movie.making = Some(Making {
+            destination,
+            source,
+            description,
+            derivation,
             frames,
             camera: self.mip_view.camera,
-            settings: self.mip_view.frame_settings(),
+            settings,
             volume: scene.render.intensity.clone(),
             features,
             target,
@@ -244,7 +361,7 @@ impl ShapecastApp {
             cost: None,
             pane_frames: self.mip_view.frames_rendered(),
             reads: VecDeque::new(),
-            writer: ApngWriter::new(size, frames, FPS)?,
+            sink: Sink::new(destination, size, frames)?,
         });
         Ok(())
     }
@@ -279,14 +396,14 @@ impl ShapecastApp {
             m.next_row = 0;
             m.cost = None;
             m.reads.clear();
-            m.writer = ApngWriter::new(m.target.size, m.frames, FPS)?;
+            m.sink = Sink::new(m.destination, m.target.size, m.frames)?;
         }
         while let Some(read) = m.reads.front_mut() {
             match read.poll(gpu) {
                 None => break,
                 Some(Ok(rgba)) => {
                     m.reads.pop_front();
-                    m.writer.push(&rgba)?;
+                    m.sink.push(rgba)?;
                 }
                 Some(Err(e)) => return Err(format!("reading frame {} back: {e}", m.encoded() + 1)),
             }
@@ -338,7 +455,29 @@ impl ShapecastApp {
             return;
         };
         let (frames, size) = (m.frames, m.target.size);
-        let png = match m.writer.finish() {
+        let writer = match m.sink {
+            Sink::Apng(w) => w,
+            Sink::Frames(rgba) => {
+                let Some((study, series)) = m.source else {
+                    return;
+                };
+                self.notes.push(format!(
+                    "Store to PACS: sending {frames} frames of {}x{} to the archive",
+                    size[0], size[1]
+                ));
+                let report = self.reading_report();
+                return self.pacs_store(crate::app::pacs::StoreJob {
+                    study,
+                    series,
+                    frames: rgba,
+                    size,
+                    description: m.description,
+                    derivation: m.derivation,
+                    report,
+                });
+            }
+        };
+        let png = match writer.finish() {
             Ok(png) => png,
             Err(e) => return self.error(format!("Save movie: {e}")),
         };
@@ -375,6 +514,39 @@ impl ShapecastApp {
         }
     }
 
+    /// The "Store to PACS" button (in the PACS bar): shown when the volume came from an archive.
+    pub(in crate::app) fn store_pacs_ui(&mut self, ui: &mut egui::Ui) {
+        if self.pacs_source().is_none() {
+            return;
+        }
+        let r = ui
+            .add_enabled(
+                self.movie_progress().is_none() && !self.storing_to_pacs(),
+                egui::Button::new("Store to PACS"),
+            )
+            .on_hover_text(format!(
+                "the MIP's full turn ({MOVIE_FRAMES} frames) as a Secondary Capture series in this study of the archive, beside the source series"
+            ));
+        self.control("store-pacs", r.rect);
+        if r.clicked() {
+            let ctx = ui.ctx().clone();
+            self.store_to_pacs(&ctx, MOVIE_FRAMES);
+        }
+        if self.storing_to_pacs() {
+            ui.spinner();
+            ui.label(egui::RichText::new("sending to the archive").small());
+        } else if let Some(t) = self.pacs.stored_at {
+            if ui.ctx().input(|i| i.time) - t < 4.0 {
+                ui.label(egui::RichText::new("stored").small())
+                    .on_hover_text("the series is in the study (see Notes)");
+                ui.ctx()
+                    .request_repaint_after(std::time::Duration::from_millis(500));
+            } else {
+                self.pacs.stored_at = None;
+            }
+        }
+    }
+
     /// The status bar's progress of the movie being made, with its Cancel.
     pub(in crate::app) fn movie_progress_ui(&mut self, ui: &mut egui::Ui) {
         let Some((done, frames)) = self.movie_progress() else {
@@ -383,7 +555,13 @@ impl ShapecastApp {
         ui.add(
             egui::ProgressBar::new(done as f32 / frames.max(1) as f32)
                 .desired_width(200.0)
-                .text(format!("saving the movie: frame {done} of {frames}")),
+                .text(format!(
+                    "{}: frame {done} of {frames}",
+                    match self.export.movie.making.as_ref().map(|m| m.destination) {
+                        Some(Destination::Pacs) => "storing to PACS",
+                        _ => "saving the movie",
+                    }
+                )),
         );
         let r = ui
             .small_button("Cancel")
@@ -392,6 +570,14 @@ impl ShapecastApp {
         if r.clicked() {
             self.cancel_movie();
         }
+    }
+}
+
+/// The action's name in messages.
+fn action(destination: Destination) -> &'static str {
+    match destination {
+        Destination::File => "Save movie",
+        Destination::Pacs => "Store to PACS",
     }
 }
 

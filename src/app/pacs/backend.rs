@@ -12,7 +12,7 @@ pub use web::*;
 mod web {
     use std::rc::Rc;
 
-    use super::super::{Event, Inbox, PacsTarget};
+    use super::super::{Event, Inbox, PacsTarget, StoreJob};
     use crate::io::dicomweb::web::WebClient;
     use crate::io::dicomweb::{Auth, Base, DicomWebError, StudySearch};
 
@@ -112,6 +112,25 @@ mod web {
         Task(Some(c))
     }
 
+    /// Stores a rotation into its study (the source series' metadata, then STOW-RS).
+    pub fn store(base: Base, auth: Auth, job: StoreJob, task: u64, inbox: Inbox) -> Task {
+        let Some(c) = client(base, auth, task, &inbox, |e| Event::Stored(Err(e))) else {
+            return Task(None);
+        };
+        let client = c.clone();
+        wasm_bindgen_futures::spawn_local(async move {
+            let result = async {
+                let source = client.source_series(&job.study, &job.series).await?;
+                let (instances, skipped) = job.instances(&source)?;
+                client.store(&job.study, &instances).await?;
+                Ok(job.done(&instances, skipped))
+            }
+            .await;
+            inbox.push(task, Event::Stored(result));
+        });
+        Task(Some(c))
+    }
+
     /// `#token=...` of the page's address, removed from the address bar (the rest of the
     /// fragment stays).
     pub fn take_fragment_token() -> Option<String> {
@@ -159,7 +178,7 @@ mod native {
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
 
-    use super::super::{Event, Inbox, PacsTarget};
+    use super::super::{Event, Inbox, PacsTarget, StoreJob};
     use crate::io::dicomweb::client::Client;
     use crate::io::dicomweb::{Auth, Base, StudySearch};
 
@@ -224,6 +243,19 @@ mod native {
                 target,
                 result: Box::new(result),
             });
+        })
+    }
+
+    /// Stores a rotation into its study (the source series' metadata, then STOW-RS).
+    pub fn store(base: Base, auth: Auth, job: StoreJob, task: u64, inbox: Inbox) -> Task {
+        spawn(task, inbox, move |send| {
+            let result = Client::new(base, auth).and_then(|c| {
+                let source = c.source_series(&job.study, &job.series)?;
+                let (instances, skipped) = job.instances(&source)?;
+                c.store(&job.study, &instances)?;
+                Ok(job.done(&instances, skipped))
+            });
+            send(Event::Stored(result));
         })
     }
 }

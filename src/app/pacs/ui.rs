@@ -1,11 +1,12 @@
-//! The PACS bar above the panes ("Open from PACS…", Cancel, the patient line) and the dialog:
-//! server, token, study search, studies, series.
+//! The PACS bar above the panes ("Open from PACS…", Cancel, "Store to PACS" for a series from an
+//! archive, the patient line) and the dialog: server, token, study search, studies, series.
 
 use super::{PacsTarget, patient_line, study_summary};
 use crate::app::ShapecastApp;
 
 impl ShapecastApp {
-    /// The bar above the panes: "Open from PACS…", the retrieval's Cancel, the patient line.
+    /// The bar above the panes: "Open from PACS…", the retrieval's Cancel, "Store to PACS",
+    /// the patient line.
     pub(in crate::app) fn pacs_bar_ui(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
             let r = ui
@@ -24,6 +25,7 @@ impl ShapecastApp {
                     self.cancel_dicomweb();
                 }
             }
+            self.store_pacs_ui(ui);
             if let Some(line) = self.pacs.patient.as_ref().and_then(patient_line) {
                 ui.separator();
                 ui.label(egui::RichText::new(line).strong())

@@ -347,6 +347,30 @@ impl<T: Transport> Client<T> {
         }
     }
 
+    /// One page of a series search across studies: (study, series) pairs.
+    pub fn search_series(
+        &self,
+        search: &super::SeriesSearch,
+    ) -> Result<Vec<(String, SeriesInfo)>, DicomWebError> {
+        let url = self.base.series_search(search)?;
+        let body = self.get_json(url.clone(), "the series search")?;
+        qido::parse_series_in_studies(&url, &body)
+    }
+
+    /// Whether the archive holds series `series` in study `study`.
+    pub fn has_series(&self, study: &str, series: &str) -> Result<bool, DicomWebError> {
+        let url = self.base.series_exists_query(study, series)?;
+        let body = self.get_json(url.clone(), &format!("study {study}"));
+        match body {
+            Ok(body) => Ok(qido::parse_series(&url, &body)?
+                .iter()
+                .any(|s| s.series_uid == series)),
+            // Some archives answer a query into an unknown study with 404.
+            Err(DicomWebError::NotFound { .. }) => Ok(false),
+            Err(e) => Err(e),
+        }
+    }
+
     /// The study and the series to open: the one named, else the chooser's.
     pub fn resolve(&self, study: &str, series: Option<&str>) -> Result<Resolved, DicomWebError> {
         let info = self.find_study(study)?;

@@ -17,7 +17,8 @@
 //! - `web` (wasm only): the page's transport, the browser's `fetch` with streamed bodies,
 //!   driving the same `Retrieval` from one async task;
 //! - `stow`: results back into the archive (STOW-RS): the source series from its metadata, the
-//!   Secondary Capture of a shape MIP rotation, the request body and the archive's answer.
+//!   Secondary Capture of a shape MIP rotation, the request body and the archive's answer;
+//! - `sr`: a reading's measurements and findings as a DICOM Structured Report (TID 1500).
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod client;
@@ -25,6 +26,7 @@ pub mod listing;
 pub mod multipart;
 pub mod qido;
 pub mod retrieve;
+pub mod sr;
 pub mod stow;
 #[cfg(target_arch = "wasm32")]
 pub mod web;
@@ -32,6 +34,7 @@ pub mod web;
 pub use listing::InstanceListing;
 pub use multipart::{MultipartParser, Part};
 pub use qido::{InstanceInfo, SeriesInfo, StudyInfo, choose_series, pet_series};
+
 pub use retrieve::{Fetch, InstanceResponse, Progress, Retrieval};
 
 use crate::io::LoadError;
@@ -316,6 +319,75 @@ impl Base {
         let instance = check_uid("SOPInstanceUID", instance)?;
         Ok(format!(
             "{}/studies/{study}/series/{series}/instances/{instance}",
+            self.url
+        ))
+    }
+}
+
+/// A series search across studies (QIDO-RS `{base}/series?...`), as a batch pages through an
+/// archive: a modality, more matching keys (`StudyDate=20240101-20240131`, a keyword or an
+/// 8-digit tag each), and a page.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SeriesSearch {
+    pub modality: String,
+    pub keys: Vec<(String, String)>,
+    pub offset: usize,
+    pub limit: usize,
+}
+
+impl SeriesSearch {
+    /// A `KEY=VALUE` matching key, checked.
+    pub fn parse_key(kv: &str) -> Result<(String, String), DicomWebError> {
+        let bad = |reason| DicomWebError::InvalidSearch {
+            field: "query",
+            value: kv.chars().take(80).collect(),
+            reason,
+        };
+        let (k, v) = kv.split_once('=').ok_or(bad("expected KEY=VALUE"))?;
+        let (k, v) = (k.trim(), v.trim());
+        if k.is_empty()
+            || k.len() > 64
+            || !k.bytes().all(|b| b.is_ascii_alphanumeric())
+            || k.eq_ignore_ascii_case("limit")
+            || k.eq_ignore_ascii_case("offset")
+        {
+            return Err(bad(
+                "KEY must be a DICOM keyword or an 8-digit tag (and not limit or offset)",
+            ));
+        }
+        if v.is_empty() || v.chars().count() > 64 || v.chars().any(char::is_control) {
+            return Err(bad("VALUE must be 1 to 64 printable characters"));
+        }
+        Ok((k.to_owned(), v.to_owned()))
+    }
+}
+
+impl Base {
+    /// `{base}/series?Modality=M&KEY=VALUE...&includefield=0020000D&limit=N&offset=K`.
+    pub fn series_search(&self, search: &SeriesSearch) -> Result<String, DicomWebError> {
+        let mut url = format!("{}/series?", self.url);
+        let modality = SeriesSearch::parse_key(&format!("Modality={}", search.modality))?;
+        for (k, v) in std::iter::once(&modality).chain(&search.keys) {
+            let (k, v) = SeriesSearch::parse_key(&format!("{k}={v}"))?;
+            url.push_str(&k);
+            url.push('=');
+            url.push_str(&crate::io::url::percent_encode(&v, b"*"));
+            url.push('&');
+        }
+        url.push_str(&format!(
+            "includefield=0020000D&limit={}&offset={}",
+            search.limit.max(1),
+            search.offset
+        ));
+        Ok(url)
+    }
+
+    /// `{base}/studies/{study}/series?SeriesInstanceUID={series}`: whether the archive holds it.
+    pub fn series_exists_query(&self, study: &str, series: &str) -> Result<String, DicomWebError> {
+        let study = check_uid("StudyInstanceUID", study)?;
+        let series = check_uid("SeriesInstanceUID", series)?;
+        Ok(format!(
+            "{}/studies/{study}/series?SeriesInstanceUID={series}",
             self.url
         ))
     }

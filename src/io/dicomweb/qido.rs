@@ -111,6 +111,21 @@ pub fn parse_series(url: &str, body: &[u8]) -> Result<Vec<SeriesInfo>, DicomWebE
         .collect()
 }
 
+/// The series of an all-studies series query (`{base}/series?...`), each with its study.
+pub fn parse_series_in_studies(
+    url: &str,
+    body: &[u8],
+) -> Result<Vec<(String, SeriesInfo)>, DicomWebError> {
+    let study_uids: Vec<String> = entries(url, body)?
+        .iter()
+        .map(|o| uid(url, o, "0020000D", "StudyInstanceUID"))
+        .collect::<Result<_, _>>()?;
+    Ok(study_uids
+        .into_iter()
+        .zip(parse_series(url, body)?)
+        .collect())
+}
+
 /// The instances of a QIDO-RS instance query.
 pub fn parse_instances(url: &str, body: &[u8]) -> Result<Vec<InstanceInfo>, DicomWebError> {
     entries(url, body)?

@@ -21,6 +21,11 @@ use super::{Auth, Base, DicomWebError, Request, check_uid};
 /// The SeriesDescription of every series Shapecast stores begins with this.
 pub const DESCRIPTION_PREFIX: &str = "Shapecast";
 
+/// SeriesNumber of the series Shapecast stores: the rotation's, then the report's (after the
+/// scanner's own series, which rarely reach the thousands).
+pub const ROTATION_SERIES_NUMBER: u32 = 9001;
+pub const REPORT_SERIES_NUMBER: u32 = 9002;
+
 /// The patient and study attributes a derived series copies from its source (PS3.3 C.7.1.1,
 /// C.7.2.1), with their VRs; type 2 attributes are written empty where the source lacks them.
 const COPIED: [(Tag, VR, bool); 10] = [
@@ -46,6 +51,8 @@ pub struct SourceSeries {
     pub study_uid: String,
     pub series_uid: String,
     pub modality: Option<String>,
+    /// FrameOfReferenceUID: the patient coordinates a report's 3D regions are in.
+    pub frame_of_reference: Option<String>,
     /// The copied patient and study attributes present in the source: (tag, value as text).
     copied: Vec<(Tag, String)>,
     /// (SOPClassUID, SOPInstanceUID) of each instance, as listed.
@@ -91,6 +98,8 @@ impl SourceSeries {
             study_uid,
             series_uid,
             modality: qido::string(first, "00080060"),
+            frame_of_reference: qido::string(first, "00200052")
+                .filter(|u| check_uid("FrameOfReferenceUID", u).is_ok()),
             copied,
             instances,
         })
@@ -116,6 +125,9 @@ pub struct Rotation<'a> {
     pub derivation: String,
     /// Degrees between frames about the view's vertical axis.
     pub step_deg: f64,
+    /// A key that makes the UIDs the same on every run (a batch's rerun finds its own result);
+    /// `None`: new UIDs each time.
+    pub stable_key: Option<String>,
 }
 
 /// A DICOM instance made for the archive.
@@ -253,57 +265,34 @@ pub fn secondary_capture(
     if pixels.len() % 2 == 1 {
         pixels.push(0); // OB values have even length
     }
-    let name = format!(
-        "shapecast|secondary-capture|{}|{}{}|{:016x}|{}",
-        source.series_uid,
-        now.date,
-        now.time,
-        fnv1a(&pixels),
-        rotation.description
-    );
+    let name = match &rotation.stable_key {
+        Some(key) => format!("shapecast|stable|{key}"),
+        None => format!(
+            "shapecast|secondary-capture|{}|{}{}|{:016x}|{}",
+            source.series_uid,
+            now.date,
+            now.time,
+            fnv1a(&pixels),
+            rotation.description
+        ),
+    };
     let series_uid = uid_for(&format!("{name}|series"));
     let sop_instance_uid = uid_for(&format!("{name}|instance"));
     let sop_class_uid = uids::MULTI_FRAME_TRUE_COLOR_SECONDARY_CAPTURE_IMAGE_STORAGE;
 
-    let mut obj = InMemDicomObject::new_empty();
-    // SOP common, patient, general study (copied), general series, SC equipment.
-    put(&mut obj, tags::SPECIFIC_CHARACTER_SET, VR::CS, "ISO_IR 192");
-    put(&mut obj, tags::SOP_CLASS_UID, VR::UI, sop_class_uid);
-    put(&mut obj, tags::SOP_INSTANCE_UID, VR::UI, &sop_instance_uid);
-    put(&mut obj, tags::INSTANCE_CREATION_DATE, VR::DA, &now.date);
-    put(&mut obj, tags::INSTANCE_CREATION_TIME, VR::TM, &now.time);
-    put(&mut obj, tags::TIMEZONE_OFFSET_FROM_UTC, VR::SH, "+0000");
-    for (tag, vr, type2) in COPIED {
-        match source.attribute(tag) {
-            Some(v) => put(&mut obj, tag, vr, v),
-            None if type2 => put(&mut obj, tag, vr, ""),
-            None => {}
-        }
-    }
-    put(
-        &mut obj,
-        tags::STUDY_INSTANCE_UID,
-        VR::UI,
-        &source.study_uid,
+    let mut obj = derived_object(
+        source,
+        &Derived {
+            sop_class_uid,
+            sop_instance_uid: &sop_instance_uid,
+            series_uid: &series_uid,
+            modality: "OT",
+            series_number,
+            description: &rotation.description,
+        },
+        now,
     );
-    put(&mut obj, tags::MODALITY, VR::CS, "OT");
-    put(&mut obj, tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
-    put(
-        &mut obj,
-        tags::SERIES_NUMBER,
-        VR::IS,
-        &series_number.to_string(),
-    );
-    let description = format!("{DESCRIPTION_PREFIX} {}", rotation.description);
-    put(
-        &mut obj,
-        tags::SERIES_DESCRIPTION,
-        VR::LO,
-        &description.chars().take(64).collect::<String>(),
-    );
-    put(&mut obj, tags::SERIES_DATE, VR::DA, &now.date);
-    put(&mut obj, tags::SERIES_TIME, VR::TM, &now.time);
-    put(&mut obj, tags::MANUFACTURER, VR::LO, "Shapecast");
+    // SC equipment, general image, SC image, cine, multi-frame.
     put(&mut obj, tags::CONVERSION_TYPE, VR::CS, "WSD");
     put(
         &mut obj,
@@ -323,7 +312,6 @@ pub fn secondary_capture(
         VR::LO,
         env!("CARGO_PKG_VERSION"),
     );
-    // General image, SC image, cine, multi-frame.
     put(&mut obj, tags::INSTANCE_NUMBER, VR::IS, "1");
     put(&mut obj, tags::PATIENT_ORIENTATION, VR::CS, "");
     put(&mut obj, tags::CONTENT_DATE, VR::DA, &now.date);
@@ -408,6 +396,86 @@ pub fn secondary_capture(
         PrimitiveValue::from(pixels),
     ));
 
+    let bytes = part10(obj, "the Secondary Capture")?;
+    Ok(Instance {
+        bytes,
+        series_uid,
+        sop_instance_uid,
+        sop_class_uid,
+    })
+}
+
+/// What a derived instance is: its class and UIDs, and its series.
+pub(super) struct Derived<'a> {
+    pub sop_class_uid: &'a str,
+    pub sop_instance_uid: &'a str,
+    pub series_uid: &'a str,
+    pub modality: &'a str,
+    pub series_number: u32,
+    /// After "Shapecast " in SeriesDescription.
+    pub description: &'a str,
+}
+
+/// The attributes every instance Shapecast derives from a series carries: SOP common, the
+/// patient and study copied from the source, its own series, the equipment.
+pub(super) fn derived_object(
+    source: &SourceSeries,
+    d: &Derived<'_>,
+    now: &DicomNow,
+) -> InMemDicomObject {
+    let mut obj = InMemDicomObject::new_empty();
+    put(&mut obj, tags::SPECIFIC_CHARACTER_SET, VR::CS, "ISO_IR 192");
+    put(&mut obj, tags::SOP_CLASS_UID, VR::UI, d.sop_class_uid);
+    put(&mut obj, tags::SOP_INSTANCE_UID, VR::UI, d.sop_instance_uid);
+    put(&mut obj, tags::INSTANCE_CREATION_DATE, VR::DA, &now.date);
+    put(&mut obj, tags::INSTANCE_CREATION_TIME, VR::TM, &now.time);
+    put(&mut obj, tags::TIMEZONE_OFFSET_FROM_UTC, VR::SH, "+0000");
+    for (tag, vr, type2) in COPIED {
+        match source.attribute(tag) {
+            Some(v) => put(&mut obj, tag, vr, v),
+            None if type2 => put(&mut obj, tag, vr, ""),
+            None => {}
+        }
+    }
+    put(
+        &mut obj,
+        tags::STUDY_INSTANCE_UID,
+        VR::UI,
+        &source.study_uid,
+    );
+    put(&mut obj, tags::MODALITY, VR::CS, d.modality);
+    put(&mut obj, tags::SERIES_INSTANCE_UID, VR::UI, d.series_uid);
+    put(
+        &mut obj,
+        tags::SERIES_NUMBER,
+        VR::IS,
+        &d.series_number.to_string(),
+    );
+    let description = format!("{DESCRIPTION_PREFIX} {}", d.description);
+    put(
+        &mut obj,
+        tags::SERIES_DESCRIPTION,
+        VR::LO,
+        &description.chars().take(64).collect::<String>(),
+    );
+    put(&mut obj, tags::SERIES_DATE, VR::DA, &now.date);
+    put(&mut obj, tags::SERIES_TIME, VR::TM, &now.time);
+    put(&mut obj, tags::MANUFACTURER, VR::LO, "Shapecast");
+    put(
+        &mut obj,
+        tags::SOFTWARE_VERSIONS,
+        VR::LO,
+        env!("CARGO_PKG_VERSION"),
+    );
+    obj
+}
+
+/// The object as a Part 10 file in explicit VR little endian.
+pub(super) fn part10(obj: InMemDicomObject, what: &str) -> Result<Vec<u8>, DicomWebError> {
+    let error = |message: String| DicomWebError::Encode {
+        what: what.to_owned(),
+        message,
+    };
     let file = obj
         .with_meta(
             FileMetaTableBuilder::new()
@@ -415,16 +483,11 @@ pub fn secondary_capture(
                 .implementation_class_uid(IMPLEMENTATION_CLASS_UID)
                 .implementation_version_name(concat!("SHAPECAST_", env!("CARGO_PKG_VERSION"))),
         )
-        .map_err(|e| encode_error(e.to_string()))?;
+        .map_err(|e| error(e.to_string()))?;
     let mut bytes = Vec::new();
     file.write_all(&mut bytes)
-        .map_err(|e| encode_error(e.to_string()))?;
-    Ok(Instance {
-        bytes,
-        series_uid,
-        sop_instance_uid,
-        sop_class_uid,
-    })
+        .map_err(|e| error(e.to_string()))?;
+    Ok(bytes)
 }
 
 /// Shapecast's implementation class UID (a `2.25.` UUID of its name).
@@ -696,6 +759,7 @@ mod tests {
             description: "shape MIP, RST".to_owned(),
             derivation: "test".to_owned(),
             step_deg: 120.0,
+            stable_key: None,
         };
         let now = DicomNow::from_unix(1_732_838_400, 0);
         let made = secondary_capture(&source(), &rotation, &now, 9001).unwrap();
@@ -746,7 +810,8 @@ mod tests {
                     frames: &frames,
                     description: String::new(),
                     derivation: String::new(),
-                    step_deg: 1.0
+                    step_deg: 1.0,
+                    stable_key: None,
                 },
                 &now,
                 1
@@ -765,6 +830,7 @@ mod tests {
             description: "x".to_owned(),
             derivation: String::new(),
             step_deg: 360.0,
+            stable_key: None,
         };
         let made = secondary_capture(&source(), &rotation, &DicomNow::from_unix(0, 0), 1).unwrap();
         let (ct, body) = request_body(std::slice::from_ref(&made));

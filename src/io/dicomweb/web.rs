@@ -197,11 +197,46 @@ impl WebClient {
         retrieval.finish()
     }
 
+    /// The series a result derives from, from the series' WADO-RS metadata.
+    pub async fn source_series(
+        &self,
+        study: &str,
+        series: &str,
+    ) -> Result<super::stow::SourceSeries, DicomWebError> {
+        let url = self.base.series_metadata_url(study, series)?;
+        let body = self.get_json(&url, &format!("series {series}")).await?;
+        super::stow::SourceSeries::from_metadata(&url, &body)
+    }
+
+    /// Stores instances into a study (STOW-RS).
+    pub async fn store(
+        &self,
+        study: &str,
+        instances: &[super::stow::Instance],
+    ) -> Result<super::stow::Stored, DicomWebError> {
+        let url = self.base.store_url(study)?;
+        let (content_type, body) = super::stow::request_body(instances);
+        let request = Request::stow(url.clone(), content_type, &self.auth);
+        let signal = self.controller.signal();
+        let response = send(&request, Some(&body), &signal).await?;
+        drop(body);
+        let status = response.status();
+        let mut answer = Vec::new();
+        read_body(&response, &url, &signal, &mut |chunk| {
+            if answer.len() as u64 + chunk.len() as u64 <= MAX_JSON_BYTES {
+                answer.extend_from_slice(chunk);
+            }
+            Ok(())
+        })
+        .await?;
+        super::stow::read_answer(&url, status, &answer, instances, &self.auth)
+    }
+
     /// A QIDO-RS answer's bytes (at most [`MAX_JSON_BYTES`]).
     async fn get_json(&self, url: &str, what: &str) -> Result<Vec<u8>, DicomWebError> {
         let request = Request::qido(url.to_owned(), &self.auth);
         let signal = self.controller.signal();
-        let response = send(&request, &signal).await?;
+        let response = send(&request, None, &signal).await?;
         check_status(response.status(), url, what, &self.auth)?;
         if let Some(n) = content_length(&response)
             && n > MAX_JSON_BYTES
@@ -244,7 +279,7 @@ async fn fetch_instance(
     signal: &web_sys::AbortSignal,
     inbox: &Inbox<Message>,
 ) -> Result<Vec<Part>, DicomWebError> {
-    let response = send(&fetch.request, signal).await?;
+    let response = send(&fetch.request, None, signal).await?;
     let content_type = response.headers().get("content-type").ok().flatten();
     let mut reader = InstanceResponse::start(
         fetch,
@@ -268,10 +303,11 @@ async fn fetch_instance(
     reader.finish()
 }
 
-/// Sends a GET with the request's headers; a refusal (no answer, CORS, the page's
-/// Content-Security-Policy) is a message saying what may be wrong.
+/// Sends a GET (or, with a body, a POST) with the request's headers; a refusal (no answer,
+/// CORS, the page's Content-Security-Policy) is a message saying what may be wrong.
 async fn send(
     request: &Request,
+    body: Option<&[u8]>,
     signal: &web_sys::AbortSignal,
 ) -> Result<web_sys::Response, DicomWebError> {
     let url = request.url.as_str();
@@ -287,7 +323,13 @@ async fn send(
             .map_err(|_| transport(format!("the {name} header cannot be sent")))?;
     }
     let init = web_sys::RequestInit::new();
-    init.set_method("GET");
+    match body {
+        Some(bytes) => {
+            init.set_method("POST");
+            init.set_body(&js_sys::Uint8Array::from(bytes).into());
+        }
+        None => init.set_method("GET"),
+    }
     init.set_headers(&headers);
     init.set_signal(Some(signal));
     match JsFuture::from(window.fetch_with_str_and_init(url, &init)).await {
