@@ -1086,6 +1086,110 @@ fn findings_go_back_as_a_measurement_report() {
     }
 }
 
+/// `batch` over an archive of a CT and an MR study in two shards (the flag, then a Kubernetes
+/// Indexed Job's and a Slurm array's environment): every series is done by exactly one shard
+/// and its rotation lands in its study; a rerun skips everything; the summary is JSON.
+#[test]
+fn a_batch_in_two_shards_does_every_series_once_and_a_rerun_skips_them() {
+    let Some(series_root) = common::shared_data("series") else {
+        return;
+    };
+    let Some(orthanc) = Orthanc::start(false) else {
+        return;
+    };
+    let head = series_files(&series_root.join("ct-head-64px"));
+    let mr = series_files(&series_root.join("mr-prostate-adc-oblique"));
+    let chest = series_files(&series_root.join("ct-chest-lung-kernel"));
+    orthanc.upload(&head);
+    orthanc.upload(&mr);
+    orthanc.upload(&chest);
+    let url = orthanc.url("/dicom-web");
+    let batch = |extra: &[&str], env: &[(&str, &str)]| {
+        let mut args = vec![
+            "batch",
+            "--dicomweb",
+            &url,
+            "--method",
+            "hessian",
+            "--preset",
+            "lung-nodules",
+            "--frames",
+            "3",
+            "--size",
+            "40x32",
+        ];
+        args.extend_from_slice(extra);
+        let (ok, out, err) = shapecast(&args, env);
+        assert!(ok, "{err}");
+        eprintln!("{err}{out}");
+        let summary: serde_json::Value = serde_json::from_str(&out).expect("the JSON summary");
+        (summary, err)
+    };
+    let count = |v: &serde_json::Value, key: &str| v[key].as_u64().unwrap_or(u64::MAX);
+    let (first, _) = batch(&["--shard", "0/2"], &[]);
+    let (second, _) = batch(&["--shards", "2"], &[("JOB_COMPLETION_INDEX", "1")]);
+    assert_eq!(count(&first, "series_matching"), 3, "{first}");
+    assert_eq!(count(&second, "series_matching"), 3, "{second}");
+    assert_eq!(
+        count(&first, "done") + count(&second, "done"),
+        3,
+        "{first} {second}"
+    );
+    assert_eq!(
+        count(&first, "series_in_shard") + count(&second, "series_in_shard"),
+        3
+    );
+    for (files, modality) in [(&head, "CT"), (&mr, "MR"), (&chest, "CT")] {
+        let (study, source) = uids(&files[0]);
+        let listed = listed_series(&orthanc, &study);
+        assert!(
+            listed
+                .iter()
+                .any(|s| s.1 == "OT" && s.2 == "Shapecast shape MIP, HESSIAN, lung-nodules"),
+            "{modality}: no rotation in {listed:?}"
+        );
+        assert!(listed.iter().any(|s| s.0 == source));
+    }
+    // The chest CT's findings went in as a report (the head CT has none in the lung).
+    let (chest_study, _) = uids(&chest[0]);
+    assert!(
+        listed_series(&orthanc, &chest_study)
+            .iter()
+            .any(|s| s.1 == "SR" && s.2.starts_with("Shapecast findings, HESSIAN lung-nodules")),
+        "no report"
+    );
+    // A query that matches nothing: nothing to do.
+    let (none, _) = batch(&["--query", "PatientID=nobody-at-all", "--dry-run"], &[]);
+    assert_eq!(count(&none, "series_matching"), 0, "{none}");
+    // A rerun (both shards, from a Slurm array's environment) finds everything done.
+    let mut skipped = 0;
+    for task in ["1", "2"] {
+        let (again, err) = batch(
+            &[],
+            &[
+                ("SLURM_ARRAY_TASK_ID", task),
+                ("SLURM_ARRAY_TASK_COUNT", "2"),
+                ("SLURM_ARRAY_TASK_MIN", "1"),
+            ],
+        );
+        assert_eq!(count(&again, "done"), 0, "{again} {err}");
+        skipped += count(&again, "skipped");
+        assert!(
+            err.contains("skipped, its result is in the archive")
+                || count(&again, "series_in_shard") == 0,
+            "{err}"
+        );
+    }
+    assert_eq!(skipped, 3);
+    // No more rotations than series: nothing was stored twice.
+    let (study, _) = uids(&head[0]);
+    let rotations = listed_series(&orthanc, &study)
+        .iter()
+        .filter(|s| s.1 == "OT")
+        .count();
+    assert_eq!(rotations, 1);
+}
+
 /// tests/io/read_back.py's JSON for a file, or a visible skip where python3 or pydicom is
 /// missing (a failure under CI=true: `cargo xtask setup` installs python3-pydicom).
 fn pydicom_read_back(path: &Path) -> Option<serde_json::Value> {
