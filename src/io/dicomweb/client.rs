@@ -22,6 +22,8 @@ pub use super::DEFAULT_PARALLEL;
 pub struct HttpResponse {
     pub status: u16,
     pub content_type: Option<String>,
+    /// The Retry-After header of a busy answer.
+    pub retry_after: Option<String>,
     pub body: Box<dyn Read>,
 }
 
@@ -136,14 +138,18 @@ fn answer(
         },
     })?;
     let status = response.status().as_u16();
-    let content_type = response
-        .headers()
-        .get("content-type")
-        .and_then(|v| v.to_str().ok())
-        .map(str::to_owned);
+    let header = |name: &str| {
+        response
+            .headers()
+            .get(name)
+            .and_then(|v| v.to_str().ok())
+            .map(str::to_owned)
+    };
+    let (content_type, retry_after) = (header("content-type"), header("retry-after"));
     Ok(HttpResponse {
         status,
         content_type,
+        retry_after,
         body: Box::new(response.into_body().into_reader()),
     })
 }
@@ -230,11 +236,28 @@ impl<T: Transport> Client<T> {
         &self.base
     }
 
-    /// A QIDO-RS answer's bytes (at most [`MAX_JSON_BYTES`]).
+    /// A QIDO-RS answer's bytes (at most [`MAX_JSON_BYTES`]), asked for again after a dropped
+    /// connection (once) or a busy answer (after the wait it asks for, [`super::backoff`]).
     fn get_json(&self, url: String, what: &str) -> Result<Vec<u8>, DicomWebError> {
-        let request = Request::qido(url, &self.auth);
+        let mut attempt = 0;
+        loop {
+            attempt += 1;
+            match self.get_json_once(&url, what) {
+                Err(e) if e.is_retryable() && attempt < super::max_attempts(&e) => {
+                    let wait = super::backoff(attempt, &e);
+                    log::warn!("{e}; asking again in {:.1} s", wait.as_secs_f64());
+                    std::thread::sleep(wait);
+                }
+                other => return other,
+            }
+        }
+    }
+
+    fn get_json_once(&self, url: &str, what: &str) -> Result<Vec<u8>, DicomWebError> {
+        let request = Request::qido(url.to_owned(), &self.auth);
         let response = self.transport.get(&request)?;
-        check_status(response.status, &request.url, what, &self.auth)?;
+        check_status(response.status, &request.url, what, &self.auth)
+            .map_err(|e| e.with_retry_after(response.retry_after.as_deref()))?;
         let mut body = Vec::new();
         response
             .body
@@ -327,6 +350,7 @@ impl<T: Transport> Client<T> {
             attempt += 1;
             let result = self.transport.post(&request, &body).and_then(|response| {
                 let status = response.status;
+                let retry_after = response.retry_after.clone();
                 let mut answer = Vec::new();
                 response
                     .body
@@ -337,10 +361,11 @@ impl<T: Transport> Client<T> {
                         message: format!("reading the answer: {e}"),
                     })?;
                 super::stow::read_answer(&url, status, &answer, instances, &self.auth)
+                    .map_err(|e| e.with_retry_after(retry_after.as_deref()))
             });
             match result {
-                Err(e) if attempt < 2 && e.is_retryable() => {
-                    std::thread::sleep(Duration::from_millis(500));
+                Err(e) if e.is_retryable() && attempt < super::max_attempts(&e) => {
+                    std::thread::sleep(super::backoff(attempt, &e));
                 }
                 other => return other,
             }
@@ -422,6 +447,9 @@ impl<T: Transport> Client<T> {
                             Err(_) => return,
                         };
                         let Ok(fetch) = job else { return };
+                        if !fetch.delay.is_zero() {
+                            std::thread::sleep(fetch.delay);
+                        }
                         if stop.load(Ordering::Relaxed) {
                             return;
                         }
@@ -490,7 +518,8 @@ fn fetch_instance<T: Transport>(
         response.content_type.as_deref(),
         auth,
         limits,
-    )?;
+    )
+    .map_err(|e| e.with_retry_after(response.retry_after.as_deref()))?;
     let mut body = response.body;
     let mut buf = vec![0u8; 256 << 10];
     loop {
@@ -526,6 +555,8 @@ mod tests {
     struct FakeArchive {
         answers: HashMap<String, (u16, String, Vec<u8>)>,
         flaky: Vec<String>,
+        /// URLs whose first request is answered 429 with Retry-After: 1.
+        busy: Vec<String>,
         seen: Mutex<Vec<String>>,
         in_flight: AtomicUsize,
         most_in_flight: AtomicUsize,
@@ -547,6 +578,7 @@ mod tests {
                 return Ok(HttpResponse {
                     status: 404,
                     content_type: None,
+                    retry_after: None,
                     body: Box::new(std::io::empty()),
                 });
             };
@@ -554,9 +586,18 @@ mod tests {
             if first_time && self.flaky.contains(&request.url) {
                 body.truncate(body.len() / 2);
             }
+            if first_time && self.busy.contains(&request.url) {
+                return Ok(HttpResponse {
+                    status: 429,
+                    content_type: None,
+                    retry_after: Some("1".to_owned()),
+                    body: Box::new(std::io::empty()),
+                });
+            }
             Ok(HttpResponse {
                 status: *status,
                 content_type: Some(ct.clone()),
+                retry_after: None,
                 body: Box::new(std::io::Cursor::new(body)),
             })
         }
@@ -607,6 +648,7 @@ mod tests {
         FakeArchive {
             answers,
             flaky: Vec::new(),
+            busy: Vec::new(),
             seen: Mutex::new(Vec::new()),
             in_flight: AtomicUsize::new(0),
             most_in_flight: AtomicUsize::new(0),
@@ -642,6 +684,29 @@ mod tests {
             2,
             "retried once"
         );
+    }
+
+    /// An archive that answers 429 with Retry-After: 1 to an instance and to the instance list
+    /// is asked again after the wait it asked for, and the series opens.
+    #[test]
+    fn a_busy_archive_is_asked_again_after_its_retry_after() {
+        let mut a = archive(4);
+        let list = format!("http://archive/dw/studies/{STUDY}/series/{SERIES}/instances");
+        let instance = format!("{list}/{SERIES}.2");
+        a.busy = vec![list.clone(), instance.clone()];
+        let c = client(a);
+        let started = std::time::Instant::now();
+        let loaded = c.retrieve(STUDY, SERIES, &mut |_| {}).unwrap();
+        assert_eq!(loaded.volume.dims, [5, 4, 4]);
+        // Two waits of the 1 s asked for, one after the other (the list, then the instance).
+        assert!(
+            started.elapsed() >= Duration::from_secs(2),
+            "{:?}",
+            started.elapsed()
+        );
+        let seen = c.transport.seen.lock().unwrap();
+        assert_eq!(seen.iter().filter(|u| **u == instance).count(), 2);
+        assert_eq!(seen.iter().filter(|u| **u == list).count(), 2);
     }
 
     #[test]

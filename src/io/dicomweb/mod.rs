@@ -91,6 +91,18 @@ pub enum DicomWebError {
         reason: String,
     },
 
+    #[error("{url}: HTTP {status}: the archive is busy{}", match retry_after_s {
+        Some(s) => format!(" (it asked to wait {s} s)"),
+        None => String::new(),
+    })]
+    Busy {
+        url: String,
+        /// 429 Too Many Requests or 503 Service Unavailable.
+        status: u16,
+        /// The answer's Retry-After, in seconds.
+        retry_after_s: Option<u64>,
+    },
+
     #[error(
         "cannot connect to {host}: {message} (is the archive running there, and is the base URL right?)"
     )]
@@ -191,10 +203,63 @@ impl DicomWebError {
     /// a busy server), as opposed to an answer that will not change (401, 404, 406, bad data).
     pub fn is_retryable(&self) -> bool {
         match self {
-            Self::Transport { .. } | Self::Multipart { .. } | Self::Connect { .. } => true,
+            Self::Transport { .. }
+            | Self::Multipart { .. }
+            | Self::Connect { .. }
+            | Self::Busy { .. } => true,
             Self::Http { status, .. } => *status >= 500 || *status == 408 || *status == 429,
             _ => false,
         }
+    }
+
+    /// A busy answer with the answer's `Retry-After` header (seconds; an HTTP date is not
+    /// read and leaves the default backoff).
+    pub fn with_retry_after(self, header: Option<&str>) -> Self {
+        match self {
+            Self::Busy {
+                url,
+                status,
+                retry_after_s: None,
+            } => Self::Busy {
+                url,
+                status,
+                retry_after_s: header.and_then(|h| h.trim().parse::<u64>().ok()),
+            },
+            other => other,
+        }
+    }
+}
+
+/// The longest wait a Retry-After is honoured for: an archive asking for more is asked again
+/// after this (and the request fails if it is still busy then).
+pub const MAX_RETRY_AFTER: std::time::Duration = std::time::Duration::from_secs(120);
+
+/// How long to wait before attempt `attempt + 1` of a request that failed with `error`: the
+/// archive's Retry-After where it gave one (at most [`MAX_RETRY_AFTER`]), else 0.5 s doubling
+/// per attempt up to 8 s.
+pub fn backoff(attempt: u32, error: &DicomWebError) -> std::time::Duration {
+    use std::time::Duration;
+    if let DicomWebError::Busy {
+        retry_after_s: Some(s),
+        ..
+    } = error
+    {
+        return Duration::from_secs(*s).min(MAX_RETRY_AFTER);
+    }
+    let doublings = attempt.saturating_sub(1).min(4);
+    Duration::from_millis(500 << doublings)
+}
+
+/// Attempts of a request the archive answered busy (429, 503): the first and three more.
+pub const BUSY_ATTEMPTS: u32 = 4;
+
+/// Attempts of a request that failed with `e` (a retryable failure): two, more for a busy
+/// archive.
+pub fn max_attempts(e: &DicomWebError) -> u32 {
+    if matches!(e, DicomWebError::Busy { .. }) {
+        BUSY_ATTEMPTS
+    } else {
+        retrieve::MAX_ATTEMPTS
     }
 }
 
@@ -718,6 +783,11 @@ pub fn check_status(status: u16, url: &str, what: &str, auth: &Auth) -> Result<(
             what: what.to_owned(),
             url: url.to_owned(),
         }),
+        429 | 503 => Err(DicomWebError::Busy {
+            url: url.to_owned(),
+            status,
+            retry_after_s: None,
+        }),
         406 => Err(DicomWebError::NotAcceptable {
             url: url.to_owned(),
             asked: asked_syntaxes(),
@@ -1002,6 +1072,21 @@ mod tests {
                 .unwrap_err()
                 .is_retryable()
         );
+        // A busy answer: its Retry-After is honoured up to a limit, else the wait doubles.
+        let busy = check_status(429, "u", "s", &Auth::None)
+            .unwrap_err()
+            .with_retry_after(Some(" 5 "));
+        assert!(busy.to_string().contains("asked to wait 5 s"), "{busy}");
+        assert_eq!(backoff(1, &busy), std::time::Duration::from_secs(5));
+        let long = check_status(503, "u", "s", &Auth::None)
+            .unwrap_err()
+            .with_retry_after(Some("86400"));
+        assert_eq!(backoff(1, &long), MAX_RETRY_AFTER);
+        let dated = check_status(503, "u", "s", &Auth::None)
+            .unwrap_err()
+            .with_retry_after(Some("Wed, 21 Oct 2026 07:28:00 GMT"));
+        let ms = |a| backoff(a, &dated).as_millis();
+        assert_eq!((ms(1), ms(2), ms(3), ms(9)), (500, 1000, 2000, 8000));
         assert!(
             !check_status(400, "u", "s", &Auth::None)
                 .unwrap_err()

@@ -13,7 +13,8 @@ use super::qido::InstanceInfo;
 use super::{Auth, Base, DicomWebError, Request, check_status, check_uid};
 use crate::io::{InputFile, Limits, Loaded, SeriesBuilder};
 
-/// Attempts per instance: the first and one retry.
+/// Attempts per instance: the first and one retry (an archive that answers busy gets
+/// [`super::BUSY_ATTEMPTS`], each after the wait it asked for).
 pub const MAX_ATTEMPTS: u32 = 2;
 
 /// One request to make: `id` goes back with its answer.
@@ -23,6 +24,8 @@ pub struct Fetch {
     pub request: Request,
     /// "instance 3 of 30 (1.2.3...)", for messages.
     pub label: String,
+    /// Wait this long before asking (a retry's backoff; zero the first time).
+    pub delay: std::time::Duration,
 }
 
 /// How far a retrieval has come.
@@ -45,6 +48,8 @@ pub struct Retrieval {
     instances: Vec<InstanceInfo>,
     queue: VecDeque<usize>,
     attempts: Vec<u32>,
+    /// The backoff before each instance's next attempt.
+    delays: Vec<std::time::Duration>,
     done: Vec<bool>,
     done_count: usize,
     bytes: u64,
@@ -81,6 +86,7 @@ impl Retrieval {
             instances,
             queue: (0..n).collect(),
             attempts: vec![0; n],
+            delays: vec![std::time::Duration::ZERO; n],
             done: vec![false; n],
             done_count: 0,
             bytes: 0,
@@ -124,6 +130,7 @@ impl Retrieval {
             id,
             request: Request::wado(url, &self.auth),
             label,
+            delay: self.delays[id],
         })
     }
 
@@ -177,14 +184,18 @@ impl Retrieval {
                 },
             });
         }
-        if self.attempts[id] >= MAX_ATTEMPTS {
+        if self.attempts[id] >= super::max_attempts(&error) {
             return Err(DicomWebError::Failed {
                 instance: label,
                 attempts: self.attempts[id],
                 source: Box::new(error),
             });
         }
-        log::warn!("{label}: {error}; asking again");
+        self.delays[id] = super::backoff(self.attempts[id], &error);
+        log::warn!(
+            "{label}: {error}; asking again in {:.1} s",
+            self.delays[id].as_secs_f64()
+        );
         self.queue.push_back(id);
         Ok(())
     }

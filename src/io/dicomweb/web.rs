@@ -232,12 +232,33 @@ impl WebClient {
         super::stow::read_answer(&url, status, &answer, instances, &self.auth)
     }
 
-    /// A QIDO-RS answer's bytes (at most [`MAX_JSON_BYTES`]).
+    /// A QIDO-RS answer's bytes (at most [`MAX_JSON_BYTES`]), asked for again after a dropped
+    /// connection (once) or a busy answer (after the wait it asks for, [`super::backoff`]).
     async fn get_json(&self, url: &str, what: &str) -> Result<Vec<u8>, DicomWebError> {
+        let mut attempt = 0;
+        loop {
+            attempt += 1;
+            match self.get_json_once(url, what).await {
+                Err(e)
+                    if e.is_retryable()
+                        && attempt < super::max_attempts(&e)
+                        && !self.cancelled() =>
+                {
+                    let wait = super::backoff(attempt, &e);
+                    log::warn!("{e}; asking again in {:.1} s", wait.as_secs_f64());
+                    sleep(wait).await;
+                }
+                other => return other,
+            }
+        }
+    }
+
+    async fn get_json_once(&self, url: &str, what: &str) -> Result<Vec<u8>, DicomWebError> {
         let request = Request::qido(url.to_owned(), &self.auth);
         let signal = self.controller.signal();
         let response = send(&request, None, &signal).await?;
-        check_status(response.status(), url, what, &self.auth)?;
+        check_status(response.status(), url, what, &self.auth)
+            .map_err(|e| e.with_retry_after(header(&response, "retry-after").as_deref()))?;
         if let Some(n) = content_length(&response)
             && n > MAX_JSON_BYTES
         {
@@ -279,15 +300,19 @@ async fn fetch_instance(
     signal: &web_sys::AbortSignal,
     inbox: &Inbox<Message>,
 ) -> Result<Vec<Part>, DicomWebError> {
+    if !fetch.delay.is_zero() {
+        sleep(fetch.delay).await;
+    }
     let response = send(&fetch.request, None, signal).await?;
-    let content_type = response.headers().get("content-type").ok().flatten();
+    let content_type = header(&response, "content-type");
     let mut reader = InstanceResponse::start(
         fetch,
         response.status(),
         content_type.as_deref(),
         auth,
         limits,
-    )?;
+    )
+    .map_err(|e| e.with_retry_after(header(&response, "retry-after").as_deref()))?;
     let mut unreported: u64 = 0;
     read_body(&response, &fetch.request.url, signal, &mut |chunk| {
         unreported += chunk.len() as u64;
@@ -301,6 +326,26 @@ async fn fetch_instance(
         inbox.push(Message::Bytes(unreported));
     }
     reader.finish()
+}
+
+/// A header of an answer (one the page may read: same-origin, or exposed by CORS).
+fn header(response: &web_sys::Response, name: &str) -> Option<String> {
+    response.headers().get(name).ok().flatten()
+}
+
+/// Waits `d` without blocking the page (a `setTimeout` promise).
+async fn sleep(d: std::time::Duration) {
+    let ms = d.as_millis().min(i32::MAX as u128) as i32;
+    let promise = js_sys::Promise::new(&mut |resolve, _| {
+        let scheduled = web_sys::window().is_some_and(|w| {
+            w.set_timeout_with_callback_and_timeout_and_arguments_0(&resolve, ms)
+                .is_ok()
+        });
+        if !scheduled {
+            let _ = resolve.call0(&JsValue::NULL);
+        }
+    });
+    let _ = JsFuture::from(promise).await;
 }
 
 /// Sends a GET (or, with a body, a POST) with the request's headers; a refusal (no answer,
