@@ -61,6 +61,8 @@ pub struct BatchArgs {
 
 /// The modalities a batch processes.
 const MODALITIES: [&str; 2] = ["CT", "MR"];
+/// Series with fewer images are not volumes (localizers, dose pages) and are skipped.
+const MIN_INSTANCES: u64 = 3;
 /// Series asked for per QIDO page.
 const PAGE: usize = 100;
 /// The most pages read per modality (a million series).
@@ -139,6 +141,7 @@ fn list_series(
     study: Option<&str>,
 ) -> anyhow::Result<Vec<Item>> {
     let mut out = Vec::new();
+    let mut seen = std::collections::HashSet::new();
     for modality in MODALITIES {
         let mut offset = 0;
         for page in 0.. {
@@ -162,17 +165,22 @@ fn list_series(
                 .search_series(&search)
                 .with_context(|| format!("listing the {modality} series"))?;
             let n = found.len();
-            out.extend(
-                found
-                    .into_iter()
-                    // A result of ours (a rotation is OT, a report SR) is never a source; an
-                    // archive that ignores the Modality key is held to it here.
-                    .filter(|(_, s)| s.modality.as_deref() == Some(modality))
-                    .map(|(study, series)| Item { study, series }),
-            );
-            // An archive that caps its answers below the page asked for ends a page early:
-            // ask on until a page comes back empty.
-            if n == 0 {
+            let mut new = 0;
+            for (study, series) in found {
+                if !seen.insert(series.series_uid.clone()) {
+                    continue;
+                }
+                new += 1;
+                // A result of ours (a rotation is OT, a report SR) is never a source; an
+                // archive that ignores the Modality key is held to it here.
+                if series.modality.as_deref() == Some(modality) {
+                    out.push(Item { study, series });
+                }
+            }
+            // An archive that caps its answers below the page asked for ends a page early: ask
+            // on until a page comes back empty, or (an archive that ignores `offset` and
+            // answers the first page again) brings nothing new.
+            if n == 0 || new == 0 {
                 break;
             }
             offset += n;
@@ -258,9 +266,12 @@ fn process(
             };
             let instance =
                 sr::measurement_report(&source, &report, &now, stow::REPORT_SERIES_NUMBER)?;
-            client
+            let stored = client
                 .store(study, std::slice::from_ref(&instance))
                 .context("storing the report")?;
+            for w in stored.warnings {
+                eprintln!("  series {series}: the archive says of the report: {w}");
+            }
         }
     }
     let frames = crate::cli::render::rotation_frames(
@@ -291,9 +302,12 @@ fn process(
         stable_key: Some(rotation_uid_key.to_owned()),
     };
     let instance = stow::secondary_capture(&source, &rotation, &now, stow::ROTATION_SERIES_NUMBER)?;
-    client
+    let stored = client
         .store(study, std::slice::from_ref(&instance))
         .context("storing the rotation")?;
+    for w in stored.warnings {
+        eprintln!("  series {series}: the archive says of the rotation: {w}");
+    }
     Ok(Done {
         findings: found,
         seconds: started.elapsed().as_secs_f64(),
@@ -375,6 +389,12 @@ pub fn run(args: BatchArgs) -> anyhow::Result<()> {
                 .instances
                 .map_or("?".to_owned(), |i| i.to_string())
         );
+        // A localizer or a dose page is no volume: not a failure, and not tried.
+        if item.series.instances.is_some_and(|n| n < MIN_INSTANCES) {
+            skipped += 1;
+            eprintln!("{what}: skipped, fewer than {MIN_INSTANCES} images make no volume");
+            continue;
+        }
         let key = stable_key(&args, preset, series, "rotation");
         let result_uid = rotation_series_uid(&key);
         match client.has_series(&item.study, &result_uid) {

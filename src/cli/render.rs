@@ -489,6 +489,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             &mut target,
             n,
             args.out.as_deref(),
+            args.store,
         )?;
         if let (true, Some(archive)) = (args.store, &archive) {
             let rotation = crate::io::dicomweb::stow::Rotation {
@@ -590,6 +591,7 @@ pub fn rotation_frames(
         &mut target,
         n,
         None,
+        true,
     )
 }
 
@@ -613,7 +615,8 @@ pub fn method_name(method: RenderMethod) -> &'static str {
 }
 
 /// Frames `0..n` of a full turn: frame `f` is the view turned by `360 f / n` degrees about its
-/// vertical axis, written as `dir/frame_FFFF.png` when a folder is given; returned as RGBA.
+/// vertical axis, written as `dir/frame_FFFF.png` when a folder is given; returned as RGBA
+/// when `keep` (else none are kept: a long turn is written frame by frame).
 #[allow(clippy::too_many_arguments)]
 fn turntable(
     ctx: &GpuContext,
@@ -624,12 +627,13 @@ fn turntable(
     target: &mut RaycastTarget,
     n: u32,
     dir: Option<&std::path::Path>,
+    keep: bool,
 ) -> anyhow::Result<Vec<Vec<u8>>> {
     if let Some(dir) = dir {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let started = web_time::Instant::now();
-    let mut frames = Vec::with_capacity(n as usize);
+    let mut frames = Vec::with_capacity(if keep { n as usize } else { 0 });
     for f in 0..n {
         caster.render(ctx, scene, &camera.turntable(f, n), settings, target, ..)?;
         let rgba = target.read_image_blocking(ctx)?;
@@ -644,7 +648,9 @@ fn turntable(
             )
             .with_context(|| format!("writing {}", out.display()))?;
         }
-        frames.push(rgba);
+        if keep {
+            frames.push(rgba);
+        }
     }
     eprintln!(
         "turntable: {n} frames of {}x{} in {:.1} s{}",

@@ -1467,6 +1467,16 @@ fn the_viewer_opens_a_study_and_shows_its_patient() {
     };
     let found = client.search_studies(&as_ct).expect("search");
     assert!(!found.iter().any(|s| s.study_uid == study), "{found:?}");
+    // Paged: the page after the last match is empty.
+    let all = client
+        .search_studies(&shapecast::io::dicomweb::StudySearch::default())
+        .expect("search");
+    assert!(all.iter().any(|s| s.study_uid == study), "{all:?}");
+    let after = shapecast::io::dicomweb::StudySearch {
+        offset: all.len(),
+        ..Default::default()
+    };
+    assert!(client.search_studies(&after).expect("search").is_empty());
     let nobody = shapecast::io::dicomweb::StudySearch {
         study_date: "19000101-19000102".to_owned(),
         ..Default::default()

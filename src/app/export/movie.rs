@@ -469,6 +469,7 @@ impl ShapecastApp {
                 return self.pacs_store(crate::app::pacs::StoreJob {
                     study,
                     series,
+                    frame_count: rgba.len(),
                     frames: rgba,
                     size,
                     description: m.description,

@@ -120,10 +120,13 @@ mod web {
         let client = c.clone();
         wasm_bindgen_futures::spawn_local(async move {
             let result = async {
+                let mut job = job;
                 let source = client.source_series(&job.study, &job.series).await?;
                 let (instances, skipped) = job.instances(&source)?;
-                client.store(&job.study, &instances).await?;
-                Ok(job.done(&instances, skipped))
+                let stored = client.store(&job.study, &instances).await?;
+                let mut done = job.done(&instances, skipped);
+                done.warnings = stored.warnings;
+                Ok(done)
             }
             .await;
             inbox.push(task, Event::Stored(result));
@@ -249,11 +252,14 @@ mod native {
     /// Stores a rotation into its study (the source series' metadata, then STOW-RS).
     pub fn store(base: Base, auth: Auth, job: StoreJob, task: u64, inbox: Inbox) -> Task {
         spawn(task, inbox, move |send| {
+            let mut job = job;
             let result = Client::new(base, auth).and_then(|c| {
                 let source = c.source_series(&job.study, &job.series)?;
                 let (instances, skipped) = job.instances(&source)?;
-                c.store(&job.study, &instances)?;
-                Ok(job.done(&instances, skipped))
+                let stored = c.store(&job.study, &instances)?;
+                let mut done = job.done(&instances, skipped);
+                done.warnings = stored.warnings;
+                Ok(done)
             });
             send(Event::Stored(result));
         })

@@ -64,6 +64,8 @@ pub(super) struct StoreJob {
     pub series: String,
     /// RGBA frames of `size`.
     pub frames: Vec<Vec<u8>>,
+    /// How many frames (kept after the frames are let go).
+    pub frame_count: usize,
     pub size: [u32; 2],
     pub description: String,
     pub derivation: String,
@@ -74,11 +76,14 @@ pub(super) struct StoreJob {
 impl StoreJob {
     /// What goes into the study: the rotation's Secondary Capture, and the report (when the
     /// reading has one and the series allows it: else why not, beside).
+    /// The frames are let go once in the instance (a large pane's frames are hundreds of MB:
+    /// the page must not hold them beside the request).
     fn instances(
-        &self,
+        &mut self,
         source: &stow::SourceSeries,
     ) -> Result<(Vec<stow::Instance>, Option<String>), DicomWebError> {
         let mut out = vec![self.instance(source)?];
+        self.frames = Vec::new();
         let mut skipped = None;
         if let Some(report) = &self.report {
             match dicomweb::sr::measurement_report(
@@ -102,7 +107,7 @@ impl StoreJob {
             frames: &self.frames,
             description: self.description.clone(),
             derivation: self.derivation.clone(),
-            step_deg: 360.0 / self.frames.len().max(1) as f64,
+            step_deg: 360.0 / self.frame_count.max(1) as f64,
             stable_key: None,
         };
         stow::secondary_capture(
@@ -116,7 +121,7 @@ impl StoreJob {
     fn done(&self, instances: &[stow::Instance], skipped: Option<String>) -> StoreDone {
         StoreDone {
             series: instances.iter().map(|i| i.series_uid.clone()).collect(),
-            frames: self.frames.len(),
+            frames: self.frame_count,
             bytes: instances.iter().map(|i| i.bytes.len()).sum(),
             description: self.description.clone(),
             report: self
@@ -125,6 +130,7 @@ impl StoreJob {
                 .filter(|_| instances.len() > 1)
                 .map(|r| r.description.clone()),
             skipped,
+            warnings: Vec::new(),
         }
     }
 }
@@ -140,6 +146,8 @@ pub(super) struct StoreDone {
     report: Option<String>,
     /// Why the reading's report was not stored.
     skipped: Option<String>,
+    /// What the archive said of what it stored.
+    pub warnings: Vec<String>,
 }
 
 /// The tag of "Store to PACS" task ids (see [`PET_TASK`]).
@@ -195,6 +203,8 @@ pub(super) struct Pacs {
     token: String,
     search: StudySearch,
     studies: Vec<StudyInfo>,
+    /// The archive may hold more matches than the page listed.
+    more: bool,
     /// The study whose series are listed, with its archive.
     study: Option<(String, StudyInfo)>,
     series: Vec<SeriesInfo>,
@@ -510,13 +520,22 @@ impl ShapecastApp {
                 Event::Studies(Ok(studies)) => {
                     self.pacs.busy = None;
                     self.pacs.running = None;
-                    self.pacs.message = studies.is_empty().then(|| "no study matches".to_owned());
-                    if studies.len() >= StudySearch::LIMIT {
+                    let first = self.pacs.search.offset;
+                    self.pacs.message = studies.is_empty().then(|| {
+                        if first == 0 {
+                            "no study matches".to_owned()
+                        } else {
+                            format!("no more matches after the first {first}")
+                        }
+                    });
+                    if studies.len() >= StudySearch::LIMIT || first > 0 {
                         self.pacs.message = Some(format!(
-                            "the first {} matches are listed: narrow the search",
-                            StudySearch::LIMIT
+                            "matches {} to {} are listed: narrow the search, or page with Previous / Next",
+                            first + 1,
+                            first + studies.len()
                         ));
                     }
+                    self.pacs.more = studies.len() >= StudySearch::LIMIT;
                     self.pacs.studies = studies;
                 }
                 Event::Studies(Err(e)) => {
@@ -752,6 +771,10 @@ impl ShapecastApp {
                     self.error(format!(
                         "Store to PACS: the rotation was stored, the measurements were not: {why}"
                     ));
+                }
+                for w in &done.warnings {
+                    self.notes
+                        .push(format!("Store to PACS: the archive says: {w}"));
                 }
                 self.pacs.stored.extend(done.series);
                 self.pacs.stored_at = Some(now);

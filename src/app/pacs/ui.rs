@@ -3,6 +3,7 @@
 
 use super::{PacsTarget, patient_line, study_summary};
 use crate::app::ShapecastApp;
+use crate::io::dicomweb::StudySearch;
 
 impl ShapecastApp {
     /// The bar above the panes: "Open from PACS…", the retrieval's Cancel, "Store to PACS",
@@ -151,10 +152,35 @@ impl ShapecastApp {
                     ui.end_row();
                 }
             });
+        if go {
+            // Enter in a field: a new search, from its first page.
+            self.pacs.search.offset = 0;
+        }
         ui.horizontal(|ui| {
             let r = ui.button("Search");
             self.control("pacs-search", r.rect);
-            go |= r.clicked();
+            if r.clicked() {
+                // A new search starts on its first page.
+                self.pacs.search.offset = 0;
+                go = true;
+            }
+            let page = StudySearch::LIMIT;
+            if self.pacs.search.offset > 0 {
+                let r = ui.button("Previous");
+                self.control("pacs-previous", r.rect);
+                if r.clicked() {
+                    self.pacs.search.offset = self.pacs.search.offset.saturating_sub(page);
+                    go = true;
+                }
+            }
+            if self.pacs.more {
+                let r = ui.button(format!("Next {page}"));
+                self.control("pacs-next", r.rect);
+                if r.clicked() {
+                    self.pacs.search.offset += page;
+                    go = true;
+                }
+            }
             if let Some(b) = &self.pacs.busy {
                 ui.spinner();
                 ui.label(b.as_str());

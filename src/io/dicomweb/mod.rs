@@ -350,6 +350,9 @@ impl Base {
             url.push('&');
         }
         url.push_str(&format!("limit={}", StudySearch::LIMIT));
+        if search.offset > 0 {
+            url.push_str(&format!("&offset={}", search.offset));
+        }
         Ok(url)
     }
 
@@ -525,6 +528,8 @@ pub struct StudySearch {
     pub modality: String,
     /// `YYYYMMDD`, or a range `YYYYMMDD-YYYYMMDD` (either end may be left open).
     pub study_date: String,
+    /// The page: matches skipped before the first listed (a multiple of [`Self::LIMIT`]).
+    pub offset: usize,
 }
 
 impl StudySearch {
@@ -910,12 +915,21 @@ mod tests {
             b.study_search(&StudySearch::default()).unwrap(),
             "/dicom-web/studies?limit=100"
         );
+        assert_eq!(
+            b.study_search(&StudySearch {
+                offset: 200,
+                ..Default::default()
+            })
+            .unwrap(),
+            "/dicom-web/studies?limit=100&offset=200"
+        );
         let s = StudySearch {
             patient_id: " Lung_Dx A0002* ".to_owned(),
             patient_name: "DOE^J*".to_owned(),
             accession_number: "a&b=c?".to_owned(),
             modality: " pt ".to_owned(),
             study_date: "20070101-".to_owned(),
+            offset: 0,
         };
         assert_eq!(
             b.study_search(&s).unwrap(),

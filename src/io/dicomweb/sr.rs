@@ -415,6 +415,11 @@ pub fn measurement_report(
         tags::REFERENCED_PERFORMED_PROCEDURE_STEP_SEQUENCE,
         Vec::new(),
     );
+    seq(
+        &mut obj,
+        tags::PERFORMED_PROCEDURE_CODE_SEQUENCE,
+        vec![code_item(&codes::IMAGING_PROCEDURE)],
+    );
     let refs: Vec<InMemDicomObject> = source
         .instances
         .iter()

@@ -318,7 +318,6 @@ pub fn secondary_capture(
     put(&mut obj, tags::CONTENT_TIME, VR::TM, &now.time);
     put(&mut obj, tags::IMAGE_TYPE, VR::CS, "DERIVED\\SECONDARY");
     put(&mut obj, tags::BURNED_IN_ANNOTATION, VR::CS, "NO");
-    put(&mut obj, tags::RECOGNIZABLE_VISUAL_FEATURES, VR::CS, "NO");
     put(&mut obj, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "00");
     put(
         &mut obj,
@@ -347,11 +346,13 @@ pub fn secondary_capture(
         VR::IS,
         &format!("{:.0}", 1000.0 / frame_ms),
     );
-    obj.put(DataElement::new(
-        tags::FRAME_INCREMENT_POINTER,
-        VR::AT,
-        PrimitiveValue::Tags(dicom_core::smallvec::smallvec![tags::FRAME_TIME]),
-    ));
+    if n > 1 {
+        obj.put(DataElement::new(
+            tags::FRAME_INCREMENT_POINTER,
+            VR::AT,
+            PrimitiveValue::Tags(dicom_core::smallvec::smallvec![tags::FRAME_TIME]),
+        ));
+    }
     put(&mut obj, tags::PHOTOMETRIC_INTERPRETATION, VR::CS, "RGB");
     let us = |v: u16| PrimitiveValue::from(v);
     for (tag, v) in [
@@ -429,7 +430,6 @@ pub(super) fn derived_object(
     put(&mut obj, tags::SOP_INSTANCE_UID, VR::UI, d.sop_instance_uid);
     put(&mut obj, tags::INSTANCE_CREATION_DATE, VR::DA, &now.date);
     put(&mut obj, tags::INSTANCE_CREATION_TIME, VR::TM, &now.time);
-    put(&mut obj, tags::TIMEZONE_OFFSET_FROM_UTC, VR::SH, "+0000");
     for (tag, vr, type2) in COPIED {
         match source.attribute(tag) {
             Some(v) => put(&mut obj, tag, vr, v),
@@ -481,7 +481,7 @@ pub(super) fn part10(obj: InMemDicomObject, what: &str) -> Result<Vec<u8>, Dicom
             FileMetaTableBuilder::new()
                 .transfer_syntax(uids::EXPLICIT_VR_LITTLE_ENDIAN)
                 .implementation_class_uid(IMPLEMENTATION_CLASS_UID)
-                .implementation_version_name(concat!("SHAPECAST_", env!("CARGO_PKG_VERSION"))),
+                .implementation_version_name(IMPLEMENTATION_VERSION_NAME),
         )
         .map_err(|e| error(e.to_string()))?;
     let mut bytes = Vec::new();
@@ -489,6 +489,15 @@ pub(super) fn part10(obj: InMemDicomObject, what: &str) -> Result<Vec<u8>, Dicom
         .map_err(|e| error(e.to_string()))?;
     Ok(bytes)
 }
+
+/// ImplementationVersionName (SH: at most 16 characters).
+const IMPLEMENTATION_VERSION_NAME: &str = {
+    let v = concat!("SHAPECAST", env!("CARGO_PKG_VERSION"));
+    match v.split_at_checked(16) {
+        Some((head, _)) => head,
+        None => v,
+    }
+};
 
 /// Shapecast's implementation class UID (a `2.25.` UUID of its name).
 const IMPLEMENTATION_CLASS_UID: &str = "2.25.196357845216954395718813542183469123123";
@@ -583,7 +592,14 @@ pub fn read_answer(
     asked: &[Instance],
     auth: &Auth,
 ) -> Result<Stored, DicomWebError> {
-    let o = if body.iter().all(u8::is_ascii_whitespace) {
+    let unreadable = |why: &str| DicomWebError::Json {
+        url: url.to_owned(),
+        message: format!(
+            "the archive's answer to the store (HTTP {status}) {why}; whether it stored the results is unknown"
+        ),
+    };
+    let empty = body.iter().all(u8::is_ascii_whitespace);
+    let o = if empty {
         Map::new()
     } else {
         match serde_json::from_slice::<Value>(body) {
@@ -596,21 +612,32 @@ pub fn read_answer(
                     _ => None,
                 })
                 .unwrap_or_default(),
-            _ if (200..300).contains(&status) => Map::new(),
+            // A 2xx that is not DICOM JSON (a login page from a proxy, XML) says nothing.
+            _ if (200..300).contains(&status) => {
+                return Err(unreadable("is not DICOM JSON"));
+            }
             _ => Map::new(),
         }
     };
+    let mut already = Vec::new();
     let failed: Vec<String> = sop_items(&o, "00081198")
         .into_iter()
-        .map(|item| {
+        .filter_map(|item| {
             let uid = qido::string(item, "00081155").unwrap_or_else(|| "?".to_owned());
-            match reason_text(item, "00081197") {
+            // 0x0111: the archive holds that SOP instance already (a rerun's stable UIDs).
+            if qido::count(item, "00081197") == Some(0x0111)
+                && asked.iter().any(|i| i.sop_instance_uid == uid)
+            {
+                already.push(uid);
+                return None;
+            }
+            Some(match reason_text(item, "00081197") {
                 Some(r) => format!("{uid} ({r})"),
                 None => uid,
-            }
+            })
         })
         .collect();
-    if !failed.is_empty() || status == 409 {
+    if !failed.is_empty() || (status == 409 && already.is_empty()) {
         return Err(DicomWebError::StoreRefused {
             url: url.to_owned(),
             status,
@@ -621,7 +648,15 @@ pub fn read_answer(
             },
         });
     }
-    super::check_status(status, url, "the study to store into", auth)?;
+    if status != 409 {
+        super::check_status(status, url, "the study to store into", auth)?;
+    }
+    // 202 means some were refused or stored with warnings: the answer must say which.
+    if status == 202 && o.is_empty() {
+        return Err(unreadable(
+            "is empty, though 202 means some were not stored as sent",
+        ));
+    }
     let mut stored = Stored {
         retrieve_url: qido::string(&o, "00081190"),
         ..Default::default()
@@ -634,8 +669,14 @@ pub fn read_answer(
             stored.warnings.push(r);
         }
     }
-    // An archive that answers 200 with no list stored what it was given.
-    if stored.instances.is_empty() && o.is_empty() {
+    for uid in already {
+        stored
+            .warnings
+            .push(format!("{uid} was in the archive already"));
+        stored.instances.push(uid);
+    }
+    // An archive that answers 200 with an empty body stored what it was given.
+    if stored.instances.is_empty() && status == 200 && empty {
         stored.instances = asked.iter().map(|i| i.sop_instance_uid.clone()).collect();
     }
     let missing: Vec<&str> = asked
@@ -883,5 +924,15 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("not in the archive's answer"), "{e}");
+        // A login page, an empty 202: not a success.
+        let e = read_answer("u", 200, b"<html>log in</html>", asked, &Auth::None).unwrap_err();
+        assert!(e.to_string().contains("is not DICOM JSON"), "{e}");
+        assert!(read_answer("u", 202, b"", asked, &Auth::None).is_err());
+        assert!(read_answer("u", 200, b"", asked, &Auth::None).is_ok());
+        // A duplicate of our own instance (a rerun): already stored, said as a warning.
+        let duplicate = refused.replace("43264", "273");
+        let stored = read_answer("u", 409, duplicate.as_bytes(), asked, &Auth::None).unwrap();
+        assert_eq!(stored.instances, vec![made.sop_instance_uid.clone()]);
+        assert!(stored.warnings[0].contains("in the archive already"));
     }
 }
