@@ -22,7 +22,7 @@ use crate::cpu::{Grid, Preset};
 use crate::gpu::GpuContext;
 use crate::io::dicomweb::client::Client;
 use crate::io::dicomweb::{SeriesInfo, SeriesSearch, sr, stow};
-use crate::volume::{Modality, Volume};
+use crate::volume::Modality;
 
 #[derive(clap::Args, Debug)]
 pub struct BatchArgs {
@@ -251,7 +251,7 @@ fn process(
     if let Some(components) = &result.components {
         let grid = Grid::of(&volume);
         let list = findings::find(&grid, &volume.to_f32(), &components[2], preset)?;
-        let groups = finding_groups(&volume, &list.findings, preset);
+        let groups = crate::cli::findings::report_groups(&volume, &list.findings, preset, SHOWN);
         found = Some(groups.len());
         if !groups.is_empty() {
             let report = sr::Report {
@@ -312,24 +312,6 @@ fn process(
         findings: found,
         seconds: started.elapsed().as_secs_f64(),
     })
-}
-
-/// The candidates listed (the first [`SHOWN`]) as report groups.
-fn finding_groups(volume: &Volume, list: &[findings::Finding], preset: Preset) -> Vec<sr::Group> {
-    let world = volume.world_from_voxel();
-    list.iter()
-        .take(SHOWN)
-        .map(|f| {
-            let p = world.transform_point3(glam::DVec3::from(f.voxel.map(|v| v as f64)));
-            crate::app::report::finding_group(
-                format!("candidate {}", f.rank),
-                f,
-                p,
-                preset,
-                volume.modality == Modality::Ct,
-            )
-        })
-        .collect()
 }
 
 /// The rotation's series UID for a source series: what marks it done.

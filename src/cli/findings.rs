@@ -155,22 +155,7 @@ pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
         );
     }
     if let Some(archive) = &archive {
-        let world = volume.world_from_voxel();
-        let groups: Vec<_> = found
-            .findings
-            .iter()
-            .take(shown)
-            .map(|f| {
-                let p = world.transform_point3(glam::DVec3::from(f.voxel.map(|v| v as f64)));
-                crate::app::report::finding_group(
-                    format!("candidate {}", f.rank),
-                    f,
-                    p,
-                    preset,
-                    volume.modality == Modality::Ct,
-                )
-            })
-            .collect();
+        let groups = report_groups(&volume, &found.findings, preset, shown);
         if groups.is_empty() {
             eprintln!("no findings: nothing stored");
         } else {
@@ -188,6 +173,29 @@ pub fn run(args: FindingsArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The first `shown` findings as a report's groups ("candidate N", each at its peak).
+pub fn report_groups(
+    volume: &Volume,
+    list: &[findings::Finding],
+    preset: crate::cpu::Preset,
+    shown: usize,
+) -> Vec<crate::io::dicomweb::sr::Group> {
+    let world = volume.world_from_voxel();
+    list.iter()
+        .take(shown)
+        .map(|f| {
+            let p = world.transform_point3(glam::DVec3::from(f.voxel.map(|v| v as f64)));
+            crate::app::report::finding_group(
+                format!("candidate {}", f.rank),
+                f,
+                p,
+                preset,
+                volume.modality == Modality::Ct,
+            )
+        })
+        .collect()
 }
 
 /// The findings as JSON: `{"findings": [{rank, lps_mm, voxel, score, ...}], "more": N, ...}`,

@@ -311,6 +311,10 @@ impl ShapecastApp {
             .mip_view
             .full_size()
             .ok_or("the MIP pane has not been drawn yet; show it first")?;
+        let size = match destination {
+            Destination::File => size,
+            Destination::Pacs => stored_size(size),
+        };
         let features = self.shown_features().map(|f| f.texture.clone());
         let target = RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?;
         let source = match destination {
@@ -574,6 +578,21 @@ impl ShapecastApp {
     }
 }
 
+/// The longest side of a frame stored into an archive, pixels: a HiDPI pane's full size would
+/// hold hundreds of MB in the page several times over (frames, the DICOM instance, the request).
+pub const MAX_STORED_SIDE: u32 = 1024;
+
+/// The size frames are stored at: the pane's, scaled down to [`MAX_STORED_SIDE`] (the same
+/// picture: the camera spans its field of view over the shorter side whatever the size).
+pub fn stored_size(size: [u32; 2]) -> [u32; 2] {
+    let longest = size[0].max(size[1]);
+    if longest <= MAX_STORED_SIDE {
+        return size;
+    }
+    let scale = f64::from(MAX_STORED_SIDE) / f64::from(longest);
+    size.map(|s| ((f64::from(s) * scale).round() as u32).max(1))
+}
+
 /// The action's name in messages.
 fn action(destination: Destination) -> &'static str {
     match destination {
@@ -607,6 +626,14 @@ mod tests {
             reader.next_frame(&mut buf).expect("frame");
             assert_eq!(&buf[4..8], &[f * 50, 10, 7, 255], "frame {f}");
         }
+    }
+
+    #[test]
+    fn stored_frames_are_at_most_1024_on_a_side_at_the_pane_s_aspect() {
+        assert_eq!(stored_size([800, 600]), [800, 600]);
+        assert_eq!(stored_size([2048, 1536]), [1024, 768]);
+        assert_eq!(stored_size([1200, 3000]), [410, 1024]);
+        assert_eq!(stored_size([5000, 1]), [1024, 1]);
     }
 
     #[test]
