@@ -1086,85 +1086,132 @@ fn findings_go_back_as_a_measurement_report() {
     }
 }
 
-/// `batch` over an archive of a CT and an MR study in two shards (the flag, then a Kubernetes
-/// Indexed Job's and a Slurm array's environment): every series is done by exactly one shard
-/// and its rotation lands in its study; a rerun skips everything; the summary is JSON.
+/// A `shapecast batch` process with its stderr read line by line as it runs.
+fn spawn_batch(url: &str, extra: &[&str], env: &[(&str, &str)]) -> Child {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_shapecast"));
+    cmd.args([
+        "batch",
+        "--dicomweb",
+        url,
+        "--method",
+        "hessian",
+        "--preset",
+        "lung-nodules",
+        "--frames",
+        "3",
+        "--size",
+        "40x32",
+    ])
+    .args(extra)
+    .env_remove("SHAPECAST_DICOMWEB_TOKEN")
+    .env_remove("SHAPECAST_DICOMWEB_USER")
+    .env_remove("SHAPECAST_DICOMWEB_CA")
+    .env_remove("JOB_COMPLETION_INDEX")
+    .env_remove("SLURM_ARRAY_TASK_ID")
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped());
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.spawn().expect("start shapecast batch")
+}
+
+/// A batch process to its end: (success, the JSON summary, stderr).
+fn finish_batch(child: Child) -> (bool, serde_json::Value, String) {
+    let out = child.wait_with_output().expect("wait for shapecast batch");
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    eprintln!("{err}");
+    let summary = serde_json::from_slice(&out.stdout).unwrap_or(serde_json::Value::Null);
+    (out.status.success(), summary, err)
+}
+
+/// `batch` over an archive that caps its answers at 2 (so the series search pages), holding a
+/// head CT, a chest CT and an MR: a worker killed after its first series, then two shards run at
+/// once (by the flag and from a Kubernetes Indexed Job's environment), then a rerun of both from
+/// a Slurm array's environment. Every source series ends with exactly one rotation in its study
+/// (the chest CT also its findings' report), the shards split the work, and the rerun does
+/// nothing.
 #[test]
-fn a_batch_in_two_shards_does_every_series_once_and_a_rerun_skips_them() {
+fn a_batch_killed_restarted_and_sharded_stores_each_result_once() {
     let Some(series_root) = common::shared_data("series") else {
         return;
     };
-    let Some(orthanc) = Orthanc::start(false) else {
+    if shapecast::gpu::context::test_context().is_none() {
+        return;
+    }
+    let Some(orthanc) = Orthanc::start_with(false, Some(2)) else {
         return;
     };
     let head = series_files(&series_root.join("ct-head-64px"));
     let mr = series_files(&series_root.join("mr-prostate-adc-oblique"));
     let chest = series_files(&series_root.join("ct-chest-lung-kernel"));
-    orthanc.upload(&head);
-    orthanc.upload(&mr);
-    orthanc.upload(&chest);
+    for files in [&head, &mr, &chest] {
+        orthanc.upload(files);
+    }
     let url = orthanc.url("/dicom-web");
-    let batch = |extra: &[&str], env: &[(&str, &str)]| {
-        let mut args = vec![
-            "batch",
-            "--dicomweb",
-            &url,
-            "--method",
-            "hessian",
-            "--preset",
-            "lung-nodules",
-            "--frames",
-            "3",
-            "--size",
-            "40x32",
-        ];
-        args.extend_from_slice(extra);
-        let (ok, out, err) = shapecast(&args, env);
-        assert!(ok, "{err}");
-        eprintln!("{err}{out}");
-        let summary: serde_json::Value = serde_json::from_str(&out).expect("the JSON summary");
-        (summary, err)
-    };
     let count = |v: &serde_json::Value, key: &str| v[key].as_u64().unwrap_or(u64::MAX);
-    let (first, _) = batch(&["--shard", "0/2"], &[]);
-    let (second, _) = batch(&["--shards", "2"], &[("JOB_COMPLETION_INDEX", "1")]);
-    assert_eq!(count(&first, "series_matching"), 3, "{first}");
-    assert_eq!(count(&second, "series_matching"), 3, "{second}");
-    assert_eq!(
-        count(&first, "done") + count(&second, "done"),
-        3,
-        "{first} {second}"
+
+    // A worker killed once it has stored its first series.
+    let mut killed = spawn_batch(&url, &["--shard", "0/1"], &[]);
+    let stderr = killed.stderr.take().expect("stderr");
+    let mut first = String::new();
+    for line in std::io::BufRead::lines(std::io::BufReader::new(stderr)) {
+        let Ok(line) = line else { break };
+        eprintln!("{line}");
+        if line.contains("stored the rotation") {
+            first = line;
+            break;
+        }
+    }
+    let _ = killed.kill();
+    let _ = killed.wait();
+    assert!(
+        first.starts_with("[1/3]"),
+        "the killed worker stored nothing first: {first:?}"
     );
+
+    // Two shards at once finish the rest.
+    let a = spawn_batch(&url, &["--shard", "0/2"], &[]);
+    let b = spawn_batch(&url, &["--shards", "2"], &[("JOB_COMPLETION_INDEX", "1")]);
+    let (ok_a, sa, err_a) = finish_batch(a);
+    let (ok_b, sb, err_b) = finish_batch(b);
+    assert!(ok_a && ok_b, "{err_a}\n{err_b}");
+    assert_eq!(count(&sa, "series_matching"), 3, "{sa}");
+    assert_eq!(count(&sb, "series_matching"), 3, "{sb}");
     assert_eq!(
-        count(&first, "series_in_shard") + count(&second, "series_in_shard"),
+        count(&sa, "series_in_shard") + count(&sb, "series_in_shard"),
         3
     );
-    for (files, modality) in [(&head, "CT"), (&mr, "MR"), (&chest, "CT")] {
+    // The killed worker's series is skipped; the other two are done.
+    assert_eq!(count(&sa, "done") + count(&sb, "done"), 2, "{sa} {sb}");
+    assert_eq!(
+        count(&sa, "skipped") + count(&sb, "skipped"),
+        1,
+        "{sa} {sb}"
+    );
+
+    // Exactly one rotation per source series, and the chest CT's report.
+    for (files, name) in [(&head, "head CT"), (&mr, "MR"), (&chest, "chest CT")] {
         let (study, source) = uids(&files[0]);
         let listed = listed_series(&orthanc, &study);
-        assert!(
-            listed
-                .iter()
-                .any(|s| s.1 == "OT" && s.2 == "Shapecast shape MIP, HESSIAN, lung-nodules"),
-            "{modality}: no rotation in {listed:?}"
-        );
-        assert!(listed.iter().any(|s| s.0 == source));
-    }
-    // The chest CT's findings went in as a report (the head CT has none in the lung).
-    let (chest_study, _) = uids(&chest[0]);
-    assert!(
-        listed_series(&orthanc, &chest_study)
+        let rotations = listed
             .iter()
-            .any(|s| s.1 == "SR" && s.2.starts_with("Shapecast findings, HESSIAN lung-nodules")),
-        "no report"
-    );
-    // A query that matches nothing: nothing to do.
-    let (none, _) = batch(&["--query", "PatientID=nobody-at-all", "--dry-run"], &[]);
-    assert_eq!(count(&none, "series_matching"), 0, "{none}");
-    // A rerun (both shards, from a Slurm array's environment) finds everything done.
-    let mut skipped = 0;
+            .filter(|s| s.1 == "OT" && s.2 == "Shapecast shape MIP, HESSIAN, lung-nodules")
+            .count();
+        assert_eq!(rotations, 1, "{name}: {listed:?}");
+        assert!(listed.iter().any(|s| s.0 == source));
+        let reports = listed.iter().filter(|s| s.1 == "SR").count();
+        assert_eq!(
+            reports,
+            usize::from(name == "chest CT"),
+            "{name}: {listed:?}"
+        );
+    }
+
+    // A rerun of both shards (a Slurm array, counted from 1) stores nothing new.
     for task in ["1", "2"] {
-        let (again, err) = batch(
+        let child = spawn_batch(
+            &url,
             &[],
             &[
                 ("SLURM_ARRAY_TASK_ID", task),
@@ -1172,22 +1219,33 @@ fn a_batch_in_two_shards_does_every_series_once_and_a_rerun_skips_them() {
                 ("SLURM_ARRAY_TASK_MIN", "1"),
             ],
         );
-        assert_eq!(count(&again, "done"), 0, "{again} {err}");
-        skipped += count(&again, "skipped");
-        assert!(
-            err.contains("skipped, its result is in the archive")
-                || count(&again, "series_in_shard") == 0,
-            "{err}"
+        let (ok, again, err) = finish_batch(child);
+        assert!(ok, "{err}");
+        assert_eq!(count(&again, "done"), 0, "{again}");
+        assert_eq!(
+            count(&again, "skipped"),
+            count(&again, "series_in_shard"),
+            "{again}"
         );
     }
-    assert_eq!(skipped, 3);
-    // No more rotations than series: nothing was stored twice.
-    let (study, _) = uids(&head[0]);
-    let rotations = listed_series(&orthanc, &study)
-        .iter()
-        .filter(|s| s.1 == "OT")
-        .count();
-    assert_eq!(rotations, 1);
+    let (chest_study, _) = uids(&chest[0]);
+    assert_eq!(
+        listed_series(&orthanc, &chest_study)
+            .iter()
+            .filter(|s| s.1 != "CT")
+            .count(),
+        2,
+        "the rerun stored something"
+    );
+    // A query that matches nothing: nothing to do.
+    let child = spawn_batch(
+        &url,
+        &["--query", "PatientID=nobody-at-all", "--dry-run"],
+        &[],
+    );
+    let (ok, none, err) = finish_batch(child);
+    assert!(ok, "{err}");
+    assert_eq!(count(&none, "series_matching"), 0, "{none}");
 }
 
 /// tests/io/read_back.py's JSON for a file, or a visible skip where python3 or pydicom is
