@@ -68,13 +68,9 @@ const PAGE: usize = 100;
 /// The most pages read per modality (a million series).
 const MAX_PAGES: usize = 10_000;
 
-/// FNV-1a of a UID: the shard a series belongs to, the same in every worker.
+/// The shard a series belongs to (FNV-1a of its UID), the same in every worker.
 fn shard_of(series_uid: &str, shards: u32) -> u32 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in series_uid.as_bytes() {
-        h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    (h % u64::from(shards.max(1))) as u32
+    (stow::fnv1a(series_uid.as_bytes()) % u64::from(shards.max(1))) as u32
 }
 
 /// This worker's shard (index, count), from `--shard`, else the scheduler's environment.

@@ -207,59 +207,51 @@ impl Archive {
         rotation: &crate::io::dicomweb::stow::Rotation<'_>,
     ) -> anyhow::Result<String> {
         use crate::io::dicomweb::stow;
-        let base = self.client.base().as_str().to_owned();
-        let source = self
-            .client
-            .source_series(&self.study, &self.series)
-            .with_context(|| format!("DICOMweb {base}: the source series' metadata"))?;
-        let instance = stow::secondary_capture(
-            &source,
-            rotation,
-            &stow::DicomNow::now(),
-            stow::ROTATION_SERIES_NUMBER,
-        )?;
-        let started = web_time::Instant::now();
-        let stored = self
-            .client
-            .store(&self.study, std::slice::from_ref(&instance))
-            .with_context(|| format!("DICOMweb {base}: storing the shape MIP"))?;
-        for w in &stored.warnings {
-            eprintln!("warning: the archive stored it with a warning: {w}");
-        }
-        eprintln!(
-            "stored {} frames ({:.1} MB) as series {} in study {} ({:.1} s)",
-            rotation.frames.len(),
-            instance.bytes.len() as f64 / 1e6,
-            instance.series_uid,
-            self.study,
-            started.elapsed().as_secs_f64()
-        );
-        Ok(instance.series_uid)
+        let what = format!("{} frames of the shape MIP", rotation.frames.len());
+        self.store(&what, |source, now| {
+            stow::secondary_capture(source, rotation, now, stow::ROTATION_SERIES_NUMBER)
+        })
     }
 
     /// Stores a measurement report into the study (STOW-RS) and says so on stderr; returns the
     /// new series' UID.
     pub fn store_report(&self, report: &crate::io::dicomweb::sr::Report) -> anyhow::Result<String> {
         use crate::io::dicomweb::{sr, stow};
+        let what = format!("the report ({} groups)", report.groups.len());
+        self.store(&what, |source, now| {
+            sr::measurement_report(source, report, now, stow::REPORT_SERIES_NUMBER)
+        })
+    }
+
+    /// Makes an instance from the source series' metadata and stores it into the study.
+    fn store(
+        &self,
+        what: &str,
+        make: impl FnOnce(
+            &crate::io::dicomweb::stow::SourceSeries,
+            &crate::io::dicomweb::stow::DicomNow,
+        ) -> Result<crate::io::dicomweb::stow::Instance, DicomWebError>,
+    ) -> anyhow::Result<String> {
         let base = self.client.base().as_str().to_owned();
         let source = self
             .client
             .source_series(&self.study, &self.series)
             .with_context(|| format!("DICOMweb {base}: the source series' metadata"))?;
-        let instance = sr::measurement_report(
-            &source,
-            report,
-            &stow::DicomNow::now(),
-            stow::REPORT_SERIES_NUMBER,
-        )?;
-        self.client
+        let instance = make(&source, &crate::io::dicomweb::stow::DicomNow::now())?;
+        let started = web_time::Instant::now();
+        let stored = self
+            .client
             .store(&self.study, std::slice::from_ref(&instance))
-            .with_context(|| format!("DICOMweb {base}: storing the report"))?;
+            .with_context(|| format!("DICOMweb {base}: storing {what}"))?;
+        for w in &stored.warnings {
+            eprintln!("warning: the archive stored {what} with a warning: {w}");
+        }
         eprintln!(
-            "stored the report ({} groups) as series {} in study {}",
-            report.groups.len(),
+            "stored {what} ({:.1} MB) as series {} in study {} ({:.1} s)",
+            instance.bytes.len() as f64 / 1e6,
             instance.series_uid,
-            self.study
+            self.study,
+            started.elapsed().as_secs_f64()
         );
         Ok(instance.series_uid)
     }

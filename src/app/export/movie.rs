@@ -230,7 +230,7 @@ impl ShapecastApp {
     /// Asks for the same turn of `frames` frames, stored into the archive's study the series
     /// came from as a Secondary Capture series ("Store to PACS").
     pub fn store_to_pacs(&mut self, ctx: &egui::Context, frames: u32) {
-        if self.pacs_source().is_none() {
+        if !self.shows_archive_series() {
             return self.error(
                 "Store to PACS: the volume shown did not come from an archive (open it with \"Open from PACS…\")".to_owned(),
             );
@@ -521,7 +521,7 @@ impl ShapecastApp {
 
     /// The "Store to PACS" button (in the PACS bar): shown when the volume came from an archive.
     pub(in crate::app) fn store_pacs_ui(&mut self, ui: &mut egui::Ui) {
-        if self.pacs_source().is_none() {
+        if !self.shows_archive_series() {
             return;
         }
         let r = ui

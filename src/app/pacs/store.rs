@@ -101,6 +101,15 @@ pub(super) struct StoreDone {
 pub(super) const STORE_TASK: u64 = 1 << 62;
 
 impl ShapecastApp {
+    /// Whether the volume shown came from an archive (what "Store to PACS" needs; checked
+    /// every frame, so without copying the UIDs).
+    pub(in crate::app) fn shows_archive_series(&self) -> bool {
+        matches!(
+            self.scene.as_ref().and_then(|s| s.origin.as_ref()),
+            Some(ViewSource::DicomWeb { series, .. }) if !series.is_empty()
+        )
+    }
+
     /// The study and series the volume shown came from, when an archive it was.
     pub(in crate::app) fn pacs_source(&self) -> Option<(String, String, String)> {
         match &self.scene.as_ref()?.origin {

@@ -192,8 +192,8 @@ pub fn uid_for(name: &str) -> String {
     format!("2.25.{}", id.as_u128())
 }
 
-/// FNV-1a over bytes: the pixels' share of a UID's name.
-fn fnv1a(bytes: &[u8]) -> u64 {
+/// FNV-1a over bytes: the pixels' share of a UID's name (and a batch's shard of a series).
+pub fn fnv1a(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for &b in bytes {
         h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
