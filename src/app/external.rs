@@ -3,7 +3,7 @@
 //! progress, a link pasted into the address bar), taken once per frame.
 
 #[cfg(target_arch = "wasm32")]
-use super::web_files;
+use super::web_events;
 use super::{LoadSource, ShapecastApp};
 
 impl ShapecastApp {
@@ -39,10 +39,10 @@ impl ShapecastApp {
         #[cfg(target_arch = "wasm32")]
         {
             let _ = ctx;
-            for event in web_files::take_events() {
+            for event in web_events::take_events() {
                 match event {
-                    web_files::WebEvent::Hover(on) => self.windows.drop_hover = on,
-                    web_files::WebEvent::Progress {
+                    web_events::WebEvent::Hover(on) => self.windows.drop_hover = on,
+                    web_events::WebEvent::Progress {
                         verb,
                         label,
                         done,
@@ -68,14 +68,14 @@ impl ShapecastApp {
                         };
                         self.load_progress = Some((0.5 * f, what));
                     }
-                    web_files::WebEvent::Files {
+                    web_events::WebEvent::Files {
                         label,
                         files,
                         origin,
                     } => {
                         self.open_from(LoadSource::Files { label, files }, Some(origin));
                     }
-                    web_files::WebEvent::Loaded {
+                    web_events::WebEvent::Loaded {
                         loaded,
                         series,
                         origin,
@@ -87,7 +87,7 @@ impl ShapecastApp {
                             origin.or_else(|| self.scene.as_ref().and_then(|s| s.origin.clone()));
                         self.install(*loaded, series);
                     }
-                    web_files::WebEvent::PetLoaded { loaded, generation } => {
+                    web_events::WebEvent::PetLoaded { loaded, generation } => {
                         let ct = self.scene.as_ref().map(|s| s.volume.as_ref());
                         if let Some(message) =
                             self.pet
@@ -97,7 +97,7 @@ impl ShapecastApp {
                         }
                         self.pet_arrived();
                     }
-                    web_files::WebEvent::PetFiles {
+                    web_events::WebEvent::PetFiles {
                         label,
                         files,
                         generation,
@@ -108,7 +108,7 @@ impl ShapecastApp {
                                 .start_source(LoadSource::Files { label, files }, generation);
                         }
                     }
-                    web_files::WebEvent::PetFailed {
+                    web_events::WebEvent::PetFailed {
                         message,
                         generation,
                     } => {
@@ -116,16 +116,16 @@ impl ShapecastApp {
                             self.error(format!("PET: {message}"));
                         }
                     }
-                    web_files::WebEvent::Failed { message } => {
+                    web_events::WebEvent::Failed { message } => {
                         self.load_progress = None;
                         self.series.loading = None;
                         self.load_failed(message);
                     }
-                    web_files::WebEvent::Cancelled { label } => {
+                    web_events::WebEvent::Cancelled { label } => {
                         self.load_progress = None;
                         self.notes.push(format!("{label}: download cancelled"));
                     }
-                    web_files::WebEvent::Link { fragment } => self.open_link(&fragment),
+                    web_events::WebEvent::Link { fragment } => self.open_link(&fragment),
                 }
             }
         }

@@ -4,6 +4,22 @@
 
 use super::*;
 
+/// A loaded volume whose intensity texture is being written, slab by slab over frames (a
+/// whole-body CT is 1 GB: seconds of uploading in one frame would stop the viewer); it is
+/// installed, and the volume shown replaced, once the last slab is in.
+pub(super) struct Uploading {
+    patient: Option<crate::io::Patient>,
+    notes: Vec<String>,
+    volume: Volume,
+    series: Option<load::SeriesSet>,
+    origin: Option<ViewSource>,
+    render: RenderVolume,
+    upload: IntensityUpload,
+}
+
+/// Upload slabs a frame may write, in seconds (at least one slab per frame).
+const UPLOAD_SECONDS_PER_FRAME: f64 = 0.05;
+
 impl ShapecastApp {
     /// Makes a loaded volume the displayed one (or says why it cannot be shown), with the
     /// series list of the files it came from (`None`: files of one series, another format, a

@@ -116,7 +116,7 @@ impl ShapecastApp {
             Key::Escape => self.measure.tool = Tool::Navigate,
             Key::F => {
                 for p in &mut self.panes {
-                    p.view = super::slices::PaneView::default();
+                    p.view = super::model::axes::PaneView::default();
                 }
             }
             _ => {}

@@ -10,11 +10,16 @@
 
 use std::sync::Arc;
 
+mod mip;
+mod panel;
+
+pub use mip::{MipArea, PetMip};
+
 use glam::{DAffine3, DVec3};
 
 use super::load::{LoadJob, LoadSource, LoadStep, SeriesSet};
 use super::mip_view::{MipScene, MipView};
-use super::slices::PaneAxes;
+use super::model::axes::PaneAxes;
 use super::view_link::PetView;
 use crate::gpu::GpuContext;
 use crate::gpu::volume_texture::RenderVolume;
@@ -224,134 +229,10 @@ pub struct PetState {
     pending_view: Option<PetView>,
 }
 
-/// The PET's MIP viewport: its camera follows the shape MIP's.
-#[derive(Default)]
-pub struct PetMip {
-    mip: MipView,
-    /// The PET texture the viewport last framed (its first frame keeps the CT's camera).
-    mip_for: Option<usize>,
-}
-
-/// Where the PET's MIP goes: the MIP pane, and where the shape MIP's image starts in it.
-#[derive(Clone, Copy, Debug)]
-pub struct MipArea {
-    pub pane: egui::Rect,
-    pub image_top: f32,
-    /// The shared crosshair (LPS mm), marked in the PET's MIP as in the shape MIP.
-    pub crosshair_mm: Option<DVec3>,
-}
-
-/// What the PET's MIP did this frame.
-pub struct PetMipOutput {
-    /// A click picked this point (LPS mm): the PET's maximum along that ray.
-    pub pick: Option<DVec3>,
-    /// What is left of the MIP pane for the shape MIP.
-    pub rest: egui::Rect,
-    /// The PET's window after this frame (a right drag in the viewport sets it).
-    pub window: (f32, f32),
-}
-
 impl PetState {
     /// Forgets the PET (a new CT was loaded).
     pub fn clear(&mut self) {
         *self = Self::default();
-    }
-}
-
-impl PetMip {
-    /// Where the PET's MIP image was drawn last frame.
-    pub fn image_area(&self) -> egui::Rect {
-        self.mip.image_area()
-    }
-
-    /// Whether the PET's MIP was drawn with another camera than `camera` (the shape MIP's,
-    /// moved after it this frame): it needs another frame.
-    pub fn lags(&self, camera: &Camera) -> bool {
-        self.mip_for.is_some() && self.mip.camera != *camera
-    }
-
-    /// The PET MIP's picture state ([`MipView::picture_state`]).
-    pub fn picture_state(&self) -> &'static str {
-        self.mip.picture_state()
-    }
-
-    /// The PET's MIP in the left half of the MIP pane's `area`, turned with `camera` (the shape
-    /// MIP's: a drag in either turns both): inverted grey in the PET's window. `None` (the
-    /// whole pane for the shape MIP) without a PET shown.
-    pub fn ui(
-        &mut self,
-        ui: &mut egui::Ui,
-        area: MipArea,
-        gpu: &GpuContext,
-        render_state: &eframe::egui_wgpu::RenderState,
-        layer: Option<&PetLayer>,
-        camera: &mut Camera,
-    ) -> Option<PetMipOutput> {
-        let MipArea {
-            pane: area,
-            image_top,
-            crosshair_mm,
-        } = area;
-        let layer = layer.filter(|l| l.visible)?;
-        let render = layer.render.as_ref()?;
-        let (left, right) = area.split_left_right_at_fraction(0.5);
-        let mut pick = None;
-        let mut touched = false;
-        let mut window = layer.window;
-        let first = self.mip_for != Some(Arc::as_ptr(&layer.volume) as usize);
-        let mip = &mut self.mip;
-        ui.scope_builder(egui::UiBuilder::new().max_rect(left.shrink(2.0)), |ui| {
-            ui.horizontal(|ui| {
-                ui.label(egui::RichText::new("PET MIP").strong());
-                ui.label(format!(
-                    "{:.1} to {:.1} {}",
-                    layer.window.0,
-                    layer.window.1,
-                    layer.volume.unit()
-                ));
-            });
-            // The image starts where the shape MIP's does (below its toolbar), so that both
-            // have one size and one scale.
-            let gap = image_top - ui.cursor().top();
-            if gap > 0.0 && gap < 200.0 {
-                ui.add_space(gap);
-            }
-            mip.camera = *camera;
-            mip.set_crosshair(crosshair_mm);
-            mip.settings.window = layer.window;
-            mip.settings.invert_grey = true;
-            mip.settings.show_intensity = true;
-            mip.mode = None;
-            let scene = MipScene {
-                volume: render,
-                features: &[],
-            };
-            let out = mip.image_ui(ui, gpu, render_state, &scene);
-            pick = out.pick.map(|p| p.world_mm);
-            // Only the user's own moves here (drag, wheel, the view's keys) turn the shape MIP.
-            touched = out.response.dragged() || out.response.hovered();
-            // Its right drag sets the PET's window, as in the slice panes.
-            if mip.settings.window.1 > mip.settings.window.0 {
-                window = mip.settings.window;
-            }
-        });
-        if first || !touched {
-            // The viewport framed the PET on its first frame (or changed its camera by itself):
-            // the shape MIP's view stays, and is the PET's from the next frame.
-            self.mip_for = Some(Arc::as_ptr(&layer.volume) as usize);
-            if self.mip.camera != *camera {
-                self.mip.camera = *camera;
-                ui.ctx().request_repaint();
-            }
-        } else if self.mip.camera != *camera {
-            *camera = self.mip.camera;
-            ui.ctx().request_repaint();
-        }
-        Some(PetMipOutput {
-            pick,
-            rest: right,
-            window,
-        })
     }
 }
 
@@ -522,100 +403,11 @@ impl PetState {
         self.layer = Some(layer);
         message
     }
-
-    /// The panel's PET section: what is shown, its window (SUV), the opacity, on/off.
-    pub fn panel_ui(&mut self, ui: &mut egui::Ui) -> Vec<(String, egui::Rect)> {
-        let mut controls = Vec::new();
-        if self.loading() {
-            ui.label("PET: loading…");
-        }
-        let Some(layer) = &mut self.layer else {
-            return controls;
-        };
-        ui.separator();
-        ui.strong("PET (fused over the CT)");
-        let v = &layer.volume;
-        ui.label(format!(
-            "{} x {} x {} at {:.2} x {:.2} x {:.2} mm, {}",
-            v.dims[0],
-            v.dims[1],
-            v.dims[2],
-            v.spacing_mm[0],
-            v.spacing_mm[1],
-            v.spacing_mm[2],
-            match v.pet.as_ref().and_then(|p| p.suv_factor) {
-                Some(1.0) => "stored as SUVbw".to_owned(),
-                Some(f) => format!("SUVbw (factor {f:.4e})"),
-                None => format!("in {} (no SUV)", layer.unit()),
-            }
-        ));
-        let r = ui.checkbox(&mut layer.visible, "show the PET");
-        controls.push(("pet-visible".to_owned(), r.rect));
-        let r = ui
-            .checkbox(&mut layer.alone, "PET alone on the slices")
-            .on_hover_text(
-                "The slice panes show the PET in inverted grey instead of fused over the CT",
-            );
-        controls.push(("pet-alone".to_owned(), r.rect));
-        let unit = layer.unit().to_owned();
-        let (mut lo, mut hi) = layer.window;
-        // The sliders' ranges hold the window set (a link's, a PET's own values below 0 or
-        // above its maximum), and never clamp it just by being drawn.
-        let range = v.value_range().unwrap_or((0.0, 10.0));
-        let top = range.1.max(hi).max(lo + 1.0);
-        let bottom = range.0.min(lo).min(0.0);
-        let r = ui.add(
-            egui::Slider::new(&mut hi, bottom..=top)
-                .text(format!("window top ({unit})"))
-                .clamping(egui::SliderClamping::Never),
-        );
-        controls.push(("pet-window-hi".to_owned(), r.rect));
-        let r = ui.add(
-            egui::Slider::new(&mut lo, bottom..=top)
-                .text("window bottom")
-                .clamping(egui::SliderClamping::Never),
-        );
-        controls.push(("pet-window-lo".to_owned(), r.rect));
-        if hi > lo {
-            layer.window = (lo, hi);
-        }
-        ui.horizontal_wrapped(|ui| {
-            for (label, window) in window_presets(&unit, range) {
-                let r = ui.selectable_label(layer.window == window, label);
-                if r.clicked() {
-                    layer.window = window;
-                }
-                controls.push((format!("pet-preset:{label}"), r.rect));
-            }
-        });
-        let r = ui.add(egui::Slider::new(&mut layer.opacity, 0.0..=1.0).text("opacity"));
-        controls.push(("pet-opacity".to_owned(), r.rect));
-        for n in &layer.notes {
-            ui.label(egui::RichText::new(n).small().weak());
-        }
-        controls
-    }
-}
-
-/// The PET window presets a nuclear-medicine reader expects: SUV 0-5 (lymph nodes, lesions
-/// beside the mediastinal blood pool), 0-10 (the default), 0-20 (the hot organs: brain,
-/// bladder) and the volume's whole range; a PET without SUV gets its whole range only.
-fn window_presets(unit: &str, range: (f32, f32)) -> Vec<(&'static str, (f32, f32))> {
-    let full = (range.0.min(0.0), range.1.max(range.0.min(0.0) + 1.0));
-    let mut presets = Vec::new();
-    if unit == "SUV" {
-        presets.extend([
-            ("0-5", (0.0, 5.0)),
-            ("0-10", (0.0, 10.0)),
-            ("0-20", (0.0, 20.0)),
-        ]);
-    }
-    presets.push(("full", full));
-    presets
 }
 
 #[cfg(test)]
 mod tests {
+    use super::panel::window_presets;
     use super::*;
     use crate::volume::PetScale;
 
@@ -677,7 +469,8 @@ mod tests {
         });
         let layer = PetLayer::new(pet, &ct);
         assert_eq!(layer.window, (0.0, 10.0));
-        let axes = super::super::slices::pane_axes(&ct, super::super::slices::SliceKind::Axial);
+        let axes =
+            crate::app::model::axes::pane_axes(&ct, crate::app::model::axes::SliceKind::Axial);
         let image = layer.overlay(&ct, axes, 2);
         assert_eq!(image.size, [40, 40]);
         let at = |x: usize, y: usize| image.pixels[x + 40 * y];

@@ -4,8 +4,9 @@
 //! is installed (downloaded from its URLs, or dropped by the user: a link to a file from its
 //! author's computer says which file to drop), after the defaults a new volume gets.
 
+use super::model::axes::SliceKind;
 use super::view_link::{ViewSource, ViewState, human_bytes};
-use super::{Layout, ShapecastApp, slices::SliceKind};
+use super::{Layout, ShapecastApp};
 
 /// A link's view that waits for its volume.
 pub(super) struct PendingView {

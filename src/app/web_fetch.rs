@@ -17,8 +17,9 @@ use wasm_bindgen_futures::JsFuture;
 
 use super::js_bytes::{self, Gathered, JsBytes};
 use super::view_link::ViewSource;
-use super::web_files::{WebEvent, js_error, push};
+use super::web_events::{WebEvent, push};
 use crate::io::InputFile;
+use crate::io::js::error_text as js_error;
 use crate::io::url::host_of;
 
 thread_local! {

@@ -11,6 +11,8 @@ pub mod dicomweb;
 mod error;
 mod geometry;
 mod input;
+#[cfg(target_arch = "wasm32")]
+pub mod js;
 mod metaimage;
 pub mod nifti;
 mod nrrd;

@@ -3,6 +3,7 @@
 //! Secondary Capture series in the archive, `movie` then `app::pacs`), and their state in
 //! [`Export`].
 
+pub mod apng;
 pub mod movie;
 pub mod picture;
 

@@ -3,8 +3,7 @@
 //! asks eframe for a screenshot of the next frame (`ViewportCommand::Screenshot`, on the web and
 //! natively), crops it to the pane and encodes it as PNG; the page offers it as a download (a
 //! `blob:` URL on an `<a download>`: nothing leaves the machine), natively it is written into the
-//! current folder. Also the scale bar the panes draw: a round length in mm near a fifth of the
-//! pane's width.
+//! current folder.
 
 use std::sync::{Arc, Mutex};
 
@@ -33,54 +32,6 @@ pub(in crate::app) struct PictureState {
     /// Natively, the folder pictures are written into (`None`: the current folder).
     #[cfg(not(target_arch = "wasm32"))]
     pub dir: Option<std::path::PathBuf>,
-}
-
-/// A round length (1, 2 or 5 times a power of ten) in mm close to `target_mm`.
-pub fn round_length_mm(target_mm: f64) -> f64 {
-    if !(target_mm.is_finite() && target_mm > 0.0) {
-        return 1.0;
-    }
-    let power = 10f64.powf(target_mm.log10().floor());
-    let m = target_mm / power;
-    let step = if m < 1.5 {
-        1.0
-    } else if m < 3.5 {
-        2.0
-    } else if m < 7.5 {
-        5.0
-    } else {
-        10.0
-    };
-    step * power
-}
-
-/// A scale bar in the bottom-right corner of `area` for `points_per_mm` on screen: a round
-/// length near a fifth of the width, with end ticks and its length written above.
-pub fn draw_scale_bar(painter: &egui::Painter, area: egui::Rect, points_per_mm: f32) {
-    if !(points_per_mm.is_finite() && points_per_mm > 0.0) || area.width() < 60.0 {
-        return;
-    }
-    let mm = round_length_mm(f64::from(area.width() / points_per_mm) / 5.0);
-    let length = mm as f32 * points_per_mm;
-    let right = area.right_bottom() + egui::vec2(-10.0, -10.0);
-    let left = right - egui::vec2(length, 0.0);
-    let stroke = egui::Stroke::new(2.0, egui::Color32::from_gray(235));
-    painter.line_segment([left, right], stroke);
-    for p in [left, right] {
-        painter.line_segment([p - egui::vec2(0.0, 5.0), p], stroke);
-    }
-    let label = if mm >= 1.0 {
-        format!("{mm:.0} mm")
-    } else {
-        format!("{mm} mm")
-    };
-    painter.text(
-        left + egui::vec2(0.5 * length, -4.0),
-        egui::Align2::CENTER_BOTTOM,
-        label,
-        egui::FontId::proportional(12.0),
-        egui::Color32::from_gray(235),
-    );
 }
 
 /// The pixels of `rect` (points) of a screenshot taken at `pixels_per_point`, as PNG.
@@ -275,7 +226,7 @@ impl ShapecastApp {
 /// Hands a PNG to the user: a download in the page.
 #[cfg(target_arch = "wasm32")]
 fn deliver(name: &str, bytes: &[u8]) -> Result<String, String> {
-    download(name, bytes).map_err(|e| crate::app::web_files::js_error(&e))?;
+    download(name, bytes).map_err(|e| crate::io::js::error_text(&e))?;
     Ok(format!("{name} (your downloads)"))
 }
 
@@ -321,23 +272,6 @@ thread_local! {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn round_lengths() {
-        for (target, want) in [
-            (0.9, 1.0),
-            (1.6, 2.0),
-            (4.0, 5.0),
-            (8.0, 10.0),
-            (23.0, 20.0),
-            (0.3, 0.2),
-        ] {
-            let got = round_length_mm(target);
-            assert!((got - want).abs() < 1e-9, "{target}: {got}");
-        }
-        assert_eq!(round_length_mm(f64::NAN), 1.0);
-        assert_eq!(round_length_mm(-3.0), 1.0);
-    }
 
     #[test]
     fn crop_keeps_the_pixels_of_the_rect() {

@@ -20,9 +20,14 @@ use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
 mod backend;
+mod patient;
+mod pet;
 mod store;
 mod ui;
 
+pub use patient::patient_line;
+use patient::{merge_patient, study_summary};
+use pet::{PET_TASK, PetRetrieval};
 pub(super) use store::StoreJob;
 use store::{STORE_TASK, StoreDone};
 
@@ -88,18 +93,6 @@ impl Inbox {
             .map(|mut q| q.drain(..).collect())
             .unwrap_or_default()
     }
-}
-
-/// The tag of a PET retrieval's task ids: their own range, apart from the dialog's tasks
-/// (`Pacs::task`), so that neither replaces nor receives the other's answers.
-const PET_TASK: u64 = 1 << 63;
-
-/// A PET/CT study's PET on its way: its task, the generation of the CT it goes over, and the
-/// retrieval (cancelled when another CT is shown).
-struct PetRetrieval {
-    task: u64,
-    generation: u64,
-    running: backend::Task,
 }
 
 /// The dialog's state, the running task and the patient line.
@@ -169,85 +162,6 @@ impl Pacs {
         self.task += 1;
         self.task
     }
-}
-
-/// "DOE, JANE · ID P-7 · born 1970-01-01 · study 2024-01-02 · Thorax 1.0 B70f": the patient
-/// line, from what is known (`None` when nothing is).
-pub fn patient_line(p: &Patient) -> Option<String> {
-    let date = |d: &str| {
-        if d.len() == 8 && d.bytes().all(|b| b.is_ascii_digit()) {
-            format!("{}-{}-{}", &d[..4], &d[4..6], &d[6..])
-        } else {
-            d.to_owned()
-        }
-    };
-    let name = p.name.as_ref().map(|n| {
-        n.split('^')
-            .map(str::trim)
-            .filter(|s| !s.is_empty())
-            .collect::<Vec<_>>()
-            .join(", ")
-    });
-    let parts: Vec<String> = [
-        name.filter(|n| !n.is_empty()),
-        p.id.as_ref().map(|i| format!("ID {i}")),
-        p.birth_date.as_deref().map(|d| format!("born {}", date(d))),
-        p.study_date
-            .as_deref()
-            .map(|d| format!("study {}", date(d))),
-        p.series_description.clone(),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
-    (!parts.is_empty()).then(|| parts.join(" · "))
-}
-
-/// The patient of a retrieved series: what its images say, completed by the archive's listing.
-fn merge_patient(
-    images: Option<Patient>,
-    study: &StudyInfo,
-    series: Option<&SeriesInfo>,
-) -> Patient {
-    let mut p = images.unwrap_or_default();
-    p.name = p.name.or_else(|| study.patient_name.clone());
-    p.id = p.id.or_else(|| study.patient_id.clone());
-    p.birth_date = p.birth_date.or_else(|| study.patient_birth_date.clone());
-    p.study_date = p.study_date.or_else(|| study.study_date.clone());
-    p.series_description = p
-        .series_description
-        .or_else(|| series.and_then(|s| s.description.clone()));
-    p
-}
-
-/// One line of the study list.
-fn study_summary(s: &StudyInfo) -> String {
-    let mut parts: Vec<String> = Vec::new();
-    if let Some(d) = &s.study_date {
-        parts.push(d.clone());
-    }
-    if let Some(n) = &s.patient_name {
-        parts.push(n.replace('^', ", "));
-    }
-    if let Some(i) = &s.patient_id {
-        parts.push(format!("ID {i}"));
-    }
-    if let Some(a) = &s.accession_number {
-        parts.push(format!("acc. {a}"));
-    }
-    if !s.modalities.is_empty() {
-        parts.push(s.modalities.join("/"));
-    }
-    if let Some(d) = &s.description {
-        parts.push(format!("\"{d}\""));
-    }
-    if let Some(n) = s.series_count {
-        parts.push(format!("{n} series"));
-    }
-    if parts.is_empty() {
-        parts.push(s.study_uid.clone());
-    }
-    parts.join("  ")
 }
 
 impl ShapecastApp {
@@ -544,77 +458,6 @@ impl ShapecastApp {
         self.pacs_title(ctx);
     }
 
-    /// A CT just shown from an archive's PET/CT study (the CT of `generation`): the study's
-    /// PET series is retrieved next and fused over it, as a dropped folder's PET is.
-    pub(super) fn pacs_retrieve_pet(&mut self, generation: u64) {
-        // A PET still on its way for an earlier CT is cancelled.
-        if let Some(old) = self.pacs.pet.take() {
-            old.running.cancel();
-        }
-        let Some(scene) = &self.scene else {
-            return;
-        };
-        let Some(ViewSource::DicomWeb { base, study, .. }) = &scene.origin else {
-            return;
-        };
-        if scene.volume.modality != crate::volume::Modality::Ct
-            || self.pacs.study.as_ref().map(|(_, s)| &s.study_uid) != Some(study)
-        {
-            return;
-        }
-        let Some(pet) = dicomweb::pet_series(&self.pacs.series) else {
-            return;
-        };
-        let target = PacsTarget {
-            base: base.clone(),
-            study: study.clone(),
-            series: Some(self.pacs.series[pet].series_uid.clone()),
-        };
-        let parsed = Base::parse(&target.base).and_then(|b| Ok((b, self.pacs.auth()?)));
-        let (base, auth) = match parsed {
-            Ok(x) => x,
-            Err(e) => return self.error(format!("PET: {e}")),
-        };
-        // Its own task: the dialog's next search or study does not cancel it, a new CT does.
-        self.pacs.pet_tasks += 1;
-        let task = PET_TASK | self.pacs.pet_tasks;
-        self.pet.awaiting(generation);
-        let running = backend::retrieve(base, auth, target, task, self.pacs.inbox.clone());
-        self.pacs.pet = Some(PetRetrieval {
-            task,
-            generation,
-            running,
-        });
-    }
-
-    /// The archive's answer for a PET/CT study's PET: fused over its CT when that is still the
-    /// one shown; its progress shows as the PET's own "loading".
-    fn pacs_pet_event(&mut self, event: Event) {
-        let Event::Retrieved { result, .. } = event else {
-            return;
-        };
-        let Some(retrieval) = self.pacs.pet.take() else {
-            return;
-        };
-        match *result {
-            Ok(loaded) => {
-                let ct = self.scene.as_ref().map(|s| s.volume.as_ref());
-                if let Some(message) =
-                    self.pet
-                        .install(loaded.volume, ct, retrieval.generation, self.gpu.as_ref())
-                {
-                    self.error(message);
-                }
-                self.pet_arrived();
-            }
-            Err(e) => {
-                if self.pet.failed(retrieval.generation) {
-                    self.error(format!("PET: {e}"));
-                }
-            }
-        }
-    }
-
     /// Natively the window title names the patient too (the page's title never does: it is
     /// the tab's name in a browser's history).
     fn pacs_title(&mut self, ctx: &egui::Context) {
@@ -630,54 +473,5 @@ impl ShapecastApp {
             }
         }
         let _ = ctx;
-    }
-}
-
-#[cfg(test)]
-#[allow(clippy::unwrap_used)] // a failed unwrap is a failed test
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_patient_line_says_what_is_known() {
-        assert_eq!(patient_line(&Patient::default()), None);
-        let p = Patient {
-            name: Some("DOE^JANE^^".to_owned()),
-            id: Some("P-7".to_owned()),
-            birth_date: Some("19700101".to_owned()),
-            study_date: Some("2024-1-2".to_owned()),
-            series_description: Some("Thorax 1.0 B70f".to_owned()),
-        };
-        assert_eq!(
-            patient_line(&p).unwrap(),
-            "DOE, JANE · ID P-7 · born 1970-01-01 · study 2024-1-2 · Thorax 1.0 B70f"
-        );
-        assert_eq!(format!("{p:?}"), "Patient(..)");
-    }
-
-    #[test]
-    fn the_archive_fills_what_the_images_lack() {
-        let study = StudyInfo {
-            study_uid: "1.2".to_owned(),
-            patient_name: Some("ROE^RICHARD".to_owned()),
-            patient_id: Some("Q".to_owned()),
-            study_date: Some("20200202".to_owned()),
-            ..StudyInfo::default()
-        };
-        let series = SeriesInfo {
-            series_uid: "1.2.3".to_owned(),
-            description: Some("lung".to_owned()),
-            ..SeriesInfo::default()
-        };
-        let images = Patient {
-            id: Some("from-header".to_owned()),
-            ..Patient::default()
-        };
-        let p = merge_patient(Some(images), &study, Some(&series));
-        assert_eq!(p.id.as_deref(), Some("from-header"));
-        assert_eq!(p.name.as_deref(), Some("ROE^RICHARD"));
-        assert_eq!(p.study_date.as_deref(), Some("20200202"));
-        assert_eq!(p.series_description.as_deref(), Some("lung"));
-        assert!(study_summary(&study).starts_with("20200202  ROE, RICHARD  ID Q"));
     }
 }

@@ -1,11 +1,12 @@
 //! The series in a set of DICOM files, from their headers alone (no pixel is decoded): what a
 //! list shows of each (modality, description, images, slice thickness, orientation), the
 //! default choice, and loading exactly the one chosen from the same files. The grouping is the
-//! loader's own (`series::group_stacks`): one entry per stack the loader can load.
+//! loader's own (`stacks::group_stacks`): one entry per stack the loader can load.
 
 use glam::DVec3;
 
-use super::series::{self, Stack};
+use super::series;
+use super::stacks::{self, Stack};
 use super::{FileHeader, read_header};
 use crate::io::{InputFile, Limits, LoadError, Loaded};
 
@@ -160,7 +161,7 @@ impl SeriesList {
             .iter()
             .map(|(i, h)| (names.get(*i).map_or("", String::as_str), h))
             .collect();
-        let stacks = series::group_stacks(&named);
+        let stacks = stacks::group_stacks(&named);
         let entries = stacks
             .iter()
             .map(|s| {
@@ -232,14 +233,14 @@ impl SeriesList {
     /// first of equals (the archive's rule, `dicomweb::choose_series`).
     pub fn default_choice(&self) -> usize {
         let named = self.named_headers();
-        series::default_stack(&self.stacks, &named).unwrap_or(0)
+        stacks::default_stack(&self.stacks, &named).unwrap_or(0)
     }
 
     /// Notes naming every entry but `chosen` as not loaded (what [`crate::io::load`] tells a
     /// user who sees no list).
     pub fn others_not_loaded(&self, chosen: usize) -> Vec<String> {
         let mut notes = Vec::new();
-        series::other_stack_notes(&self.stacks, chosen, &self.named_headers(), &mut notes);
+        stacks::other_stack_notes(&self.stacks, chosen, &self.named_headers(), &mut notes);
         notes
     }
 

@@ -24,6 +24,7 @@ use super::{
     Auth, Base, DEFAULT_PARALLEL, DicomWebError, InstanceListing, MAX_JSON_BYTES, Request,
     StudySearch, check_status,
 };
+use crate::io::js::error_text;
 use crate::io::{Limits, Loaded};
 
 /// A progress report is sent at least every this many streamed bytes.
@@ -52,7 +53,7 @@ impl WebClient {
     pub fn new(base: Base, auth: Auth) -> Result<Self, DicomWebError> {
         let controller = web_sys::AbortController::new().map_err(|e| DicomWebError::Transport {
             url: base.as_str().to_owned(),
-            message: format!("cannot make an AbortController: {}", js_text(&e)),
+            message: format!("cannot make an AbortController: {}", error_text(&e)),
         })?;
         Ok(Self {
             base,
@@ -361,7 +362,7 @@ async fn send(
         message,
     };
     let window = web_sys::window().ok_or_else(|| transport("no window object".to_owned()))?;
-    let headers = web_sys::Headers::new().map_err(|e| transport(js_text(&e)))?;
+    let headers = web_sys::Headers::new().map_err(|e| transport(error_text(&e)))?;
     for (name, value) in &request.headers {
         headers
             .set(name, value)
@@ -381,7 +382,7 @@ async fn send(
         Ok(r) => Ok(r.unchecked_into()),
         Err(_) if signal.aborted() => Err(DicomWebError::Cancelled),
         Err(e) => {
-            log::warn!("fetch {url}: {}", js_text(&e));
+            log::warn!("fetch {url}: {}", error_text(&e));
             Err(transport(refusal(url)))
         }
     }
@@ -446,7 +447,7 @@ async fn read_body(
                     url: url.to_owned(),
                     message: format!(
                         "the answer broke off after {received} bytes ({})",
-                        js_text(&e)
+                        error_text(&e)
                     ),
                 });
             }
@@ -473,16 +474,6 @@ async fn read_body(
             return Err(e);
         }
     }
-}
-
-fn js_text(e: &JsValue) -> String {
-    e.as_string()
-        .or_else(|| {
-            js_sys::Reflect::get(e, &JsValue::from_str("message"))
-                .ok()
-                .and_then(|m| m.as_string())
-        })
-        .unwrap_or_else(|| format!("{e:?}"))
 }
 
 /// A queue that one task awaits and others push to (single-threaded: wasm).

@@ -1,0 +1,339 @@
+//! The app's bars and panels: the top bar (open, demo and phantom menu, mode, layout, about),
+//! the side panel (features and their parameters, display gains, window), the status bar
+//! (mouse and crosshair readouts, progress), the error messages, the about window and the drop
+//! overlay.
+
+mod side;
+
+use super::features::{self, DisplayMode};
+use super::{Layout, LoadSource, PaneId, ShapecastApp, SliceKind, WindowPreset, demo};
+
+const FEATURE_NAMES: [&str; 3] = ["vesselness", "airwayness", "blobness"];
+
+impl ShapecastApp {
+    pub(super) fn top_bar_ui(&mut self, ui: &mut egui::Ui) {
+        egui::MenuBar::new().ui(ui, |ui| {
+            ui.heading("Shapecast");
+            ui.separator();
+            self.open_menu_ui(ui);
+            ui.menu_button("Demo", |ui| {
+                if ui.button("Demo CT (chest CTA, 1.5 mm)").clicked() {
+                    self.open_demo_ct();
+                    ui.close();
+                }
+                ui.separator();
+                ui.label("Phantoms of the paper (0.5 mm, HU):");
+                for name in crate::phantom::NAMES
+                    .iter()
+                    .chain(crate::phantom::EXTRA_NAMES.iter())
+                {
+                    if ui.button(*name).clicked() {
+                        self.open(LoadSource::Phantom((*name).to_owned()));
+                        ui.close();
+                    }
+                }
+            });
+            ui.separator();
+            ui.label("Mode:");
+            for m in DisplayMode::ALL {
+                let r = ui.selectable_label(self.mode == m, m.label());
+                let r = match m.method() {
+                    Some(method) => {
+                        let cached = self.features.find(&self.applied.request(method)).is_some();
+                        r.on_hover_text(if cached {
+                            "computed: switches at once"
+                        } else if method == crate::cpu::pipeline::Method::Rst {
+                            "computes the RST features with the current parameters: rays from every voxel, several times the Hessian's time (the status says how long)"
+                        } else {
+                            "computes the features with the current parameters"
+                        })
+                    }
+                    None => r.on_hover_text("grey values only"),
+                };
+                self.control(&format!("mode:{}", m.name()), r.rect);
+                if r.clicked() && self.mode != m {
+                    self.set_mode(m);
+                }
+            }
+            ui.separator();
+            ui.label("Layout:");
+            let before = self.reading.layout;
+            for (layout, label) in [
+                (Layout::MipAndSlices, "MIP + slices"),
+                (Layout::Grid, "2×2"),
+                (Layout::Single(PaneId::Mip), "MIP"),
+                (Layout::Single(PaneId::Slice(SliceKind::Axial)), "Axial"),
+                (Layout::Single(PaneId::Slice(SliceKind::Coronal)), "Coronal"),
+                (
+                    Layout::Single(PaneId::Slice(SliceKind::Sagittal)),
+                    "Sagittal",
+                ),
+            ] {
+                let r = ui.selectable_label(self.reading.layout == layout, label);
+                self.control(&format!("layout:{}", layout.name()), r.rect);
+                if r.clicked() {
+                    self.reading.layout = layout;
+                }
+            }
+            if self.reading.layout != before && !matches!(self.reading.layout, Layout::Single(_)) {
+                self.reading.multi_layout = self.reading.layout;
+            }
+            ui.separator();
+            self.copy_link_ui(ui);
+            self.save_picture_ui(ui);
+            self.save_movie_ui(ui);
+            ui.separator();
+            if ui.button("About & data").clicked() {
+                self.windows.show_about = !self.windows.show_about;
+            }
+        });
+    }
+
+    pub(super) fn open_demo_ct(&mut self) {
+        #[cfg(target_arch = "wasm32")]
+        {
+            self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
+            super::web_files::fetch_demo();
+        }
+        #[cfg(not(target_arch = "wasm32"))]
+        self.open_from(demo::demo_source(), Some(super::ViewSource::Demo));
+    }
+
+    #[cfg(target_arch = "wasm32")]
+    fn open_menu_ui(&mut self, ui: &mut egui::Ui) {
+        if ui
+            .button("Open files…")
+            .on_hover_text("a volume file, a header with its data file, or DICOM slices")
+            .clicked()
+        {
+            super::web_files::open_dialog(false);
+        }
+        if ui
+            .button("Open folder…")
+            .on_hover_text("a folder holding a DICOM series")
+            .clicked()
+        {
+            super::web_files::open_dialog(true);
+        }
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    fn open_menu_ui(&mut self, ui: &mut egui::Ui) {
+        ui.menu_button("Open", |ui| {
+            ui.label("A file or a folder (DICOM series), or drop them on the window:");
+            let r = ui.add(
+                egui::TextEdit::singleline(&mut self.windows.open_path)
+                    .hint_text("/path/to/volume.nii.gz or /path/to/dicom-folder")
+                    .desired_width(360.0),
+            );
+            let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+            if (ui.button("Open").clicked() || enter) && !self.windows.open_path.trim().is_empty() {
+                let path = std::path::PathBuf::from(self.windows.open_path.trim());
+                self.open(LoadSource::Paths(vec![path]));
+                ui.close();
+            }
+        });
+    }
+
+    pub(super) fn status_bar_ui(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            ui.label(self.status.phase.as_str());
+            if let Some((f, what)) = &self.load_progress {
+                ui.add(
+                    egui::ProgressBar::new(*f)
+                        .desired_width(260.0)
+                        .text(what.as_str()),
+                );
+                #[cfg(target_arch = "wasm32")]
+                if super::web_fetch::active() {
+                    let r = ui
+                        .small_button("Cancel")
+                        .on_hover_text("stop the download; the volume shown stays");
+                    self.control("cancel-download", r.rect);
+                    if r.clicked() {
+                        super::web_fetch::cancel();
+                    }
+                }
+            } else if let Some(bar) = self.feature_progress_bar(260.0) {
+                ui.add(bar);
+                if ui.small_button("Cancel").clicked() {
+                    self.features.cancel();
+                }
+            }
+            self.movie_progress_ui(ui);
+            if let Some(a) = &self.status.adapter {
+                ui.separator();
+                ui.label(egui::RichText::new(format!("GPU: {} ({})", a.name, a.backend)).small());
+            }
+            ui.separator();
+            ui.label(format!(
+                "W {:.0} L {:.0}",
+                self.reading.window.width, self.reading.window.level
+            ));
+        });
+        let mono = egui::TextStyle::Monospace;
+        ui.horizontal(|ui| {
+            ui.label(egui::RichText::new("mouse     ").text_style(mono.clone()));
+            if let Some(h) = self.reading.hover {
+                ui.label(egui::RichText::new(self.readout(h)).text_style(mono.clone()));
+            }
+        });
+        ui.horizontal(|ui| {
+            ui.label(egui::RichText::new("crosshair ").text_style(mono.clone()));
+            if self.scene.is_some() {
+                ui.label(
+                    egui::RichText::new(self.readout(self.reading.crosshair)).text_style(mono),
+                );
+            }
+        });
+    }
+
+    pub(super) fn errors_ui(&mut self, ui: &mut egui::Ui) {
+        let mut dismiss = None;
+        for (n, e) in self.errors.iter().enumerate() {
+            let fill = egui::Color32::from_rgb(70, 25, 25);
+            let title = ("Error:", egui::Color32::from_rgb(255, 170, 160));
+            if notice_ui(ui, fill, title, e) {
+                dismiss = Some(n);
+            }
+        }
+        if let Some(n) = dismiss {
+            self.errors.remove(n);
+        }
+    }
+
+    pub(super) fn about_ui(&mut self, ctx: &egui::Context) {
+        let mut open = self.windows.show_about;
+        egui::Window::new("About & data")
+            .open(&mut open)
+            .default_width(520.0)
+            .show(ctx, |ui| {
+                ui.label(
+                    "Shapecast shows shape features of CT and MR volumes (Hessian and radial \
+                     structure tensor, after Wiemker et al. 2013) as colour-coded maximum \
+                     intensity projections beside linked slice panes. Everything runs on this \
+                     machine's GPU; no data leaves it.",
+                );
+                ui.separator();
+                ui.heading("Demo data");
+                ui.label(demo::ATTRIBUTION);
+                ui.hyperlink_to("Apache License 2.0", demo::LICENCE_URL);
+                ui.hyperlink_to(
+                    "TotalSegmentator on GitHub",
+                    "https://github.com/wasserth/TotalSegmentator",
+                );
+                ui.separator();
+                ui.label(demo::PHANTOM_NOTE);
+                ui.separator();
+                ui.label(
+                    "Use: click a slice to move the crosshair; wheel to change slice; \
+                     right-drag (or ctrl-drag) for window/level; 'maximise' shows one pane alone.",
+                );
+            });
+        self.windows.show_about = open;
+    }
+
+    pub(super) fn drop_overlay(&self, ctx: &egui::Context) {
+        if !self.windows.drop_hover {
+            return;
+        }
+        let screen = ctx.content_rect();
+        let painter = ctx.layer_painter(egui::LayerId::new(
+            egui::Order::Foreground,
+            egui::Id::unique("drop overlay"),
+        ));
+        painter.rect_filled(screen, 0.0, egui::Color32::from_black_alpha(170));
+        painter.text(
+            screen.center(),
+            egui::Align2::CENTER_CENTER,
+            "Drop files or a folder to open them",
+            egui::FontId::proportional(24.0),
+            egui::Color32::WHITE,
+        );
+    }
+
+    /// The running feature computation's progress, `width` points wide: "method: stage".
+    fn feature_progress_bar(&self, width: f32) -> Option<egui::ProgressBar> {
+        let (fraction, stage) = self.features.progress()?;
+        let name = self
+            .features
+            .running_request()
+            .map_or("", |r| features::method_name(r.method));
+        Some(
+            egui::ProgressBar::new(fraction)
+                .desired_width(width)
+                .text(format!(
+                    "{name}: {stage}{}",
+                    time_left(self.features.timing())
+                )),
+        )
+    }
+
+    /// Keeps the status bar's feature readback going.
+    pub(super) fn update_probe(&mut self) {
+        let Some(gpu) = &self.gpu else { return };
+        let entry = self
+            .displayed_request()
+            .and_then(|r| self.features.find(&r));
+        let mut voxels = vec![self.reading.crosshair];
+        if let Some(h) = self.reading.hover
+            && h != self.reading.crosshair
+        {
+            voxels.push(h);
+        }
+        self.probe
+            .update(gpu, entry.map(|e| (&e.texture, e.id)), voxels);
+    }
+}
+
+/// ", about 12 s left" from a job's (elapsed, left) seconds; ", estimating the time" before it
+/// has progress to go by.
+pub(super) fn time_left(timing: Option<(f64, Option<f64>)>) -> String {
+    match timing {
+        None => String::new(),
+        Some((_, None)) => ", estimating the time".to_owned(),
+        Some((_, Some(left))) if left < 60.0 => format!(", about {:.0} s left", left.ceil()),
+        Some((_, Some(left))) => format!(", about {:.0} min left", (left / 60.0).ceil()),
+    }
+}
+
+/// A notice in a `fill` frame: a Dismiss button on the right, the title (text, colour), then
+/// `text`, wrapped. True when Dismiss was clicked.
+pub(super) fn notice_ui(
+    ui: &mut egui::Ui,
+    fill: egui::Color32,
+    title: (&str, egui::Color32),
+    text: impl Into<egui::WidgetText>,
+) -> bool {
+    let mut dismiss = false;
+    egui::Frame::new()
+        .fill(fill)
+        .inner_margin(6.0)
+        .corner_radius(4.0)
+        .show(ui, |ui| {
+            ui.with_layout(egui::Layout::right_to_left(egui::Align::TOP), |ui| {
+                dismiss = ui.button("Dismiss").clicked();
+                ui.with_layout(egui::Layout::left_to_right(egui::Align::TOP), |ui| {
+                    ui.colored_label(title.1, title.0);
+                    ui.add(egui::Label::new(text).wrap());
+                });
+            });
+        });
+    dismiss
+}
+
+/// A closed header `title` over `notes`, one small line each.
+fn notes_ui(
+    ui: &mut egui::Ui,
+    title: impl Into<egui::WidgetText>,
+    id_salt: &str,
+    notes: &[String],
+) {
+    egui::CollapsingHeader::new(title)
+        .id_salt(id_salt)
+        .show(ui, |ui| {
+            for n in notes {
+                ui.label(egui::RichText::new(n).small());
+            }
+        });
+}

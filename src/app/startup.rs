@@ -1,0 +1,186 @@
+//! Starting the viewer: the wgpu configuration, the native window, the app's first state and
+//! what it opens first (the demo, a phantom, paths, URLs, an archive's study).
+
+use super::*;
+
+/// The eframe/egui wgpu configuration both targets use: the adapter's own limits and features
+/// (wgpu's defaults are far too small for volumes), WebGPU only on the web.
+pub fn wgpu_options() -> eframe::egui_wgpu::WgpuConfiguration {
+    use eframe::egui_wgpu::{WgpuConfiguration, WgpuSetup, WgpuSetupCreateNew};
+    let mut create = WgpuSetupCreateNew::without_display_handle();
+    create.device_descriptor = Arc::new(crate::gpu::context::device_descriptor);
+    #[cfg(target_arch = "wasm32")]
+    {
+        create.instance_descriptor.backends = wgpu::Backends::BROWSER_WEBGPU;
+    }
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        create.instance_descriptor.backends =
+            wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
+    }
+    WgpuConfiguration {
+        wgpu_setup: WgpuSetup::CreateNew(create),
+        ..Default::default()
+    }
+}
+
+/// Opens the viewer in a native window.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn run_native(options: AppOptions) -> anyhow::Result<()> {
+    let native = eframe::NativeOptions {
+        renderer: eframe::Renderer::Wgpu,
+        wgpu_options: wgpu_options(),
+        viewport: egui::ViewportBuilder::default()
+            .with_title("Shapecast")
+            .with_inner_size([1440.0, 900.0])
+            .with_drag_and_drop(true),
+        ..Default::default()
+    };
+    eframe::run_native(
+        "Shapecast",
+        native,
+        Box::new(move |cc| Ok(Box::new(ShapecastApp::with_options(cc, options)))),
+    )
+    .map_err(|e| anyhow::anyhow!("could not open the viewer window: {e}"))
+}
+
+impl ShapecastApp {
+    /// The app as the page and the native window start it (URL parameters on the web).
+    pub fn new(cc: &eframe::CreationContext<'_>) -> Self {
+        Self::with_options(cc, AppOptions::from_environment())
+    }
+
+    pub fn with_options(cc: &eframe::CreationContext<'_>, options: AppOptions) -> Self {
+        // Radiologists read in a dark room: dark theme regardless of the system's.
+        cc.egui_ctx.set_theme(egui::Theme::Dark);
+        let gpu = cc
+            .wgpu_render_state
+            .as_ref()
+            .map(GpuContext::from_render_state);
+        let mut status = AppStatus::default();
+        // Asked now, so that the answer is in before the first volume (a link's) is uploaded.
+        #[cfg(target_arch = "wasm32")]
+        if let Some(g) = &gpu {
+            crate::gpu::volume_texture::ask_render_attachment_3d(g);
+        }
+        match &gpu {
+            Some(g) => {
+                #[cfg(target_arch = "wasm32")]
+                let name = crate::gpu::context::browser_adapter_name()
+                    .unwrap_or_else(|| g.adapter_info.name.clone());
+                #[cfg(not(target_arch = "wasm32"))]
+                let name = g.adapter_info.name.clone();
+                status.adapter = Some(AdapterStatus {
+                    name,
+                    backend: format!("{:?}", g.adapter_info.backend),
+                });
+                log::info!("GPU context:\n{}", g.describe());
+            }
+            None => {
+                status.phase = Phase::Error;
+                status.error = Some("eframe started without a wgpu renderer".to_owned());
+            }
+        }
+        let mut errors = options.link_problems.clone();
+        errors.truncate(5);
+        let pending_view = options.view.clone().map(share::PendingView::new);
+        let preset = options.preset.unwrap_or(match options.start {
+            StartWith::DemoCt => Preset::Vessels,
+            _ => Preset::default(),
+        });
+        let params = FeatureParams::from_preset(preset);
+        let slice_renderer = gpu.as_ref().and_then(|g| match SliceRenderer::new(g) {
+            Ok(r) => Some(r),
+            Err(e) => {
+                log::error!("slice kernel: {e}");
+                None
+            }
+        });
+        Self {
+            gpu,
+            mode: options.mode,
+            options,
+            status,
+            published: None,
+            started: false,
+            load: None,
+            uploading: None,
+            load_progress: None,
+            scene: None,
+            generation: 0,
+            errors,
+            notes: Vec::new(),
+            features: FeatureManager::default(),
+            applied: params.clone(),
+            params,
+            display: FeatureDisplay::default(),
+            reading: model::Reading::default(),
+            panes: SliceKind::ALL.map(SlicePane::new),
+            slice_renderer,
+            mip_view: MipView::new(),
+            measure: measure::Measurements::default(),
+            probe: probe::ProbeState::default(),
+            windows: model::Windows::default(),
+            export: export::Export::default(),
+            loading_origin: None,
+            pending_view,
+            pending_camera: None,
+            controls: Vec::new(),
+            pacs: pacs::Pacs::default(),
+            pet: pet::PetState::default(),
+            pet_mip: pet::PetMip::default(),
+            findings: findings::FindingsState::default(),
+            series: series_list::SeriesState::default(),
+        }
+    }
+
+    pub(super) fn start_once(&mut self, ctx: &egui::Context) {
+        if self.started {
+            return;
+        }
+        self.started = true;
+        // One frame when a job's step is done (`request_repaint` would ask for two).
+        let wake = ctx.clone();
+        self.features.set_waker(Arc::new(move || {
+            wake.request_repaint_after(std::time::Duration::from_millis(1));
+        }));
+        #[cfg(target_arch = "wasm32")]
+        if let Err(e) = web_files::install(ctx) {
+            self.error(format!("drag and drop is unavailable: {e}"));
+        }
+        self.pacs_start(ctx);
+        match self.options.start.clone() {
+            StartWith::DemoCt => {
+                #[cfg(target_arch = "wasm32")]
+                {
+                    self.cancel_upload();
+                    self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
+                    web_files::fetch_demo();
+                }
+                #[cfg(not(target_arch = "wasm32"))]
+                self.open_from(demo::demo_source(), Some(ViewSource::Demo));
+            }
+            StartWith::Phantom(name) => self.open(LoadSource::Phantom(name)),
+            #[cfg(not(target_arch = "wasm32"))]
+            StartWith::Paths(paths) => self.open(LoadSource::Paths(paths)),
+            StartWith::Urls(urls) => self.open_urls(urls),
+            StartWith::DicomWeb(target) => self.open_dicomweb(target),
+            StartWith::Nothing => {}
+        }
+    }
+
+    /// Downloads volumes by URL (web; natively the command line opens paths instead).
+    pub fn open_urls(&mut self, urls: Vec<String>) {
+        #[cfg(target_arch = "wasm32")]
+        {
+            self.cancel_upload();
+            self.load_progress = Some((0.0, format!("downloading {}", urls.join(", "))));
+            web_fetch::fetch_urls(urls);
+        }
+        #[cfg(not(target_arch = "wasm32"))]
+        self.error(format!(
+            "{}: opening a volume by URL works in the browser; download it and open the file",
+            urls.join(", ")
+        ));
+    }
+}

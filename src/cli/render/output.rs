@@ -1,0 +1,87 @@
+//! `render --bench N` (frame times) and `render --pick PX,PY` (where a pixel's maximum came
+//! from, as JSON).
+
+use super::*;
+
+pub(super) fn bench(
+    ctx: &GpuContext,
+    caster: &Raycaster,
+    scene: &Scene<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    target: &mut RaycastTarget,
+    frames: u32,
+) -> anyhow::Result<()> {
+    // The first frame (already submitted) compiles the pipeline: wait for it before timing.
+    ctx.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .context("waiting for the GPU")?;
+    let mut times = Vec::new();
+    let mut cam = *camera;
+    for _ in 0..frames.max(1) {
+        // Turn a little every frame, as a drag does.
+        cam.orbit(2.0, 0.0);
+        let t = web_time::Instant::now();
+        caster.render(ctx, scene, &cam, settings, target, ..)?;
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .context("waiting for the GPU")?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let mean = times.iter().sum::<f64>() / times.len() as f64;
+    let min = times.iter().copied().fold(f64::INFINITY, f64::min);
+    eprintln!(
+        "bench: {} frames of {}x{} over {:?} voxels ({}) on {}: mean {mean:.1} ms, min {min:.1} ms",
+        times.len(),
+        target.size[0],
+        target.size[1],
+        scene.volume.dims,
+        match (scene.features.is_some(), scene.skipping()) {
+            (true, true) => "intensity + features, skipping empty space",
+            (true, false) => "intensity + features, no skipping",
+            (false, true) => "intensity only, skipping empty space",
+            (false, false) => "intensity only, no skipping",
+        },
+        ctx.adapter_label()
+    );
+    println!(
+        "{{\"frame_ms_mean\": {mean:.3}, \"frame_ms_min\": {min:.3}, \"frames\": {}}}",
+        times.len()
+    );
+    Ok(())
+}
+
+pub(super) fn pick_json(
+    ctx: &GpuContext,
+    volume: &Volume,
+    features: Option<&FeatureTexture>,
+    method: RenderMethod,
+    pixel: [u32; 2],
+    pick: Option<Pick>,
+) -> anyhow::Result<serde_json::Value> {
+    use serde_json::json;
+    let Some(p) = pick else {
+        return Ok(json!({ "pixel": pixel, "hit": false }));
+    };
+    let [i, j, k] = p.voxel;
+    let mut out = json!({
+        "pixel": pixel,
+        "hit": true,
+        "channel": p.channel.name(),
+        "depth_mm": p.depth_mm,
+        "lps_mm": [p.world_mm.x, p.world_mm.y, p.world_mm.z],
+        "voxel": p.voxel,
+        "voxel_continuous": [p.voxel_f.x, p.voxel_f.y, p.voxel_f.z],
+        "intensity": volume.value_at(i, j, k),
+    });
+    if let Some(f) = features {
+        let v = raycast::read_feature_texel_blocking(ctx, f, p.voxel)?;
+        out["method"] = json!(format!("{method:?}").to_lowercase());
+        out["features"] = json!({
+            "vesselness": v[0],
+            "airwayness": v[1],
+            "blobness": v[2],
+        });
+    }
+    Ok(out)
+}
