@@ -14,7 +14,6 @@
 mod read;
 
 use std::cell::RefCell;
-use std::collections::VecDeque;
 
 use wasm_bindgen::JsCast as _;
 use wasm_bindgen::JsValue;
