@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use super::multipart::{MultipartLimits, Part};
 use super::qido::{self, InstanceInfo, SeriesInfo, StudyInfo};
-use super::retrieve::{Fetch, InstanceResponse, Progress, Retrieval};
+use super::retrieve::{Fetch, InstanceResponse, Progress, Retrieval, SERIES_FETCH};
 use super::{Auth, Base, DicomWebError, InstanceListing, Request, StudySearch, check_status};
 use crate::io::{Limits, Loaded};
 
@@ -409,9 +409,9 @@ impl<T: Transport> Client<T> {
         })
     }
 
-    /// Retrieves one series (WADO-RS, instance by instance, several in flight, a failed one
-    /// asked for again once) and decodes it as it arrives; `progress` is told after each
-    /// instance.
+    /// Retrieves one series (WADO-RS: the whole series in one request, decoded part by part as
+    /// it streams in; what it did not bring instance by instance, several in flight, a failed
+    /// one asked for again once); `progress` is told after each instance.
     pub fn retrieve(
         &self,
         study: &str,
@@ -426,7 +426,8 @@ impl<T: Transport> Client<T> {
             instances,
             self.auth.clone(),
             self.limits,
-        )?;
+        )?
+        .series_first();
         let limits = retrieval.multipart_limits();
         let auth = &self.auth;
         let transport = &self.transport;
@@ -434,8 +435,7 @@ impl<T: Transport> Client<T> {
         let (job_tx, job_rx) = mpsc::channel::<Fetch>();
         let job_rx = Mutex::new(job_rx);
         // Bounded: at most `parallel` answers wait to be decoded.
-        let (done_tx, done_rx) =
-            mpsc::sync_channel::<(usize, Result<Vec<Part>, DicomWebError>)>(self.parallel);
+        let (done_tx, done_rx) = mpsc::sync_channel::<Answer>(self.parallel);
         std::thread::scope(|scope| {
             for _ in 0..self.parallel {
                 let done_tx = done_tx.clone();
@@ -453,8 +453,15 @@ impl<T: Transport> Client<T> {
                         if stop.load(Ordering::Relaxed) {
                             return;
                         }
-                        let result = fetch_instance(transport, &fetch, auth, limits);
-                        if done_tx.send((fetch.id, result)).is_err() {
+                        let mut each = |part: Part| {
+                            done_tx
+                                .send(Answer::Part(part))
+                                .map_err(|_| internal("the retrieval stopped"))
+                        };
+                        let each: Option<&mut dyn FnMut(Part) -> Result<(), DicomWebError>> =
+                            (fetch.id == SERIES_FETCH).then_some(&mut each);
+                        let result = fetch_instance(transport, &fetch, auth, limits, each);
+                        if done_tx.send(Answer::Done(fetch.id, result)).is_err() {
                             return;
                         }
                     }
@@ -478,13 +485,18 @@ impl<T: Transport> Client<T> {
                     if in_flight == 0 {
                         return Err(internal("nothing in flight and nothing to ask for"));
                     }
-                    let (id, result) = done_rx
+                    let answer = done_rx
                         .recv()
                         .map_err(|_| internal("the request threads stopped"))?;
-                    in_flight -= 1;
-                    match result {
-                        Ok(parts) => retrieval.received(id, parts)?,
-                        Err(e) => retrieval.failed(id, e)?,
+                    match answer {
+                        Answer::Part(part) => retrieval.received_part(part)?,
+                        Answer::Done(id, result) => {
+                            in_flight -= 1;
+                            match result {
+                                Ok(parts) => retrieval.received(id, parts)?,
+                                Err(e) => retrieval.failed(id, e)?,
+                            }
+                        }
                     }
                     progress(&retrieval.progress());
                 }
@@ -497,6 +509,14 @@ impl<T: Transport> Client<T> {
     }
 }
 
+/// What a request thread hands the retrieval.
+enum Answer {
+    /// A part of the series' answer ([`SERIES_FETCH`]), decoded while the rest streams in.
+    Part(Part),
+    /// A request ended: its parts (those not handed on one by one), or why it failed.
+    Done(usize, Result<Vec<Part>, DicomWebError>),
+}
+
 fn internal(message: &str) -> DicomWebError {
     DicomWebError::Transport {
         url: "-".to_owned(),
@@ -504,12 +524,14 @@ fn internal(message: &str) -> DicomWebError {
     }
 }
 
-/// One instance's request, read to its end through the multipart parser.
+/// One instance's request (or the series'), read to its end through the multipart parser;
+/// with `each`, parts are handed to it as they complete instead of kept for the end.
 fn fetch_instance<T: Transport>(
     transport: &T,
     fetch: &Fetch,
     auth: &Auth,
     limits: MultipartLimits,
+    mut each: Option<&mut dyn FnMut(Part) -> Result<(), DicomWebError>>,
 ) -> Result<Vec<Part>, DicomWebError> {
     let response = transport.get(&fetch.request)?;
     let mut reader = InstanceResponse::start(
@@ -534,7 +556,10 @@ fn fetch_instance<T: Transport>(
                 });
             }
         };
-        reader.feed(&buf[..n])?;
+        match each.as_mut() {
+            Some(each) => reader.feed_each(&buf[..n], &mut **each)?,
+            None => reader.feed(&buf[..n])?,
+        }
     }
     reader.finish()
 }

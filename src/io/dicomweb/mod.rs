@@ -161,6 +161,13 @@ impl Base {
         ))
     }
 
+    /// `{base}/studies/{study}/series/{series}`: WADO-RS retrieve of a whole series.
+    pub fn series_url(&self, study: &str, series: &str) -> Result<String, DicomWebError> {
+        let study = check_uid("StudyInstanceUID", study)?;
+        let series = check_uid("SeriesInstanceUID", series)?;
+        Ok(format!("{}/studies/{study}/series/{series}", self.url))
+    }
+
     /// `{base}/studies/{study}/series/{series}/instances/{instance}` (WADO-RS).
     pub fn instance_url(
         &self,

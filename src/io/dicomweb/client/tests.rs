@@ -223,3 +223,39 @@ fn a_capped_instance_list_is_completed_or_the_series_refused() {
         "{e}"
     );
 }
+
+/// An archive that gives the whole series in one answer: one request for it, decoded as it
+/// streams, and only the instance its answer lacked asked for on its own.
+#[test]
+fn a_series_answer_is_decoded_as_it_streams_and_only_its_gaps_are_asked_for() {
+    let mut a = archive(6);
+    let series_url = format!("http://archive/dw/studies/{STUDY}/series/{SERIES}");
+    let mut body = Vec::new();
+    for k in [0, 1, 2, 4, 5] {
+        body.extend_from_slice(b"--XX\r\nContent-Type: application/dicom\r\n\r\n");
+        body.extend_from_slice(&Slice::axial(SERIES, k, 4, 5).bytes());
+        body.extend_from_slice(b"\r\n");
+    }
+    body.extend_from_slice(b"--XX--");
+    a.answers.insert(
+        series_url.clone(),
+        (
+            200,
+            "multipart/related; type=\"application/dicom\"; boundary=XX".to_owned(),
+            body,
+        ),
+    );
+    let c = client(a);
+    let mut reports = Vec::new();
+    let loaded = c
+        .retrieve(STUDY, SERIES, &mut |p| reports.push(*p))
+        .unwrap();
+    assert_eq!(loaded.volume.dims, [5, 4, 6]);
+    assert_eq!(loaded.volume.value_at(2, 1, 3), (300 + 7) as f32 - 1024.0);
+    // Progress came part by part while the one answer streamed (five parts, then the gap).
+    assert!(reports.len() >= 6, "{} reports", reports.len());
+    let seen = c.transport.seen.lock().unwrap();
+    assert_eq!(seen.iter().filter(|u| **u == series_url).count(), 1);
+    let instances: Vec<&String> = seen.iter().filter(|u| u.contains("/instances/")).collect();
+    assert_eq!(instances, [&format!("{series_url}/instances/{SERIES}.3")]);
+}

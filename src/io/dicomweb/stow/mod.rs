@@ -550,12 +550,7 @@ impl Base {
 
     /// `{base}/studies/{study}/series/{series}/metadata`: every instance's attributes.
     pub fn series_metadata_url(&self, study: &str, series: &str) -> Result<String, DicomWebError> {
-        let study = check_uid("StudyInstanceUID", study)?;
-        let series = check_uid("SeriesInstanceUID", series)?;
-        Ok(format!(
-            "{}/studies/{study}/series/{series}/metadata",
-            self.as_str()
-        ))
+        Ok(format!("{}/metadata", self.series_url(study, series)?))
     }
 }
 
