@@ -19,8 +19,9 @@
 //  4. an archive with authentication on (a second Orthanc, behind a small proxy on the page's
 //     origin that takes a bearer token, as a hospital's gateway would): without a token the page
 //     says a token is needed and the dialog asks for one; the token typed there opens it;
-//  5. progress in instances and MB, Cancel stops the requests and keeps the page usable, and an
-//     instance whose answer is cut short is asked for again (a gateway that delays or cuts);
+//  5. progress in instances and MB, Cancel stops the requests and keeps the page usable, an
+//     instance whose answer is cut short is asked for again (a gateway that delays or cuts),
+//     and a series answer cut short keeps its parts and asks only for the rest;
 //  6. every request the pages made went to 127.0.0.1.
 // Orthanc is stopped by its pid at the end. Orthanc, its plugins or ../shared/data missing: the
 // suite says so and skips, except under CI=true, where that is a failure.
@@ -175,14 +176,17 @@ async function upload(o, rel) {
 
 // The page's origin for the archive with authentication: dist/ at /, and /dicom-web/ passed
 // to Orthanc with the bearer token exchanged for Orthanc's own credentials (a gateway).
-// Two more roots for the retrieval's own behaviour: /slow/dicom-web/ answers each instance
-// after 500 ms (time to see progress and cancel), /flaky/dicom-web/ cuts the first answer for
-// one instance short (the page must ask for it again).
-const gatewayLog = { instances: [], cut: null };
+// Three more roots for the retrieval's own behaviour. /slow/dicom-web/ and /flaky/dicom-web/
+// refuse series-level retrieves (406, as an archive without them answers: the page asks
+// instance by instance); /slow/ answers each instance after 500 ms (time to see progress and
+// cancel), /flaky/ cuts the first answer for one instance short (asked for again).
+// /cut/dicom-web/ cuts the series' answer short after 200 KB (its whole parts are kept, the
+// rest asked for instance by instance).
+const gatewayLog = { instances: [], series: [], cut: null };
 function gateway(o) {
   return http.createServer((req, res) => {
     const url = new URL(req.url, 'http://127.0.0.1');
-    const mode = /^\/(slow|flaky)\/dicom-web\//.exec(url.pathname)?.[1] ?? null;
+    const mode = /^\/(slow|flaky|cut)\/dicom-web\//.exec(url.pathname)?.[1] ?? null;
     if (mode || url.pathname.startsWith('/dicom-web/')) {
       const upstreamPath = mode ? req.url.slice(mode.length + 1) : req.url;
       const headers = { accept: req.headers.accept ?? '*/*' };
@@ -195,21 +199,30 @@ function gateway(o) {
       headers.authorization = `Basic ${Buffer.from(`${USER}:${PASSWORD}`).toString('base64')}`;
       const instance = /\/instances\/[0-9.]+$/.test(url.pathname);
       if (instance) gatewayLog.instances.push(`${mode ?? ''}${url.pathname}`);
+      const series = req.method === 'GET' && /\/studies\/[0-9.]+\/series\/[0-9.]+$/.test(url.pathname);
+      if (series) gatewayLog.series.push(`${mode ?? ''}${url.pathname}`);
+      if (series && (mode === 'slow' || mode === 'flaky')) {
+        res.writeHead(406, { 'content-type': 'text/plain' }).end('series-level retrieve not offered');
+        return;
+      }
       const cut = mode === 'flaky' && instance && gatewayLog.cut === null;
       if (cut) gatewayLog.cut = url.pathname;
+      // The bytes passed on before the answer is cut (a whole series': some of its parts).
+      const cutAfter = cut ? 4096 : (mode === 'cut' && series ? 200000 : null);
       const forward = () => {
         const up = http.request({ host: '127.0.0.1', port: o.port, path: upstreamPath, method: req.method, headers }, (r) => {
           res.writeHead(r.statusCode, r.headers);
-          if (!cut) {
+          if (cutAfter === null) {
             r.pipe(res);
             return;
           }
           let sent = 0;
           r.on('data', (chunk) => {
-            if (sent > 4096) return;
-            res.write(chunk.subarray(0, 4096));
-            sent += chunk.length;
-            if (sent > 4096) setTimeout(() => res.destroy(), 100);
+            if (sent >= cutAfter) return;
+            const part = chunk.subarray(0, cutAfter - sent);
+            res.write(part);
+            sent += part.length;
+            if (sent >= cutAfter) setTimeout(() => res.destroy(), 100);
           });
         });
         up.on('error', () => res.writeHead(502).end());
@@ -507,6 +520,17 @@ try {
     const times = gatewayLog.instances.filter((p) => p === `flaky${cut}`).length;
     check('an instance cut short is asked for again and the study opens', s?.phase === 'ready' && s?.volume?.dims?.[2] === 20
       && cut !== null && times === 2, `${cut} asked ${times} times; error ${s?.error}`);
+
+    // The series in one request, its answer cut short: the parts that came are kept, only the
+    // rest is asked for instance by instance.
+    await page.goto('about:blank');
+    await page.goto(`${G}/?dicomweb=/cut/dicom-web&study=${lockedMr.study}&method=intensity#token=${TOKEN}`);
+    s = await waitReady(page, 'the study whose series answer was cut short');
+    const seriesAsked = gatewayLog.series.filter((p) => p.startsWith('cut')).length;
+    const rest = gatewayLog.instances.filter((p) => p.startsWith('cut')).length;
+    check('a series answer cut short: its parts kept, only the rest asked for one by one, the study opens',
+      s?.phase === 'ready' && s?.volume?.dims?.[2] === 20 && seriesAsked === 1 && rest > 0 && rest < 20,
+      `series asked ${seriesAsked} time(s), then ${rest} of 20 instances; error ${s?.error}`);
   });
 
   check('every request went to 127.0.0.1', offending.length === 0 && requests.length > 0,
