@@ -19,7 +19,7 @@
 
 use crate::cpu::features::FeatureMap;
 use crate::gpu::checks::{self, RecordError};
-use crate::gpu::kernel::{SlabGrid, WORKGROUP};
+use crate::gpu::kernel::{Recorder, SlabGrid, WORKGROUP};
 use crate::gpu::{GpuContext, shaders};
 use std::ops::Range;
 
@@ -187,46 +187,31 @@ impl EigenFeatures {
     /// slab's slices `out_z = (out_z0, out_nz)`.
     pub fn record(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         grid: &SlabGrid,
         tensor: [&wgpu::Buffer; 6],
         out_z: (u32, u32),
         pass: EigenPass<'_>,
     ) -> Result<(), RecordError> {
-        self.record_part(ctx, encoder, grid, tensor, out_z, 0..out_z.1, pass)
+        let part = TensorPart {
+            grid,
+            tensor,
+            out_z,
+            slices: 0..out_z.1,
+            rows: None,
+        };
+        self.record_part(rec, &part, pass)
     }
 
-    /// [`Self::record`] for the output slices `part` (within `0..out_nz`) only, written where
-    /// the whole output block has them: the parts of a block give the whole block's bits.
-    #[allow(clippy::too_many_arguments)]
+    /// [`Self::record`] for part of the output block ([`TensorPart`]).
     pub fn record_part(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        tensor: [&wgpu::Buffer; 6],
-        out_z: (u32, u32),
-        part: Range<u32>,
+        rec: &mut Recorder<'_>,
+        p: &TensorPart<'_>,
         pass: EigenPass<'_>,
     ) -> Result<(), RecordError> {
-        self.record_part_rows(ctx, encoder, grid, tensor, out_z, part, None, pass)
-    }
-
-    /// [`Self::record_part`] only on the rows `rows = [row0, n_rows]` when given (a brick's
-    /// core: `Output` leaves the block's halo rows as they are, `MaxNorm` ignores them).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_part_rows(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        tensor: [&wgpu::Buffer; 6],
-        out_z: (u32, u32),
-        part: Range<u32>,
-        rows: Option<[u32; 2]>,
-        pass: EigenPass<'_>,
-    ) -> Result<(), RecordError> {
+        let (ctx, grid, tensor, out_z, part, rows) =
+            (rec.ctx, p.grid, p.tensor, p.out_z, p.slices.clone(), p.rows);
         let groups = Self::check(ctx, grid, &tensor, out_z, &part)?;
         if grid.is_empty() || part.is_empty() {
             return Ok(());
@@ -277,7 +262,7 @@ impl EigenFeatures {
             layout: &pipeline.get_bind_group_layout(0),
             entries: &entries,
         });
-        checks::dispatch(encoder, label, pipeline, &bind_group, groups);
+        checks::dispatch(rec.encoder, label, pipeline, &bind_group, groups);
         Ok(())
     }
 
@@ -285,6 +270,20 @@ impl EigenFeatures {
     pub fn record_clear_norm(&self, encoder: &mut wgpu::CommandEncoder, norm_bits: &wgpu::Buffer) {
         encoder.clear_buffer(norm_bits, 0, Some(4));
     }
+}
+
+/// Part of a tensor's output block: the output slices `slices` (within `0..out_nz` of
+/// `out_z = (out_z0, out_nz)`), written where the whole block has them (the parts of a block
+/// give the whole block's bits), and when given only the rows `rows = [row0, n_rows]` (a
+/// brick's core: `Output` leaves the block's halo rows as they are, `MaxNorm` ignores them).
+#[derive(Clone, Debug)]
+pub struct TensorPart<'a> {
+    pub grid: &'a SlabGrid,
+    /// `[xx, yy, zz, xy, xz, yz]`, `grid.len()` f32 each.
+    pub tensor: [&'a wgpu::Buffer; 6],
+    pub out_z: (u32, u32),
+    pub slices: Range<u32>,
+    pub rows: Option<[u32; 2]>,
 }
 
 /// What [`EigenFeatures::record`] records.
@@ -298,7 +297,7 @@ pub enum EigenPass<'a> {
         out: &'a wgpu::Buffer,
     },
     /// `norm_bits = max(norm_bits, bits of the largest Frobenius norm over the output slices)`
-    /// (of the rows [`EigenFeatures::record_part_rows`] is given); `norm_bits` is a 4-byte buffer
+    /// (of the rows [`TensorPart::rows`] is given); `norm_bits` is a 4-byte buffer
     /// (e.g. [`norm_buffer`]), cleared once before the first brick.
     MaxNorm { norm_bits: &'a wgpu::Buffer },
 }

@@ -4,20 +4,21 @@
 //! taps), so the GPU and `crate::cpu::gaussian` compute the same sums (f32 against f64).
 //!
 //! Taps are uploaded once per (sigma, spacing, order) as an [`AxisTaps`] (or several orders of
-//! one axis as an [`AxisTapSet`]) and reused for every slab; `record_*` methods only record into
-//! the caller's encoder (no submit).
+//! one axis as an [`AxisTapSet`]) and reused for every slab; [`Gaussian::record_pass`] (an
+//! [`AxisPass`]) and [`Gaussian::record_separable`] only record into the caller's encoder (no
+//! submit).
 //!
 //! Speed (lavapipe, where every storage-buffer load or store is a per-lane scalar loop): each
 //! invocation of the block kernels computes [`BLOCK`] consecutive outputs along the pass axis from
 //! one sliding window of inputs, so a pass costs about `(BLOCK + 2 radius) / BLOCK` loads per
 //! voxel instead of `2 radius + 1`, with the taps in a uniform array;
-//! [`Gaussian::record_axis_multi`] applies up to three kernels of one axis (e.g. orders 0, 1, 2)
+//! [`Gaussian::record_pass`] with a [`PassKernels::Set`] applies up to three kernels of one axis (e.g. orders 0, 1, 2)
 //! in one read of the input. Kernels longer than [`MAX_TAPS`] fall back to one output per
 //! invocation with the taps in a storage buffer.
 
 use crate::cpu::gaussian::{GaussianOrder, derivative_kernel, kernel_radius_vox, tap_sum};
 use crate::gpu::checks::{self, RecordError};
-use crate::gpu::kernel::{SlabGrid, WORKGROUP};
+use crate::gpu::kernel::{Recorder, SlabGrid, WORKGROUP};
 use crate::gpu::{GpuContext, shaders};
 use std::ops::Range;
 
@@ -141,7 +142,7 @@ fn scaled_kernel(sigma_mm: f64, spacing_mm: f64, order: GaussianOrder, scale: f6
 }
 
 /// The kernels of orders 0, 1 and 2 of one axis (same sigma, spacing and scale), each usable
-/// alone ([`Self::order`]) and all together by [`Gaussian::record_axis_multi`], which reads the
+/// alone ([`Self::order`]) and all together by [`Gaussian::record_pass`], which reads the
 /// input once for up to three of them.
 #[derive(Debug)]
 pub struct AxisTapSet {
@@ -180,7 +181,7 @@ impl AxisTapSet {
         self.radius
     }
 
-    /// Loads and stores per output voxel of [`Gaussian::record_axis_multi`] with `outputs`
+    /// Loads and stores per output voxel of [`Gaussian::record_pass`] with `outputs`
     /// kernels of this set.
     pub fn accesses_per_voxel(&self, outputs: usize) -> f64 {
         match (&self.packed, outputs) {
@@ -246,6 +247,30 @@ pub struct Gaussian {
     unused: wgpu::Buffer,
 }
 
+/// The kernels of a pass: one, or up to three of one axis applied in one read of the input.
+#[derive(Clone, Copy, Debug)]
+pub enum PassKernels<'a> {
+    One(&'a AxisTaps),
+    Set(&'a AxisTapSet),
+}
+
+/// One convolution pass along `axis` of the slab `grid`: `dst[o] = src (*) kernel o` (one
+/// output for [`PassKernels::One`], one to three for [`PassKernels::Set`]), replicated borders.
+#[derive(Clone, Copy, Debug)]
+pub struct AxisPass<'a> {
+    pub grid: &'a SlabGrid,
+    /// 0, 1 or 2.
+    pub axis: usize,
+    /// The outputs written, a box of the slab (`None`: all of it); the rest of `dst` is left as
+    /// it is, and the inputs are read wherever the kernel reaches.
+    pub region: Option<&'a Region>,
+    pub kernels: PassKernels<'a>,
+    /// `grid.len()` f32, different from every output.
+    pub src: &'a wgpu::Buffer,
+    /// `grid.len()` f32 each, all different buffers.
+    pub dst: &'a [&'a wgpu::Buffer],
+}
+
 /// Which kernel a pass applies: the bindings and uniforms that differ between passes.
 struct PassTaps<'a> {
     storage: Option<&'a wgpu::Buffer>,
@@ -302,20 +327,17 @@ impl Gaussian {
         Ok(())
     }
 
-    /// Records one dispatch: the block kernel (`outputs` 1: `convolve_block`, 2 or 3:
-    /// `convolve_block3`) when `taps.uniform` is there, else the fallback (one output).
-    #[allow(clippy::too_many_arguments)]
+    /// Records one dispatch of `pass` over `region`: the block kernel (`outputs` 1:
+    /// `convolve_block`, 2 or 3: `convolve_block3`) when `taps.uniform` is there, else the
+    /// fallback (one output).
     fn dispatch(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        axis: usize,
+        rec: &mut Recorder<'_>,
+        pass: &AxisPass<'_>,
         region: &Region,
         taps: &PassTaps<'_>,
-        src: &wgpu::Buffer,
-        dst: &[&wgpu::Buffer],
     ) -> Result<(), RecordError> {
+        let (ctx, grid, axis, src, dst) = (rec.ctx, pass.grid, pass.axis, pass.src, pass.dst);
         let params = Params {
             dims: grid.dims,
             axis: axis as u32,
@@ -388,110 +410,64 @@ impl Gaussian {
             layout: &pipeline.get_bind_group_layout(0),
             entries: &entries,
         });
-        checks::dispatch(encoder, "gaussian", pipeline, &bind_group, groups);
+        checks::dispatch(rec.encoder, "gaussian", pipeline, &bind_group, groups);
         Ok(())
     }
 
-    /// Records `dst = src (*) taps` along `axis` (0, 1, 2) of the slab `grid`; `src` and `dst`
-    /// hold `grid.len()` f32 each and must be different buffers.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_axis(
+    /// Records the convolution `pass` (see [`AxisPass`]).
+    pub fn record_pass(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        axis: usize,
-        taps: &AxisTaps,
-        src: &wgpu::Buffer,
-        dst: &wgpu::Buffer,
+        rec: &mut Recorder<'_>,
+        pass: &AxisPass<'_>,
     ) -> Result<(), RecordError> {
-        self.record_axis_part(ctx, encoder, grid, axis, &whole(grid), taps, src, dst)
-    }
-
-    /// [`Self::record_axis`] for the outputs in `region` only (the rest of `dst` is left as it
-    /// is; the inputs are read wherever the kernel reaches).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_axis_part(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        axis: usize,
-        region: &Region,
-        taps: &AxisTaps,
-        src: &wgpu::Buffer,
-        dst: &wgpu::Buffer,
-    ) -> Result<(), RecordError> {
-        Self::check_pass(ctx, grid, axis, region, src, &[dst])?;
-        if grid.is_empty() || region.iter().any(|r| r.is_empty()) {
-            return Ok(());
-        }
-        let pass = PassTaps {
-            storage: Some(&taps.buffer),
-            uniform: taps.uniform.as_ref(),
-            radius: taps.radius,
-            sums: [taps.sum, 0.0, 0.0, 0.0],
+        let (grid, dst) = (pass.grid, pass.dst);
+        let whole_grid = whole(grid);
+        let region = pass.region.unwrap_or(&whole_grid);
+        let outputs_ok = match pass.kernels {
+            PassKernels::One(_) => dst.len() == 1,
+            PassKernels::Set(_) => (1..=3).contains(&dst.len()),
         };
-        self.dispatch(ctx, encoder, grid, axis, region, &pass, src, &[dst])
-    }
-
-    /// Records `dst[o] = src (*) taps of order o` along `axis` for `o < dst.len()` (one to three
-    /// outputs): one read of `src` for all of them. `src` and the outputs hold `grid.len()` f32
-    /// each and must all be different buffers.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_axis_multi(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        axis: usize,
-        taps: &AxisTapSet,
-        src: &wgpu::Buffer,
-        dst: &[&wgpu::Buffer],
-    ) -> Result<(), RecordError> {
-        self.record_axis_multi_part(ctx, encoder, grid, axis, &whole(grid), taps, src, dst)
-    }
-
-    /// [`Self::record_axis_multi`] for the outputs in `region` only.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_axis_multi_part(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        axis: usize,
-        region: &Region,
-        taps: &AxisTapSet,
-        src: &wgpu::Buffer,
-        dst: &[&wgpu::Buffer],
-    ) -> Result<(), RecordError> {
-        if dst.is_empty() || dst.len() > 3 {
+        if !outputs_ok {
             return Err(RecordError::Invalid(
-                "gaussian: one to three outputs per pass",
+                "gaussian: one to three outputs per pass, one per kernel",
             ));
         }
-        Self::check_pass(ctx, grid, axis, region, src, dst)?;
+        Self::check_pass(rec.ctx, grid, pass.axis, region, pass.src, dst)?;
         if grid.is_empty() || region.iter().any(|r| r.is_empty()) {
             return Ok(());
         }
-        match (&taps.packed, dst) {
-            (Some(u), [_, _, ..]) => {
-                let pass = PassTaps {
-                    storage: None,
-                    uniform: Some(u),
+        match pass.kernels {
+            PassKernels::One(taps) => {
+                let taps = PassTaps {
+                    storage: Some(&taps.buffer),
+                    uniform: taps.uniform.as_ref(),
                     radius: taps.radius,
-                    sums: [taps.sums[0], taps.sums[1], taps.sums[2], 0.0],
+                    sums: [taps.sum, 0.0, 0.0, 0.0],
                 };
-                self.dispatch(ctx, encoder, grid, axis, region, &pass, src, dst)
+                self.dispatch(rec, pass, region, &taps)
             }
-            // One output, or kernels too long for the uniform array: one pass per order.
-            _ => {
-                for (o, d) in dst.iter().enumerate() {
-                    let taps = &taps.orders[o];
-                    self.record_axis_part(ctx, encoder, grid, axis, region, taps, src, d)?;
+            PassKernels::Set(set) => match (&set.packed, dst) {
+                (Some(u), [_, _, ..]) => {
+                    let taps = PassTaps {
+                        storage: None,
+                        uniform: Some(u),
+                        radius: set.radius,
+                        sums: [set.sums[0], set.sums[1], set.sums[2], 0.0],
+                    };
+                    self.dispatch(rec, pass, region, &taps)
                 }
-                Ok(())
-            }
+                // One output, or kernels too long for the uniform array: one pass per order.
+                _ => dst.iter().enumerate().try_for_each(|(o, d)| {
+                    self.record_pass(
+                        rec,
+                        &AxisPass {
+                            kernels: PassKernels::One(&set.orders[o]),
+                            dst: &[*d],
+                            ..*pass
+                        },
+                    )
+                }),
+            },
         }
     }
 
@@ -511,11 +487,9 @@ impl Gaussian {
 
     /// Records the separable filter `kernel` (x, then y, then z, as the CPU's `separable`):
     /// `src -> dst -> tmp -> dst`. Three different buffers of `grid.len()` f32.
-    #[allow(clippy::too_many_arguments)]
     pub fn record_separable(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         grid: &SlabGrid,
         kernel: &SeparableKernel,
         src: &wgpu::Buffer,
@@ -527,8 +501,19 @@ impl Gaussian {
                 "separable filter: src, tmp and dst must be different buffers",
             ));
         }
-        self.record_axis(ctx, encoder, grid, 0, &kernel.axes[0], src, dst)?;
-        self.record_axis(ctx, encoder, grid, 1, &kernel.axes[1], dst, tmp)?;
-        self.record_axis(ctx, encoder, grid, 2, &kernel.axes[2], tmp, dst)
+        for (axis, (from, to)) in [(src, dst), (dst, tmp), (tmp, dst)].into_iter().enumerate() {
+            self.record_pass(
+                rec,
+                &AxisPass {
+                    grid,
+                    axis,
+                    region: None,
+                    kernels: PassKernels::One(&kernel.axes[axis]),
+                    src: from,
+                    dst: &[to],
+                },
+            )?;
+        }
+        Ok(())
     }
 }

@@ -8,9 +8,11 @@
 //! input). The sigma^2 normalisation is folded into the x taps. Intermediate results are parked
 //! in output buffers not yet written, so the working set is one temporary plus the six outputs.
 
-use crate::compute::gaussian::{AxisTapSet, Gaussian, Region, cut_axis, whole};
+use crate::compute::gaussian::{
+    AxisPass, AxisTapSet, Gaussian, PassKernels, Region, cut_axis, whole,
+};
 use crate::gpu::checks::RecordError;
-use crate::gpu::kernel::SlabGrid;
+use crate::gpu::kernel::{Recorder, SlabGrid};
 use crate::gpu::{GpuContext, shaders};
 use std::ops::Range;
 
@@ -81,11 +83,9 @@ impl Hessian {
     /// Records the six Hessian components of `input` (one f32 per voxel of `grid`) into
     /// `out = [xx, yy, zz, xy, xz, yz]`, using `tmp`; eight different buffers of `grid.len()`
     /// f32 each (`input` is only read).
-    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         grid: &SlabGrid,
         kernels: &HessianKernels,
         input: &wgpu::Buffer,
@@ -94,45 +94,41 @@ impl Hessian {
     ) -> Result<(), RecordError> {
         let core = whole(grid);
         (0..PASSES).try_for_each(|pass| {
-            let all = pass_lines(grid, &core, pass);
             self.record_pass(
-                ctx, encoder, grid, kernels, input, tmp, out, pass, &core, all,
+                rec,
+                &HessianPass {
+                    grid,
+                    kernels,
+                    input,
+                    tmp,
+                    out,
+                    pass,
+                    core: &core,
+                    cut: pass_lines(grid, &core, pass),
+                },
             )
         })
     }
 
-    /// Records pass `pass` (of [`PASSES`], in order) of [`Self::record`], computing only what
-    /// the components need in `core` (a brick's core; its halo is read, not delivered:
-    /// [`pass_region`]), for the lines `cut` of its cut axis (within [`pass_lines`]): the
-    /// passes may go in separate submissions, and a pass in parts (the feature job's paced
-    /// steps), since every intermediate lives in `tmp` and `out` and each output depends on its
-    /// own line only. A pass's parts must all be recorded before the next pass. Inside `core`
-    /// the components have the bits of the whole slab's passes.
-    #[allow(clippy::too_many_arguments)]
+    /// Records one pass of [`Self::record`] (see [`HessianPass`]).
     pub fn record_pass(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        grid: &SlabGrid,
-        kernels: &HessianKernels,
-        input: &wgpu::Buffer,
-        tmp: &wgpu::Buffer,
-        out: [&wgpu::Buffer; 6],
-        pass: usize,
-        core: &Region,
-        cut: Range<u32>,
+        rec: &mut Recorder<'_>,
+        p: &HessianPass<'_>,
     ) -> Result<(), RecordError> {
+        let (grid, kernels, input, tmp, out, pass) =
+            (p.grid, p.kernels, p.input, p.tmp, p.out, p.pass);
         if pass >= PASSES {
             return Err(RecordError::Invalid("Hessian: no such pass"));
         }
-        let mut region = pass_region(grid, core, pass);
+        let mut region = pass_region(grid, p.core, pass);
         let across = cut_axis(PASS_AXIS_OUTPUTS[pass].0);
-        if cut.start < region[across].start || cut.end > region[across].end {
+        if p.cut.start < region[across].start || p.cut.end > region[across].end {
             return Err(RecordError::Invalid(
                 "Hessian: a pass's part must lie within its lines",
             ));
         }
-        region[across] = cut;
+        region[across] = p.cut.clone();
         let region = &region;
         let all: [&wgpu::Buffer; 8] = [input, tmp, out[0], out[1], out[2], out[3], out[4], out[5]];
         for (n, a) in all.iter().enumerate() {
@@ -148,42 +144,78 @@ impl Hessian {
         // xx = x2 y0 z0, yy = x0 y2 z0, zz = x0 y0 z2, xy = x1 y1 z0, xz = x1 y0 z1,
         // yz = x0 y1 z1. Every pass reads a buffer no output of the same pass aliases, and
         // overwrites only results already consumed.
-        let multi = |encoder: &mut wgpu::CommandEncoder,
-                     axis: usize,
-                     src: &wgpu::Buffer,
-                     dst: &[&wgpu::Buffer]| {
-            let taps = [x, y, z][axis];
-            g.record_axis_multi_part(ctx, encoder, grid, axis, region, taps, src, dst)
-        };
-        let single = |encoder: &mut wgpu::CommandEncoder,
-                      order: usize,
-                      src: &wgpu::Buffer,
-                      dst: &wgpu::Buffer| {
-            let taps = x.order(order);
-            g.record_axis_part(ctx, encoder, grid, 0, region, taps, src, dst)
+        let mut multi = |axis: usize, src: &wgpu::Buffer, dst: &[&wgpu::Buffer]| {
+            let kernels = PassKernels::Set([x, y, z][axis]);
+            let region = Some(region);
+            g.record_pass(
+                rec,
+                &AxisPass {
+                    grid,
+                    axis,
+                    region,
+                    kernels,
+                    src,
+                    dst,
+                },
+            )
         };
         // z orders 0, 1, 2 of the input, parked in outputs written last.
         let (z0, z1, z2) = (yz, xz, xy);
         // y orders 0, 1, 2 of z0 (pass 3), then y orders 0, 1 of z1 (pass 7).
         let (z0y0, z0y1, z0y2) = (yy, tmp, xy);
         let (z1y0, z1y1) = (yz, tmp);
-        match pass {
-            0 => multi(encoder, 2, input, &[z0, z1, z2]),
+        // The x passes apply one order each: (order, src, dst).
+        let (order, src, dst) = match pass {
+            0 => return multi(2, input, &[z0, z1, z2]),
             // zz = x0 y0 z2.
-            1 => multi(encoder, 1, z2, &[tmp]),
-            2 => multi(encoder, 0, tmp, &[zz]),
+            1 => return multi(1, z2, &[tmp]),
+            2 => return multi(0, tmp, &[zz]),
             // xx, xy, yy from z0 (z2, in xy, is consumed).
-            3 => multi(encoder, 1, z0, &[z0y0, z0y1, z0y2]),
-            4 => single(encoder, 2, z0y0, xx),
-            5 => single(encoder, 0, z0y2, yy),
-            6 => single(encoder, 1, z0y1, xy),
+            3 => return multi(1, z0, &[z0y0, z0y1, z0y2]),
+            4 => (2, z0y0, xx),
+            5 => (0, z0y2, yy),
+            6 => (1, z0y1, xy),
             // xz, yz from z1 (z0, in yz, is consumed).
-            7 => multi(encoder, 1, z1, &[z1y0, z1y1]),
-            8 => single(encoder, 1, z1y0, xz),
-            9 => single(encoder, 0, z1y1, yz),
-            _ => Err(RecordError::Invalid("Hessian: no such pass")),
-        }
+            7 => return multi(1, z1, &[z1y0, z1y1]),
+            8 => (1, z1y0, xz),
+            9 => (0, z1y1, yz),
+            _ => return Err(RecordError::Invalid("Hessian: no such pass")),
+        };
+        let kernels = PassKernels::One(x.order(order));
+        g.record_pass(
+            rec,
+            &AxisPass {
+                grid,
+                axis: 0,
+                region: Some(region),
+                kernels,
+                src,
+                dst: &[dst],
+            },
+        )
     }
+}
+
+/// One pass (of [`PASSES`], in order) of [`Hessian::record`], computing only what the
+/// components need in `core` (a brick's core; its halo is read, not delivered:
+/// [`pass_region`]), for the lines `cut` of its cut axis (within [`pass_lines`]): the passes may
+/// go in separate submissions, and a pass in parts (the feature job's paced steps), since every
+/// intermediate lives in `tmp` and `out` and each output depends on its own line only. A pass's
+/// parts must all be recorded before the next pass. Inside `core` the components have the bits
+/// of the whole slab's passes.
+#[derive(Clone, Debug)]
+pub struct HessianPass<'a> {
+    pub grid: &'a SlabGrid,
+    pub kernels: &'a HessianKernels,
+    /// The input, one f32 per voxel of `grid` (only read).
+    pub input: &'a wgpu::Buffer,
+    pub tmp: &'a wgpu::Buffer,
+    /// `[xx, yy, zz, xy, xz, yz]`; with `input` and `tmp` eight different buffers of
+    /// `grid.len()` f32.
+    pub out: [&'a wgpu::Buffer; 6],
+    pub pass: usize,
+    pub core: &'a Region,
+    pub cut: Range<u32>,
 }
 
 /// Passes of [`Hessian::record`] (dispatches: 15 convolutions, the z and y ones shared).

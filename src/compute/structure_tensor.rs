@@ -7,7 +7,7 @@
 
 use crate::compute::gaussian::{Gaussian, SeparableKernel};
 use crate::gpu::checks::{self, RecordError};
-use crate::gpu::kernel::{SlabGrid, WORKGROUP};
+use crate::gpu::kernel::{Recorder, SlabGrid, WORKGROUP};
 use crate::gpu::{GpuContext, shaders};
 
 /// Mirrors `Params` in structure_tensor.wgsl (keep in sync).
@@ -99,8 +99,14 @@ impl StructureTensor {
                 ],
             });
             checks::dispatch(encoder, "outer product", &self.product, &bind_group, groups);
-            self.gaussian
-                .record_separable(ctx, encoder, grid, rho, tmp[0], tmp[1], out[c])?;
+            self.gaussian.record_separable(
+                &mut Recorder::new(ctx, encoder),
+                grid,
+                rho,
+                tmp[0],
+                tmp[1],
+                out[c],
+            )?;
         }
         Ok(())
     }

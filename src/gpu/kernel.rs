@@ -11,6 +11,19 @@
 //! - Compute shaders use `@workgroup_size(8, 8, 1)` over `(i, j, k)` unless stated, and check
 //!   bounds, so any size works.
 
+/// Where a kernel records: the device and the caller's encoder. Kernels record into it and
+/// never submit (the caller decides when the work goes to the queue).
+pub struct Recorder<'a> {
+    pub ctx: &'a crate::gpu::GpuContext,
+    pub encoder: &'a mut wgpu::CommandEncoder,
+}
+
+impl<'a> Recorder<'a> {
+    pub fn new(ctx: &'a crate::gpu::GpuContext, encoder: &'a mut wgpu::CommandEncoder) -> Self {
+        Self { ctx, encoder }
+    }
+}
+
 /// The grid of the slab a kernel runs on: voxel counts and spacing (mm) per axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SlabGrid {

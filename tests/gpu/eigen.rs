@@ -18,7 +18,7 @@ use shapecast::cpu::features::{hessian_eigen_multiscale, sym_at};
 use shapecast::cpu::hessian_volume;
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::kernel::SlabGrid;
+use shapecast::gpu::kernel::{Recorder, SlabGrid};
 
 /// Eigenvalues (sorted by magnitude, as eigen.wgsl returns them) of the f32 matrices
 /// `comps[c][i]` on the GPU, laid out as a `width x (n / width)` slab.
@@ -31,8 +31,7 @@ fn gpu_eigenvalues(ctx: &GpuContext, comps: &[Vec<f32>; 6], width: usize) -> Vec
     let out = buffer(ctx, 4 * n);
     let mut enc = encoder(ctx);
     ef.record(
-        ctx,
-        &mut enc,
+        &mut Recorder::new(ctx, &mut enc),
         &sg,
         std::array::from_fn(|c| &bufs[c]),
         (0, 1),
@@ -186,8 +185,7 @@ fn multiscale_eigenvalues_on_real_ct_differ_only_at_ties() {
         let mut enc = encoder(&ctx);
         hessian
             .record(
-                &ctx,
-                &mut enc,
+                &mut Recorder::new(&ctx, &mut enc),
                 &sg,
                 &kernels,
                 &input,
@@ -196,8 +194,7 @@ fn multiscale_eigenvalues_on_real_ct_differ_only_at_ties() {
             )
             .expect("record");
         ef.record(
-            &ctx,
-            &mut enc,
+            &mut Recorder::new(&ctx, &mut enc),
             &sg,
             std::array::from_fn(|c| &h[c]),
             (0, sg.dims[2]),

@@ -6,9 +6,10 @@
 use crate::gpu_common;
 
 use gpu_common::*;
-use shapecast::compute::gaussian::{Gaussian, SeparableKernel};
+use shapecast::compute::gaussian::{AxisPass, Gaussian, PassKernels, SeparableKernel};
 use shapecast::cpu::gaussian::{GaussianOrder, derivative_kernel, separable};
 use shapecast::gpu::context::test_context;
+use shapecast::gpu::kernel::Recorder;
 
 const O: [GaussianOrder; 3] = [
     GaussianOrder::Smooth,
@@ -48,7 +49,14 @@ fn gaussian_passes_match_cpu() {
                 let (src, tmp, dst) = (upload(&ctx, input), buffer(&ctx, n), buffer(&ctx, n));
                 let mut enc = encoder(&ctx);
                 gauss
-                    .record_separable(&ctx, &mut enc, &sg, &k, &src, &tmp, &dst)
+                    .record_separable(
+                        &mut Recorder::new(&ctx, &mut enc),
+                        &sg,
+                        &k,
+                        &src,
+                        &tmp,
+                        &dst,
+                    )
                     .expect("record");
                 submit(&ctx, enc);
                 let gpu = read(&ctx, &dst, n);
@@ -64,7 +72,7 @@ fn gaussian_passes_match_cpu() {
     eprintln!("gaussian passes: worst max error {worst:.2e} of the output's range (bound 1e-5)");
 }
 
-/// The block kernels with one, two and three kernels per pass (`record_axis_multi`, as the
+/// The block kernels with one, two and three kernels per pass (a `PassKernels::Set`, as the
 /// Hessian uses them) along every axis of a slab with long lines (several blocks per line, the
 /// last one partial), including the zero-padded mix of radii at sigma 0 (identity and central
 /// differences), against the CPU's `convolve_axis` per order; and kernels too long for the
@@ -126,7 +134,17 @@ fn gaussian_multi_order_and_fallback_match_cpu() {
                     let refs: Vec<&wgpu::Buffer> = dst.iter().collect();
                     let mut enc = encoder(&ctx);
                     gauss
-                        .record_axis_multi(&ctx, &mut enc, &sg, axis, &set, &src, &refs)
+                        .record_pass(
+                            &mut Recorder::new(&ctx, &mut enc),
+                            &AxisPass {
+                                grid: &sg,
+                                axis,
+                                region: None,
+                                kernels: PassKernels::Set(&set),
+                                src: &src,
+                                dst: &refs,
+                            },
+                        )
                         .expect("record");
                     submit(&ctx, enc);
                     for (o, d) in dst.iter().enumerate() {
@@ -153,7 +171,7 @@ fn gaussian_multi_order_and_fallback_match_cpu() {
 use shapecast::compute::eigen_features::{
     EigenFeatures, EigenPass, Mapping, TensorOutput, frangi_c_from_norm_bits, norm_buffer,
 };
-use shapecast::compute::hessian::{Hessian, HessianKernels};
+use shapecast::compute::hessian::{Hessian, HessianKernels, HessianPass};
 use shapecast::cpu::eigen::{eigenvalues_sorted, frobenius};
 use shapecast::cpu::features::{
     FeatureMap, HessianMethod, frangi_default_c, hessian_eigen_multiscale,
@@ -180,8 +198,7 @@ fn gpu_hessian(
     let mut enc = encoder(ctx);
     hessian
         .record(
-            ctx,
-            &mut enc,
+            &mut Recorder::new(ctx, &mut enc),
             sg,
             &kernels,
             &input,
@@ -269,8 +286,7 @@ fn hessian_and_eigenvalues_match_cpu() {
         let out = buffer(&ctx, 4 * n);
         let mut enc = encoder(&ctx);
         ef.record(
-            &ctx,
-            &mut enc,
+            &mut Recorder::new(&ctx, &mut enc),
             &sg,
             refs(&gpu_bufs),
             (0, sg.dims[2]),
@@ -386,8 +402,7 @@ fn eigen_solver_handles_degenerate_matrices() {
     let out = buffer(&ctx, 4 * n);
     let mut enc = encoder(&ctx);
     ef.record(
-        &ctx,
-        &mut enc,
+        &mut Recorder::new(&ctx, &mut enc),
         &sg,
         refs(&bufs),
         (0, 1),
@@ -458,8 +473,7 @@ fn gpu_multiscale(
         let h = gpu_hessian(ctx, &sg, grid.spacing_mm, values, sigma);
         let mut enc = encoder(ctx);
         ef.record(
-            ctx,
-            &mut enc,
+            &mut Recorder::new(ctx, &mut enc),
             &sg,
             refs(&h),
             (0, sg.dims[2]),
@@ -617,8 +631,7 @@ fn frangi_default_c_matches_cpu() {
         ef.record_clear_norm(&mut enc, &bits);
         for z in [(0, 4), (4, 3), (7, 4)] {
             ef.record(
-                &ctx,
-                &mut enc,
+                &mut Recorder::new(&ctx, &mut enc),
                 &sg,
                 refs(&h),
                 z,
@@ -640,8 +653,7 @@ fn frangi_default_c_matches_cpu() {
             let one = norm_buffer(&ctx);
             let mut enc = encoder(&ctx);
             ef.record(
-                &ctx,
-                &mut enc,
+                &mut Recorder::new(&ctx, &mut enc),
                 &sg,
                 refs(&h),
                 z,
@@ -710,8 +722,7 @@ fn slab_with_halo_matches_whole_volume() {
         let mut enc = encoder(&ctx);
         let what = TensorOutput::hessian(Mapping::Map(FeatureMap::Li));
         ef.record(
-            &ctx,
-            &mut enc,
+            &mut Recorder::new(&ctx, &mut enc),
             &sg,
             refs(&h),
             ((z0 - s0) as u32, nz as u32),
@@ -762,8 +773,7 @@ fn slab_with_halo_matches_whole_volume() {
         let out2 = buffer(&ctx, 3 * plane * nz);
         let mut enc = encoder(&ctx);
         ef.record(
-            &ctx,
-            &mut enc,
+            &mut Recorder::new(&ctx, &mut enc),
             &bare,
             refs(&h),
             (0, nz as u32),
@@ -822,8 +832,7 @@ fn structure_tensor_matches_cpu() {
         .expect("record");
         let all = (0, sg.dims[2]);
         ef.record(
-            &ctx,
-            &mut enc,
+            &mut Recorder::new(&ctx, &mut enc),
             &sg,
             refs(&t),
             all,
@@ -836,8 +845,7 @@ fn structure_tensor_matches_cpu() {
         .expect("record");
         for (m, map) in [FeatureMap::Simple, FeatureMap::Li].into_iter().enumerate() {
             ef.record(
-                &ctx,
-                &mut enc,
+                &mut Recorder::new(&ctx, &mut enc),
                 &sg,
                 refs(&t),
                 all,
@@ -906,15 +914,45 @@ fn record_refuses_wrong_buffers() {
     let (a, b, small) = (buffer(&ctx, n), buffer(&ctx, n), buffer(&ctx, n - 1));
     let mut enc = encoder(&ctx);
     assert!(matches!(
-        gauss.record_axis(&ctx, &mut enc, &sg, 0, &k.axes[0], &a, &small),
+        gauss.record_pass(
+            &mut Recorder::new(&ctx, &mut enc),
+            &AxisPass {
+                grid: &sg,
+                axis: 0,
+                region: None,
+                kernels: PassKernels::One(&k.axes[0]),
+                src: &a,
+                dst: &[&small],
+            }
+        ),
         Err(RecordError::BufferTooSmall { .. })
     ));
     assert!(matches!(
-        gauss.record_axis(&ctx, &mut enc, &sg, 0, &k.axes[0], &a, &a),
+        gauss.record_pass(
+            &mut Recorder::new(&ctx, &mut enc),
+            &AxisPass {
+                grid: &sg,
+                axis: 0,
+                region: None,
+                kernels: PassKernels::One(&k.axes[0]),
+                src: &a,
+                dst: &[&a],
+            }
+        ),
         Err(RecordError::Invalid(_))
     ));
     assert!(matches!(
-        gauss.record_axis(&ctx, &mut enc, &sg, 3, &k.axes[0], &a, &b),
+        gauss.record_pass(
+            &mut Recorder::new(&ctx, &mut enc),
+            &AxisPass {
+                grid: &sg,
+                axis: 3,
+                region: None,
+                kernels: PassKernels::One(&k.axes[0]),
+                src: &a,
+                dst: &[&b],
+            }
+        ),
         Err(RecordError::Invalid(_))
     ));
     let ef = EigenFeatures::new(&ctx).expect("shader");
@@ -923,8 +961,7 @@ fn record_refuses_wrong_buffers() {
     let what = TensorOutput::hessian(Mapping::Map(FeatureMap::Li));
     assert_eq!(
         ef.record(
-            &ctx,
-            &mut enc,
+            &mut Recorder::new(&ctx, &mut enc),
             &sg,
             refs(&t),
             (8, 4),
@@ -943,8 +980,7 @@ fn record_refuses_wrong_buffers() {
     // Eigenvalues need 4 components: a 3-component buffer is refused.
     assert!(matches!(
         ef.record(
-            &ctx,
-            &mut enc,
+            &mut Recorder::new(&ctx, &mut enc),
             &sg,
             refs(&t),
             (0, 11),
@@ -993,16 +1029,17 @@ fn passes_over_a_core_give_the_whole_slabs_bits_there() {
             let end = (at + step).min(lines.end);
             hessian_pass
                 .record_pass(
-                    &ctx,
-                    &mut enc,
-                    &sg,
-                    &kernels,
-                    &input,
-                    &tmp,
-                    std::array::from_fn(|c| &out[c]),
-                    pass,
-                    &core,
-                    at..end,
+                    &mut Recorder::new(&ctx, &mut enc),
+                    &HessianPass {
+                        grid: &sg,
+                        kernels: &kernels,
+                        input: &input,
+                        tmp: &tmp,
+                        out: std::array::from_fn(|c| &out[c]),
+                        pass,
+                        core: &core,
+                        cut: at..end,
+                    },
                 )
                 .expect("record");
             at = end;
@@ -1053,16 +1090,17 @@ fn passes_over_a_core_give_the_whole_slabs_bits_there() {
     // A part outside the pass's lines is refused.
     let mut enc = encoder(&ctx);
     let err = hessian_pass.record_pass(
-        &ctx,
-        &mut enc,
-        &sg,
-        &kernels,
-        &input,
-        &tmp,
-        std::array::from_fn(|c| &out[c]),
-        1,
-        &core,
-        0..nz,
+        &mut Recorder::new(&ctx, &mut enc),
+        &HessianPass {
+            grid: &sg,
+            kernels: &kernels,
+            input: &input,
+            tmp: &tmp,
+            out: std::array::from_fn(|c| &out[c]),
+            pass: 1,
+            core: &core,
+            cut: 0..nz,
+        },
     );
     assert!(err.is_err(), "a part beyond the core's slices was recorded");
 }

@@ -10,8 +10,9 @@
 use crate::gpu_common;
 
 use gpu_common::*;
-use shapecast::compute::gaussian::{Gaussian, SeparableKernel};
+use shapecast::compute::gaussian::{AxisPass, Gaussian, PassKernels, SeparableKernel};
 use shapecast::gpu::context::test_context;
+use shapecast::gpu::kernel::Recorder;
 
 #[cfg(target_os = "linux")]
 fn resident_mb() -> f64 {
@@ -77,7 +78,17 @@ fn measure_alone() {
             let mut enc = encoder(&ctx);
             let axis = i % 3;
             gaussian
-                .record_axis(&ctx, &mut enc, &sg, axis, &kernel.axes[axis], &a, &b)
+                .record_pass(
+                    &mut Recorder::new(&ctx, &mut enc),
+                    &AxisPass {
+                        grid: &sg,
+                        axis,
+                        region: None,
+                        kernels: PassKernels::One(&kernel.axes[axis]),
+                        src: &a,
+                        dst: &[&b],
+                    },
+                )
                 .expect("record");
             submit(&ctx, enc);
             ctx.device

@@ -18,7 +18,7 @@ use crate::cpu::features::{FeatureMap, HessianMethod, hessian_features_multiscal
 use crate::cpu::rst::{GradientVolume, RstParams, rst_tensor_at};
 use crate::cpu::{Grid, Preset, gaussian_smooth, rays};
 use crate::gpu::GpuContext;
-use crate::gpu::kernel::{SlabGrid, f32_buffer};
+use crate::gpu::kernel::{Recorder, SlabGrid, f32_buffer};
 use crate::gpu::readback::read_f32_blocking;
 use crate::phantom::{Phantom, Shape};
 use crate::volume::Volume;
@@ -266,7 +266,14 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     if which != "rst" {
         let kernel = SeparableKernel::smooth(&ctx, 1.0, volume.spacing_mm);
         let g = timed(&ctx, |e| {
-            Ok(gaussian.record_separable(&ctx, e, &slab, &kernel, &input, &tmp, &smooth_out)?)
+            Ok(gaussian.record_separable(
+                &mut Recorder::new(&ctx, e),
+                &slab,
+                &kernel,
+                &input,
+                &tmp,
+                &smooth_out,
+            )?)
         })?;
         let cpu = (!args.no_cpu).then(|| {
             let t = Instant::now();
@@ -304,11 +311,10 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         let g = timed(&ctx, |e| {
             for (i, k) in kernels.iter().enumerate() {
                 let c: [&wgpu::Buffer; 6] = std::array::from_fn(|j| &comps[j]);
-                hessian.record(&ctx, e, &slab, k, &input, &tmp, c)?;
+                hessian.record(&mut Recorder::new(&ctx, e), &slab, k, &input, &tmp, c)?;
                 for (z0, nz, out) in &blocks {
                     eigen.record(
-                        &ctx,
-                        e,
+                        &mut Recorder::new(&ctx, e),
                         &slab,
                         c,
                         (*z0, *nz),
@@ -369,7 +375,14 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         // The RST reads (I, g) packed in one texture; the structure tensor reads g as buffers.
         let packed = crate::compute::gradient::packed_texture(&ctx, &slab, "bench (I, g)")?;
         let g = timed(&ctx, |e| {
-            gaussian.record_separable(&ctx, e, &slab, &kernel, &input, &tmp, &smooth_out)?;
+            gaussian.record_separable(
+                &mut Recorder::new(&ctx, e),
+                &slab,
+                &kernel,
+                &input,
+                &tmp,
+                &smooth_out,
+            )?;
             gradient.record(&ctx, e, &slab, &smooth_out, GradientOutput::Buffers(gb))?;
             let packed = GradientOutput::Packed(&packed);
             gradient.record(&ctx, e, &slab, &smooth_out, packed)?;

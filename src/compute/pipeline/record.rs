@@ -2,6 +2,9 @@
 //! the eigenvalue features of a tensor.
 
 use super::*;
+use crate::compute::eigen_features::TensorPart;
+use crate::compute::hessian::HessianPass;
+use crate::gpu::kernel::Recorder;
 
 impl FeatureJob {
     /// Uploads the input box `ranges` (whole rows) into `buffers.input` (f32, physical values).
@@ -82,8 +85,7 @@ impl FeatureJob {
     ) -> Result<(), PipelineError> {
         let b = &self.buffers;
         self.kernels.gaussian.record_separable(
-            ctx,
-            encoder,
+            &mut Recorder::new(ctx, encoder),
             grid,
             &self.kernels.smooth_g,
             self.vol(),
@@ -140,8 +142,7 @@ impl FeatureJob {
         self.kernels
             .hessian
             .record(
-                ctx,
-                encoder,
+                &mut Recorder::new(ctx, encoder),
                 grid,
                 &self.kernels.hessian_kernels[scale],
                 self.vol(),
@@ -168,8 +169,7 @@ impl FeatureJob {
                 self.record_slab_values(ctx, encoder, &slab)?;
                 let b = &self.buffers;
                 self.kernels.gaussian.record_separable(
-                    ctx,
-                    encoder,
+                    &mut Recorder::new(ctx, encoder),
                     &grid,
                     &self.kernels.smooth_g,
                     self.vol(),
@@ -227,14 +227,15 @@ impl FeatureJob {
                 let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
                 self.kernels.eigen.record_clear_norm(encoder, &b.norm);
                 let (z, y) = core_in_slab(&slab);
-                self.kernels.eigen.record_part_rows(
-                    ctx,
-                    encoder,
-                    &grid,
-                    tensor,
-                    z,
-                    0..z.1,
-                    Some([y.0, y.1]),
+                self.kernels.eigen.record_part(
+                    &mut Recorder::new(ctx, encoder),
+                    &TensorPart {
+                        grid: &grid,
+                        tensor,
+                        out_z: z,
+                        slices: 0..z.1,
+                        rows: Some([y.0, y.1]),
+                    },
                     EigenPass::MaxNorm { norm_bits: &b.norm },
                 )?;
                 Ok(Some((b.norm.clone(), 4, ReadFor::FrangiC(scale))))
@@ -355,21 +356,21 @@ impl FeatureJob {
             let b = &self.buffers;
             let out: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[c]);
             self.kernels.hessian.record_pass(
-                ctx,
-                encoder,
-                &grid,
-                &self.kernels.hessian_kernels[part],
-                self.vol(),
-                &b.tmp[0],
-                out,
-                pass,
-                &core_box,
-                first + cut.start..first + cut.end,
+                &mut Recorder::new(ctx, encoder),
+                &HessianPass {
+                    grid: &grid,
+                    kernels: &self.kernels.hessian_kernels[part],
+                    input: self.vol(),
+                    tmp: &b.tmp[0],
+                    out,
+                    pass,
+                    core: &core_box,
+                    cut: first + cut.start..first + cut.end,
+                },
             )?;
         } else {
             self.record_features_of_tensor(
-                ctx,
-                encoder,
+                &mut Recorder::new(ctx, encoder),
                 &grid,
                 0,
                 (core, rows),
@@ -398,11 +399,9 @@ impl FeatureJob {
 
     /// Eigenvalues or features of the six tensor components in `work[first..first + 6]` for the
     /// core slices, into `out_core` (the multi-scale maximum from the second scale on).
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn record_features_of_tensor(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         grid: &SlabGrid,
         first: usize,
         (core, rows): ((u32, u32), (u32, u32)),
@@ -413,14 +412,15 @@ impl FeatureJob {
         let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[first + c]);
         self.kernels
             .eigen
-            .record_part_rows(
-                ctx,
-                encoder,
-                grid,
-                tensor,
-                core,
-                slices,
-                Some([rows.0, rows.1]),
+            .record_part(
+                rec,
+                &TensorPart {
+                    grid,
+                    tensor,
+                    out_z: core,
+                    slices,
+                    rows: Some([rows.0, rows.1]),
+                },
                 EigenPass::Output {
                     what: self.tensor_output(part),
                     accumulate: part > 0,

@@ -40,8 +40,7 @@ impl FeatureJob {
                 )?;
                 let rows = core_in_slab(&slab).1;
                 self.record_features_of_tensor(
-                    ctx,
-                    encoder,
+                    &mut crate::gpu::kernel::Recorder::new(ctx, encoder),
                     &grid,
                     4,
                     (core, rows),
