@@ -1,6 +1,7 @@
 //! The native DICOMweb client: a blocking HTTP(S) transport (ureq with rustls) behind the
-//! [`Transport`] trait, and the driver that runs a [`Retrieval`] with several instance requests
-//! in flight on a few threads while the calling thread decodes what arrives. This is the only
+//! [`Transport`] trait, and the driver that runs a [`Retrieval`] (the whole series in one
+//! request, then what it lacked with several instance requests in flight) on a few threads
+//! while the calling thread decodes what arrives. This is the only
 //! code of `src/io` that does I/O; the page drives the same `Retrieval` with `fetch`.
 
 use std::io::Read;
@@ -437,6 +438,9 @@ impl<T: Transport> Client<T> {
         // Bounded: at most `parallel` answers wait to be decoded.
         let (done_tx, done_rx) = mpsc::sync_channel::<Answer>(self.parallel);
         std::thread::scope(|scope| {
+            // Dropped when the loop below ends, so that a request thread blocked handing on a
+            // part of the series' answer (the channel full) stops instead of waiting forever.
+            let done_rx = done_rx;
             for _ in 0..self.parallel {
                 let done_tx = done_tx.clone();
                 let (job_rx, stop) = (&job_rx, &stop);
@@ -454,9 +458,12 @@ impl<T: Transport> Client<T> {
                             return;
                         }
                         let mut each = |part: Part| {
+                            if stop.load(Ordering::Relaxed) {
+                                return Err(DicomWebError::Cancelled);
+                            }
                             done_tx
                                 .send(Answer::Part(part))
-                                .map_err(|_| internal("the retrieval stopped"))
+                                .map_err(|_| DicomWebError::Cancelled)
                         };
                         let each: Option<&mut dyn FnMut(Part) -> Result<(), DicomWebError>> =
                             (fetch.id == SERIES_FETCH).then_some(&mut each);
@@ -503,6 +510,7 @@ impl<T: Transport> Client<T> {
             })();
             stop.store(true, Ordering::Relaxed);
             drop(job_tx);
+            drop(done_rx);
             result
         })?;
         retrieval.finish()

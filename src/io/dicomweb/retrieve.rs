@@ -44,7 +44,7 @@ enum SeriesRequest {
 pub struct Fetch {
     pub id: usize,
     pub request: Request,
-    /// "instance 3 of 30 (1.2.3...)", for messages.
+    /// "instance 3 of 30 (1.2.3...)" or "series 1.2.3... (30 instances)", for messages.
     pub label: String,
     /// Wait this long before asking (a retry's backoff; zero the first time).
     pub delay: std::time::Duration,
@@ -78,6 +78,9 @@ pub struct Retrieval {
     builder: SeriesBuilder,
     multipart: MultipartLimits,
     series_request: SeriesRequest,
+    /// Requests for the whole series made, and the wait before the next (a busy archive's).
+    series_attempts: u32,
+    series_delay: std::time::Duration,
     /// Instance index by SOPInstanceUID (the parts of the series' answer).
     by_uid: HashMap<String, usize>,
 }
@@ -121,6 +124,8 @@ impl Retrieval {
                 ..MultipartLimits::default()
             },
             series_request: SeriesRequest::NotAsked,
+            series_attempts: 0,
+            series_delay: std::time::Duration::ZERO,
             by_uid: HashMap::new(),
         })
     }
@@ -163,11 +168,13 @@ impl Retrieval {
         )
     }
 
-    /// The next instance to ask for, if any is waiting (first attempts, then retries).
+    /// The next request to make: the whole series first ([`Self::series_first`]), then the
+    /// instances waiting (first attempts, then retries).
     pub fn next_fetch(&mut self) -> Option<Fetch> {
         match self.series_request {
             SeriesRequest::Waiting => {
                 self.series_request = SeriesRequest::InFlight;
+                self.series_attempts += 1;
                 // Every UID was checked when this retrieval was made.
                 let url = self
                     .base
@@ -177,7 +184,7 @@ impl Retrieval {
                     id: SERIES_FETCH,
                     request: Request::wado(url, &self.auth),
                     label: self.label(SERIES_FETCH),
-                    delay: std::time::Duration::ZERO,
+                    delay: self.series_delay,
                 });
             }
             SeriesRequest::InFlight => return None,
@@ -283,10 +290,22 @@ impl Retrieval {
     /// otherwise (or the second time) the retrieval fails with an error naming it.
     pub fn failed(&mut self, id: usize, error: DicomWebError) -> Result<(), DicomWebError> {
         if id == SERIES_FETCH {
-            // Credentials refused are refused for the instances too; anything else (an archive
-            // without series retrieves, an answer cut short) leaves the rest to them.
-            if matches!(error, DicomWebError::Unauthorized { .. }) {
+            // Credentials refused (401) are refused for the instances too. A busy archive is
+            // asked again after the wait it asks for, once. Anything else (an archive without
+            // series retrieves, a gateway forbidding them with 403, an answer cut short)
+            // leaves the rest to the instances, each with its own answer.
+            if matches!(error, DicomWebError::Unauthorized { status: 401, .. }) {
                 return Err(error);
+            }
+            if matches!(error, DicomWebError::Busy { .. }) && self.series_attempts < 2 {
+                self.series_delay = super::backoff(self.series_attempts, &error);
+                log::warn!(
+                    "{}: {error}; asking again in {:.1} s",
+                    self.label(SERIES_FETCH),
+                    self.series_delay.as_secs_f64()
+                );
+                self.series_request = SeriesRequest::Waiting;
+                return Ok(());
             }
             log::warn!(
                 "{}: {error}; asking instance by instance",

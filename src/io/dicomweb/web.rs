@@ -1,9 +1,10 @@
 //! The page's DICOMweb transport (wasm only): the browser's `fetch` drives the same pure code as
 //! the native client (`client.rs`). QIDO-RS answers are read whole (at most
-//! [`MAX_JSON_BYTES`]); a WADO-RS retrieval keeps [`DEFAULT_PARALLEL`] instance requests in
-//! flight from one async task, each body streamed from its reader into an [`InstanceResponse`]
-//! chunk by chunk, each instance decoded into the [`Retrieval`]'s series as it completes (so
-//! the voxels are held once), a failed instance asked for again once. One `AbortController`
+//! [`MAX_JSON_BYTES`]); a WADO-RS retrieval asks for the whole series in one request first,
+//! its parts decoded into the [`Retrieval`]'s series as they complete, then keeps
+//! [`DEFAULT_PARALLEL`] requests in flight from one async task for the instances that answer
+//! lacked, each body streamed from its reader into an [`InstanceResponse`] chunk by chunk and
+//! decoded as it completes (so the voxels are held once), a failed instance asked for again. One `AbortController`
 //! cancels every request of a client. Nothing here blocks: every wait is a promise.
 
 use std::cell::RefCell;

@@ -259,3 +259,42 @@ fn a_series_answer_is_decoded_as_it_streams_and_only_its_gaps_are_asked_for() {
     let instances: Vec<&String> = seen.iter().filter(|u| u.contains("/instances/")).collect();
     assert_eq!(instances, [&format!("{series_url}/instances/{SERIES}.3")]);
 }
+
+/// A part of the series' answer that cannot be decoded ends the retrieval with its error while
+/// the rest of the answer is still streaming: the request thread blocked handing on parts is
+/// let go, never left waiting (it was, with more parts behind than the channel holds).
+#[test]
+fn a_bad_part_mid_stream_ends_the_retrieval_without_hanging() {
+    let mut a = archive(12);
+    let series_url = format!("http://archive/dw/studies/{STUDY}/series/{SERIES}");
+    let mut body = Vec::new();
+    for k in 0..12 {
+        let mut s = Slice::axial(SERIES, k, 4, 5);
+        if k == 1 {
+            s.transfer_syntax = "1.2.840.10008.1.2.4.80".to_owned();
+        }
+        body.extend_from_slice(b"--XX\r\nContent-Type: application/dicom\r\n\r\n");
+        body.extend_from_slice(&s.bytes());
+        body.extend_from_slice(b"\r\n");
+    }
+    body.extend_from_slice(b"--XX--");
+    a.answers.insert(
+        series_url,
+        (
+            200,
+            "multipart/related; type=\"application/dicom\"; boundary=XX".to_owned(),
+            body,
+        ),
+    );
+    let c = client(a).with_parallel(2);
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let result = c.retrieve(STUDY, SERIES, &mut |_| {}).map(|_| ());
+        let _ = tx.send(result.map_err(|e| e.to_string()));
+    });
+    let result = rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("the retrieval hangs");
+    let e = result.unwrap_err();
+    assert!(e.contains("1.2.840.10008.1.2.4.80"), "{e}");
+}

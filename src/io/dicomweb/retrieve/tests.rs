@@ -268,3 +268,44 @@ fn a_part_is_named_by_its_file_meta_group() {
     long.extend_from_slice(b"DICM\x02\x00\x03\x00UI\xff\xff1.2");
     assert_eq!(part_sop_uid(&long), None);
 }
+
+#[test]
+fn a_busy_series_request_is_asked_again_once_and_a_403_falls_back() {
+    let mut r = retrieval(2).series_first();
+    let whole = r.next_fetch().unwrap();
+    let busy = || DicomWebError::Busy {
+        url: whole.request.url.clone(),
+        status: 429,
+        retry_after_s: Some(3),
+    };
+    r.failed(SERIES_FETCH, busy()).unwrap();
+    let again = r.next_fetch().unwrap();
+    assert_eq!(
+        (again.id, again.delay),
+        (SERIES_FETCH, std::time::Duration::from_secs(3))
+    );
+    assert!(
+        r.next_fetch().is_none(),
+        "instances wait for the series again"
+    );
+    // Busy a second time: the instances, each with its own answer.
+    r.failed(SERIES_FETCH, busy()).unwrap();
+    let ids: Vec<usize> = std::iter::from_fn(|| r.next_fetch())
+        .map(|f| f.id)
+        .collect();
+    assert_eq!(ids, [0, 1]);
+
+    // A gateway that forbids series retrieves (403) but serves instances.
+    let mut r = retrieval(2).series_first();
+    let whole = r.next_fetch().unwrap();
+    let forbidden = DicomWebError::Unauthorized {
+        status: 403,
+        url: whole.request.url.clone(),
+        credentials: None,
+    };
+    r.failed(SERIES_FETCH, forbidden).unwrap();
+    let ids: Vec<usize> = std::iter::from_fn(|| r.next_fetch())
+        .map(|f| f.id)
+        .collect();
+    assert_eq!(ids, [0, 1]);
+}
