@@ -378,8 +378,10 @@ try {
         const mip = await page.evaluate(() => window.shapecastStatus?.controls?.['pane:mip'] ?? null);
         if (mip) await page.mouse.move(mip[0] + mip[2] / 2, mip[1] + mip[3] / 2);
         await page.waitForTimeout(500);
+        // 36 frames and the dropped volume's features: 230 s on this machine's SwiftShader
+        // (2026-12-02), 10 minutes allowed for a slower one.
         const [download] = await Promise.all([
-          page.waitForEvent('download', { timeout: 300000 }),
+          page.waitForEvent('download', { timeout: 600000 }),
           page.keyboard.press('m'),
         ]);
         const file = path.join(outDir, download.suggestedFilename());
