@@ -93,9 +93,10 @@ fn draw_like_the_viewer(
         let small = size.map(|s| ((s as f32 * coarse_scale).round() as u32).max(1));
         let mut coarse = RaycastTarget::new(ctx, small)?;
         let t = Instant::now();
+        let span = pacer.open(ctx);
         caster.render(ctx, scene, camera, settings, &mut coarse, ..)?;
         let s = f64::from(coarse_scale);
-        pacer.submitted(ctx, full * s * s, t);
+        pacer.submitted(ctx, full * s * s, span);
         wait(ctx)?;
         pacer.poll(ctx);
         timing.coarse_ms = Some(t.elapsed().as_secs_f64() * 1e3);
@@ -106,8 +107,9 @@ fn draw_like_the_viewer(
     while row < size[1] {
         let end = cost.band_within(row, pacer.budget_samples());
         let t = Instant::now();
+        let span = pacer.open(ctx);
         caster.render(ctx, scene, camera, settings, &mut target, row..end)?;
-        pacer.submitted(ctx, cost.rows(row..end), t);
+        pacer.submitted(ctx, cost.rows(row..end), span);
         wait(ctx)?;
         pacer.poll(ctx);
         let ms = t.elapsed().as_secs_f64() * 1e3;

@@ -2,7 +2,8 @@
 //! the tests create their own (preferring the CPU adapter, lavapipe, under tests).
 //!
 //! It always asks for the adapter's real limits (3D texture size, storage buffer size, workgroup
-//! limits) instead of wgpu's small defaults, and for FLOAT32_FILTERABLE where the adapter has it.
+//! limits) instead of wgpu's small defaults, and for FLOAT32_FILTERABLE and TIMESTAMP_QUERY where
+//! the adapter has them.
 
 use std::fmt::Write as _;
 
@@ -44,9 +45,10 @@ pub struct GpuContext {
     pub features: wgpu::Features,
 }
 
-/// Features Shapecast asks for where the adapter offers them.
+/// Features Shapecast asks for where the adapter offers them: filtering of 32-bit float
+/// textures, and timestamps, which time the pacers' steps ([`super::timing`]).
 pub fn wanted_features(adapter: &wgpu::Adapter) -> wgpu::Features {
-    adapter.features() & wgpu::Features::FLOAT32_FILTERABLE
+    adapter.features() & (wgpu::Features::FLOAT32_FILTERABLE | wgpu::Features::TIMESTAMP_QUERY)
 }
 
 /// The device descriptor Shapecast uses everywhere: the adapter's own limits and wanted features.
@@ -196,6 +198,11 @@ impl GpuContext {
             s,
             "float32_filterable:               {}",
             self.float32_filterable()
+        );
+        let _ = write!(
+            s,
+            "\ntimestamps:                       {}",
+            self.features.contains(wgpu::Features::TIMESTAMP_QUERY)
         );
         s
     }

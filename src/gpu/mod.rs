@@ -9,6 +9,7 @@ pub mod context;
 pub mod kernel;
 pub mod readback;
 pub mod shaders;
+pub mod timing;
 pub mod volume_texture;
 
 pub use context::{AdapterPreference, GpuContext, GpuError};

@@ -453,7 +453,7 @@ impl MipView {
             step = Some((0, full, rows.clone(), r.cost.rows(rows)));
         }
         if let Some((slot, size, rows, samples)) = step {
-            let started = web_time::Instant::now();
+            let span = self.pacer.open(gpu);
             match self.render(
                 gpu,
                 render_state,
@@ -465,7 +465,7 @@ impl MipView {
                 rows.clone(),
             ) {
                 Ok(()) => {
-                    self.pacer.submitted(gpu, samples, started);
+                    self.pacer.submitted(gpu, samples, span);
                     self.last_samples = samples;
                     rendered = true;
                     self.frames += 1;

@@ -19,7 +19,6 @@ impl MipView {
         rows: std::ops::Range<u32>,
         samples: f64,
     ) -> Result<(), String> {
-        let started = web_time::Instant::now();
         self.prepare(gpu, volume, features)?;
         let Some(caster) = &self.caster else {
             return Err("the ray caster is not ready".to_owned());
@@ -30,10 +29,11 @@ impl MipView {
             bricks: self.bricks.as_ref(),
             feature_bricks: self.feature_bricks.as_ref(),
         };
+        let span = self.pacer.open(gpu);
         caster
             .render(gpu, &scene, camera, settings, target, rows)
             .map_err(|e| e.to_string())?;
-        self.pacer.submitted(gpu, samples, started);
+        self.pacer.submitted(gpu, samples, span);
         Ok(())
     }
 

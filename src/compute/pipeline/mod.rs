@@ -49,10 +49,11 @@ use crate::gpu::volume_texture::{FeatureTexture, RenderVolumeError};
 use crate::gpu::{GpuContext, shaders};
 use crate::volume::Volume;
 
+use crate::gpu::timing::GpuSpan;
 use buffers::{Buffers, box_grid, bytes_per_voxel, core_in_slab, halo_of, starts, to_u32};
 use kernels::Kernels;
+use pace::StepPace;
 pub use pace::Waker;
-use pace::{InFlight, StepPace};
 
 /// Why a feature computation failed.
 #[derive(Debug, thiserror::Error)]
@@ -232,8 +233,8 @@ pub struct FeatureJob {
     packed: Option<([u32; 3], wgpu::Texture)>,
     // GPU sync.
     /// The last submission, until the queue's completion callback has been seen.
-    busy: Option<InFlight>,
-    /// What [`InFlight`]'s times count from.
+    busy: Option<GpuSpan>,
+    /// What [`GpuSpan`]'s callback times count from.
     epoch: web_time::Instant,
     /// Called when a submitted step is done (the viewer asks for a frame then).
     waker: Option<Waker>,
@@ -272,7 +273,7 @@ impl FeatureJob {
         self.submissions
     }
 
-    /// GPU seconds of the last step seen done ([`InFlight::seconds`]).
+    /// GPU seconds of the last step seen done ([`GpuSpan::seconds`]).
     pub fn last_step_seconds(&self) -> Option<f64> {
         self.last_step_s
     }
@@ -403,8 +404,9 @@ impl FeatureJob {
                 ctx.queue.on_submitted_work_done(move || wake());
             }
         } else {
-            let flight = InFlight::submit(ctx, self.epoch, encoder.finish(), self.waker.clone());
-            self.busy = Some(flight);
+            let span = GpuSpan::open(ctx, self.epoch);
+            ctx.queue.submit([encoder.finish()]);
+            self.busy = Some(span.close(ctx, self.waker.clone()));
         }
         self.submissions += 1;
         Ok(self.state())

@@ -2,15 +2,13 @@
 //! projects per second, measured on the frames themselves, and from it how much of a frame fits
 //! in one frame's GPU budget.
 //!
-//! A measurement runs from just before a submission to the queue's "work done" callback, so it
-//! includes queueing behind other work and the wait for the next poll: the rate is an
-//! underestimate, and bands come out smaller than the budget rather than larger.
-
-use std::sync::{Arc, Mutex};
-
-use web_time::Instant;
+//! A measurement is a [`GpuSpan`] around the frame's (or band's) submission: the device's own
+//! time where it writes timestamps, else from the submission to the queue's "work done"
+//! callback, which includes queueing behind other work and the wait for the next poll: an
+//! underestimate of the rate, so that bands come out smaller than the budget rather than larger.
 
 use crate::gpu::GpuContext;
+use crate::gpu::timing::{GpuSpan, OpenSpan, Rate};
 
 /// First guess of the rate (samples per second) before a kind of frame was measured: below a
 /// software renderer's (lavapipe on two cores: ~100 M/s intensity only, ~15 M/s with features);
@@ -22,41 +20,40 @@ pub struct FramePacer {
     /// GPU seconds one frame may take; `None`: frames are drawn whole, whatever they cost.
     pub budget_s: Option<f64>,
     /// Measured rates per kind of frame (intensity only, with features: a feature sample costs
-    /// several times an intensity one, and skips less), `None` until measured.
-    rates: [Option<f64>; 2],
+    /// several times an intensity one, and skips less).
+    rates: [Rate; 2],
     /// The kind of the frames being planned.
     kind: usize,
     /// The rate is given, never measured (tests, benchmarks).
     fixed: Option<f64>,
     measuring: Option<Measure>,
+    /// What the spans' callback times count from.
+    epoch: web_time::Instant,
 }
 
 struct Measure {
-    start: Instant,
     samples: f64,
     kind: usize,
-    done: Arc<Mutex<Option<Instant>>>,
+    span: GpuSpan,
 }
 
 impl FramePacer {
     pub fn new(budget_s: Option<f64>) -> Self {
         Self {
             budget_s,
-            rates: [None; 2],
+            rates: [Rate::default(); 2],
             kind: 0,
             fixed: None,
             measuring: None,
+            epoch: web_time::Instant::now(),
         }
     }
 
     /// A pacer with a given rate that it never measures (reproducible bands in tests).
     pub fn fixed(budget_s: Option<f64>, samples_per_s: f64) -> Self {
         Self {
-            budget_s,
-            rates: [None; 2],
-            kind: 0,
             fixed: Some(samples_per_s.max(1.0)),
-            measuring: None,
+            ..Self::new(budget_s)
         }
     }
 
@@ -68,13 +65,13 @@ impl FramePacer {
     /// Samples per second of the current kind of frame, measured (or the first guess).
     pub fn rate(&self) -> f64 {
         self.fixed
-            .or(self.rates[self.kind])
+            .or(self.rates[self.kind].get().map(|r| r.clamp(1e5, 1e13)))
             .unwrap_or(INITIAL_SAMPLES_PER_S)
     }
 
     /// Whether [`Self::rate`] comes from a measurement.
     pub fn measured(&self) -> bool {
-        self.fixed.is_some() || self.rates[self.kind].is_some()
+        self.fixed.is_some() || self.rates[self.kind].get().is_some()
     }
 
     /// How many samples one frame may cost; infinite without a budget.
@@ -85,24 +82,26 @@ impl FramePacer {
         }
     }
 
-    /// Call right after submitting `samples` samples of work, with the time taken just before
-    /// the submission: times it if no other measurement is running.
-    pub fn submitted(&mut self, ctx: &GpuContext, samples: f64, start: Instant) {
-        if self.fixed.is_some() || self.measuring.is_some() || samples.is_nan() || samples <= 0.0 {
+    /// Call right before submitting a frame: opens its measurement unless one is running (or
+    /// the rate is fixed). Hand the result to [`Self::submitted`].
+    pub fn open(&self, ctx: &GpuContext) -> Option<OpenSpan> {
+        (self.fixed.is_none() && self.measuring.is_none()).then(|| GpuSpan::open(ctx, self.epoch))
+    }
+
+    /// Call right after submitting `samples` samples of work, with what [`Self::open`] gave
+    /// before the submission: times it.
+    pub fn submitted(&mut self, ctx: &GpuContext, samples: f64, span: Option<OpenSpan>) {
+        let Some(span) = span else {
+            return;
+        };
+        let span = span.close(ctx, None);
+        if self.measuring.is_some() || samples.is_nan() || samples <= 0.0 {
             return;
         }
-        let done = Arc::new(Mutex::new(None));
-        let d = Arc::clone(&done);
-        ctx.queue.on_submitted_work_done(move || {
-            if let Ok(mut d) = d.lock() {
-                *d = Some(Instant::now());
-            }
-        });
         self.measuring = Some(Measure {
-            start,
             samples,
             kind: self.kind,
-            done,
+            span,
         });
     }
 
@@ -116,20 +115,11 @@ impl FramePacer {
         let _ = ctx.device.poll(wgpu::PollType::Poll);
         #[cfg(target_arch = "wasm32")]
         let _ = ctx;
-        let done = m.done.lock().ok().and_then(|d| *d);
-        let Some(done) = done else {
+        let Some(secs) = m.span.seconds() else {
             return true;
         };
         // A millisecond floor: a tiny frame's time is mostly overhead.
-        let secs = done.duration_since(m.start).as_secs_f64().max(1e-3);
-        let sample = (m.samples / secs).clamp(1e5, 1e13);
-        let rate = &mut self.rates[m.kind];
-        *rate = Some(match *rate {
-            // Up slowly (the geometric mean of the old rate and the new sample), down at once:
-            // a band over dense tissue after bands of air must not be planned at air's rate.
-            Some(old) if sample > old => (old * sample).sqrt(),
-            _ => sample,
-        });
+        self.rates[m.kind].observe(m.samples, secs.max(1e-3));
         self.measuring = None;
         false
     }
