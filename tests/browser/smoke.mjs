@@ -166,6 +166,25 @@ fs.mkdirSync(outDir, { recursive: true });
 try {
   // 1, 2 and 3: the app on WebGPU.
   await withBrowser([...baseArgs, ...webgpuArgs], async (page) => {
+    // Every task the app publishes, in the page itself: a poll from here can miss a task that
+    // lasts a frame or two (the movie of a small volume is saved within a few frames).
+    await page.addInitScript(() => {
+      let value;
+      window.shapecastTasks = [];
+      Object.defineProperty(window, 'shapecastStatus', {
+        configurable: true,
+        get: () => value,
+        set: (v) => {
+          value = v;
+          const task = v?.task;
+          const seen = window.shapecastTasks;
+          if (task && seen[seen.length - 1] !== task) {
+            seen.push(task);
+            if (seen.length > 2000) seen.splice(0, 1000);
+          }
+        },
+      });
+    });
     const t0 = Date.now();
     await page.goto(`${url}?method=li`);
     let status;
@@ -379,11 +398,15 @@ try {
         if (mip) await page.mouse.move(mip[0] + mip[2] / 2, mip[1] + mip[3] / 2);
         await page.waitForTimeout(500);
         // 36 frames and the dropped volume's features: 230 s on this machine's SwiftShader
-        // (2026-12-02), 10 minutes allowed for a slower one.
+        // (2026-12-02), 27 s since the pacers read the GPU's timestamps; 10 minutes allowed.
+        await page.evaluate(() => { window.shapecastTasks.length = 0; });
         const [download] = await Promise.all([
           page.waitForEvent('download', { timeout: 600000 }),
           page.keyboard.press('m'),
         ]);
+        for (const t of await page.evaluate(() => window.shapecastTasks)) {
+          tasks.add(t.replace(/frame \d+/, 'frame N'));
+        }
         const file = path.join(outDir, download.suggestedFilename());
         await download.saveAs(file);
         const apng = apngFrames(fs.readFileSync(file));
