@@ -377,8 +377,8 @@ impl FeatureManager {
         // The job reads its slices from the loaded volume itself (no copy per computation).
         // Its steps follow the device's speed, so that a frame of the viewer never waits behind
         // more than `STEP_SECONDS` of feature work (more only where its own frames are slower):
-        // a step is timed from when the work queued before it (the last frame) was done, so a
-        // slow frame does not count as the step's.
+        // a step is timed by the device's timestamps around it (or, without them, from when
+        // the work queued before it was done), so a slow frame does not count as the step's.
         let options = JobOptions {
             step_seconds: paced(ctx).then_some(STEP_SECONDS),
             ..JobOptions::default()

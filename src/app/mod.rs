@@ -303,7 +303,7 @@ impl ShapecastApp {
 
 impl ShapecastApp {
     /// Frames for a running feature job. In the browser the job asks for a frame when its step
-    /// is done (its waker, from the queue's callback), so frames do not run back to back
+    /// is done (its waker, when the step's time is known), so frames do not run back to back
     /// between steps: on a software adapter a frame costs ~0.25 s of the device, and three of
     /// them per step left the job a third of it. The progress line still moves four times a
     /// second. Natively the queue's callbacks run only when something polls: frames go on.

@@ -1,11 +1,16 @@
 //! How long submitted GPU work took: the one clock of both pacers, the feature job's
 //! (`compute::pipeline::pace`) and progressive rendering's (`render::raycast::pace`).
 //!
-//! A [`GpuSpan`] is opened before the work's submissions and closed after them. Where the device
-//! has timestamp queries (wgpu's `TIMESTAMP_QUERY`, WebGPU's "timestamp-query": Chrome has them,
-//! on SwiftShader too, and so does lavapipe), the span writes a timestamp in an empty compute
-//! pass submitted before the work and one submitted after it, and the work's time is their
-//! difference: the device's own time, however late the page hears of it.
+//! A [`GpuSpan`] is opened right before the work's submissions and closed right after them.
+//! Where the device has timestamp queries (wgpu's `TIMESTAMP_QUERY`, WebGPU's "timestamp-query":
+//! Chrome has them, on SwiftShader too, and so does lavapipe), the span writes a timestamp in an
+//! empty compute pass submitted before the work and one submitted after it, and the work's time
+//! is their difference, however late the page hears of it. That is the device's time from the
+//! first stamp to the second: the work, and whatever keeps the device waiting for it in between
+//! (so open a span only once the CPU's part of the work is done). The query set and buffers of a
+//! span are destroyed when it is closed and dropped (a browser on Metal has only a few dozen
+//! timestamp query sets per device; dropping one in wasm would leave it to the garbage
+//! collector).
 //!
 //! Without timestamps the span is timed by the queue's callbacks. In the browser the work's time
 //! runs from when everything queued before it was done (`before`: the viewer's last frame, say)
@@ -173,7 +178,9 @@ impl GpuSpan {
                         u64::from_le_bytes(b)
                     };
                     let (t0, t1) = (at(0), at(1));
-                    if t1 > t0 {
+                    // A zero first stamp was never written (an invalid submission resolves
+                    // zeros); the second alone would be the device's clock, not a time.
+                    if t0 != 0 && t1 > t0 {
                         return Some((t1 - t0) as f64 * s.period_ns * 1e-9);
                     }
                     // Equal stamps (a browser quantises them, to 0.1 ms in Chrome): shorter
@@ -239,6 +246,9 @@ impl OpenSpan {
                 encoder.resolve_query_set(&set, 0..2, &resolve, 0);
                 encoder.copy_buffer_to_buffer(&resolve, 0, &buffer, 0, STAMP_BYTES);
             });
+            // Freed once the submitted work is done (WebGPU and wgpu defer it).
+            set.destroy();
+            resolve.destroy();
             let mapped = Arc::new(Mutex::new(None));
             let m = Arc::clone(&mapped);
             let wake = wake.clone();
@@ -269,6 +279,15 @@ impl OpenSpan {
             before: self.before,
             done,
             stamps,
+        }
+    }
+}
+
+impl Drop for GpuSpan {
+    fn drop(&mut self) {
+        if let Some(s) = &self.stamps {
+            // Unmaps it if mapped; a mapping still pending ends with an error nobody reads.
+            s.buffer.destroy();
         }
     }
 }

@@ -453,7 +453,6 @@ impl MipView {
             step = Some((0, full, rows.clone(), r.cost.rows(rows)));
         }
         if let Some((slot, size, rows, samples)) = step {
-            let span = self.pacer.open(gpu);
             match self.render(
                 gpu,
                 render_state,
@@ -462,10 +461,9 @@ impl MipView {
                 &settings,
                 slot,
                 size,
-                rows.clone(),
+                (rows.clone(), samples),
             ) {
                 Ok(()) => {
-                    self.pacer.submitted(gpu, samples, span);
                     self.last_samples = samples;
                     rendered = true;
                     self.frames += 1;

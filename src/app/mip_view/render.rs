@@ -68,6 +68,8 @@ impl MipView {
         Ok(())
     }
 
+    /// Renders `rows` of the frame into target `slot` (of `size`), timing the caster's
+    /// submission of their `samples` for the pacer.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn render(
         &mut self,
@@ -78,7 +80,7 @@ impl MipView {
         settings: &RenderSettings,
         slot: usize,
         size: [u32; 2],
-        rows: std::ops::Range<u32>,
+        (rows, samples): (std::ops::Range<u32>, f64),
     ) -> Result<(), String> {
         self.prepare(gpu, volume, features)?;
         let resized = self.targets[slot].as_ref().is_none_or(|t| t.size != size);
@@ -94,9 +96,11 @@ impl MipView {
             bricks: self.bricks.as_ref(),
             feature_bricks: self.feature_bricks.as_ref(),
         };
+        let span = self.pacer.open(gpu);
         caster
             .render(gpu, &scene, &self.camera, settings, target, rows)
             .map_err(|e| e.to_string())?;
+        self.pacer.submitted(gpu, samples, span);
         if resized {
             show_texture(render_state, gpu, &target.view, &mut self.texture_ids[slot]);
         }

@@ -2,10 +2,10 @@
 //! projects per second, measured on the frames themselves, and from it how much of a frame fits
 //! in one frame's GPU budget.
 //!
-//! A measurement is a [`GpuSpan`] around the frame's (or band's) submission: the device's own
-//! time where it writes timestamps, else from the submission to the queue's "work done"
-//! callback, which includes queueing behind other work and the wait for the next poll: an
-//! underestimate of the rate, so that bands come out smaller than the budget rather than larger.
+//! A measurement is a [`GpuSpan`] around the frame's (or band's) submission: the device's
+//! timestamps where it writes them, else the queue's callbacks, which may include queueing
+//! behind other work and the wait for the next poll: an underestimate of the rate, so that bands
+//! come out smaller than the budget rather than larger.
 
 use crate::gpu::GpuContext;
 use crate::gpu::timing::{GpuSpan, OpenSpan, Rate};
@@ -118,8 +118,10 @@ impl FramePacer {
         let Some(secs) = m.span.seconds() else {
             return true;
         };
-        // A millisecond floor: a tiny frame's time is mostly overhead.
-        self.rates[m.kind].observe(m.samples, secs.max(1e-3));
+        // A millisecond floor: a tiny frame's time is mostly overhead; and a rate of at
+        // least 1e5 samples per second (a stall must not plan bands of a few pixels).
+        let secs = secs.max(1e-3).min(m.samples / 1e5);
+        self.rates[m.kind].observe(m.samples, secs);
         self.measuring = None;
         false
     }
