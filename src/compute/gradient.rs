@@ -7,6 +7,7 @@
 //! Also holds what the RST and gradient kernels share: [`RecordError`] and the checks that make
 //! a bad size an error instead of a wgpu validation panic.
 
+use crate::gpu::kernel::Recorder;
 use crate::gpu::kernel::{SlabGrid, WORKGROUP, params_buffer};
 use crate::gpu::{GpuContext, shaders};
 
@@ -205,8 +206,7 @@ impl Gradient {
     /// three buffers, or (I, gx, gy, gz) texels. Nothing is submitted.
     pub fn record(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         grid: &SlabGrid,
         intensity: &wgpu::Buffer,
         out: GradientOutput<'_>,
@@ -227,12 +227,12 @@ impl Gradient {
                 }
             }
         }
-        let groups = workgroups(ctx, grid.dims)?;
-        let params_buf = Self::params_buffer(ctx, grid);
+        let groups = workgroups(rec.ctx, grid.dims)?;
+        let params_buf = Self::params_buffer(rec.ctx, grid);
         let view;
         let mut entries = vec![
             entry(0, params_buf.as_entire_binding()),
-            entry(1, storage_binding(ctx, "intensity", intensity, bytes)?),
+            entry(1, storage_binding(rec.ctx, "intensity", intensity, bytes)?),
         ];
         let (label, pipeline) = match out {
             GradientOutput::Packed(texture) => {
@@ -241,18 +241,21 @@ impl Gradient {
                 ("gradient packed", &self.packed)
             }
             GradientOutput::Buffers(out) => {
-                entries.push(entry(2, storage_binding(ctx, "gx", out.gx, bytes)?));
-                entries.push(entry(3, storage_binding(ctx, "gy", out.gy, bytes)?));
-                entries.push(entry(4, storage_binding(ctx, "gz", out.gz, bytes)?));
+                entries.push(entry(2, storage_binding(rec.ctx, "gx", out.gx, bytes)?));
+                entries.push(entry(3, storage_binding(rec.ctx, "gy", out.gy, bytes)?));
+                entries.push(entry(4, storage_binding(rec.ctx, "gz", out.gz, bytes)?));
                 ("gradient", &self.pipeline)
             }
         };
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(label),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
-        crate::gpu::checks::dispatch(encoder, label, pipeline, &bind_group, groups);
+        let bind_group = rec
+            .ctx
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &entries,
+            });
+        crate::gpu::checks::dispatch(rec.encoder, label, pipeline, &bind_group, groups);
         Ok(())
     }
 }

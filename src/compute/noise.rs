@@ -4,6 +4,7 @@
 //! the CPU over the whole volume ([`crate::cpu::tf::median`]).
 
 use crate::cpu::tf::{NOISE_WINDOW, noise_window_counts};
+use crate::gpu::kernel::Recorder;
 use crate::gpu::kernel::{self, SlabGrid, params_buffer};
 use crate::gpu::{GpuContext, checks, shaders};
 
@@ -40,27 +41,25 @@ impl NoiseWindows {
         Ok(Self { pipeline })
     }
 
-    /// Records the window sigmas of slices `z0..z0 + nz` of `smoothed` (a slab of `slab`) into
-    /// `out` (at least [`output_len`] f32): a standard deviation, or -1 for a window not wholly
-    /// inside `band`.
-    #[allow(clippy::too_many_arguments)]
+    /// Records the window sigmas of `slices` of `smoothed` (a slab of `slab`) into `out` (at
+    /// least [`output_len`] f32): a standard deviation, or -1 for a window not wholly inside
+    /// `band`.
     pub fn record(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         slab: SlabGrid,
         smoothed: &wgpu::Buffer,
-        z0: u32,
-        nz: u32,
+        slices: std::ops::Range<u32>,
         band: (f32, f32),
         out: &wgpu::Buffer,
     ) {
+        let (z0, nz) = (slices.start, slices.end.saturating_sub(slices.start));
         let [nwx, nwy] = noise_window_counts(slab.dims.map(|d| d as usize)).map(|n| n as u32);
         if nwx == 0 || nwy == 0 || nz == 0 {
             return;
         }
         let params = params_buffer(
-            &ctx.device,
+            &rec.ctx.device,
             "noise params",
             &Params {
                 dims: slab.dims,
@@ -75,7 +74,7 @@ impl NoiseWindows {
             },
         );
         let bind = kernel::bind_group(
-            &ctx.device,
+            &rec.ctx.device,
             "noise windows",
             &self.pipeline,
             [
@@ -85,7 +84,7 @@ impl NoiseWindows {
             ],
         );
         let groups = [nwx.div_ceil(8), nwy.div_ceil(8), nz];
-        checks::dispatch(encoder, "noise windows", &self.pipeline, &bind, groups);
+        checks::dispatch(rec.encoder, "noise windows", &self.pipeline, &bind, groups);
     }
 
     /// The sigmas of windows inside the band, from the bytes of a readback of `out`.

@@ -4,6 +4,7 @@
 //! CPU twin is [`crate::gpu::volume_texture::encode_rgb9e5`], as
 //! [`crate::gpu::volume_texture::FeatureTexture::from_components`] uses it.
 
+use crate::gpu::kernel::Recorder;
 use crate::gpu::kernel::{self, SlabGrid, WORKGROUP, params_buffer};
 use crate::gpu::volume_texture::{
     FEATURE_TEXEL_BYTES, FeatureTexture, HISTOGRAM_BINS, histogram_quantile,
@@ -84,13 +85,12 @@ impl Pack {
     /// Records: the box `at` of the block `src` (3 components, component-major) into `dst`.
     pub fn record(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         src: &wgpu::Buffer,
         dst: &FeatureTexture,
         at: PackBox,
     ) {
-        self.record_slices(ctx, encoder, src, dst, at, 0..at.src_dims[2]);
+        self.record_slices(rec, src, dst, at, 0..at.src_dims[2]);
     }
 
     /// [`Self::record`] for the box's slices `slices` only (the feature job's paced steps):
@@ -98,8 +98,7 @@ impl Pack {
     /// is cut (maxima and counts are order-free atomics).
     pub fn record_slices(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         src: &wgpu::Buffer,
         dst: &FeatureTexture,
         at: PackBox,
@@ -112,24 +111,25 @@ impl Pack {
         let row_bytes =
             (nx * FEATURE_TEXEL_BYTES).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let pitch = row_bytes / FEATURE_TEXEL_BYTES;
-        let limit = ctx
+        let limit = rec
+            .ctx
             .limits
             .max_storage_buffer_binding_size
-            .min(ctx.limits.max_buffer_size);
+            .min(rec.ctx.limits.max_buffer_size);
         let slice_bytes = u64::from(row_bytes) * u64::from(ny);
         let chunk = (limit / slice_bytes.max(1)).clamp(1, u64::from(nz.max(1))) as u32;
         // One staging buffer for the whole box's chunks (wgpu orders the copy before the next
         // chunk's writes), sized for the largest chunk a box of this size can take.
         let box_chunk = (limit / slice_bytes.max(1)).clamp(1, u64::from(at.src_dims[2].max(1)));
         // Kept only within the binding limit (a slice larger than it is the only one refused).
-        let staging = self.staging(ctx, (slice_bytes * box_chunk).max(4), limit);
+        let staging = self.staging(rec.ctx, (slice_bytes * box_chunk).max(4), limit);
         let mut src_z0 = slices.start;
         while src_z0 < nz {
             let dims = [nx, ny, chunk.min(nz - src_z0)];
             // Slices src_z0.. of the box: encoded into the staging buffer, then copied.
             self.record_chunk(
-                ctx,
-                encoder,
+                rec.ctx,
+                rec.encoder,
                 (src, at),
                 dst,
                 &staging,

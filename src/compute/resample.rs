@@ -11,6 +11,7 @@
 //! the whole volume's ends, as on the CPU.
 
 use crate::gpu::checks::{self, RecordError};
+use crate::gpu::kernel::Recorder;
 use crate::gpu::kernel::{SlabGrid, WORKGROUP};
 use crate::gpu::{GpuContext, shaders};
 
@@ -123,6 +124,20 @@ fn tap(geometry: &ResampleGeometry, axis: usize, n_src: u32, t: u32) -> Tap {
     }
 }
 
+/// A buffer of volumes of `dims` voxels each, stored component-major: what [`Resample`] reads
+/// and writes.
+#[derive(Clone, Copy, Debug)]
+pub struct Volumes<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub dims: [u32; 3],
+}
+
+impl<'a> Volumes<'a> {
+    pub fn new(buffer: &'a wgpu::Buffer, dims: [u32; 3]) -> Self {
+        Self { buffer, dims }
+    }
+}
+
 /// The resampling pipeline.
 pub struct Resample {
     pipeline: wgpu::ComputePipeline,
@@ -136,20 +151,25 @@ impl Resample {
         })
     }
 
-    /// Records `dst` (grid `dst_dims`) = `src` (grid `src_dims`) resampled linearly, for
-    /// `components` volumes stored component-major in each buffer.
-    #[allow(clippy::too_many_arguments)]
+    /// Records `dst` = `src` resampled linearly, for `components` volumes in each buffer.
     pub fn record(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        src: &wgpu::Buffer,
-        src_dims: [u32; 3],
-        dst: &wgpu::Buffer,
-        dst_dims: [u32; 3],
+        rec: &mut Recorder<'_>,
+        src: Volumes<'_>,
+        dst: Volumes<'_>,
         components: u32,
         geometry: &ResampleGeometry,
     ) -> Result<(), RecordError> {
+        let (
+            Volumes {
+                buffer: src,
+                dims: src_dims,
+            },
+            Volumes {
+                buffer: dst,
+                dims: dst_dims,
+            },
+        ) = (src, dst);
         if src == dst {
             return Err(RecordError::Invalid("resample cannot run in place"));
         }
@@ -163,41 +183,44 @@ impl Resample {
         }
         let c = u64::from(components);
         checks::buffer(
-            ctx,
+            rec.ctx,
             "resample src",
             src,
             checks::f32_bytes(src_grid.len(), c),
         )?;
         checks::buffer(
-            ctx,
+            rec.ctx,
             "resample dst",
             dst,
             checks::f32_bytes(dst_grid.len(), c),
         )?;
-        let groups = checks::workgroups(ctx, "resample", dst_grid.workgroups(WORKGROUP))?;
+        let groups = checks::workgroups(rec.ctx, "resample", dst_grid.workgroups(WORKGROUP))?;
         let mut taps = Vec::new();
         for axis in 0..3 {
             taps.extend(axis_taps(geometry, axis, src_dims[axis], dst_dims[axis]));
         }
-        let taps = crate::gpu::kernel::storage_buffer_init(&ctx.device, "resample taps", &taps);
+        let taps = crate::gpu::kernel::storage_buffer_init(&rec.ctx.device, "resample taps", &taps);
         let params = Params {
             src_dims,
             components,
             dst_dims,
             _pad: 0,
         };
-        let params = crate::gpu::kernel::params_buffer(&ctx.device, "resample params", &params);
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("resample"),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &[
-                checks::entry(0, &params),
-                checks::entry(1, src),
-                checks::entry(2, &taps),
-                checks::entry(3, dst),
-            ],
-        });
-        checks::dispatch(encoder, "resample", &self.pipeline, &bind_group, groups);
+        let params = crate::gpu::kernel::params_buffer(&rec.ctx.device, "resample params", &params);
+        let bind_group = rec
+            .ctx
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("resample"),
+                layout: &self.pipeline.get_bind_group_layout(0),
+                entries: &[
+                    checks::entry(0, &params),
+                    checks::entry(1, src),
+                    checks::entry(2, &taps),
+                    checks::entry(3, dst),
+                ],
+            });
+        checks::dispatch(rec.encoder, "resample", &self.pipeline, &bind_group, groups);
         Ok(())
     }
 }

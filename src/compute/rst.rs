@@ -44,6 +44,7 @@ use crate::compute::gradient::{
 use crate::cpu::rst::{ALPHA_STOP, opacity_length_mm};
 use crate::cpu::{FeatureMap, OpacityRule, RstParams};
 use crate::gpu::checks::RecordError;
+use crate::gpu::kernel::Recorder;
 use crate::gpu::kernel::{SlabGrid, params_buffer};
 use crate::gpu::{GpuContext, shaders};
 
@@ -513,8 +514,7 @@ impl Rst {
     /// `out_z0 + k * z_stride`). Nothing is submitted.
     pub fn record(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         inputs: &RstInputs<'_>,
         params: &RstDispatch,
         out: &wgpu::Buffer,
@@ -551,7 +551,7 @@ impl Rst {
                 rays: rays_spacing,
             });
         }
-        let groups = workgroups(ctx, [grid.dims[0], n_rows, params.out_nz])?;
+        let groups = workgroups(rec.ctx, [grid.dims[0], n_rows, params.out_nz])?;
         let (mode, map) = params.output.mode_and_map();
         let gpu_params = Params {
             dims: grid.dims,
@@ -576,7 +576,7 @@ impl Rst {
             z_stride: params.z_stride,
             _pad: 0,
         };
-        let params_buf = params_buffer(&ctx.device, "rst params", &gpu_params);
+        let params_buf = params_buffer(&rec.ctx.device, "rst params", &gpu_params);
         let ray_bytes = u64::from(rays.n_rays) * std::mem::size_of::<GpuRay>() as u64;
         let view = inputs
             .volume
@@ -584,16 +584,25 @@ impl Rst {
         let entries = [
             entry(0, params_buf.as_entire_binding()),
             entry(1, wgpu::BindingResource::TextureView(&view)),
-            entry(2, storage_binding(ctx, "rays", &rays.buffer, ray_bytes)?),
-            entry(3, storage_binding(ctx, "output", out, params.out_bytes())?),
+            entry(
+                2,
+                storage_binding(rec.ctx, "rays", &rays.buffer, ray_bytes)?,
+            ),
+            entry(
+                3,
+                storage_binding(rec.ctx, "output", out, params.out_bytes())?,
+            ),
             entry(4, wgpu::BindingResource::Sampler(&self.sampler)),
         ];
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("rst"),
-            layout: &self.layout,
-            entries: &entries,
-        });
-        crate::gpu::checks::dispatch(encoder, "rst", &self.pipeline, &bind_group, groups);
+        let bind_group = rec
+            .ctx
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("rst"),
+                layout: &self.layout,
+                entries: &entries,
+            });
+        crate::gpu::checks::dispatch(rec.encoder, "rst", &self.pipeline, &bind_group, groups);
         Ok(())
     }
 }

@@ -53,11 +53,9 @@ impl StructureTensor {
     /// Records the six smoothed components of g g^T into `out`; `gradient` = `[g_x, g_y, g_z]`,
     /// `rho` = `SeparableKernel::smooth(ctx, rho_mm, spacing_mm)`, `tmp` two temporaries.
     /// Eleven different buffers of `grid.len()` f32 each.
-    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        rec: &mut Recorder<'_>,
         grid: &SlabGrid,
         rho: &SeparableKernel,
         gradient: [&wgpu::Buffer; 3],
@@ -74,10 +72,10 @@ impl StructureTensor {
         }
         let bytes = checks::f32_bytes(grid.len(), 1);
         for g in gradient {
-            checks::buffer(ctx, "gradient component", g, bytes)?;
+            checks::buffer(rec.ctx, "gradient component", g, bytes)?;
         }
-        checks::buffer(ctx, "structure tensor temporary", tmp[0], bytes)?;
-        let groups = checks::workgroups(ctx, "outer product", grid.workgroups(WORKGROUP))?;
+        checks::buffer(rec.ctx, "structure tensor temporary", tmp[0], bytes)?;
+        let groups = checks::workgroups(rec.ctx, "outer product", grid.workgroups(WORKGROUP))?;
         let layout = self.product.get_bind_group_layout(0);
         for (c, &(a, b)) in PAIRS.iter().enumerate() {
             let params = Params {
@@ -86,27 +84,30 @@ impl StructureTensor {
                 b,
                 _pad: [0; 3],
             };
-            let params = crate::gpu::kernel::params_buffer(&ctx.device, "gg^T params", &params);
-            let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("outer product"),
-                layout: &layout,
-                entries: &[
-                    checks::entry(0, &params),
-                    checks::entry(1, gradient[0]),
-                    checks::entry(2, gradient[1]),
-                    checks::entry(3, gradient[2]),
-                    checks::entry(4, tmp[0]),
-                ],
-            });
-            checks::dispatch(encoder, "outer product", &self.product, &bind_group, groups);
-            self.gaussian.record_separable(
-                &mut Recorder::new(ctx, encoder),
-                grid,
-                rho,
-                tmp[0],
-                tmp[1],
-                out[c],
-            )?;
+            let params = crate::gpu::kernel::params_buffer(&rec.ctx.device, "gg^T params", &params);
+            let bind_group = rec
+                .ctx
+                .device
+                .create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("outer product"),
+                    layout: &layout,
+                    entries: &[
+                        checks::entry(0, &params),
+                        checks::entry(1, gradient[0]),
+                        checks::entry(2, gradient[1]),
+                        checks::entry(3, gradient[2]),
+                        checks::entry(4, tmp[0]),
+                    ],
+                });
+            checks::dispatch(
+                rec.encoder,
+                "outer product",
+                &self.product,
+                &bind_group,
+                groups,
+            );
+            self.gaussian
+                .record_separable(rec, grid, rho, tmp[0], tmp[1], out[c])?;
         }
         Ok(())
     }

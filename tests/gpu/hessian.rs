@@ -821,8 +821,7 @@ fn structure_tensor_matches_cpu() {
         let feats: Vec<wgpu::Buffer> = (0..2).map(|_| buffer(&ctx, 3 * n)).collect();
         let mut enc = encoder(&ctx);
         st.record(
-            &ctx,
-            &mut enc,
+            &mut Recorder::new(&ctx, &mut enc),
             &sg,
             &kernel,
             [&grads[0], &grads[1], &grads[2]],

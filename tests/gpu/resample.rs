@@ -6,10 +6,11 @@
 use crate::gpu_common;
 
 use gpu_common::*;
-use shapecast::compute::resample::{Resample, ResampleGeometry};
+use shapecast::compute::resample::{Resample, ResampleGeometry, Volumes};
 use shapecast::cpu::Grid;
 use shapecast::cpu::resample::{refine_linear, refined_grid, subsample};
 use shapecast::gpu::context::test_context;
+use shapecast::gpu::kernel::Recorder;
 
 const FACTORS: [usize; 3] = [1, 2, 3];
 
@@ -48,23 +49,17 @@ fn resample_whole_volume_matches_cpu() {
     let g_up = ResampleGeometry::refine(f32s(), dims32(&grid));
     let g_down = ResampleGeometry::subsample(f32s(), dims32(&fine));
     rs.record(
-        &ctx,
-        &mut enc,
-        &src,
-        dims32(&grid),
-        &up,
-        dims32(&fine),
+        &mut Recorder::new(&ctx, &mut enc),
+        Volumes::new(&src, dims32(&grid)),
+        Volumes::new(&up, dims32(&fine)),
         1,
         &g_up,
     )
     .expect("record");
     rs.record(
-        &ctx,
-        &mut enc,
-        &up,
-        dims32(&fine),
-        &down,
-        dims32(&grid),
+        &mut Recorder::new(&ctx, &mut enc),
+        Volumes::new(&up, dims32(&fine)),
+        Volumes::new(&down, dims32(&grid)),
         1,
         &g_down,
     )
@@ -135,8 +130,14 @@ fn resample_by_blocks_matches_whole_volume() {
             let src_dims = [nx as u32, (sy1 - sy0) as u32, (sz1 - sz0) as u32];
             let dst_dims = [nx as u32, (y1 - y0) as u32, (z1 - z0) as u32];
             let mut enc = encoder(&ctx);
-            rs.record(&ctx, &mut enc, &src_buf, src_dims, &dst, dst_dims, 3, &geom)
-                .expect("record");
+            rs.record(
+                &mut Recorder::new(&ctx, &mut enc),
+                Volumes::new(&src_buf, src_dims),
+                Volumes::new(&dst, dst_dims),
+                3,
+                &geom,
+            )
+            .expect("record");
             submit(&ctx, enc);
             let gpu = read(&ctx, &dst, 3 * n_dst);
             for c in 0..3 {
@@ -171,8 +172,14 @@ fn resample_by_blocks_matches_whole_volume() {
     let src_dims = [nx as u32, grid.dims[1] as u32, (sz1 - sz0) as u32];
     let dst_dims = [nx as u32, ny as u32, (z1 - z0) as u32];
     let mut enc = encoder(&ctx);
-    rs.record(&ctx, &mut enc, &src_buf, src_dims, &dst, dst_dims, 1, &geom)
-        .expect("record");
+    rs.record(
+        &mut Recorder::new(&ctx, &mut enc),
+        Volumes::new(&src_buf, src_dims),
+        Volumes::new(&dst, dst_dims),
+        1,
+        &geom,
+    )
+    .expect("record");
     submit(&ctx, enc);
     let short = read(&ctx, &dst, nx * ny);
     let want = &cpu[0][z0 * nx * ny..(z0 + 1) * nx * ny];

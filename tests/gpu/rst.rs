@@ -18,7 +18,7 @@ use shapecast::cpu::{
 use shapecast::gpu::GpuContext;
 use shapecast::gpu::checks::RecordError;
 use shapecast::gpu::context::test_context;
-use shapecast::gpu::kernel::{SlabGrid, f32_buffer, f32_buffer_init};
+use shapecast::gpu::kernel::{Recorder, SlabGrid, f32_buffer, f32_buffer_init};
 use shapecast::gpu::readback::{read_bytes_blocking, read_f32_blocking};
 use shapecast::phantom::{BACKGROUND_HU, CONTRAST_HU, Phantom, Shape};
 
@@ -174,8 +174,13 @@ fn run_rst(
     let mut encoder = ctx
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("rst") });
-    rst.record(ctx, &mut encoder, inputs, dispatch, &out)
-        .expect("record");
+    rst.record(
+        &mut Recorder::new(ctx, &mut encoder),
+        inputs,
+        dispatch,
+        &out,
+    )
+    .expect("record");
     ctx.queue.submit([encoder.finish()]);
     let flat = read_f32_blocking(ctx, &out, n_out * comps).expect("readback");
     flat.chunks(n_out).map(<[f32]>::to_vec).collect()
@@ -202,7 +207,7 @@ fn run_rst_rows(
             rows: Some([w[0], w[1] - w[0]]),
             ..*dispatch
         };
-        rst.record(ctx, &mut encoder, inputs, &d, &out)
+        rst.record(&mut Recorder::new(ctx, &mut encoder), inputs, &d, &out)
             .expect("record");
     }
     ctx.queue.submit([encoder.finish()]);
@@ -312,8 +317,7 @@ fn gradient_matches_the_twin() {
         };
         kernel
             .record(
-                &ctx,
-                &mut encoder,
+                &mut Recorder::new(&ctx, &mut encoder),
                 &slab,
                 &intensity,
                 GradientOutput::Buffers(bufs),
@@ -321,8 +325,7 @@ fn gradient_matches_the_twin() {
             .expect("record");
         kernel
             .record(
-                &ctx,
-                &mut encoder,
+                &mut Recorder::new(&ctx, &mut encoder),
                 &slab,
                 &intensity,
                 GradientOutput::Packed(&packed),
@@ -573,8 +576,7 @@ fn slab_with_its_halo_matches_the_whole_volume() {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         gradient
             .record(
-                &ctx,
-                &mut encoder,
+                &mut Recorder::new(&ctx, &mut encoder),
                 &slab,
                 &intensity,
                 GradientOutput::Packed(&packed),
@@ -584,8 +586,13 @@ fn slab_with_its_halo_matches_the_whole_volume() {
             volume: &packed,
             rays: &rays,
         };
-        rst.record(&ctx, &mut encoder, &inputs, &dispatch, &out)
-            .expect("rst");
+        rst.record(
+            &mut Recorder::new(&ctx, &mut encoder),
+            &inputs,
+            &dispatch,
+            &out,
+        )
+        .expect("rst");
         ctx.queue.submit([encoder.finish()]);
         let n_out = dispatch.out_voxels() as usize;
         let flat = read_f32_blocking(&ctx, &out, 3 * n_out).expect("readback");
@@ -851,7 +858,12 @@ fn bad_dispatches_are_errors() {
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
     let mut record = |d: &RstDispatch, out: &wgpu::Buffer| {
-        rst.record(&ctx, &mut encoder, &inputs.inputs(&rays), d, out)
+        rst.record(
+            &mut Recorder::new(&ctx, &mut encoder),
+            &inputs.inputs(&rays),
+            d,
+            out,
+        )
     };
     assert_eq!(record(&ok, &out), Ok(()));
     let past_end = RstDispatch { out_nz: 6, ..ok };
@@ -1057,8 +1069,13 @@ fn time_gpu_rst_against_the_cpu_twin() {
                 output,
             };
             // Every dispatch writes the start of the same buffer: only the time matters here.
-            rst.record(&ctx, &mut encoder, &inputs.inputs(&rays), &d, out)
-                .expect("record");
+            rst.record(
+                &mut Recorder::new(&ctx, &mut encoder),
+                &inputs.inputs(&rays),
+                &d,
+                out,
+            )
+            .expect("record");
         }
         ctx.queue.submit([encoder.finish()]);
         ctx.device
@@ -1183,8 +1200,13 @@ fn time_exact_against_hardware_filtering() {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         for z0 in slices.step_by(4) {
             let d = RstDispatch::slices(slab, z0, 4.min(nz - z0), output);
-            rst.record(&ctx, &mut encoder, &inputs.inputs(&rays), &d, &out)
-                .expect("record");
+            rst.record(
+                &mut Recorder::new(&ctx, &mut encoder),
+                &inputs.inputs(&rays),
+                &d,
+                &out,
+            )
+            .expect("record");
         }
         ctx.queue.submit([encoder.finish()]);
         ctx.device

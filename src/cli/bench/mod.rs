@@ -383,9 +383,14 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 &tmp,
                 &smooth_out,
             )?;
-            gradient.record(&ctx, e, &slab, &smooth_out, GradientOutput::Buffers(gb))?;
+            gradient.record(
+                &mut Recorder::new(&ctx, e),
+                &slab,
+                &smooth_out,
+                GradientOutput::Buffers(gb),
+            )?;
             let packed = GradientOutput::Packed(&packed);
-            gradient.record(&ctx, e, &slab, &smooth_out, packed)?;
+            gradient.record(&mut Recorder::new(&ctx, e), &slab, &smooth_out, packed)?;
             Ok(())
         })?;
         let mut gv = None;
@@ -439,7 +444,9 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 rows: None,
                 output: RstOutput::Features(FeatureMap::Li),
             };
-            total += timed(&ctx, |e| Ok(rst.record(&ctx, e, &inputs, &dispatch, &out)?))?;
+            total += timed(&ctx, |e| {
+                Ok(rst.record(&mut Recorder::new(&ctx, e), &inputs, &dispatch, &out)?)
+            })?;
             z += nz;
         }
         // Ray samples: counted on the middle slices, extrapolated to the volume.
@@ -455,7 +462,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 rows: None,
                 output: RstOutput::SampleCount,
             };
-            Ok(rst.record(&ctx, e, &inputs, &dispatch, &count_out)?)
+            Ok(rst.record(&mut Recorder::new(&ctx, e), &inputs, &dispatch, &count_out)?)
         })?;
         let counts = read_f32_blocking(&ctx, &count_out, (plane * u64::from(nz)) as usize)?;
         let per_voxel =

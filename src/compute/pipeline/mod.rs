@@ -34,7 +34,7 @@ use std::sync::Arc;
 use crate::compute::eigen_features::{EigenPass, Mapping, TensorOutput};
 use crate::compute::gradient::{GradientBuffers, GradientOutput};
 use crate::compute::pack::PackBox;
-use crate::compute::resample::ResampleGeometry;
+use crate::compute::resample::{ResampleGeometry, Volumes};
 use crate::compute::rst::{RstDispatch, RstInputs, RstOutput, RstRays};
 use crate::compute::slab::{Brick, BrickLimits, PlanError, plan};
 use crate::compute::{hessian, noise, pack};
@@ -232,7 +232,8 @@ pub struct FeatureJob {
     /// The slab's (I, gx, gy, gz) texture the rays read, with its dims.
     packed: Option<([u32; 3], wgpu::Texture)>,
     // GPU sync.
-    /// The last submission, until the queue's completion callback has been seen.
+    /// The last submission, until its time is known ([`GpuSpan::seconds`]: the timestamps'
+    /// readback, or the queue's completion callback).
     busy: Option<GpuSpan>,
     /// What [`GpuSpan`]'s callback times count from.
     epoch: web_time::Instant,
@@ -278,9 +279,10 @@ impl FeatureJob {
         self.last_step_s
     }
 
-    /// Calls `wake` whenever a step's work is done on the GPU, from the queue's completion
-    /// callback (in the browser it runs as the queue finishes, so the page can take the next
-    /// step without drawing frames in between; natively only when something polls the device).
+    /// Calls `wake` whenever a step's work is done on the GPU and its time known: from the
+    /// timestamps' readback, or the queue's completion callback without timestamps (in the
+    /// browser these run as the queue finishes, so the page can take the next step without
+    /// drawing frames in between; natively only when something polls the device).
     pub fn set_waker(&mut self, wake: Waker) {
         self.waker = Some(wake);
     }

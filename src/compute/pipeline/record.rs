@@ -58,12 +58,9 @@ impl FeatureJob {
                 ResampleGeometry::refine(self.factors.map(to_u32), self.input.dims.map(to_u32))
                     .blocks(starts(&brick.input), starts(&brick.slab_c));
             self.kernels.resample.record(
-                ctx,
-                encoder,
-                &self.buffers.input,
-                src.dims,
-                vol,
-                dst.dims,
+                &mut Recorder::new(ctx, encoder),
+                Volumes::new(&self.buffers.input, src.dims),
+                Volumes::new(vol, dst.dims),
                 1,
                 &geometry,
             )?;
@@ -104,8 +101,7 @@ impl FeatureJob {
                 .kernels
                 .gradient
                 .record(
-                    ctx,
-                    encoder,
+                    &mut Recorder::new(ctx, encoder),
                     grid,
                     &self.buffers.work[0],
                     GradientOutput::Packed(tex),
@@ -116,8 +112,7 @@ impl FeatureJob {
         self.kernels
             .gradient
             .record(
-                ctx,
-                encoder,
+                &mut Recorder::new(ctx, encoder),
                 grid,
                 &b.work[0],
                 GradientOutput::Buffers(GradientBuffers {
@@ -184,12 +179,10 @@ impl FeatureJob {
                     return Ok(None);
                 }
                 self.kernels.noise.record(
-                    ctx,
-                    encoder,
+                    &mut Recorder::new(ctx, encoder),
                     grid,
                     &b.work[0],
-                    z0,
-                    nz,
+                    z0..z0 + nz,
                     NOISE_BAND_HU,
                     &b.small,
                 );

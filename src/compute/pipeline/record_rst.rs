@@ -2,6 +2,7 @@
 //! of a brick (back onto the input grid, packed into the texture, read back when exporting).
 
 use super::*;
+use crate::gpu::kernel::Recorder;
 
 impl FeatureJob {
     pub(super) fn record_compute(
@@ -30,8 +31,7 @@ impl FeatureJob {
                     .ok_or(PipelineError::Missing("structure tensor kernel"))?;
                 let tensor: [&wgpu::Buffer; 6] = std::array::from_fn(|c| &b.work[4 + c]);
                 gst.record(
-                    ctx,
-                    encoder,
+                    &mut Recorder::new(ctx, encoder),
                     &grid,
                     &self.kernels.rho[part],
                     [&b.work[1], &b.work[2], &b.work[3]],
@@ -150,7 +150,7 @@ impl FeatureJob {
             .chunk_out
             .as_ref()
             .ok_or(PipelineError::Missing("RST output buffer"))?;
-        rst.record(ctx, encoder, &inputs, &dispatch, chunk)?;
+        rst.record(&mut Recorder::new(ctx, encoder), &inputs, &dispatch, chunk)?;
         // Into the core's component-major block of output slices (whole brick planes, one per
         // input slice of the core; rows outside the core are never read): the slices computed,
         // or within one slice only the rows computed.
@@ -251,12 +251,9 @@ impl FeatureJob {
                         starts(&slab.out),
                     );
                     self.kernels.resample.record(
-                        ctx,
-                        encoder,
-                        &b.out_core,
-                        core_dims,
-                        out_in,
-                        at.src_dims,
+                        &mut Recorder::new(ctx, encoder),
+                        Volumes::new(&b.out_core, core_dims),
+                        Volumes::new(out_in, at.src_dims),
                         3,
                         &geometry,
                     )?;
@@ -276,9 +273,13 @@ impl FeatureJob {
             ((work / per_slice) as u32).clamp(left.min(1), left)
         };
         self.pack_pace.submitted(per_slice * f64::from(n));
-        self.kernels
-            .pack
-            .record_slices(ctx, encoder, &features, &self.texture, at, done..done + n);
+        self.kernels.pack.record_slices(
+            &mut Recorder::new(ctx, encoder),
+            &features,
+            &self.texture,
+            at,
+            done..done + n,
+        );
         let finished = done + n >= slices;
         self.pass_cursor = if finished { 0 } else { done + n };
         let bytes = 3 * at.src_dims.iter().map(|&d| u64::from(d)).product::<u64>() * 4;
