@@ -397,8 +397,13 @@ try {
         const mip = await page.evaluate(() => window.shapecastStatus?.controls?.['pane:mip'] ?? null);
         if (mip) await page.mouse.move(mip[0] + mip[2] / 2, mip[1] + mip[3] / 2);
         await page.waitForTimeout(500);
-        // 36 frames and the dropped volume's features: 230 s on this machine's SwiftShader
-        // (2026-12-02), 27 s since the pacers read the GPU's timestamps; 10 minutes allowed.
+        // 36 frames (with the dropped volume's features before them): 230 s on this machine's
+        // SwiftShader (2026-12-02), 27 s since the pacers read the GPU's timestamps; 10 minutes
+        // allowed.
+        // The dropped volume's features first: while a feature job runs, the status's task is
+        // the job's, and a movie saved within its time would never show its own progress.
+        await page.waitForFunction(() => window.shapecastStatus?.features?.state === 'done', null,
+          { timeout: 600000, polling: 250 });
         await page.evaluate(() => { window.shapecastTasks.length = 0; });
         const [download] = await Promise.all([
           page.waitForEvent('download', { timeout: 600000 }),
