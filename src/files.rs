@@ -27,12 +27,20 @@ pub struct Listing {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum FilesError {
-    #[error("{path}: cannot open: {message}")]
-    Open { path: String, message: String },
+    #[error("{path}: cannot open")]
+    Open {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("{path}: not a regular file or folder ({kind})")]
     NotAFile { path: String, kind: &'static str },
-    #[error("{path}: cannot list the folder: {message}")]
-    List { path: String, message: String },
+    #[error("{path}: cannot list the folder")]
+    List {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("{path}: the folder holds no files{detail}")]
     EmptyFolder { path: String, detail: String },
     #[error("{path}: {bytes} bytes is more than the {limit} bytes a file may have")]
@@ -41,8 +49,12 @@ pub enum FilesError {
         bytes: u64,
         limit: u64,
     },
-    #[error("{path}: cannot read: {message}")]
-    Read { path: String, message: String },
+    #[error("{path}: cannot read")]
+    Read {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 fn kind_of(t: std::fs::FileType) -> &'static str {
@@ -79,7 +91,7 @@ pub fn list(paths: &[PathBuf]) -> Result<Listing, FilesError> {
     for p in paths {
         let meta = std::fs::metadata(p).map_err(|e| FilesError::Open {
             path: p.display().to_string(),
-            message: e.to_string(),
+            source: e,
         })?;
         if meta.is_dir() {
             let before = listing.files.len();
@@ -134,7 +146,7 @@ fn walk(dir: &Path, depth: usize, listing: &mut Listing) -> Result<(), FilesErro
     let mut entries: Vec<std::fs::DirEntry> = std::fs::read_dir(dir)
         .map_err(|e| FilesError::List {
             path: dir.display().to_string(),
-            message: e.to_string(),
+            source: e,
         })?
         .filter_map(Result::ok)
         // Hidden files (.DS_Store, ._x) are never part of a series.
@@ -242,7 +254,7 @@ impl DiskFile {
     pub fn open(path: &Path) -> Result<Self, FilesError> {
         let meta = std::fs::metadata(path).map_err(|e| FilesError::Read {
             path: path.display().to_string(),
-            message: e.to_string(),
+            source: e,
         })?;
         if !meta.is_file() {
             return Err(FilesError::NotAFile {
@@ -305,7 +317,7 @@ pub fn read_all(paths: &[PathBuf]) -> Result<(Vec<crate::io::InputFile>, Vec<Str
             crate::io::InputFile::on_demand(p.display().to_string(), source).map_err(|e| {
                 FilesError::Read {
                     path: p.display().to_string(),
-                    message: e.to_string(),
+                    source: e,
                 }
             })?;
         files.push(file);

@@ -6,6 +6,7 @@
 pub mod app;
 pub mod compute;
 pub mod cpu;
+pub mod error;
 pub mod gpu;
 pub mod io;
 pub mod phantom;

@@ -46,7 +46,10 @@ impl ShapecastApp {
             Ok(r) => r,
             Err(e) => {
                 self.loading_origin = None;
-                return self.load_failed(format!("{}: {e}", volume.source));
+                return self.load_failed(super::error::AppError::Upload {
+                    volume: volume.source.clone(),
+                    source: e,
+                });
             }
         };
         self.uploading = Some(Uploading {
@@ -71,13 +74,13 @@ impl ShapecastApp {
 
     /// A load failed: a link's view that waited for the series it named (asked for once
     /// already) is dropped with a note rather than applied later to another series.
-    pub(super) fn load_failed(&mut self, message: String) {
+    pub(super) fn load_failed(&mut self, error: impl Into<super::error::AppError>) {
         if self.pending_view.as_ref().is_some_and(|p| p.series_asked) {
             self.pending_view = None;
             self.notes
                 .push("the link's series did not load, so its view was not applied".to_owned());
         }
-        self.error(message);
+        self.error(error);
     }
 
     /// Writes the next slabs of the volume being uploaded (about `UPLOAD_SECONDS_PER_FRAME`),

@@ -12,6 +12,7 @@
 
 use std::sync::Arc;
 
+use super::error::AppError;
 use crate::io::{InputFile, Loaded, SeriesList};
 use crate::volume::Volume;
 
@@ -130,7 +131,7 @@ pub enum LoadStep {
     },
     Done(Box<Loaded>),
     /// The message names the file and the problem.
-    Failed(String),
+    Failed(AppError),
 }
 
 enum Stage {
@@ -276,7 +277,7 @@ impl LoadJob {
                 // then loaded as if their files had been dropped.
                 let (files, mut unpacked) = match crate::io::zip::expand(files, &limits) {
                     Ok(r) => r,
-                    Err(e) => return LoadStep::Failed(e.to_string()),
+                    Err(e) => return LoadStep::Failed(e.into()),
                 };
                 let loaded = match crate::io::list_series(&files, &limits) {
                     Ok(Some(list)) if list.entries().len() > 1 => {
@@ -311,7 +312,7 @@ impl LoadJob {
                         loaded.notes = notes;
                         LoadStep::Done(Box::new(loaded))
                     }
-                    Err(e) => LoadStep::Failed(e.to_string()),
+                    Err(e) => LoadStep::Failed(e.into()),
                 }
             }
             Stage::Series { set, announced } => {
@@ -332,9 +333,9 @@ impl LoadJob {
                     // Read asynchronously by `web_files::load_series`, not by a job.
                     #[cfg(target_arch = "wasm32")]
                     SetFiles::Web(_) => {
-                        return LoadStep::Failed(
-                            "internal: a series of the page's files is read by the page".to_owned(),
-                        );
+                        return LoadStep::Failed(AppError::Internal(
+                            "a series of the page's files is read by the page",
+                        ));
                     }
                 };
                 match loaded {
@@ -342,7 +343,7 @@ impl LoadJob {
                         self.series = Some(set);
                         LoadStep::Done(Box::new(loaded))
                     }
-                    Err(e) => LoadStep::Failed(e.to_string()),
+                    Err(e) => LoadStep::Failed(e.into()),
                 }
             }
             Stage::Phantom { name, announced } => {
@@ -363,14 +364,17 @@ impl LoadJob {
                         notes: Vec::new(),
                         patient: None,
                     })),
-                    None => LoadStep::Failed(format!(
-                        "unknown phantom {name:?}; known: {}, {}",
-                        crate::phantom::NAMES.join(", "),
-                        crate::phantom::EXTRA_NAMES.join(", ")
-                    )),
+                    None => LoadStep::Failed(AppError::UnknownPhantom {
+                        known: format!(
+                            "{}, {}",
+                            crate::phantom::NAMES.join(", "),
+                            crate::phantom::EXTRA_NAMES.join(", ")
+                        ),
+                        name,
+                    }),
                 }
             }
-            Stage::Finished => LoadStep::Failed("internal: the load already finished".to_owned()),
+            Stage::Finished => LoadStep::Failed(AppError::Internal("the load already finished")),
         }
     }
 }
@@ -392,6 +396,7 @@ mod native {
     use std::path::PathBuf;
     use std::sync::Arc;
 
+    use super::AppError;
     use crate::files::DiskFile;
     use crate::io::{FileSource as _, InputFile};
 
@@ -405,10 +410,10 @@ mod native {
     /// sizes (`crate::files`: no FIFOs, devices or links into folders; sizes capped), and
     /// what was skipped.
     #[allow(clippy::type_complexity)]
-    pub fn list(paths: &[PathBuf]) -> Result<(Vec<(PathBuf, u64)>, Vec<String>), String> {
-        let listing = crate::files::list(paths).map_err(|e| e.to_string())?;
+    pub fn list(paths: &[PathBuf]) -> Result<(Vec<(PathBuf, u64)>, Vec<String>), AppError> {
+        let listing = crate::files::list(paths)?;
         if listing.files.is_empty() {
-            return Err("no files were given".to_owned());
+            return Err(crate::io::LoadError::NoFiles.into());
         }
         Ok((listing.files, listing.skipped))
     }
@@ -450,14 +455,14 @@ mod native {
 
         /// Reads about [`BYTES_PER_STEP`] bytes (a file costs at least one), finishing files
         /// as they are read through; the error names the file.
-        pub fn read_some(&mut self) -> Result<(), String> {
+        pub fn read_some(&mut self) -> Result<(), AppError> {
             let mut budget = BYTES_PER_STEP;
             while budget > 0 {
                 let (path, source, at) = match self.current.take() {
                     Some(c) => c,
                     None => match self.queue.pop_front() {
                         Some((path, _)) => {
-                            let source = DiskFile::open(&path).map_err(|e| e.to_string())?;
+                            let source = DiskFile::open(&path)?;
                             (path, Arc::new(source), 0)
                         }
                         None => break,
@@ -470,7 +475,10 @@ mod native {
                     self.scratch.resize(n.max(self.scratch.len()), 0);
                     source
                         .read_exact_at(at, &mut self.scratch[..n])
-                        .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+                        .map_err(|e| crate::files::FilesError::Read {
+                            path: path.display().to_string(),
+                            source: e,
+                        })?;
                     at += n as u64;
                     self.done_bytes += n as u64;
                     budget -= n as u64;
@@ -479,8 +487,12 @@ mod native {
                     self.current = Some((path, source, at));
                     break;
                 }
-                let file = InputFile::on_demand(path.to_string_lossy(), source)
-                    .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+                let file = InputFile::on_demand(path.to_string_lossy(), source).map_err(|e| {
+                    crate::files::FilesError::Read {
+                        path: path.display().to_string(),
+                        source: e,
+                    }
+                })?;
                 self.files.push(file);
                 budget = budget.saturating_sub(1);
             }

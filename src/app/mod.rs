@@ -8,6 +8,7 @@
 
 mod api;
 pub mod demo;
+pub mod error;
 pub mod export;
 mod external;
 pub mod features;
@@ -170,7 +171,9 @@ impl ShapecastApp {
         self.features.find(&self.displayed_request()?)
     }
 
-    fn error(&mut self, message: String) {
+    /// Shows an error in the list (the newest five), with its sources.
+    fn error(&mut self, error: impl Into<error::AppError>) {
+        let message = error.into().message();
         log::error!("{message}");
         if self.errors.last() != Some(&message) {
             self.errors.push(message);

@@ -333,9 +333,10 @@ impl PetState {
                 }
                 self.install(loaded.volume, ct, generation, gpu)
             }
-            LoadStep::Failed(message) => {
+            LoadStep::Failed(error) => {
                 self.job = None;
-                self.failed(loading_for).then(|| format!("PET: {message}"))
+                self.failed(loading_for)
+                    .then(|| format!("PET: {}", error.message()))
             }
         }
     }

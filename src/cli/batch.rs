@@ -383,6 +383,7 @@ pub fn run(args: BatchArgs) -> anyhow::Result<()> {
             }
             Ok(false) => {}
             Err(e) => {
+                let e = crate::error::chain(&e);
                 eprintln!("{what}: FAILED: asking whether it is done: {e}");
                 failed.push((item, format!("asking whether it is done: {e}")));
                 continue;

@@ -41,11 +41,24 @@ pub enum LoadError {
         detail: String,
     },
 
-    #[error("{file}: cannot read: {message}")]
-    Read { file: String, message: String },
+    #[error("{file}: cannot read at byte {offset}")]
+    Read {
+        file: String,
+        offset: u64,
+        #[source]
+        source: std::io::Error,
+    },
 
-    #[error("{file}: decompression failed: {message}")]
-    Decompress { file: String, message: String },
+    /// A compressed stream (`stream`: "gzip", "zip archive", "DICOM pixel data", ...) that
+    /// cannot be, or must not be, inflated; `source` is the decompressor's own complaint.
+    #[error("{file}: decompression failed: {stream}: {problem}")]
+    Decompress {
+        file: String,
+        stream: String,
+        problem: Corruption,
+        #[source]
+        source: Option<Box<dyn std::error::Error + Send + Sync>>,
+    },
 
     #[error(
         "{file}: the data file \"{data_file}\" named in the header was not given (drop it together with the header)"
@@ -85,7 +98,54 @@ pub enum LoadError {
     Write { file: String, message: String },
 }
 
+/// What is wrong with a compressed stream ([`LoadError::Decompress`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Corruption {
+    #[error("the stream ends early (the file is truncated)")]
+    Truncated,
+
+    /// The decompressor refused the stream: bad codes, or a failed CRC-32 / Adler-32 check.
+    #[error("the stream is corrupt")]
+    Corrupt,
+
+    #[error(
+        "{compressed} compressed bytes declare {declared} bytes ({}:1); scans compress far less than {ratio}:1, so this is refused as a decompression bomb",
+        declared / compressed.max(&1)
+    )]
+    Bomb {
+        compressed: u64,
+        declared: u64,
+        ratio: u64,
+    },
+
+    #[error(
+        "the stream holds more than the {declared} bytes its header declares (with {slack} bytes of slack)"
+    )]
+    LongerThanDeclared { declared: u64, slack: u64 },
+
+    #[error(
+        "the trailer says the data are {trailer} bytes (mod 2^32), more than the {max} the header allows: the file is corrupt or has bytes after its end (nothing was inflated)"
+    )]
+    TrailerTooLarge { trailer: u32, max: u64 },
+}
+
 impl LoadError {
+    /// A compressed stream that cannot be inflated.
+    pub(crate) fn decompress(
+        file: &str,
+        stream: impl Into<String>,
+        problem: Corruption,
+        source: Option<Box<dyn std::error::Error + Send + Sync>>,
+    ) -> Self {
+        Self::Decompress {
+            file: file.to_owned(),
+            stream: stream.into(),
+            problem,
+            source,
+        }
+    }
+
     pub(crate) fn header(file: &str, field: &str, message: impl Into<String>) -> Self {
         Self::InvalidHeader {
             file: file.to_owned(),

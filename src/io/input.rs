@@ -137,7 +137,7 @@ impl InputFile {
                 let n = usize::try_from(s.len()).unwrap_or(usize::MAX).min(max);
                 let mut v = super::raw::try_vec::<u8>(&self.name, "the file's bytes", n)?;
                 s.read_exact_at(0, &mut v)
-                    .map_err(|e| read_error(&self.name, 0, &e))?;
+                    .map_err(|e| read_error(&self.name, 0, e))?;
                 Ok(Cow::Owned(v))
             }
         }
@@ -157,10 +157,11 @@ impl InputFile {
 }
 
 /// A read that failed, naming the file and where.
-pub(crate) fn read_error(file: &str, offset: u64, e: &std::io::Error) -> LoadError {
+pub(crate) fn read_error(file: &str, offset: u64, e: std::io::Error) -> LoadError {
     LoadError::Read {
         file: file.to_owned(),
-        message: format!("at byte {offset}: {e}"),
+        offset,
+        source: e,
     }
 }
 
@@ -220,7 +221,7 @@ impl<'a> Data<'a> {
                 }
                 source
                     .read_exact_at(start + offset, buf)
-                    .map_err(|e| read_error(file, start + offset, &e))
+                    .map_err(|e| read_error(file, start + offset, e))
             }
         }
     }

@@ -86,10 +86,12 @@ fn zip_error(archive: &str, entry: Option<&str>, e: ::zip::result::ZipError) -> 
             "zip entry",
             "encrypted; unpack it and drop the files",
         ),
-        other => LoadError::Decompress {
-            file,
-            message: format!("not a readable zip archive: {other}"),
-        },
+        other => LoadError::decompress(
+            &file,
+            "zip archive",
+            crate::io::Corruption::Corrupt,
+            Some(other.into()),
+        ),
     }
 }
 
@@ -313,7 +315,7 @@ fn unpack(
             size,
         };
         let input = InputFile::on_demand(file.clone(), Arc::new(source))
-            .map_err(|e| super::input::read_error(&file, 0, &e))?;
+            .map_err(|e| super::input::read_error(&file, 0, e))?;
         *budget -= size;
         if is_zip(&input.bytes) {
             notes.push(format!(

@@ -8,7 +8,7 @@ use crate::common;
 
 use std::io::Write;
 
-use shapecast::io::{self, InputFile, Limits, LoadError, Loaded};
+use shapecast::io::{self, Corruption, InputFile, Limits, LoadError, Loaded};
 
 use crate::counting;
 use counting::{peak_and_allocations_during, peak_during};
@@ -650,7 +650,17 @@ fn decompression_bombs_of_a_few_mb_are_refused_before_inflating() {
             let gz = gz.clone();
             let (r, peak, allocations) =
                 peak_and_allocations_during(|| load(name, gz, &Limits::default()));
-            expect_err(r, name, &["decompression bomb"]);
+            let e = expect_err(r, name, &["decompression bomb"]);
+            assert!(
+                matches!(
+                    e,
+                    LoadError::Decompress {
+                        problem: Corruption::Bomb { .. },
+                        ..
+                    }
+                ),
+                "{e:?}"
+            );
             assert!(peak < 16 * MIB, "peak {peak} bytes");
             assert!(allocations < 1_000, "{allocations} allocations");
         }
@@ -716,10 +726,13 @@ fn decompression_bombs_of_a_few_mb_are_refused_before_inflating() {
             &Limits::default(),
         )
     });
-    let e = r.expect_err("refused").to_string();
+    let e = r.expect_err("refused");
     assert!(
-        e.contains("zeros.zip") && e.contains("decompression bomb"),
-        "{e}"
+        matches!(
+            &e,
+            LoadError::Decompress { file, problem: Corruption::Bomb { .. }, .. } if file == "zeros.zip"
+        ),
+        "{e:?}"
     );
     assert!(peak < 16 * MIB, "peak {peak} bytes");
     // Real compression ratios load: 256^3 u8 of zeros in 16 KB is 1000:1, but only 16 MiB.
@@ -747,13 +760,36 @@ fn gzip_memory_is_the_voxels_plus_a_constant() {
     let mut short = nifti_u8_header(dims);
     short.resize(352 + voxel_bytes / 2, 0);
     let r = load_one("short.nii.gz", gzip(&short), &Limits::default());
-    expect_err(r, "short.nii.gz", &["truncated"]);
+    let e = expect_err(r, "short.nii.gz", &["truncated"]);
+    // Found short by the gzip trailer's size before inflating, or by the stream's end.
+    assert!(
+        matches!(
+            e,
+            LoadError::Truncated { .. }
+                | LoadError::Decompress {
+                    problem: Corruption::Truncated,
+                    ..
+                }
+        ),
+        "{e:?}"
+    );
 
-    // A stream longer than the header declares (beyond the slack): refused.
+    // A stream longer than the header declares (beyond the slack): refused, by the gzip
+    // trailer's size before inflating or by reading past the declared bytes.
     let mut long = nifti_u8_header([16, 16, 16]);
     long.resize(352 + 4096 + 2 * MIB, 0);
     let r = load_one("long.nii.gz", gzip(&long), &Limits::default());
-    expect_err(r, "long.nii.gz", &["more than"]);
+    let e = expect_err(r, "long.nii.gz", &["more than"]);
+    assert!(
+        matches!(
+            e,
+            LoadError::Decompress {
+                problem: Corruption::TrailerTooLarge { .. } | Corruption::LongerThanDeclared { .. },
+                ..
+            }
+        ),
+        "{e:?}"
+    );
 }
 
 #[test]
@@ -805,7 +841,20 @@ fn shared_ct_with_the_issues_flipped_bit_is_refused() {
     // Bit 6 of byte 52925 loaded with garbage voxels (-32768..32767) before the CRC was read.
     f.bytes[52925] ^= 1 << 6;
     let r = io::load(std::slice::from_ref(&f));
-    expect_err(r, "example_ct_sm.nii.gz", &["gzip"]);
+    let e = expect_err(r, "example_ct_sm.nii.gz", &["gzip"]);
+    // Refused as corrupt, with the decompressor's complaint (the CRC) kept as the source.
+    assert!(
+        matches!(
+            &e,
+            LoadError::Decompress {
+                problem: Corruption::Corrupt,
+                source: Some(_),
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(shapecast::error::chain(&e).contains("gzip"), "{e}");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -338,15 +338,18 @@ impl ShapecastApp {
             let end = cost.band_within(m.next_row, budget);
             let rows = m.next_row..end;
             let samples = cost.rows(rows.clone());
+            let shown = crate::app::mip_view::Shown {
+                volume: &scene.render,
+                features,
+            };
+            let band = crate::app::mip_view::Band { rows, samples };
             self.mip_view.render_offscreen(
                 gpu,
-                &scene.render,
-                features,
+                shown,
                 &camera,
                 &m.settings,
                 &mut m.target,
-                rows,
-                samples,
+                band,
             )?;
             m.next_row = end;
             if end >= size[1] {

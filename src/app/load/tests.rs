@@ -1,6 +1,6 @@
 use super::*;
 
-fn run(mut job: LoadJob) -> (Vec<String>, Result<Box<Loaded>, String>) {
+fn run(mut job: LoadJob) -> (Vec<String>, Result<Box<Loaded>, AppError>) {
     let mut said = Vec::new();
     for _ in 0..1000 {
         match job.step() {
@@ -25,7 +25,7 @@ fn sphere_nii() -> (crate::volume::Volume, Vec<u8>) {
 }
 
 /// Runs the load of one file `name`.
-fn run_file(name: &str, bytes: Vec<u8>) -> (Vec<String>, Result<Box<Loaded>, String>) {
+fn run_file(name: &str, bytes: Vec<u8>) -> (Vec<String>, Result<Box<Loaded>, AppError>) {
     run(LoadJob::new(LoadSource::Files {
         label: name.into(),
         files: vec![InputFile::new(name, bytes)],
@@ -90,9 +90,12 @@ fn errors_name_the_file() {
         files: vec![InputFile::new("broken.nii", vec![7; 400])],
     }));
     let e = r.unwrap_err();
-    assert!(e.contains("broken.nii"), "{e}");
+    assert!(
+        matches!(&e, AppError::Load(crate::io::LoadError::UnknownFormat { file, .. }) if file == "broken.nii"),
+        "{e:?}"
+    );
     let (_, r) = run(LoadJob::new(LoadSource::Phantom("no-such".into())));
-    assert!(r.unwrap_err().contains("unknown phantom"));
+    assert!(matches!(r.unwrap_err(), AppError::UnknownPhantom { name, .. } if name == "no-such"));
 }
 
 #[test]
@@ -126,6 +129,12 @@ fn folders_are_walked_and_missing_paths_named() {
     );
     let missing = dir.join("missing.nii");
     let (_, r) = run(LoadJob::new(LoadSource::Paths(vec![missing])));
-    assert!(r.unwrap_err().contains("missing.nii"));
+    let e = r.unwrap_err();
+    assert!(
+        matches!(&e, AppError::Files(crate::files::FilesError::Open { path, source })
+            if path.ends_with("missing.nii") && source.kind() == std::io::ErrorKind::NotFound),
+        "{e:?}"
+    );
+    assert!(e.message().contains("missing.nii"), "{}", e.message());
     std::fs::remove_dir_all(&dir).unwrap();
 }

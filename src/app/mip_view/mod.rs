@@ -33,6 +33,7 @@
 mod controls;
 mod overlay;
 mod render;
+pub use render::{Band, Shown};
 
 use super::paint::show_texture;
 
@@ -453,16 +454,15 @@ impl MipView {
             step = Some((0, full, rows.clone(), r.cost.rows(rows)));
         }
         if let Some((slot, size, rows, samples)) = step {
-            match self.render(
-                gpu,
-                render_state,
-                scene.volume,
+            let shown = Shown {
+                volume: scene.volume,
                 features,
-                &settings,
-                slot,
-                size,
-                (rows.clone(), samples),
-            ) {
+            };
+            let band = Band {
+                rows: rows.clone(),
+                samples,
+            };
+            match self.render(gpu, render_state, shown, &settings, (slot, size), band) {
                 Ok(()) => {
                     self.last_samples = samples;
                     rendered = true;

@@ -3,47 +3,53 @@
 
 use super::*;
 
+/// What a frame shows: the volume, and the features over it.
+#[derive(Clone, Copy)]
+pub struct Shown<'a> {
+    pub volume: &'a RenderVolume,
+    pub features: Option<&'a FeatureTexture>,
+}
+
+/// Rows of a frame to render, and their cost ([`FrameCost`]: the samples the pacer counts).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Band {
+    pub rows: std::ops::Range<u32>,
+    pub samples: f64,
+}
+
 impl MipView {
-    /// Renders the rows `rows` of a frame of `volume` and `features` seen by `camera` into the
-    /// caller's `target` (an off-screen frame: "Save movie"), with the pane's ray caster and
-    /// brick tables; `samples` (its [`FrameCost`]) counts towards the pane's measured GPU rate.
-    #[allow(clippy::too_many_arguments)]
+    /// Renders the band `band` of a frame of `shown` seen by `camera` into the caller's
+    /// `target` (an off-screen frame: "Save movie"), with the pane's ray caster and brick
+    /// tables; its samples count towards the pane's measured GPU rate.
     pub fn render_offscreen(
         &mut self,
         gpu: &GpuContext,
-        volume: &RenderVolume,
-        features: Option<&FeatureTexture>,
+        shown: Shown<'_>,
         camera: &Camera,
         settings: &RenderSettings,
         target: &mut RaycastTarget,
-        rows: std::ops::Range<u32>,
-        samples: f64,
+        band: Band,
     ) -> Result<(), String> {
-        self.prepare(gpu, volume, features)?;
+        self.prepare(gpu, shown)?;
         let Some(caster) = &self.caster else {
             return Err("the ray caster is not ready".to_owned());
         };
         let scene = Scene {
-            volume,
-            features,
+            volume: shown.volume,
+            features: shown.features,
             bricks: self.bricks.as_ref(),
             feature_bricks: self.feature_bricks.as_ref(),
         };
         let span = self.pacer.open(gpu);
         caster
-            .render(gpu, &scene, camera, settings, target, rows)
+            .render(gpu, &scene, camera, settings, target, band.rows)
             .map_err(|e| e.to_string())?;
-        self.pacer.submitted(gpu, samples, span);
+        self.pacer.submitted(gpu, band.samples, span);
         Ok(())
     }
 
     /// The ray caster, and brick tables started for the textures shown.
-    pub(super) fn prepare(
-        &mut self,
-        gpu: &GpuContext,
-        volume: &RenderVolume,
-        features: Option<&FeatureTexture>,
-    ) -> Result<(), String> {
+    pub(super) fn prepare(&mut self, gpu: &GpuContext, shown: Shown<'_>) -> Result<(), String> {
         if self.caster.is_none() {
             self.caster = Some(Raycaster::new(gpu).map_err(|e| e.to_string())?);
         }
@@ -53,11 +59,11 @@ impl MipView {
         if !self
             .bricks
             .as_ref()
-            .is_some_and(|b| b.of(&volume.intensity))
+            .is_some_and(|b| b.of(&shown.volume.intensity))
         {
-            self.bricks = Some(caster.start_bricks(gpu, BrickSource::Intensity(volume)));
+            self.bricks = Some(caster.start_bricks(gpu, BrickSource::Intensity(shown.volume)));
         }
-        if let Some(f) = features
+        if let Some(f) = shown.features
             && !self
                 .feature_bricks
                 .as_ref()
@@ -68,42 +74,28 @@ impl MipView {
         Ok(())
     }
 
-    /// Renders `rows` of the frame into target `slot` (of `size`), timing the caster's
-    /// submission of their `samples` for the pacer.
-    #[allow(clippy::too_many_arguments)]
+    /// Renders `band` of the pane's frame into its target `slot` (made or remade at `size`),
+    /// as [`MipView::render_offscreen`] does with the pane's camera.
     pub(super) fn render(
         &mut self,
         gpu: &GpuContext,
         render_state: &eframe::egui_wgpu::RenderState,
-        volume: &RenderVolume,
-        features: Option<&FeatureTexture>,
+        shown: Shown<'_>,
         settings: &RenderSettings,
-        slot: usize,
-        size: [u32; 2],
-        (rows, samples): (std::ops::Range<u32>, f64),
+        (slot, size): (usize, [u32; 2]),
+        band: Band,
     ) -> Result<(), String> {
-        self.prepare(gpu, volume, features)?;
         let resized = self.targets[slot].as_ref().is_none_or(|t| t.size != size);
-        if resized {
-            self.targets[slot] = Some(RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?);
-        }
-        let (Some(caster), Some(target)) = (&self.caster, &mut self.targets[slot]) else {
-            return Err("the ray caster is not ready".to_owned());
+        let mut target = match self.targets[slot].take() {
+            Some(t) if !resized => t,
+            _ => RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?,
         };
-        let scene = Scene {
-            volume,
-            features,
-            bricks: self.bricks.as_ref(),
-            feature_bricks: self.feature_bricks.as_ref(),
-        };
-        let span = self.pacer.open(gpu);
-        caster
-            .render(gpu, &scene, &self.camera, settings, target, rows)
-            .map_err(|e| e.to_string())?;
-        self.pacer.submitted(gpu, samples, span);
+        let camera = self.camera;
+        let result = self.render_offscreen(gpu, shown, &camera, settings, &mut target, band);
         if resized {
             show_texture(render_state, gpu, &target.view, &mut self.texture_ids[slot]);
         }
-        Ok(())
+        self.targets[slot] = Some(target);
+        result
     }
 }

@@ -217,13 +217,14 @@ impl ShapecastApp {
             self.pacs.needs_token = true;
             self.pacs.dialog = true;
             self.pacs.message = Some(format!(
-                "{e}. Paste a bearer token below (or give it in the link after #, as #token=...), then open the study again."
+                "{}. Paste a bearer token below (or give it in the link after #, as #token=...), then open the study again.",
+                crate::error::chain(&e)
             ));
         } else {
-            self.pacs.message = Some(e.to_string());
+            self.pacs.message = Some(crate::error::chain(&e));
         }
-        self.pacs.error_shown = Some(e.to_string());
-        self.error(e.to_string());
+        self.pacs.error_shown = Some(crate::error::chain(&e));
+        self.error(crate::error::chain(&e));
     }
 
     fn pacs_search(&mut self) {
@@ -231,12 +232,12 @@ impl ShapecastApp {
             match Base::parse(&self.pacs.server).and_then(|b| Ok((b, self.pacs.auth()?))) {
                 Ok(x) => x,
                 Err(e) => {
-                    self.pacs.message = Some(e.to_string());
+                    self.pacs.message = Some(crate::error::chain(&e));
                     return;
                 }
             };
         if let Err(e) = base.study_search(&self.pacs.search) {
-            self.pacs.message = Some(e.to_string());
+            self.pacs.message = Some(crate::error::chain(&e));
             return;
         }
         let task = self.pacs.next_task();
@@ -367,7 +368,7 @@ impl ShapecastApp {
                     if matches!(e, DicomWebError::Unauthorized { .. }) {
                         self.pacs_fail(e);
                     } else {
-                        self.pacs.message = Some(e.to_string());
+                        self.pacs.message = Some(crate::error::chain(&e));
                     }
                 }
                 Event::Study { target, result } => match result {

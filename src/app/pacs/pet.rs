@@ -45,7 +45,7 @@ impl ShapecastApp {
         let parsed = Base::parse(&target.base).and_then(|b| Ok((b, self.pacs.auth()?)));
         let (base, auth) = match parsed {
             Ok(x) => x,
-            Err(e) => return self.error(format!("PET: {e}")),
+            Err(e) => return self.error(format!("PET: {}", crate::error::chain(&e))),
         };
         // Its own task: the dialog's next search or study does not cancel it, a new CT does.
         self.pacs.pet_tasks += 1;
@@ -81,7 +81,7 @@ impl ShapecastApp {
             }
             Err(e) => {
                 if self.pet.failed(retrieval.generation) {
-                    self.error(format!("PET: {e}"));
+                    self.error(format!("PET: {}", crate::error::chain(&e)));
                 }
             }
         }

@@ -40,7 +40,7 @@ impl StoreJob {
                 stow::REPORT_SERIES_NUMBER,
             ) {
                 Ok(sr) => out.push(sr),
-                Err(e) => skipped = Some(e.to_string()),
+                Err(e) => skipped = Some(crate::error::chain(&e)),
             }
         }
         Ok((out, skipped))
@@ -145,7 +145,7 @@ impl ShapecastApp {
         let parsed = Base::parse(&base).and_then(|b| Ok((b, self.pacs.auth()?)));
         let (base, auth) = match parsed {
             Ok(x) => x,
-            Err(e) => return self.error(format!("Store to PACS: {e}")),
+            Err(e) => return self.error(format!("Store to PACS: {}", crate::error::chain(&e))),
         };
         if let Some((_, old)) = self.pacs.store.take() {
             old.cancel();
@@ -189,10 +189,11 @@ impl ShapecastApp {
                     self.pacs.needs_token = true;
                     self.pacs.dialog = true;
                     self.pacs.message = Some(format!(
-                        "{e}. Storing needs a token the archive accepts for writing: paste it below, then Store to PACS again."
+                        "{}. Storing needs a token the archive accepts for writing: paste it below, then Store to PACS again.",
+                        crate::error::chain(&e)
                     ));
                 }
-                self.error(format!("Store to PACS: {e}"));
+                self.error(format!("Store to PACS: {}", crate::error::chain(&e)));
             }
         }
     }

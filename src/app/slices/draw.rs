@@ -3,23 +3,42 @@
 
 use super::*;
 
+/// Where a slice's image lies on screen: its rectangle (larger than the pane when zoomed in),
+/// the pane's axes, and the image's size in voxels across (`w`) and up (`h`).
+#[derive(Clone, Copy)]
+pub(super) struct Placed {
+    pub rect: egui::Rect,
+    pub axes: PaneAxes,
+    pub w: usize,
+    pub h: usize,
+}
+
+impl Placed {
+    /// The screen point of the centre of voxel (u, v) of the image.
+    pub fn screen_of(&self, u: usize, v: usize) -> egui::Pos2 {
+        self.axes.screen_of(self.rect, u, v, self.w, self.h)
+    }
+
+    /// The screen point of continuous pane coordinates.
+    pub fn screen_of_coord(&self, c: [f64; 2]) -> egui::Pos2 {
+        self.axes.screen_of_coord(self.rect, c, self.w, self.h)
+    }
+}
+
 impl SlicePane {
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn draw_overlay(
         &self,
         painter: &egui::Painter,
         area: egui::Rect,
-        rect: egui::Rect,
-        axes: PaneAxes,
+        at: Placed,
         crosshair: &[usize; 3],
-        w: usize,
-        h: usize,
         volume: &Volume,
     ) {
+        let axes = at.axes;
         // What of the image is on screen (zoomed in, the image is larger than the pane).
-        let shown = rect.intersect(area);
+        let shown = at.rect.intersect(area);
         // Crosshair lines with a gap around the point, so they never hide what is there.
-        let c = axes.screen_of(rect, crosshair[axes.across], crosshair[axes.vertical], w, h);
+        let c = at.screen_of(crosshair[axes.across], crosshair[axes.vertical]);
         let gap = 10.0;
         let stroke =
             egui::Stroke::new(1.0, egui::Color32::from_rgba_unmultiplied(90, 220, 90, 200));
@@ -70,21 +89,17 @@ impl SlicePane {
     }
 
     /// The measurements of this pane made on the slice shown.
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn draw_measurements(
         &self,
         painter: &egui::Painter,
         inputs: &PaneInputs<'_>,
-        rect: egui::Rect,
-        axes: PaneAxes,
+        at: Placed,
         slice: usize,
-        w: usize,
-        h: usize,
     ) {
         for (n, entry) in inputs.measurements.iter().enumerate() {
             let m = &entry.measurement;
             if m.pane.is_none() {
-                draw_ends_3d(painter, inputs, n, rect, axes, slice, w, h);
+                draw_ends_3d(painter, inputs, n, at, slice);
                 continue;
             }
             if m.pane != Some(self.kind) {
@@ -94,18 +109,7 @@ impl SlicePane {
                 continue;
             };
             if p.slice == slice {
-                draw_measurement(
-                    painter,
-                    entry,
-                    inputs.unit,
-                    rect,
-                    axes,
-                    p.a,
-                    p.b,
-                    w,
-                    h,
-                    false,
-                );
+                draw_measurement(painter, entry, inputs.unit, at, [p.a, p.b], false);
             }
         }
     }
@@ -137,17 +141,14 @@ pub fn slice_position(volume: &Volume, axes: PaneAxes, crosshair: [usize; 3]) ->
 
 /// The ends of ruler `n` in 3D that lie on the slice shown: a ring each, with its number and
 /// length.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn draw_ends_3d(
     painter: &egui::Painter,
     inputs: &PaneInputs<'_>,
     n: usize,
-    rect: egui::Rect,
-    axes: PaneAxes,
+    at: Placed,
     slice: usize,
-    w: usize,
-    h: usize,
 ) {
+    let axes = at.axes;
     let Some(entry) = inputs.measurements.get(n) else {
         return;
     };
@@ -166,7 +167,7 @@ pub(super) fn draw_ends_3d(
         {
             continue;
         }
-        let p = axes.screen_of_coord(rect, [v[axes.across], v[axes.vertical]], w, h);
+        let p = at.screen_of_coord([v[axes.across], v[axes.vertical]]);
         painter.circle_stroke(p, 5.0, egui::Stroke::new(1.5, colour));
         painter.text(
             p + egui::vec2(7.0, -7.0),
@@ -179,18 +180,13 @@ pub(super) fn draw_ends_3d(
 }
 
 /// A ruler (line, end ticks, length) or an ellipse (outline and statistics) between pane
-/// coordinates `a` and `b`.
-#[allow(clippy::too_many_arguments)]
+/// coordinates `a` and `b` (the one being drawn, `drawing`, in another colour).
 pub(super) fn draw_measurement(
     painter: &egui::Painter,
     entry: &measure::Entry,
     unit: &str,
-    rect: egui::Rect,
-    axes: PaneAxes,
-    a: [f64; 2],
-    b: [f64; 2],
-    w: usize,
-    h: usize,
+    at: Placed,
+    [a, b]: [[f64; 2]; 2],
     drawing: bool,
 ) {
     let colour = if drawing {
@@ -199,10 +195,7 @@ pub(super) fn draw_measurement(
         egui::Color32::from_rgb(90, 200, 255)
     };
     let stroke = egui::Stroke::new(1.5, colour);
-    let (pa, pb) = (
-        axes.screen_of_coord(rect, a, w, h),
-        axes.screen_of_coord(rect, b, w, h),
-    );
+    let (pa, pb) = (at.screen_of_coord(a), at.screen_of_coord(b));
     let font = egui::FontId::proportional(13.0);
     match entry.measurement.kind {
         MeasureKind::Ruler => {

@@ -354,7 +354,8 @@ impl SlicePane {
                     .texture(ui.ctx(), pet, volume, axes, slice, inputs.generation);
             painter.image(id, rect, axes.uv(), egui::Color32::WHITE);
         }
-        self.draw_overlay(&painter, area, rect, axes, crosshair, w, h, volume);
+        let at = draw::Placed { rect, axes, w, h };
+        self.draw_overlay(&painter, area, at, crosshair, volume);
         super::paint::draw_scale_bar(&painter, area, rect.width() / size_mm.x.max(1e-6));
         // Corner annotation: the slice index in the file, and the zoom when not fitted.
         let mut corner = format!("{} / {}", slice + 1, n_slices);
@@ -368,7 +369,7 @@ impl SlicePane {
             egui::FontId::proportional(12.0),
             egui::Color32::from_gray(190),
         );
-        self.draw_measurements(&painter, inputs, rect, axes, slice, w, h);
+        self.draw_measurements(&painter, inputs, at, slice);
         let to_voxel = volume.voxel_from_world();
         super::findings::draw_markers(
             &painter,
@@ -378,7 +379,7 @@ impl SlicePane {
                 let v = to_voxel.transform_point3(p);
                 v.is_finite().then(|| {
                     (
-                        axes.screen_of_coord(rect, [v[axes.across], v[axes.vertical]], w, h),
+                        at.screen_of_coord([v[axes.across], v[axes.vertical]]),
                         (v[axes.fixed] - slice as f64) * volume.spacing_mm[axes.fixed],
                     )
                 })
@@ -393,7 +394,7 @@ impl SlicePane {
                 b_mm: axes.world_of(volume, slice, b),
             };
             let entry = measure::Entry::new(volume, m);
-            draw::draw_measurement(&painter, &entry, inputs.unit, rect, axes, a, b, w, h, true);
+            draw::draw_measurement(&painter, &entry, inputs.unit, at, [a, b], true);
         }
         out
     }

@@ -183,7 +183,7 @@ pub(super) async fn read_dicom_set(files: &[Named], label: &str, total: f64) -> 
             Format::Dicom => {
                 if let Err(e) = reader.push(InputFile::new(f.name.clone(), bytes)) {
                     push(WebEvent::Failed {
-                        message: e.to_string(),
+                        message: crate::error::chain(&e),
                     });
                     return true;
                 }
@@ -209,7 +209,7 @@ pub(super) async fn read_dicom_set(files: &[Named], label: &str, total: f64) -> 
             read_series(set, SeriesFor::Shown(Some(origin))).await;
         }
         Err(e) => push(WebEvent::Failed {
-            message: e.to_string(),
+            message: crate::error::chain(&e),
         }),
     }
     true
@@ -264,7 +264,7 @@ pub(super) async fn read_series(set: crate::app::load::SeriesSet, purpose: Serie
         let pushed = match read_file(&named).await {
             Ok(bytes) => builder
                 .push(crate::io::InputFile::new(named.name, bytes))
-                .map_err(|e| e.to_string()),
+                .map_err(|e| crate::error::chain(&e)),
             Err(message) => Err(message),
         };
         if let Err(message) = pushed {
@@ -285,10 +285,10 @@ pub(super) async fn read_series(set: crate::app::load::SeriesSet, purpose: Serie
         }),
         (Err(e), purpose) => push(match purpose {
             SeriesFor::Shown(_) => WebEvent::Failed {
-                message: e.to_string(),
+                message: crate::error::chain(&e),
             },
             SeriesFor::Pet(generation) => WebEvent::PetFailed {
-                message: e.to_string(),
+                message: crate::error::chain(&e),
                 generation,
             },
         }),

@@ -214,7 +214,7 @@ pub(super) fn with_pixel_data<R>(
                 message: format!(
                     "cannot decode pixel data ({}): {}",
                     header.transfer_syntax,
-                    super::chain(&e)
+                    crate::error::chain(&e)
                 ),
             })?;
             decoded.data()

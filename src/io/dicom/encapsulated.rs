@@ -290,7 +290,7 @@ pub(super) fn decode_codestream_frame(
             0,
             out,
         )
-        .map_err(|e| format!("cannot decode ({ts}): {}", super::chain(&e)))
+        .map_err(|e| format!("cannot decode ({ts}): {}", crate::error::chain(&e)))
 }
 
 /// Decodes RLE Lossless frames (DICOM PS3.5 annex G) into little-endian samples, one frame

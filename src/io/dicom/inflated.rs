@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex};
 use flate2::{Decompress, FlushDecompress, Status};
 
 use super::validate;
-use crate::io::{FileSource, InputFile, Limits, LoadError};
+use crate::io::{Corruption, FileSource, InputFile, Limits, LoadError};
 
 /// Compressed bytes read from the file at a time.
 const READ_CHUNK: usize = 64 << 10;
@@ -176,10 +176,13 @@ pub(super) fn open(
     // thread.
     #[allow(clippy::arc_with_non_send_sync)]
     let inflated = Arc::new(inflated);
-    let inflated =
-        InputFile::on_demand(file.name.clone(), inflated).map_err(|e| LoadError::Decompress {
-            file: file.name.clone(),
-            message: format!("the deflated data set: {e}"),
-        })?;
+    let inflated = InputFile::on_demand(file.name.clone(), inflated).map_err(|e| {
+        let problem = if e.kind() == std::io::ErrorKind::UnexpectedEof {
+            Corruption::Truncated
+        } else {
+            Corruption::Corrupt
+        };
+        LoadError::decompress(&file.name, "the deflated data set", problem, Some(e.into()))
+    })?;
     Ok(Some((inflated, at, len)))
 }

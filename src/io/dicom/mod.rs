@@ -38,21 +38,6 @@ pub(crate) fn looks_like_bare_dataset(bytes: &[u8]) -> bool {
     bytes.starts_with(b"DICM")
 }
 
-/// The message of an error and of its sources, on one line.
-fn chain(e: &dyn std::error::Error) -> String {
-    let mut s = e.to_string();
-    let mut cur = e.source();
-    while let Some(inner) = cur {
-        let m = inner.to_string();
-        if !s.contains(&m) {
-            s.push_str(": ");
-            s.push_str(&m);
-        }
-        cur = inner.source();
-    }
-    s
-}
-
 /// Parses a DICOM file from bytes; with `headers_only` it stops before the pixel data. A file
 /// read on demand is read here and its bytes dropped once the object is built.
 pub(super) fn open(
@@ -132,7 +117,7 @@ fn parse_located(
         }
         LoadError::Dicom {
             file: file.name.clone(),
-            message: chain(&e),
+            message: crate::error::chain(&e),
         }
     })?;
     Ok(Some((obj, pixel_data)))

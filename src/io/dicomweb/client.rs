@@ -39,6 +39,7 @@ pub trait Transport: Sync {
         Err(DicomWebError::Transport {
             url: request.url.clone(),
             message: "this transport does not send (POST)".to_owned(),
+            source: None,
         })
     }
 }
@@ -135,7 +136,8 @@ fn answer(
         ureq::Error::Tls(tls) => connect(format!("TLS: {tls}")),
         other => DicomWebError::Transport {
             url: url.to_owned(),
-            message: other.to_string(),
+            message: "the request failed".to_owned(),
+            source: Some(other.into()),
         },
     })?;
     let status = response.status().as_u16();
@@ -266,7 +268,8 @@ impl<T: Transport> Client<T> {
             .read_to_end(&mut body)
             .map_err(|e| DicomWebError::Transport {
                 url: request.url.clone(),
-                message: format!("reading the answer: {e}"),
+                message: "reading the answer".to_owned(),
+                source: Some(e.into()),
             })?;
         if body.len() as u64 > MAX_JSON_BYTES {
             return Err(DicomWebError::TooLarge {
@@ -359,7 +362,8 @@ impl<T: Transport> Client<T> {
                     .read_to_end(&mut answer)
                     .map_err(|e| DicomWebError::Transport {
                         url: url.clone(),
-                        message: format!("reading the answer: {e}"),
+                        message: "reading the answer".to_owned(),
+                        source: Some(e.into()),
                     })?;
                 super::stow::read_answer(&url, status, &answer, instances, &self.auth)
                     .map_err(|e| e.with_retry_after(retry_after.as_deref()))
@@ -529,6 +533,7 @@ fn internal(message: &str) -> DicomWebError {
     DicomWebError::Transport {
         url: "-".to_owned(),
         message: format!("internal: {message}"),
+        source: None,
     }
 }
 
@@ -560,7 +565,8 @@ fn fetch_instance<T: Transport>(
             Err(e) => {
                 return Err(DicomWebError::Transport {
                     url: fetch.request.url.clone(),
-                    message: format!("the body broke off: {e}"),
+                    message: "the body broke off".to_owned(),
+                    source: Some(e.into()),
                 });
             }
         };

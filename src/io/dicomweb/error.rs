@@ -67,8 +67,14 @@ pub enum DicomWebError {
     )]
     Connect { host: String, message: String },
 
+    /// The request or its answer broke off; `message` says where, `source` (natively) why.
     #[error("{url}: {message}")]
-    Transport { url: String, message: String },
+    Transport {
+        url: String,
+        message: String,
+        #[source]
+        source: Option<Box<dyn std::error::Error + Send + Sync>>,
+    },
 
     #[error("{url}: the answer is not QIDO-RS JSON: {message}")]
     Json { url: String, message: String },
@@ -93,7 +99,7 @@ pub enum DicomWebError {
     Load {
         instance: String,
         #[source]
-        source: LoadError,
+        source: Box<LoadError>,
     },
 
     #[error("{instance} failed {attempts} times; the last time: {source}")]

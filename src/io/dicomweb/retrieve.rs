@@ -278,7 +278,7 @@ impl Retrieval {
                 .push(InputFile::new(name, part.bytes))
                 .map_err(|source| DicomWebError::Load {
                     instance: label.clone(),
-                    source,
+                    source: Box::new(source),
                 })?;
         }
         self.done[id] = true;
@@ -377,7 +377,7 @@ impl Retrieval {
             .finish()
             .map_err(|source| DicomWebError::Load {
                 instance: what,
-                source,
+                source: Box::new(source),
             })?;
         loaded.volume.source = format!(
             "DICOMweb {} series {} ({n} instance{})",

@@ -55,6 +55,7 @@ impl WebClient {
         let controller = web_sys::AbortController::new().map_err(|e| DicomWebError::Transport {
             url: base.as_str().to_owned(),
             message: format!("cannot make an AbortController: {}", error_text(&e)),
+            source: None,
         })?;
         Ok(Self {
             base,
@@ -171,6 +172,7 @@ impl WebClient {
                     return Err(DicomWebError::Transport {
                         url: self.base.as_str().to_owned(),
                         message: "internal: nothing in flight and nothing to ask for".to_owned(),
+                        source: None,
                     });
                 }
                 match inbox.next().await {
@@ -379,6 +381,7 @@ async fn send(
     let transport = |message: String| DicomWebError::Transport {
         url: url.to_owned(),
         message,
+        source: None,
     };
     let window = web_sys::window().ok_or_else(|| transport("no window object".to_owned()))?;
     let headers = web_sys::Headers::new().map_err(|e| transport(error_text(&e)))?;
@@ -468,6 +471,7 @@ async fn read_body(
                         "the answer broke off after {received} bytes ({})",
                         error_text(&e)
                     ),
+                    source: None,
                 });
             }
         };

@@ -230,27 +230,13 @@ impl Read for Members<'_> {
     }
 }
 
-pub(super) fn decompress_error(file: &str, kind: Compression, e: &std::io::Error) -> LoadError {
-    let what = match kind {
-        Compression::Gzip => "CRC-32 or length",
-        Compression::Zlib => "Adler-32",
-    };
-    let message = if e.kind() == std::io::ErrorKind::UnexpectedEof {
-        format!(
-            "{}: the stream ends early (the file is truncated)",
-            kind.name()
-        )
-    } else if e.to_string().contains("checksum") || e.to_string().contains("corrupt") {
-        format!(
-            "{}: {e}; the {what} check failed, so the file is corrupt",
-            kind.name()
-        )
+/// A stream that ended early is truncated; anything else the decompressor (or [`Members`])
+/// refused, a failed CRC-32 / Adler-32 included, is corrupt, with its complaint as the source.
+pub(super) fn decompress_error(file: &str, kind: Compression, e: std::io::Error) -> LoadError {
+    if e.kind() == std::io::ErrorKind::UnexpectedEof {
+        LoadError::decompress(file, kind.name(), Corruption::Truncated, None)
     } else {
-        format!("{}: {e} (the file is corrupt)", kind.name())
-    };
-    LoadError::Decompress {
-        file: file.to_owned(),
-        message,
+        LoadError::decompress(file, kind.name(), Corruption::Corrupt, Some(e.into()))
     }
 }
 

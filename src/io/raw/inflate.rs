@@ -49,7 +49,7 @@ pub(crate) fn inflate_voxels(
         skip,
         needed,
     };
-    let err = |e: std::io::Error| stream.error(&e);
+    let err = |e: std::io::Error| stream.error(e);
     let truncated = |got: u64| stream.truncated(got);
     let wide = matches!(
         layout.ty,
@@ -80,13 +80,15 @@ pub(crate) fn inflate_voxels(
     if rest == allowed {
         let mut probe = [0u8; 1];
         if reader.read(&mut probe).map_err(err)? > 0 {
-            return Err(LoadError::Decompress {
-                file: file.to_owned(),
-                message: format!(
-                    "{}: the stream holds more than the {declared_bytes} bytes its header declares (with {STREAM_SLACK_BYTES} bytes of slack)",
-                    kind.name()
-                ),
-            });
+            return Err(LoadError::decompress(
+                file,
+                kind.name(),
+                Corruption::LongerThanDeclared {
+                    declared: declared_bytes,
+                    slack: STREAM_SLACK_BYTES,
+                },
+                None,
+            ));
         }
     }
     let voxels = match (voxels, range) {
@@ -187,12 +189,15 @@ pub(super) fn check_gzip_trailer(
             needed,
             u64::from(isize),
         )),
-        Some(isize) => Err(LoadError::Decompress {
-            file: file.to_owned(),
-            message: format!(
-                "gzip: the trailer says the data are {isize} bytes (mod 2^32), more than the {max} the header allows: the file is corrupt or has bytes after its end (nothing was inflated)"
-            ),
-        }),
+        Some(isize) => Err(LoadError::decompress(
+            file,
+            "gzip",
+            Corruption::TrailerTooLarge {
+                trailer: isize,
+                max,
+            },
+            None,
+        )),
         None => Ok(()),
     }
 }
@@ -219,7 +224,7 @@ impl Stream<'_> {
         )
     }
 
-    fn error(&self, e: &std::io::Error) -> LoadError {
+    fn error(&self, e: std::io::Error) -> LoadError {
         decompress_error(self.file, self.kind, e)
     }
 }
@@ -251,7 +256,7 @@ impl<'r, 'a> SampleReader<'r, 'a> {
             match skip_bytes(self.reader, gap) {
                 Ok(true) => self.done += gap,
                 Ok(false) => return Err(truncated(self.done)),
-                Err(e) => return Err(self.stream.error(&e)),
+                Err(e) => return Err(self.stream.error(e)),
             }
         }
         let mut a = [0u8; 8];
@@ -259,7 +264,7 @@ impl<'r, 'a> SampleReader<'r, 'a> {
             return Err(if e.kind() == std::io::ErrorKind::UnexpectedEof {
                 truncated(self.done)
             } else {
-                self.stream.error(&e)
+                self.stream.error(e)
             });
         }
         self.done += size as u64;
@@ -290,7 +295,7 @@ pub(super) fn stream_samples(
         (&mut *reader)
             .take(n as u64)
             .read_to_end(&mut v)
-            .map_err(|e| stream.error(&e))?;
+            .map_err(|e| stream.error(e))?;
         if v.len() < n {
             return Err(stream.truncated(stream.skip + v.len() as u64));
         }
@@ -342,10 +347,12 @@ pub(super) fn read_capped(
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
             Err(_) if !out.is_empty() => break,
             Err(e) => {
-                return Err(LoadError::Decompress {
-                    file: file.to_owned(),
-                    message: format!("{kind}: {e}"),
-                });
+                let problem = if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                    Corruption::Truncated
+                } else {
+                    Corruption::Corrupt
+                };
+                return Err(LoadError::decompress(file, kind, problem, Some(e.into())));
             }
         }
     }

@@ -4,7 +4,7 @@
 use std::io::{BufRead as _, Read};
 
 use super::input::Data;
-use super::{Limits, LoadError};
+use super::{Corruption, Limits, LoadError};
 use crate::volume::Voxels;
 
 mod compress;
@@ -102,13 +102,16 @@ pub(crate) fn check_expansion(
     out_bytes: u64,
 ) -> Result<(), LoadError> {
     if out_bytes > BOMB_MIN_BYTES && out_bytes / BOMB_RATIO > compressed {
-        return Err(LoadError::Decompress {
-            file: file.to_owned(),
-            message: format!(
-                "{what}: {compressed} compressed bytes declare {out_bytes} bytes ({}:1); scans compress far less than {BOMB_RATIO}:1, so this is refused as a decompression bomb",
-                out_bytes / compressed.max(1)
-            ),
-        });
+        return Err(LoadError::decompress(
+            file,
+            what,
+            Corruption::Bomb {
+                compressed,
+                declared: out_bytes,
+                ratio: BOMB_RATIO,
+            },
+            None,
+        ));
     }
     Ok(())
 }
