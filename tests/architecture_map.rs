@@ -684,7 +684,7 @@ const RULES: &[Rule] = &[
         skip_tests: true,
     },
     Rule {
-        claim: "`src/io` depends on no other module of the crate but `src/volume.rs` and `src/error.rs`",
+        claim: "`src/io` depends on no other module but `src/volume.rs` and `src/error.rs`",
         scope: &["src/io/"],
         patterns: &[Pattern::CrateOtherThan(&["io", "volume", "error"])],
         allowed: &[],
@@ -807,7 +807,7 @@ const RULES: &[Rule] = &[
     },
     Rule {
         claim: "HTTP requests are made only by `src/io/dicomweb/client.rs`, \
-                `src/io/dicomweb/web.rs`, `src/app/web_fetch.rs` and `src/app/web_files/`",
+                `src/io/dicomweb/web.rs`, `src/app/platform/web/fetch.rs` and `src/app/platform/web/files/`",
         scope: &["src/"],
         patterns: &[
             Pattern::Ident("ureq"),
@@ -828,13 +828,13 @@ const RULES: &[Rule] = &[
                 "the page's fetch",
             ),
             allow(
-                "src/app/web_fetch.rs",
-                "`src/app/web_fetch.rs`",
+                "src/app/platform/web/fetch.rs",
+                "`src/app/platform/web/fetch.rs`",
                 "the page's ?url= downloads",
             ),
             allow(
-                "src/app/web_files/",
-                "`src/app/web_files/`",
+                "src/app/platform/web/files/",
+                "`src/app/platform/web/files/`",
                 "the page's demo CT",
             ),
         ],

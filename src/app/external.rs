@@ -3,7 +3,7 @@
 //! progress, a link pasted into the address bar), taken once per frame.
 
 #[cfg(target_arch = "wasm32")]
-use super::web_events;
+use super::platform::web::events as web_events;
 use super::{LoadSource, ShapecastApp};
 
 impl ShapecastApp {

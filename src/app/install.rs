@@ -2,6 +2,7 @@
 //! the scene, the panes and the features reset for it, a failed load reported with the previous
 //! volume kept.
 
+use super::platform::Platform as _;
 use super::*;
 
 /// A loaded volume whose intensity texture is being written, slab by slab over frames (a
@@ -190,13 +191,9 @@ impl ShapecastApp {
             let urls = std::mem::take(&mut self.options.pet_urls);
             self.pet.urls = urls.clone();
             self.pet.awaiting(self.generation);
-            #[cfg(target_arch = "wasm32")]
-            web_fetch::fetch_pet_urls(urls, self.generation);
-            #[cfg(not(target_arch = "wasm32"))]
-            self.error(format!(
-                "{}: a PET by URL opens in the browser; natively give --pet PATH",
-                urls.join(", ")
-            ));
+            if let Err(why) = self.platform.fetch_pet(urls, self.generation) {
+                self.error(why);
+            }
         }
         // A link's view for this volume replaces the defaults it just got (after loading the
         // series it names, when that is another of these files).

@@ -14,8 +14,6 @@ mod external;
 pub mod features;
 pub mod findings;
 mod install;
-#[cfg(target_arch = "wasm32")]
-mod js_bytes;
 mod keys;
 pub mod load;
 pub mod measure;
@@ -27,6 +25,7 @@ mod paint;
 mod panels;
 mod panes;
 mod pet;
+mod platform;
 mod probe;
 mod publish;
 pub mod report;
@@ -35,12 +34,6 @@ mod share;
 pub mod slices;
 mod startup;
 pub mod view_link;
-#[cfg(target_arch = "wasm32")]
-mod web_events;
-#[cfg(target_arch = "wasm32")]
-mod web_fetch;
-#[cfg(target_arch = "wasm32")]
-mod web_files;
 pub mod window_level;
 
 use std::sync::Arc;
@@ -103,6 +96,8 @@ impl Scene {
 
 pub struct ShapecastApp {
     gpu: Option<GpuContext>,
+    /// What differs between the page and the native window.
+    platform: platform::Current,
     options: AppOptions,
     status: AppStatus,
     published: Option<AppStatus>,

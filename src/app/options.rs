@@ -5,7 +5,7 @@ use super::{DisplayMode, PacsTarget, ViewSource, ViewState, features};
 use crate::cpu::tf::Preset;
 
 #[cfg(target_arch = "wasm32")]
-use super::web_files;
+use super::platform::web::files as web_files;
 
 /// What the app opens on.
 #[derive(Clone, Debug, PartialEq)]

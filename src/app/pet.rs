@@ -267,7 +267,7 @@ impl PetState {
         self.loading_for = Some(generation);
         #[cfg(target_arch = "wasm32")]
         if set.web_files().is_some() {
-            super::web_files::load_pet_series(set, generation);
+            super::platform::web::files::load_pet_series(set, generation);
             return true;
         }
         self.job = Some(LoadJob::new(LoadSource::Series(set)));

@@ -2,13 +2,14 @@
 //! (`window.shapecastStatus` in the browser), the link of the view shown and the controls'
 //! rectangles.
 
-use super::{JobOutcome, ShapecastApp, features, panels, series_list, share};
+use super::platform::Platform as _;
+use super::{JobOutcome, ShapecastApp, features, panels, series_list};
 use crate::status::{CrosshairStatus, FeatureStatus, PetStatus, Phase, VolumeStatus};
 
 impl ShapecastApp {
     pub(super) fn update_status(&mut self) {
         let view = self.view_state();
-        let link = format!("{}#{}", share::page_address(), view.fragment());
+        let link = format!("{}#{}", self.platform.page_address(), view.fragment());
         if self.status.link != link {
             self.status.link = link;
             self.status.view_json = view.json();

@@ -137,7 +137,7 @@ impl ShapecastApp {
             let set = set.with_chosen(index);
             self.cancel_upload();
             self.load_progress = Some((0.0, format!("opening {}", set.label())));
-            super::web_files::load_series(set);
+            super::platform::web::files::load_series(set);
             self.series.loading = Some(index);
             return;
         }

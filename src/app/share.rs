@@ -5,6 +5,7 @@
 //! author's computer says which file to drop), after the defaults a new volume gets.
 
 use super::model::axes::SliceKind;
+use super::platform::Platform as _;
 use super::view_link::{ViewSource, ViewState, human_bytes};
 use super::{Layout, ShapecastApp};
 
@@ -106,7 +107,11 @@ impl ShapecastApp {
 
     /// The link to this view: the page's address (on the web) with the view as its fragment.
     pub fn link(&self) -> String {
-        format!("{}#{}", page_address(), self.view_state().fragment())
+        format!(
+            "{}#{}",
+            self.platform.page_address(),
+            self.view_state().fragment()
+        )
     }
 
     /// Makes `view` the one to show: at once for what does not depend on the volume, and for
@@ -250,7 +255,7 @@ impl ShapecastApp {
             if self.pet.layer.is_none() && !self.pet.loading() && !p.urls.is_empty() {
                 self.pet.urls = p.urls.clone();
                 self.pet.awaiting(generation);
-                super::web_fetch::fetch_pet_urls(p.urls.clone(), generation);
+                super::platform::web::fetch::fetch_pet_urls(p.urls.clone(), generation);
             }
         }
         self.measure
@@ -345,20 +350,4 @@ impl Layout {
         .into_iter()
         .find(|l| l.name() == name)
     }
-}
-
-/// The page's address without query or fragment (the link's fragment holds the whole view);
-/// natively, nothing (the link is its fragment).
-pub(super) fn page_address() -> String {
-    #[cfg(target_arch = "wasm32")]
-    {
-        web_sys::window()
-            .and_then(|w| {
-                let l = w.location();
-                Some(format!("{}{}", l.origin().ok()?, l.pathname().ok()?))
-            })
-            .unwrap_or_default()
-    }
-    #[cfg(not(target_arch = "wasm32"))]
-    String::new()
 }

@@ -1,6 +1,7 @@
 //! Starting the viewer: the wgpu configuration, the native window, the app's first state and
 //! what it opens first (the demo, a phantom, paths, URLs, an archive's study).
 
+use super::platform::Platform as _;
 use super::*;
 
 /// The eframe/egui wgpu configuration both targets use: the adapter's own limits and features
@@ -121,6 +122,7 @@ impl ShapecastApp {
             measure: measure::Measurements::default(),
             probe: probe::ProbeState::default(),
             windows: model::Windows::default(),
+            platform: Default::default(),
             export: export::Export::default(),
             loading_origin: None,
             pending_view,
@@ -144,22 +146,12 @@ impl ShapecastApp {
         self.features.set_waker(Arc::new(move || {
             wake.request_repaint_after(std::time::Duration::from_millis(1));
         }));
-        #[cfg(target_arch = "wasm32")]
-        if let Err(e) = web_files::install(ctx) {
+        if let Err(e) = self.platform.install(ctx) {
             self.error(format!("drag and drop is unavailable: {e}"));
         }
         self.pacs_start(ctx);
         match self.options.start.clone() {
-            StartWith::DemoCt => {
-                #[cfg(target_arch = "wasm32")]
-                {
-                    self.cancel_upload();
-                    self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
-                    web_files::fetch_demo();
-                }
-                #[cfg(not(target_arch = "wasm32"))]
-                self.open_from(demo::demo_source(), Some(ViewSource::Demo));
-            }
+            StartWith::DemoCt => self.open_demo_ct(),
             StartWith::Phantom(name) => self.open(LoadSource::Phantom(name)),
             #[cfg(not(target_arch = "wasm32"))]
             StartWith::Paths(paths) => self.open(LoadSource::Paths(paths)),
@@ -171,16 +163,13 @@ impl ShapecastApp {
 
     /// Downloads volumes by URL (web; natively the command line opens paths instead).
     pub fn open_urls(&mut self, urls: Vec<String>) {
-        #[cfg(target_arch = "wasm32")]
-        {
-            self.cancel_upload();
-            self.load_progress = Some((0.0, format!("downloading {}", urls.join(", "))));
-            web_fetch::fetch_urls(urls);
+        let what = format!("downloading {}", urls.join(", "));
+        match self.platform.fetch(urls) {
+            Ok(()) => {
+                self.cancel_upload();
+                self.load_progress = Some((0.0, what));
+            }
+            Err(why) => self.error(why),
         }
-        #[cfg(not(target_arch = "wasm32"))]
-        self.error(format!(
-            "{}: opening a volume by URL works in the browser; download it and open the file",
-            urls.join(", ")
-        ));
     }
 }

@@ -7,6 +7,7 @@
 
 use std::sync::{Arc, Mutex};
 
+use crate::app::platform::Platform as _;
 use crate::app::{PaneId, ShapecastApp};
 
 /// A picture made: its file name and PNG bytes.
@@ -29,9 +30,6 @@ pub(in crate::app) struct PictureState {
     /// closes first).
     requested: Option<(PaneId, u8)>,
     pub last: Option<Picture>,
-    /// Natively, the folder pictures are written into (`None`: the current folder).
-    #[cfg(not(target_arch = "wasm32"))]
-    pub dir: Option<std::path::PathBuf>,
 }
 
 /// The pixels of `rect` (points) of a screenshot taken at `pixels_per_point`, as PNG.
@@ -94,7 +92,7 @@ impl ShapecastApp {
     /// Natively, where pictures are written (the current folder unless set).
     #[cfg(not(target_arch = "wasm32"))]
     pub fn set_picture_dir(&mut self, dir: std::path::PathBuf) {
-        self.export.picture.dir = Some(dir);
+        self.platform.picture_dir = Some(dir);
     }
 
     /// The last picture made (tests; the page downloads it, natively it is written to a file).
@@ -184,10 +182,7 @@ impl ShapecastApp {
     /// Hands a file made here (a picture, a movie) to the user: a download in the page, a file
     /// in the pictures' folder natively. Says where it went.
     pub(in crate::app) fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String> {
-        #[cfg(not(target_arch = "wasm32"))]
-        return deliver(name, bytes, self.export.picture.dir.as_deref());
-        #[cfg(target_arch = "wasm32")]
-        deliver(name, bytes)
+        self.platform.deliver(name, bytes)
     }
 
     /// The "Save picture" menu: one entry per pane shown.
@@ -221,52 +216,6 @@ impl ShapecastApp {
             }
         });
     }
-}
-
-/// Hands a PNG to the user: a download in the page.
-#[cfg(target_arch = "wasm32")]
-fn deliver(name: &str, bytes: &[u8]) -> Result<String, String> {
-    download(name, bytes).map_err(|e| crate::io::js::error_text(&e))?;
-    Ok(format!("{name} (your downloads)"))
-}
-
-/// Hands a file to the user: a file in `dir` (the current folder when `None`).
-#[cfg(not(target_arch = "wasm32"))]
-fn deliver(name: &str, bytes: &[u8], dir: Option<&std::path::Path>) -> Result<String, String> {
-    let path = dir.map_or_else(|| std::path::PathBuf::from(name), |d| d.join(name));
-    std::fs::write(&path, bytes).map_err(|e| format!("writing {}: {e}", path.display()))?;
-    let shown = std::path::absolute(&path).unwrap_or(path);
-    Ok(shown.display().to_string())
-}
-
-#[cfg(target_arch = "wasm32")]
-fn download(name: &str, png: &[u8]) -> Result<(), wasm_bindgen::JsValue> {
-    use wasm_bindgen::JsCast as _;
-    let window = web_sys::window().ok_or("no window")?;
-    let document = window.document().ok_or("no document")?;
-    let bytes = js_sys::Uint8Array::from(png);
-    let parts = js_sys::Array::of1(&bytes);
-    let options = web_sys::BlobPropertyBag::new();
-    options.set_type("image/png");
-    let blob = web_sys::Blob::new_with_u8_array_sequence_and_options(&parts, &options)?;
-    let url = web_sys::Url::create_object_url_with_blob(&blob)?;
-    let a: web_sys::HtmlAnchorElement = document.create_element("a")?.dyn_into()?;
-    a.set_href(&url);
-    a.set_download(name);
-    a.click();
-    // The URL is kept until the next picture: revoked at once, a browser may not have started
-    // reading it yet.
-    LAST_URL.with(|last| {
-        if let Some(old) = last.replace(Some(url)) {
-            let _ = web_sys::Url::revoke_object_url(&old);
-        }
-    });
-    Ok(())
-}
-
-#[cfg(target_arch = "wasm32")]
-thread_local! {
-    static LAST_URL: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
 }
 
 #[cfg(test)]

@@ -44,9 +44,6 @@ pub(super) struct Windows {
     pub show_keys: bool,
     /// Files are being dragged over the window.
     pub drop_hover: bool,
-    /// The native "Open" field's path.
-    #[cfg(not(target_arch = "wasm32"))]
-    pub open_path: String,
     /// When "Copy link" was last clicked (egui time), for its "copied" feedback.
     pub link_copied_at: Option<f64>,
 }

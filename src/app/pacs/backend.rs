@@ -169,7 +169,7 @@ mod web {
 
     /// Whether the page's query names a token (refused).
     pub fn query_has_token() -> bool {
-        crate::app::web_files::query_params()
+        crate::app::platform::web::files::query_params()
             .iter()
             .any(|(k, _)| k == "token")
     }

@@ -6,6 +6,7 @@
 mod side;
 
 use super::features::{self, DisplayMode};
+use super::platform::Platform as _;
 use super::{Layout, LoadSource, PaneId, ShapecastApp, SliceKind, WindowPreset, demo};
 
 const FEATURE_NAMES: [&str; 3] = ["vesselness", "airwayness", "blobness"];
@@ -90,49 +91,19 @@ impl ShapecastApp {
     }
 
     pub(super) fn open_demo_ct(&mut self) {
-        #[cfg(target_arch = "wasm32")]
-        {
-            self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
-            super::web_files::fetch_demo();
-        }
-        #[cfg(not(target_arch = "wasm32"))]
-        self.open_from(demo::demo_source(), Some(super::ViewSource::Demo));
-    }
-
-    #[cfg(target_arch = "wasm32")]
-    fn open_menu_ui(&mut self, ui: &mut egui::Ui) {
-        if ui
-            .button("Open files…")
-            .on_hover_text("a volume file, a header with its data file, or DICOM slices")
-            .clicked()
-        {
-            super::web_files::open_dialog(false);
-        }
-        if ui
-            .button("Open folder…")
-            .on_hover_text("a folder holding a DICOM series")
-            .clicked()
-        {
-            super::web_files::open_dialog(true);
-        }
-    }
-
-    #[cfg(not(target_arch = "wasm32"))]
-    fn open_menu_ui(&mut self, ui: &mut egui::Ui) {
-        ui.menu_button("Open", |ui| {
-            ui.label("A file or a folder (DICOM series), or drop them on the window:");
-            let r = ui.add(
-                egui::TextEdit::singleline(&mut self.windows.open_path)
-                    .hint_text("/path/to/volume.nii.gz or /path/to/dicom-folder")
-                    .desired_width(360.0),
-            );
-            let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-            if (ui.button("Open").clicked() || enter) && !self.windows.open_path.trim().is_empty() {
-                let path = std::path::PathBuf::from(self.windows.open_path.trim());
-                self.open(LoadSource::Paths(vec![path]));
-                ui.close();
+        match self.platform.demo() {
+            Some(source) => self.open_from(source, Some(super::ViewSource::Demo)),
+            None => {
+                self.cancel_upload();
+                self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
             }
-        });
+        }
+    }
+
+    fn open_menu_ui(&mut self, ui: &mut egui::Ui) {
+        if let Some(source) = self.platform.open_menu_ui(ui) {
+            self.open(source);
+        }
     }
 
     pub(super) fn status_bar_ui(&mut self, ui: &mut egui::Ui) {
@@ -144,14 +115,13 @@ impl ShapecastApp {
                         .desired_width(260.0)
                         .text(what.as_str()),
                 );
-                #[cfg(target_arch = "wasm32")]
-                if super::web_fetch::active() {
+                if self.platform.downloading() {
                     let r = ui
                         .small_button("Cancel")
                         .on_hover_text("stop the download; the volume shown stays");
                     self.control("cancel-download", r.rect);
                     if r.clicked() {
-                        super::web_fetch::cancel();
+                        self.platform.cancel_download();
                     }
                 }
             } else if let Some(bar) = self.feature_progress_bar(260.0) {

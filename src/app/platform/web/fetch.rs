@@ -15,9 +15,9 @@ use wasm_bindgen::JsCast as _;
 use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
-use super::js_bytes::{self, Gathered, JsBytes};
-use super::view_link::ViewSource;
-use super::web_events::{WebEvent, push};
+use crate::app::platform::web::events::{WebEvent, push};
+use crate::app::platform::web::js_bytes::{self, Gathered, JsBytes};
+use crate::app::view_link::ViewSource;
 use crate::io::InputFile;
 use crate::io::js::error_text as js_error;
 use crate::io::url::host_of;

@@ -20,12 +20,12 @@ use wasm_bindgen::JsValue;
 use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
-use super::js_bytes::{self, JsBytes};
-use super::view_link::ViewSource;
+use crate::app::platform::web::js_bytes::{self, JsBytes};
+use crate::app::view_link::ViewSource;
 use crate::io::InputFile;
 use crate::io::js::error_text as js_error;
 
-use super::web_events::{WebEvent, push};
+use crate::app::platform::web::events::{WebEvent, push};
 use read::{SeriesFor, read_all, read_series};
 
 /// The page's hidden file inputs (web/index.html).
@@ -45,7 +45,7 @@ fn set_hover(on: bool) {
 
 /// Installs the drag-and-drop listeners and the file inputs' change listeners (once).
 pub fn install(ctx: &egui::Context) -> Result<(), String> {
-    super::web_events::set_context(ctx);
+    crate::app::platform::web::events::set_context(ctx);
     let window = web_sys::window().ok_or("no window object")?;
     let document = window.document().ok_or("no document object")?;
 
@@ -107,7 +107,7 @@ pub fn install(ctx: &egui::Context) -> Result<(), String> {
         .map_err(|e| js_error(&e))?;
     link.forget();
 
-    super::web_fetch::install();
+    crate::app::platform::web::fetch::install();
 
     for id in [OPEN_FILES_INPUT, OPEN_FOLDER_INPUT] {
         let Some(input) = document
@@ -123,7 +123,7 @@ pub fn install(ctx: &egui::Context) -> Result<(), String> {
             // Clear it so that choosing the same file again fires `change` again.
             target.set_value("");
             if !files.is_empty() {
-                super::web_fetch::cancel();
+                crate::app::platform::web::fetch::cancel();
                 wasm_bindgen_futures::spawn_local(read_all(files));
             }
         });
@@ -207,7 +207,7 @@ fn on_drop(dt: &web_sys::DataTransfer) {
         return;
     }
     // A new drop replaces a download in progress.
-    super::web_fetch::cancel();
+    crate::app::platform::web::fetch::cancel();
     wasm_bindgen_futures::spawn_local(async move {
         let label = drop_label(&entries, &plain);
         push(WebEvent::Progress {
@@ -297,12 +297,12 @@ async fn walk(entries: Vec<web_sys::FileSystemEntry>) -> Result<Vec<Named>, Stri
 
 /// Loads the chosen series of a set of the page's files (a click in the series list): its
 /// files read again one at a time and decoded as they come.
-pub fn load_series(set: super::load::SeriesSet) {
+pub fn load_series(set: crate::app::load::SeriesSet) {
     wasm_bindgen_futures::spawn_local(read_series(set, SeriesFor::Shown(None)));
 }
 
 /// Loads the PET series of a set of the page's files, for the CT of `generation`.
-pub fn load_pet_series(set: super::load::SeriesSet, generation: u64) {
+pub fn load_pet_series(set: crate::app::load::SeriesSet, generation: u64) {
     wasm_bindgen_futures::spawn_local(read_series(set, SeriesFor::Pet(generation)));
 }
 
@@ -316,16 +316,16 @@ pub fn fetch_demo() {
             done: 0.0,
             total: 0.0,
         });
-        match fetch_bytes(super::demo::DEMO_URL).await {
+        match fetch_bytes(crate::app::demo::DEMO_URL).await {
             Ok(bytes) => push(WebEvent::Files {
                 label,
-                files: vec![InputFile::new(super::demo::DEMO_FILE, bytes)],
+                files: vec![InputFile::new(crate::app::demo::DEMO_FILE, bytes)],
                 origin: ViewSource::Demo,
             }),
             Err(e) => push(WebEvent::Failed {
                 message: format!(
                     "{}: could not fetch the demo CT: {e}",
-                    super::demo::DEMO_URL
+                    crate::app::demo::DEMO_URL
                 ),
             }),
         }

@@ -1,0 +1,54 @@
+//! What differs between the page and the native window, behind one small trait ([`Platform`]),
+//! so that the rest of the app does not ask which it runs in: the "Open" menu, handing a saved
+//! file to the user, the demo CT, the page's downloads and the page's address. The page's
+//! files, downloads and events live in `web/`; the native window's side in `native.rs`.
+
+use super::load::LoadSource;
+
+#[cfg(not(target_arch = "wasm32"))]
+mod native;
+#[cfg(target_arch = "wasm32")]
+pub mod web;
+
+/// The platform the app runs on.
+#[cfg(not(target_arch = "wasm32"))]
+pub type Current = native::Native;
+/// The platform the app runs on.
+#[cfg(target_arch = "wasm32")]
+pub type Current = web::Web;
+
+/// What the app asks of the platform it runs on.
+pub trait Platform {
+    /// The "Open" menu's entries. Returns a load to start when the user chose one now (the
+    /// page's file dialogs answer later, through its events).
+    fn open_menu_ui(&mut self, ui: &mut egui::Ui) -> Option<LoadSource>;
+
+    /// Hands a saved file (a picture, a movie) to the user: a download in the page, a file in
+    /// the pictures' folder natively. Says where it went.
+    fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String>;
+
+    /// Sets up what reaches the app from outside its frames (the page's drops and inputs);
+    /// called once, at the first frame.
+    fn install(&self, ctx: &egui::Context) -> Result<(), String>;
+
+    /// Starts getting the demo CT: its source when it is at hand (natively it is embedded in
+    /// the binary), `None` while it is fetched (the page: it arrives with the page's events).
+    fn demo(&self) -> Option<LoadSource>;
+
+    /// Starts downloading volumes by URL (the page's `?url=`, a link); the error says why this
+    /// platform cannot.
+    fn fetch(&self, urls: Vec<String>) -> Result<(), String>;
+
+    /// Whether one of the page's downloads (`?url=`) is running ([`Self::cancel_download`]).
+    fn downloading(&self) -> bool;
+
+    /// Stops the page's download; the volume shown stays.
+    fn cancel_download(&self);
+
+    /// Starts downloading a PET/CT link's PET (`&pet=URL`) for the CT of `generation`; the
+    /// error says why this platform cannot.
+    fn fetch_pet(&self, urls: Vec<String>, generation: u64) -> Result<(), String>;
+
+    /// The address of the page, which a link to the view starts with (empty natively).
+    fn page_address(&self) -> String;
+}

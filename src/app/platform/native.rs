@@ -1,0 +1,76 @@
+//! The native window's side of [`Platform`]: paths typed into "Open", files written into the
+//! pictures' folder, the demo CT embedded in the binary.
+
+use super::{LoadSource, Platform};
+
+/// The native window.
+#[derive(Default)]
+pub struct Native {
+    /// The "Open" field's path.
+    open_path: String,
+    /// Where saved pictures and movies are written (`None`: the current folder).
+    pub picture_dir: Option<std::path::PathBuf>,
+}
+
+impl Platform for Native {
+    fn open_menu_ui(&mut self, ui: &mut egui::Ui) -> Option<LoadSource> {
+        let mut chosen = None;
+        ui.menu_button("Open", |ui| {
+            ui.label("A file or a folder (DICOM series), or drop them on the window:");
+            let r = ui.add(
+                egui::TextEdit::singleline(&mut self.open_path)
+                    .hint_text("/path/to/volume.nii.gz or /path/to/dicom-folder")
+                    .desired_width(360.0),
+            );
+            let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+            if (ui.button("Open").clicked() || enter) && !self.open_path.trim().is_empty() {
+                let path = std::path::PathBuf::from(self.open_path.trim());
+                chosen = Some(LoadSource::Paths(vec![path]));
+                ui.close();
+            }
+        });
+        chosen
+    }
+
+    fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String> {
+        let path = self
+            .picture_dir
+            .as_ref()
+            .map_or_else(|| std::path::PathBuf::from(name), |d| d.join(name));
+        std::fs::write(&path, bytes).map_err(|e| format!("writing {}: {e}", path.display()))?;
+        let shown = std::path::absolute(&path).unwrap_or(path);
+        Ok(shown.display().to_string())
+    }
+
+    fn install(&self, _ctx: &egui::Context) -> Result<(), String> {
+        Ok(())
+    }
+
+    fn demo(&self) -> Option<LoadSource> {
+        Some(crate::app::demo::demo_source())
+    }
+
+    fn fetch(&self, urls: Vec<String>) -> Result<(), String> {
+        Err(format!(
+            "{}: opening a volume by URL works in the browser; download it and open the file",
+            urls.join(", ")
+        ))
+    }
+
+    fn downloading(&self) -> bool {
+        false
+    }
+
+    fn cancel_download(&self) {}
+
+    fn fetch_pet(&self, urls: Vec<String>, _generation: u64) -> Result<(), String> {
+        Err(format!(
+            "{}: a PET by URL opens in the browser; natively give --pet PATH",
+            urls.join(", ")
+        ))
+    }
+
+    fn page_address(&self) -> String {
+        String::new()
+    }
+}
