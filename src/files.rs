@@ -399,8 +399,14 @@ mod tests {
         assert_eq!(crate::io::load(&files).unwrap().volume.dims, [64, 64, 2]);
         // Cut short after it was listed: the read fails, named.
         std::fs::write(&p, &nii[..1000]).unwrap();
-        let e = crate::io::load(&files).unwrap_err().to_string();
-        assert!(e.contains("a.nii") && e.contains("cannot read"), "{e}");
+        let e = crate::io::load(&files).unwrap_err();
+        assert!(
+            matches!(&e, crate::io::LoadError::Read { file, .. } if file.ends_with("a.nii")),
+            "{e:?}"
+        );
+        // The cause (the file changed since it was listed) is said after the read that failed.
+        let shown = crate::error::chain(&e);
+        assert!(shown.contains("changed since it was listed"), "{shown}");
         // Replaced by a FIFO: refused without opening it (which would block).
         let made = std::process::Command::new("mkfifo")
             .arg(d.join("f.nii"))

@@ -9,6 +9,9 @@
 
 use glam::{DAffine3, DMat3, DVec3};
 
+pub mod packed;
+pub use packed::Packed;
+
 /// What kind of scan the voxels come from, as far as the file tells.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Modality {
@@ -45,6 +48,8 @@ pub enum Voxels {
     I16(Vec<i16>),
     U16(Vec<u16>),
     F32(Vec<f32>),
+    /// u8, i16 or u16 voxels packed brick by brick, lossless ([`Voxels::packed`]).
+    Packed(Packed),
 }
 
 impl Voxels {
@@ -54,6 +59,7 @@ impl Voxels {
             Self::I16(v) => v.len(),
             Self::U16(v) => v.len(),
             Self::F32(v) => v.len(),
+            Self::Packed(p) => p.len(),
         }
     }
 
@@ -63,12 +69,10 @@ impl Voxels {
 
     /// Bytes the voxels occupy.
     pub fn byte_len(&self) -> usize {
-        self.len()
-            * match self {
-                Self::U8(_) => 1,
-                Self::I16(_) | Self::U16(_) => 2,
-                Self::F32(_) => 4,
-            }
+        match self {
+            Self::Packed(p) => p.byte_len(),
+            _ => self.len() * self.bytes_per_voxel(),
+        }
     }
 
     /// The raw stored value at a linear index, as f32 (no rescale).
@@ -79,6 +83,7 @@ impl Voxels {
             Self::I16(v) => f32::from(v[index]),
             Self::U16(v) => f32::from(v[index]),
             Self::F32(v) => v[index],
+            Self::Packed(p) => p.get(index) as f32,
         }
     }
 
@@ -88,14 +93,39 @@ impl Voxels {
             Self::I16(_) => "i16",
             Self::U16(_) => "u16",
             Self::F32(_) => "f32",
+            Self::Packed(p) => match p.stored() {
+                packed::Stored::U8 => "u8 (packed)",
+                packed::Stored::I16 => "i16 (packed)",
+                packed::Stored::U16 => "u16 (packed)",
+            },
         }
     }
 
+    /// Bytes per voxel of the type the voxels have (packed ones: of their unpacked type).
     pub fn bytes_per_voxel(&self) -> usize {
         match self {
             Self::U8(_) => 1,
             Self::I16(_) | Self::U16(_) => 2,
             Self::F32(_) => 4,
+            Self::Packed(p) => match p.stored() {
+                packed::Stored::U8 => 1,
+                packed::Stored::I16 | packed::Stored::U16 => 2,
+            },
+        }
+    }
+
+    /// The same voxels packed ([`Packed`]) when they are integers of a volume of `dims`, and
+    /// packing makes them smaller; otherwise as they are.
+    pub fn packed(self, dims: [usize; 3]) -> Self {
+        let p = match &self {
+            Self::U8(v) => Packed::pack(v, dims, packed::Stored::U8),
+            Self::I16(v) => Packed::pack(v, dims, packed::Stored::I16),
+            Self::U16(v) => Packed::pack(v, dims, packed::Stored::U16),
+            _ => None,
+        };
+        match p {
+            Some(p) if p.byte_len() < self.byte_len() => Self::Packed(p),
+            _ => self,
         }
     }
 }
@@ -208,6 +238,7 @@ impl Volume {
         }
         let d = self.dims;
         let voxels = match &self.voxels {
+            Voxels::Packed(p) => return self.with_voxels(p.unpack()).reduced(factors),
             Voxels::U8(v) => Voxels::U8(reduce(v, d, f, dims, f64::from, |x| x.round() as u8)),
             Voxels::I16(v) => Voxels::I16(reduce(v, d, f, dims, f64::from, |x| x.round() as i16)),
             Voxels::U16(v) => Voxels::U16(reduce(v, d, f, dims, f64::from, |x| x.round() as u16)),
@@ -222,6 +253,24 @@ impl Volume {
             dims,
             spacing_mm: std::array::from_fn(|a| self.spacing_mm[a] * f[a] as f64),
             origin_mm: origin.into(),
+            direction: self.direction,
+            voxels,
+            value_slope: self.value_slope,
+            value_intercept: self.value_intercept,
+            modality: self.modality,
+            pet: self.pet.clone(),
+            frame_of_reference: self.frame_of_reference.clone(),
+            source: self.source.clone(),
+            warnings: self.warnings.clone(),
+        }
+    }
+
+    /// The same volume (geometry, rescale, modality, notes) with other voxels of its size.
+    pub fn with_voxels(&self, voxels: Voxels) -> Self {
+        Self {
+            dims: self.dims,
+            spacing_mm: self.spacing_mm,
+            origin_mm: self.origin_mm,
             direction: self.direction,
             voxels,
             value_slope: self.value_slope,
@@ -280,9 +329,22 @@ impl Volume {
     /// the stored value; [`Self::non_finite_count`] says how many voxels are replaced.
     pub fn values_into(&self, start: usize, out: &mut [f32]) {
         let mut all_finite = true;
-        for (n, o) in out.iter_mut().enumerate() {
-            *o = self.value(start + n);
-            all_finite &= o.is_finite();
+        if let Voxels::Packed(p) = &self.voxels {
+            // Decoded a run at a time rather than voxel by voxel.
+            let mut raw = [0i32; 4096];
+            for (n, chunk) in out.chunks_mut(raw.len()).enumerate() {
+                let raw = &mut raw[..chunk.len()];
+                p.decode_into(start + n * 4096, raw);
+                for (o, &r) in chunk.iter_mut().zip(raw.iter()) {
+                    *o = r as f32 * self.value_slope + self.value_intercept;
+                    all_finite &= o.is_finite();
+                }
+            }
+        } else {
+            for (n, o) in out.iter_mut().enumerate() {
+                *o = self.value(start + n);
+                all_finite &= o.is_finite();
+            }
         }
         if !all_finite {
             self.replace_non_finite(start, out);

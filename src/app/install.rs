@@ -21,6 +21,11 @@ pub(super) struct Uploading {
 /// Upload slabs a frame may write, in seconds (at least one slab per frame).
 const UPLOAD_SECONDS_PER_FRAME: f64 = 0.05;
 
+/// Voxels from this size on are kept packed (`Voxels::packed`: lossless, about half a CT's
+/// bytes, any voxel still read directly): a 512 x 512 x 128 CT and larger. Below it the saving
+/// is small and the dense copy is read faster (a PET read every frame for its overlay).
+pub const PACK_FROM_BYTES: usize = 64 << 20;
+
 impl ShapecastApp {
     /// Makes a loaded volume the displayed one (or says why it cannot be shown), with the
     /// series list of the files it came from (`None`: files of one series, another format, a
@@ -42,6 +47,11 @@ impl ShapecastApp {
                 "{before:?} voxels exceed this GPU's largest 3D texture ({max} per side): shown and computed as {:?} voxels, averaged {factors:?}",
                 volume.dims
             ));
+        }
+        if volume.voxels.byte_len() >= PACK_FROM_BYTES {
+            let dense =
+                std::mem::replace(&mut volume.voxels, crate::volume::Voxels::U8(Vec::new()));
+            volume.voxels = dense.packed(volume.dims);
         }
         let (render, upload) = match RenderVolume::create(gpu, &volume) {
             Ok(r) => r,

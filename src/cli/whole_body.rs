@@ -186,14 +186,23 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
     let mut volume: Volume = super::bench::tile_along_z(&loaded, opts.slices.max(1));
     drop(loaded);
     volume.spacing_mm[2] = WHOLE_BODY_SLICE_MM;
+    let load_s = t0.elapsed().as_secs_f64();
+    let dense_mb = volume.voxels.byte_len() >> 20;
+    // Packed as the viewer keeps it (`app::PACK_FROM_BYTES`).
+    let t = Instant::now();
+    if volume.voxels.byte_len() >= crate::app::PACK_FROM_BYTES {
+        let dense = std::mem::replace(&mut volume.voxels, crate::volume::Voxels::U8(Vec::new()));
+        volume.voxels = dense.packed(volume.dims);
+    }
+    let pack_s = t.elapsed().as_secs_f64();
     // Shared with the feature job, as the viewer does: one copy of the voxels.
     let volume = std::sync::Arc::new(volume);
-    let load_s = t0.elapsed().as_secs_f64();
     println!(
-        "volume: {:?} voxels ({:.0} M, {} MB as stored) from {} ({source_dims:?}) tiled along z at {WHOLE_BODY_SLICE_MM} mm",
+        "volume: {:?} voxels ({:.0} M, {dense_mb} MB as stored, {} MB kept as {} in {pack_s:.1} s) from {} ({source_dims:?}) tiled along z at {WHOLE_BODY_SLICE_MM} mm",
         volume.dims,
         volume.dims.iter().product::<usize>() as f64 / 1e6,
         volume.voxels.byte_len() >> 20,
+        volume.voxels.type_name(),
         input.display(),
     );
     println!(

@@ -131,6 +131,20 @@ pub enum Corruption {
 }
 
 impl LoadError {
+    /// The `LoadError` an `io::Error` carries (a read of the file that failed inside a
+    /// decompressor, which only passes `io::Error`s on), or the `io::Error` itself.
+    pub(crate) fn carried_by(e: std::io::Error) -> Result<Self, std::io::Error> {
+        if !e.get_ref().is_some_and(|inner| inner.is::<Self>()) {
+            return Err(e);
+        }
+        let kind = e.kind();
+        match e.into_inner().map(|inner| inner.downcast::<Self>()) {
+            Some(Ok(load)) => Ok(*load),
+            Some(Err(other)) => Err(std::io::Error::new(kind, other)),
+            None => Err(std::io::Error::from(kind)),
+        }
+    }
+
     /// A compressed stream that cannot be inflated.
     pub(crate) fn decompress(
         file: &str,

@@ -86,6 +86,15 @@ fn zip_error(archive: &str, entry: Option<&str>, e: ::zip::result::ZipError) -> 
             "zip entry",
             "encrypted; unpack it and drop the files",
         ),
+        ZipError::Io(e) => match LoadError::carried_by(e) {
+            Ok(read_failed) => read_failed,
+            Err(e) => LoadError::decompress(
+                &file,
+                "zip archive",
+                crate::io::Corruption::Corrupt,
+                Some(e.into()),
+            ),
+        },
         other => LoadError::decompress(
             &file,
             "zip archive",
@@ -112,7 +121,7 @@ impl std::io::Read for ArchiveReader {
         let data = self.file.data();
         let n = data.len().saturating_sub(self.pos).min(buf.len() as u64) as usize;
         data.read_at(&self.file.name, self.pos, &mut buf[..n])
-            .map_err(|e| std::io::Error::other(e.to_string()))?;
+            .map_err(std::io::Error::other)?;
         self.pos += n as u64;
         Ok(n)
     }

@@ -448,10 +448,7 @@ fn orthanc_listing_retrieval_geometry_and_messages() {
         })
         .expect("parse");
     assert_eq!(parts.len(), 1);
-    let e = retrieval
-        .received(fetch.id, parts)
-        .expect_err("an error")
-        .to_string();
+    let e = shapecast::error::chain(&retrieval.received(fetch.id, parts).expect_err("an error"));
     assert!(
         e.contains("1.2.840.10008.1.2.4.80")
             && e.contains("JPEG-LS")
@@ -1421,10 +1418,11 @@ fn an_instance_cut_short_is_asked_for_again_then_named() {
         let server = CutShortServer::start(instance.clone(), declared_length);
         let base = Base::parse(&format!("http://127.0.0.1:{}/dw", server.port)).expect("base");
         let client = Client::new(base, Auth::None).expect("client");
-        let e = client
-            .retrieve(STUDY, SERIES, &mut |_| {})
-            .expect_err("an error")
-            .to_string();
+        let e = shapecast::error::chain(
+            &client
+                .retrieve(STUDY, SERIES, &mut |_| {})
+                .expect_err("an error"),
+        );
         assert!(
             e.starts_with(&format!("instance 2 of 2 ({SERIES}.2) failed 2 times")),
             "{e}"

@@ -19,4 +19,5 @@ mod dicomweb_orthanc;
 mod hostile;
 mod loaders;
 mod memory;
+mod packed;
 mod pet_ct;

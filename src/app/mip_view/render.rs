@@ -86,9 +86,14 @@ impl MipView {
         band: Band,
     ) -> Result<(), String> {
         let resized = self.targets[slot].as_ref().is_none_or(|t| t.size != size);
-        let mut target = match self.targets[slot].take() {
-            Some(t) if !resized => t,
-            _ => RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?,
+        // A new target is made before the old one goes: if it cannot be, the old one stays.
+        let made = if resized {
+            Some(RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?)
+        } else {
+            None
+        };
+        let Some(mut target) = made.or_else(|| self.targets[slot].take()) else {
+            return Err("the ray caster is not ready".to_owned());
         };
         let camera = self.camera;
         let result = self.render_offscreen(gpu, shown, &camera, settings, &mut target, band);

@@ -114,6 +114,7 @@ pub(crate) fn tile_along_z(volume: &Volume, nz: usize) -> Volume {
     let plane = volume.dims[0] * volume.dims[1];
     let n = volume.dims[2].max(1);
     let voxels = match &volume.voxels {
+        Voxels::Packed(p) => return tile_along_z(&volume.with_voxels(p.unpack()), nz),
         Voxels::U8(v) => Voxels::U8(tile(v, plane, n, nz)),
         Voxels::I16(v) => Voxels::I16(tile(v, plane, n, nz)),
         Voxels::U16(v) => Voxels::U16(tile(v, plane, n, nz)),

@@ -98,7 +98,8 @@ impl FolderReader {
                 .notes
                 .push(format!("{}: DICOM without an image (skipped)", file.name)),
             Err(e) => {
-                self.notes.push(format!("skipped: {e}"));
+                self.notes
+                    .push(format!("skipped: {}", crate::error::chain(&e)));
                 self.first_error.get_or_insert(e);
             }
         }

@@ -130,7 +130,7 @@ pub(crate) fn list_series(
             Ok(Some(h)) => headers.push((i, h)),
             Ok(None) => notes.push(format!("{}: DICOM without an image (skipped)", f.name)),
             Err(e) => {
-                notes.push(format!("skipped: {e}"));
+                notes.push(format!("skipped: {}", crate::error::chain(&e)));
                 first_error.get_or_insert(e);
             }
         }

@@ -104,6 +104,8 @@ pub(super) fn store_frame(
                 .zip(samples)
                 .for_each(|(o, s)| *o = (*s as f64 * a + b) as f32)
         }
+        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
+        Voxels::Packed(_) => {}
     }
 }
 
@@ -165,7 +167,7 @@ impl Pixels<'_> {
                 .iter()
                 .map(|&(at, len)| encapsulated::read_range(file, at, len))
                 .collect::<Result<_, _>>()
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| crate::error::chain(&e))?;
             let refs: Vec<&[u8]> = read.iter().map(Vec::as_slice).collect();
             // The frame's fragments, read: frame 0 of them all.
             let whole = std::iter::once(0..refs.len()).collect::<Vec<_>>();
@@ -283,7 +285,7 @@ impl Pixels<'_> {
                 buf.resize(piece as usize, 0);
                 file.data()
                     .read_at(&file.name, offset + start, &mut buf)
-                    .map_err(|e| e.to_string())?;
+                    .map_err(|e| crate::error::chain(&e))?;
                 frame_samples(h, &buf, 0, 1, count, out)
             }
             Self::Encoded { .. } | Self::EncodedInFile { .. } => {

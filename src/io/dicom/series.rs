@@ -536,6 +536,8 @@ pub(super) fn reserve_exact(
         Voxels::I16(v) => go(v, count, name),
         Voxels::U16(v) => go(v, count, name),
         Voxels::F32(v) => go(v, count, name),
+        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
+        Voxels::Packed(_) => Ok(()),
     }
 }
 
@@ -551,5 +553,7 @@ fn fill_to(voxels: &mut Voxels, len: usize) {
         Voxels::I16(v) => go(v, len),
         Voxels::U16(v) => go(v, len),
         Voxels::F32(v) => go(v, len),
+        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
+        Voxels::Packed(_) => {}
     }
 }

@@ -115,7 +115,8 @@ impl SeriesBuilder {
                 return Ok(());
             }
             Err(e) => {
-                self.notes.push(format!("skipped: {e}"));
+                self.notes
+                    .push(format!("skipped: {}", crate::error::chain(&e)));
                 self.first_error.get_or_insert(e);
                 return Ok(());
             }
@@ -352,6 +353,8 @@ fn reserve(voxels: &mut Voxels, total: usize, name: &str) -> Result<(), LoadErro
         Voxels::I16(v) => go(v, total, name),
         Voxels::U16(v) => go(v, total, name),
         Voxels::F32(v) => go(v, total, name),
+        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
+        Voxels::Packed(_) => Ok(()),
     }
 }
 
@@ -372,6 +375,8 @@ fn grow(voxels: &mut Voxels, len: usize, name: &str) -> Result<(), LoadError> {
         Voxels::I16(v) => go(v, len, name),
         Voxels::U16(v) => go(v, len, name),
         Voxels::F32(v) => go(v, len, name),
+        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
+        Voxels::Packed(_) => Ok(()),
     }
 }
 
@@ -381,6 +386,8 @@ fn truncate(voxels: &mut Voxels, len: usize) {
         Voxels::I16(v) => v.truncate(len),
         Voxels::U16(v) => v.truncate(len),
         Voxels::F32(v) => v.truncate(len),
+        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
+        Voxels::Packed(_) => {}
     }
 }
 
@@ -392,6 +399,8 @@ pub(super) fn permute(voxels: &mut Voxels, order: &[usize], frame_len: usize) {
         Voxels::I16(v) => permute_frames(v, order, frame_len),
         Voxels::U16(v) => permute_frames(v, order, frame_len),
         Voxels::F32(v) => permute_frames(v, order, frame_len),
+        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
+        Voxels::Packed(_) => {}
     }
 }
 
@@ -456,6 +465,11 @@ fn rescaled(
             Voxels::I16(v) => rescale_into(dst, &v[src], a, b),
             Voxels::U16(v) => rescale_into(dst, &v[src], a, b),
             Voxels::F32(v) => rescale_into(dst, &v[src], a, b),
+            Voxels::Packed(p) => {
+                for (d, i) in dst.iter_mut().zip(src) {
+                    *d = (f64::from(p.get(i)) * a + b) as f32;
+                }
+            }
         }
     }
     Ok(Voxels::F32(out))

@@ -248,6 +248,7 @@ impl<T: Transport> Client<T> {
             match self.get_json_once(&url, what) {
                 Err(e) if e.is_retryable() && attempt < super::max_attempts(&e) => {
                     let wait = super::backoff(attempt, &e);
+                    let e = crate::error::chain(&e);
                     log::warn!("{e}; asking again in {:.1} s", wait.as_secs_f64());
                     std::thread::sleep(wait);
                 }

@@ -95,14 +95,14 @@ pub enum DicomWebError {
         available: String,
     },
 
-    #[error("{instance}: {source}")]
+    #[error("{instance}")]
     Load {
         instance: String,
         #[source]
         source: Box<LoadError>,
     },
 
-    #[error("{instance} failed {attempts} times; the last time: {source}")]
+    #[error("{instance} failed {attempts} times; the last time")]
     Failed {
         instance: String,
         attempts: u32,

@@ -163,12 +163,13 @@ impl InstanceListing {
             (_, Ok(body)) => match self.add(url, body) {
                 Ok(n) => Some(n),
                 Err(e) => {
-                    self.tried.push(format!("{url}: {e}"));
+                    self.tried
+                        .push(format!("{url}: {}", crate::error::chain(&e)));
                     None
                 }
             },
             (_, Err(e)) => {
-                self.tried.push(e.to_string());
+                self.tried.push(crate::error::chain(&e));
                 None
             }
         };

@@ -300,16 +300,18 @@ impl Retrieval {
             if matches!(error, DicomWebError::Busy { .. }) && self.series_attempts < 2 {
                 self.series_delay = super::backoff(self.series_attempts, &error);
                 log::warn!(
-                    "{}: {error}; asking again in {:.1} s",
+                    "{}: {}; asking again in {:.1} s",
                     self.label(SERIES_FETCH),
+                    crate::error::chain(&error),
                     self.series_delay.as_secs_f64()
                 );
                 self.series_request = SeriesRequest::Waiting;
                 return Ok(());
             }
             log::warn!(
-                "{}: {error}; asking instance by instance",
-                self.label(SERIES_FETCH)
+                "{}: {}; asking instance by instance",
+                self.label(SERIES_FETCH),
+                crate::error::chain(&error)
             );
             self.series_ended();
             return Ok(());
@@ -338,7 +340,8 @@ impl Retrieval {
         }
         self.delays[id] = super::backoff(self.attempts[id], &error);
         log::warn!(
-            "{label}: {error}; asking again in {:.1} s",
+            "{label}: {}; asking again in {:.1} s",
+            crate::error::chain(&error),
             self.delays[id].as_secs_f64()
         );
         self.queue.push_back(id);

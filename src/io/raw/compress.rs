@@ -103,7 +103,7 @@ impl<'a> Input<'a> {
             chunk.resize(n, 0);
             self.data
                 .read_at(self.file, at, &mut chunk)
-                .map_err(|e| std::io::Error::other(e.to_string()))?;
+                .map_err(std::io::Error::other)?;
             if chunk.iter().any(|&b| b != 0) {
                 return Ok(false);
             }
@@ -117,7 +117,7 @@ impl<'a> Input<'a> {
         let mut two = vec![0u8; self.remaining().min(2) as usize];
         self.data
             .read_at(self.file, self.pos, &mut two)
-            .map_err(|e| std::io::Error::other(e.to_string()))?;
+            .map_err(std::io::Error::other)?;
         Ok(two)
     }
 }
@@ -149,7 +149,7 @@ impl std::io::BufRead for Input<'_> {
                     self.buf.resize(n, 0);
                     self.data
                         .read_at(self.file, self.pos, &mut self.buf)
-                        .map_err(|e| std::io::Error::other(e.to_string()))?;
+                        .map_err(std::io::Error::other)?;
                     self.buf_start = self.pos;
                 }
                 Ok(&self.buf[(self.pos - self.buf_start) as usize..])
@@ -233,6 +233,10 @@ impl Read for Members<'_> {
 /// A stream that ended early is truncated; anything else the decompressor (or [`Members`])
 /// refused, a failed CRC-32 / Adler-32 included, is corrupt, with its complaint as the source.
 pub(super) fn decompress_error(file: &str, kind: Compression, e: std::io::Error) -> LoadError {
+    let e = match LoadError::carried_by(e) {
+        Ok(read_failed) => return read_failed,
+        Err(e) => e,
+    };
     if e.kind() == std::io::ErrorKind::UnexpectedEof {
         LoadError::decompress(file, kind.name(), Corruption::Truncated, None)
     } else {

@@ -347,6 +347,10 @@ pub(super) fn read_capped(
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
             Err(_) if !out.is_empty() => break,
             Err(e) => {
+                let e = match LoadError::carried_by(e) {
+                    Ok(read_failed) => return Err(read_failed),
+                    Err(e) => e,
+                };
                 let problem = if e.kind() == std::io::ErrorKind::UnexpectedEof {
                     Corruption::Truncated
                 } else {

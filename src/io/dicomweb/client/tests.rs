@@ -179,10 +179,7 @@ fn named_series_missing_study_and_failures_are_messages() {
     let mut a = archive(3);
     let url = format!("http://archive/dw/studies/{STUDY}/series/{SERIES}/instances/{SERIES}.1");
     a.answers.get_mut(&url).unwrap().2.truncate(100);
-    let e = client(a)
-        .retrieve(STUDY, SERIES, &mut |_| {})
-        .unwrap_err()
-        .to_string();
+    let e = crate::error::chain(&client(a).retrieve(STUDY, SERIES, &mut |_| {}).unwrap_err());
     assert!(
         e.starts_with(&format!("instance 2 of 3 ({SERIES}.1) failed 2 times"))
             && e.contains("cut short"),
@@ -290,7 +287,7 @@ fn a_bad_part_mid_stream_ends_the_retrieval_without_hanging() {
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let result = c.retrieve(STUDY, SERIES, &mut |_| {}).map(|_| ());
-        let _ = tx.send(result.map_err(|e| e.to_string()));
+        let _ = tx.send(result.map_err(|e| crate::error::chain(&e)));
     });
     let result = rx
         .recv_timeout(Duration::from_secs(60))

@@ -127,10 +127,7 @@ fn undecodable_instances_are_named_with_their_syntax() {
     let f = r.next_fetch().unwrap();
     let mut s = Slice::axial(SERIES, 0, 2, 2);
     s.transfer_syntax = "1.2.840.10008.1.2.4.80".to_owned();
-    let e = r
-        .received(f.id, vec![part(s.bytes())])
-        .unwrap_err()
-        .to_string();
+    let e = crate::error::chain(&r.received(f.id, vec![part(s.bytes())]).unwrap_err());
     assert!(
         e.starts_with(&format!("instance 1 of 1 ({SERIES}.0): "))
             && e.contains("1.2.840.10008.1.2.4.80")
