@@ -1200,3 +1200,95 @@ fn findings_list_the_pet_hot_spots_and_a_click_goes_to_one() {
         "{magenta} magenta pixels: no hot-spot ring in the axial pane"
     );
 }
+
+/// A NIfTI-1 file of int16 voxels of `dims`, voxel `(i, j, k)` holding `value(i, j, k)`.
+fn nifti_i16(dims: [usize; 3], value: impl Fn(usize, usize, usize) -> i16) -> Vec<u8> {
+    let mut b = vec![0u8; 352];
+    b[0..4].copy_from_slice(&348i32.to_le_bytes());
+    b[40..42].copy_from_slice(&3i16.to_le_bytes());
+    for (a, d) in dims.iter().enumerate() {
+        b[42 + 2 * a..44 + 2 * a].copy_from_slice(&(*d as i16).to_le_bytes());
+    }
+    b[70..72].copy_from_slice(&4i16.to_le_bytes()); // DT_INT16
+    b[72..74].copy_from_slice(&16i16.to_le_bytes());
+    for a in 0..4 {
+        b[76 + 4 * a..80 + 4 * a].copy_from_slice(&1f32.to_le_bytes());
+    }
+    b[108..112].copy_from_slice(&352f32.to_le_bytes());
+    b[344..348].copy_from_slice(b"n+1\0");
+    b.reserve(2 * dims.iter().product::<usize>());
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                b.extend_from_slice(&value(i, j, k).to_le_bytes());
+            }
+        }
+    }
+    b
+}
+
+/// A large CT is kept packed once shown (`app::PACK_FROM_BYTES`), and what reads the CPU copy
+/// (the values the status bar, measurements and findings read) gets the file's values.
+#[test]
+fn a_large_volume_is_kept_packed_and_reads_the_file_s_values() {
+    let Some(mut harness) = harness(intensity_only(StartWith::Phantom("sphere".into()))) else {
+        return;
+    };
+    // 256 x 256 x 512 int16 = 64 MiB: air with noise, a body of soft tissue, bone up to 3000 HU.
+    let dims = [256, 256, 512];
+    assert_eq!(
+        2 * dims.iter().product::<usize>(),
+        shapecast::app::PACK_FROM_BYTES
+    );
+    let value = |i: usize, j: usize, k: usize| -> i16 {
+        let (x, y) = (i as i64 - 128, j as i64 - 128);
+        let noise = ((i * 7 + j * 13 + k * 29) % 23) as i16;
+        match x * x + y * y {
+            r2 if r2 < 20 * 20 => 3000 - noise,
+            r2 if r2 < 100 * 100 => 40 + noise,
+            _ => -1000 + noise,
+        }
+    };
+    harness.state_mut().open(LoadSource::Files {
+        label: "large.nii".into(),
+        files: vec![shapecast::io::InputFile::new(
+            "large.nii",
+            nifti_i16(dims, value),
+        )],
+    });
+    run_until(&mut harness, "the large volume shown", 400, |app| {
+        app.volume().is_some_and(|v| v.dims == dims)
+    });
+    let volume = harness.state().volume().expect("shown");
+    assert!(
+        matches!(volume.voxels, shapecast::Voxels::Packed(_)),
+        "{}",
+        volume.voxels.type_name()
+    );
+    assert!(volume.voxels.byte_len() < shapecast::app::PACK_FROM_BYTES / 2);
+    for (i, j, k) in [
+        (0, 0, 0),
+        (128, 128, 256),
+        (200, 128, 17),
+        (255, 255, 511),
+        (130, 131, 400),
+    ] {
+        assert_eq!(
+            volume.value_at(i, j, k),
+            f32::from(value(i, j, k)),
+            "({i}, {j}, {k})"
+        );
+    }
+    // The status bar reads the crosshair's value from the packed copy.
+    harness.state_mut().set_crosshair([128, 128, 256]);
+    harness.run_steps(2);
+    use egui_kittest::kittest::Queryable as _;
+    let hu = value(128, 128, 256);
+    assert!(
+        harness
+            .query_all_by_label_contains(&hu.to_string())
+            .next()
+            .is_some(),
+        "the value {hu} is not on screen"
+    );
+}
