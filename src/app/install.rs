@@ -21,9 +21,10 @@ pub(super) struct Uploading {
 /// Upload slabs a frame may write, in seconds (at least one slab per frame).
 const UPLOAD_SECONDS_PER_FRAME: f64 = 0.05;
 
-/// Voxels from this size on are kept packed (`Voxels::packed`: lossless, about half a CT's
-/// bytes, any voxel still read directly): a 512 x 512 x 128 CT and larger. Below it the saving
-/// is small and the dense copy is read faster (a PET read every frame for its overlay).
+/// Voxels from this size on are kept packed natively (`Voxels::packed`: lossless, about half a
+/// CT's bytes, any voxel still read directly; `Platform::packs_voxels` says why not in the
+/// page): a 512 x 512 x 128 CT and larger. Below it the saving is small and the dense copy is
+/// read faster (a PET read every frame for its overlay).
 pub const PACK_FROM_BYTES: usize = 64 << 20;
 
 impl ShapecastApp {
@@ -48,7 +49,7 @@ impl ShapecastApp {
                 volume.dims
             ));
         }
-        if volume.voxels.byte_len() >= PACK_FROM_BYTES {
+        if self.platform.packs_voxels() && volume.voxels.byte_len() >= PACK_FROM_BYTES {
             let dense =
                 std::mem::replace(&mut volume.voxels, crate::volume::Voxels::U8(Vec::new()));
             volume.voxels = dense.packed(volume.dims);

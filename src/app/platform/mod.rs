@@ -51,4 +51,10 @@ pub trait Platform {
 
     /// The address of the page, which a link to the view starts with (empty natively).
     fn page_address(&self) -> String;
+
+    /// Whether a large volume's CPU copy is kept packed (`Voxels::packed`). Packing holds the
+    /// dense and the packed copy at once; natively the dense one then goes back to the system,
+    /// but a page's WebAssembly memory never shrinks, so there it would only add the packed
+    /// copy to the tab's peak.
+    fn packs_voxels(&self) -> bool;
 }

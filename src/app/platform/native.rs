@@ -73,4 +73,8 @@ impl Platform for Native {
     fn page_address(&self) -> String {
         String::new()
     }
+
+    fn packs_voxels(&self) -> bool {
+        true
+    }
 }

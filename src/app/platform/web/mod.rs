@@ -72,6 +72,10 @@ impl Platform for Web {
             })
             .unwrap_or_default()
     }
+
+    fn packs_voxels(&self) -> bool {
+        false
+    }
 }
 
 /// Offers `png` to the user as a download named `name`.
