@@ -204,7 +204,6 @@ struct Done {
     seconds: f64,
 }
 
-#[allow(clippy::too_many_arguments)]
 fn process(
     ctx: &GpuContext,
     client: &Client,

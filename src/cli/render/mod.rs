@@ -402,29 +402,18 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let mut target = RaycastTarget::new(&ctx, size)?;
     caster.render(&ctx, &scene, &camera, &settings, &mut target, ..)?;
 
+    let shot = Shot {
+        ctx: &ctx,
+        caster: &caster,
+        scene: &scene,
+        camera: &camera,
+        settings: &settings,
+    };
     if let Some(frames) = args.bench {
-        bench(
-            &ctx,
-            &caster,
-            &scene,
-            &camera,
-            &settings,
-            &mut target,
-            frames,
-        )?;
+        bench(&shot, &mut target, frames)?;
     }
     if let Some(n) = args.turntable {
-        let frames = turntable(
-            &ctx,
-            &caster,
-            &scene,
-            &camera,
-            &settings,
-            &mut target,
-            n,
-            args.out.as_deref(),
-            args.store,
-        )?;
+        let frames = turntable(&shot, &mut target, n, args.out.as_deref(), args.store)?;
         if let (true, Some(archive)) = (args.store, &archive) {
             let rotation = crate::io::dicomweb::stow::Rotation {
                 width: size[0],
@@ -516,17 +505,14 @@ pub fn rotation_frames(
         feature_bricks: feature_bricks.as_ref(),
     };
     let mut target = RaycastTarget::new(ctx, size)?;
-    turntable(
+    let shot = Shot {
         ctx,
-        &caster,
-        &scene,
-        &camera,
-        &settings,
-        &mut target,
-        n,
-        None,
-        true,
-    )
+        caster: &caster,
+        scene: &scene,
+        camera: &camera,
+        settings: &settings,
+    };
+    turntable(&shot, &mut target, n, None, true)
 }
 
 /// The series' description after "Shapecast", e.g. "shape MIP, RST, lymph-nodes".
@@ -548,21 +534,34 @@ pub fn method_name(method: RenderMethod) -> &'static str {
     }
 }
 
+/// What a render draws and how: the device, the ray caster, the scene, the camera and the
+/// settings (`render --bench` and `--turntable` turn the camera from there).
+#[derive(Clone, Copy)]
+pub(super) struct Shot<'a> {
+    pub ctx: &'a GpuContext,
+    pub caster: &'a Raycaster,
+    pub scene: &'a Scene<'a>,
+    pub camera: &'a Camera,
+    pub settings: &'a RenderSettings,
+}
+
 /// Frames `0..n` of a full turn: frame `f` is the view turned by `360 f / n` degrees about its
 /// vertical axis, written as `dir/frame_FFFF.png` when a folder is given; returned as RGBA
 /// when `keep` (else none are kept: a long turn is written frame by frame).
-#[allow(clippy::too_many_arguments)]
 fn turntable(
-    ctx: &GpuContext,
-    caster: &Raycaster,
-    scene: &Scene<'_>,
-    camera: &Camera,
-    settings: &RenderSettings,
+    shot: &Shot<'_>,
     target: &mut RaycastTarget,
     n: u32,
     dir: Option<&std::path::Path>,
     keep: bool,
 ) -> anyhow::Result<Vec<Vec<u8>>> {
+    let Shot {
+        ctx,
+        caster,
+        scene,
+        camera,
+        settings,
+    } = *shot;
     if let Some(dir) = dir {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }

@@ -4,14 +4,17 @@
 use super::*;
 
 pub(super) fn bench(
-    ctx: &GpuContext,
-    caster: &Raycaster,
-    scene: &Scene<'_>,
-    camera: &Camera,
-    settings: &RenderSettings,
+    shot: &Shot<'_>,
     target: &mut RaycastTarget,
     frames: u32,
 ) -> anyhow::Result<()> {
+    let Shot {
+        ctx,
+        caster,
+        scene,
+        camera,
+        settings,
+    } = *shot;
     // The first frame (already submitted) compiles the pipeline: wait for it before timing.
     ctx.device
         .poll(wgpu::PollType::wait_indefinitely())
@@ -44,9 +47,14 @@ pub(super) fn bench(
         },
         ctx.adapter_label()
     );
+    let ms = |x: f64| (x * 1e3).round() / 1e3;
     println!(
-        "{{\"frame_ms_mean\": {mean:.3}, \"frame_ms_min\": {min:.3}, \"frames\": {}}}",
-        times.len()
+        "{}",
+        serde_json::json!({
+            "frame_ms_mean": ms(mean),
+            "frame_ms_min": ms(min),
+            "frames": times.len(),
+        })
     );
     Ok(())
 }
