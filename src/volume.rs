@@ -253,19 +253,12 @@ impl Volume {
             dims,
             spacing_mm: std::array::from_fn(|a| self.spacing_mm[a] * f[a] as f64),
             origin_mm: origin.into(),
-            direction: self.direction,
-            voxels,
-            value_slope: self.value_slope,
-            value_intercept: self.value_intercept,
-            modality: self.modality,
-            pet: self.pet.clone(),
-            frame_of_reference: self.frame_of_reference.clone(),
-            source: self.source.clone(),
-            warnings: self.warnings.clone(),
+            ..self.with_voxels(voxels)
         }
     }
 
-    /// The same volume (geometry, rescale, modality, notes) with other voxels of its size.
+    /// The same volume (geometry, rescale, modality, notes) with other voxels (of its size, or
+    /// the caller sets the geometry that goes with them).
     pub fn with_voxels(&self, voxels: Voxels) -> Self {
         Self {
             dims: self.dims,

@@ -8,24 +8,19 @@ pub(super) fn bench(
     target: &mut RaycastTarget,
     frames: u32,
 ) -> anyhow::Result<()> {
-    let Shot {
-        ctx,
-        caster,
-        scene,
-        camera,
-        settings,
-    } = *shot;
+    let (ctx, scene) = (shot.ctx, shot.scene);
     // The first frame (already submitted) compiles the pipeline: wait for it before timing.
     ctx.device
         .poll(wgpu::PollType::wait_indefinitely())
         .context("waiting for the GPU")?;
     let mut times = Vec::new();
-    let mut cam = *camera;
+    let mut cam = *shot.camera;
     for _ in 0..frames.max(1) {
         // Turn a little every frame, as a drag does.
         cam.orbit(2.0, 0.0);
         let t = web_time::Instant::now();
-        caster.render(ctx, scene, &cam, settings, target, ..)?;
+        shot.caster
+            .render(ctx, scene, &cam, shot.settings, target, ..)?;
         ctx.device
             .poll(wgpu::PollType::wait_indefinitely())
             .context("waiting for the GPU")?;
