@@ -439,6 +439,18 @@ impl Volume {
         if n == 0 {
             return None;
         }
+        // Packed voxels know their range brick by brick (integers: finite under a finite
+        // rescale).
+        if let Voxels::Packed(p) = &self.voxels {
+            let (lo, hi) = p.range()?;
+            let (a, b) = (
+                lo as f32 * self.value_slope + self.value_intercept,
+                hi as f32 * self.value_slope + self.value_intercept,
+            );
+            if a.is_finite() && b.is_finite() {
+                return Some((a.min(b), a.max(b)));
+            }
+        }
         let mut lo = f32::INFINITY;
         let mut hi = f32::NEG_INFINITY;
         for idx in 0..n {

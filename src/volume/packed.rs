@@ -17,13 +17,21 @@ pub enum Stored {
     U16,
 }
 
-/// One brick: where its bits start, its minimum, and its bits per voxel (0: constant).
+/// One brick: where its bits start, its minimum and maximum, and its bits per voxel (0:
+/// constant).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Brick {
     bit: u64,
     min: i32,
+    max: i32,
     bits: u8,
 }
+
+/// The integer types that pack (their range, at most 65535, fits 16 bits).
+pub trait Narrow: Copy + Into<i32> {}
+impl Narrow for u8 {}
+impl Narrow for i16 {}
+impl Narrow for u16 {}
 
 /// Integer voxels packed brick by brick (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
@@ -38,11 +46,7 @@ pub struct Packed {
 
 impl Packed {
     /// Packs `values` (i fastest) of a volume of `dims`; `None` when the counts disagree.
-    pub fn pack<T: Copy + Into<i32>>(
-        values: &[T],
-        dims: [usize; 3],
-        stored: Stored,
-    ) -> Option<Self> {
+    pub fn pack<T: Narrow>(values: &[T], dims: [usize; 3], stored: Stored) -> Option<Self> {
         let n = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d))?;
         if n != values.len() {
             return None;
@@ -60,7 +64,12 @@ impl Packed {
                 hi = hi.max(v);
             });
             let bits = bits_for((hi - lo) as u32);
-            bricks.push(Brick { bit, min: lo, bits });
+            bricks.push(Brick {
+                bit,
+                min: lo,
+                max: hi,
+                bits,
+            });
             bit += u64::from(bits) * BRICK as u64;
         }
         let mut words = vec![0u64; bit.div_ceil(64) as usize];
@@ -104,14 +113,35 @@ impl Packed {
         self.words.len() * 8 + self.bricks.len() * std::mem::size_of::<Brick>()
     }
 
-    /// The stored value at linear index `index` (i fastest).
+    /// The smallest and largest stored value, from the bricks' own (`None` when empty).
+    pub fn range(&self) -> Option<(i32, i32)> {
+        let lo = self.bricks.iter().map(|b| b.min).min()?;
+        let hi = self.bricks.iter().map(|b| b.max).max()?;
+        Some((lo, hi))
+    }
+
+    /// The stored value at linear index `index` (i fastest; below [`Self::len`]).
     #[inline]
     pub fn get(&self, index: usize) -> i32 {
-        let nx = self.dims[0];
-        let ny = self.dims[1];
-        let (i, rest) = (index % nx, index / nx);
-        let (j, k) = (rest % ny, rest / ny);
+        debug_assert!(index < self.len());
+        let [i, j, k] = self.ijk(index);
         self.get_ijk(i, j, k)
+    }
+
+    /// Voxel (i, j, k) of a linear index: 32-bit divisions where the volume allows (up to 4 G
+    /// voxels, a 512 x 512 x 16,000 CT), about twice as fast as 64-bit ones.
+    #[inline]
+    fn ijk(&self, index: usize) -> [usize; 3] {
+        let (nx, ny) = (self.dims[0].max(1), self.dims[1].max(1));
+        if let (Ok(x), Ok(nx32), Ok(ny32)) =
+            (u32::try_from(index), u32::try_from(nx), u32::try_from(ny))
+        {
+            let (rest, i) = (x / nx32, x % nx32);
+            [i as usize, (rest % ny32) as usize, (rest / ny32) as usize]
+        } else {
+            let (rest, i) = (index / nx, index % nx);
+            [i, rest % ny, rest / ny]
+        }
     }
 
     #[inline]
@@ -132,14 +162,12 @@ impl Packed {
 
     /// The stored values of linear indices `start..start + out.len()`, row by row.
     pub fn decode_into(&self, start: usize, out: &mut [i32]) {
+        debug_assert!(start + out.len() <= self.len());
         let nx = self.dims[0].max(1);
-        let ny = self.dims[1].max(1);
         let mut idx = start;
         let mut o = 0;
         while o < out.len() {
-            let i = idx % nx;
-            let rest = idx / nx;
-            let (j, k) = (rest % ny, rest / ny);
+            let [i, j, k] = self.ijk(idx);
             // A run along i within one brick.
             let run = (EDGE - i % EDGE).min(nx - i).min(out.len() - o);
             let b = i / EDGE + self.grid[0] * (j / EDGE + self.grid[1] * (k / EDGE));
@@ -160,14 +188,24 @@ impl Packed {
         }
     }
 
-    /// The voxels as they were.
+    /// The voxels as they were (decoded a run at a time: no buffer beside the result).
     pub fn unpack(&self) -> super::Voxels {
-        let mut all = vec![0i32; self.len()];
-        self.decode_into(0, &mut all);
+        fn into<T>(p: &Packed, narrow: impl Fn(i32) -> T) -> Vec<T> {
+            let mut out = Vec::with_capacity(p.len());
+            let mut run = [0i32; 4096];
+            let mut at = 0;
+            while at < p.len() {
+                let run = &mut run[..(p.len() - at).min(4096)];
+                p.decode_into(at, run);
+                out.extend(run.iter().map(|&v| narrow(v)));
+                at += run.len();
+            }
+            out
+        }
         match self.stored {
-            Stored::U8 => super::Voxels::U8(all.into_iter().map(|v| v as u8).collect()),
-            Stored::I16 => super::Voxels::I16(all.into_iter().map(|v| v as i16).collect()),
-            Stored::U16 => super::Voxels::U16(all.into_iter().map(|v| v as u16).collect()),
+            Stored::U8 => super::Voxels::U8(into(self, |v| v as u8)),
+            Stored::I16 => super::Voxels::I16(into(self, |v| v as i16)),
+            Stored::U16 => super::Voxels::U16(into(self, |v| v as u16)),
         }
     }
 }
@@ -265,8 +303,13 @@ mod tests {
         let v: Vec<u8> = (0..1000u32).map(|i| (i * 37 % 256) as u8).collect();
         let p = Packed::pack(&v, [10, 10, 10], Stored::U8).expect("counts agree");
         assert_eq!(p.unpack(), Voxels::U8(v));
-        let v: Vec<u16> = (0..4096u32).map(|i| (i * 16 + i % 16) as u16).collect();
+        let mut v: Vec<u16> = (0..4096u32).map(|i| (i * 16 + i % 16) as u16).collect();
+        // A brick spanning the whole range: 16 bits.
+        v[0] = 0;
+        v[1] = u16::MAX;
         let p = Packed::pack(&v, [16, 16, 16], Stored::U16).expect("counts agree");
+        assert_eq!(p.bricks[0].bits, 16);
+        assert_eq!(p.range(), Some((0, 65535)));
         assert_eq!(p.unpack(), Voxels::U16(v));
         // A count that does not match the dims is refused.
         assert!(Packed::pack(&[0i16; 7], [2, 2, 2], Stored::I16).is_none());

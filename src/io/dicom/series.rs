@@ -536,8 +536,13 @@ pub(super) fn reserve_exact(
         Voxels::I16(v) => go(v, count, name),
         Voxels::U16(v) => go(v, count, name),
         Voxels::F32(v) => go(v, count, name),
-        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
-        Voxels::Packed(_) => Ok(()),
+        // Loaders fill dense buffers (`PixelType::empty`); only the viewer packs a volume,
+        // after loading. Said rather than written into nothing.
+        Voxels::Packed(_) => Err(LoadError::unsupported(
+            name,
+            "voxel buffer",
+            "internal: a packed buffer cannot be filled",
+        )),
     }
 }
 

@@ -353,8 +353,13 @@ fn reserve(voxels: &mut Voxels, total: usize, name: &str) -> Result<(), LoadErro
         Voxels::I16(v) => go(v, total, name),
         Voxels::U16(v) => go(v, total, name),
         Voxels::F32(v) => go(v, total, name),
-        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
-        Voxels::Packed(_) => Ok(()),
+        // Loaders fill dense buffers (`PixelType::empty`); only the viewer packs a volume,
+        // after loading. Said rather than written into nothing.
+        Voxels::Packed(_) => Err(LoadError::unsupported(
+            name,
+            "voxel buffer",
+            "internal: a packed buffer cannot be filled",
+        )),
     }
 }
 
@@ -375,8 +380,13 @@ fn grow(voxels: &mut Voxels, len: usize, name: &str) -> Result<(), LoadError> {
         Voxels::I16(v) => go(v, len, name),
         Voxels::U16(v) => go(v, len, name),
         Voxels::F32(v) => go(v, len, name),
-        // Loaders fill dense buffers; only the viewer packs a volume, after loading.
-        Voxels::Packed(_) => Ok(()),
+        // Loaders fill dense buffers (`PixelType::empty`); only the viewer packs a volume,
+        // after loading. Said rather than written into nothing.
+        Voxels::Packed(_) => Err(LoadError::unsupported(
+            name,
+            "voxel buffer",
+            "internal: a packed buffer cannot be filled",
+        )),
     }
 }
 
