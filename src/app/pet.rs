@@ -347,7 +347,6 @@ impl PetState {
     }
 
     /// Whether a PET for the CT of `generation` is awaited (its download may be decoded).
-    #[cfg(target_arch = "wasm32")]
     pub fn awaits(&self, generation: u64) -> bool {
         self.loading_for == Some(generation) && self.job.is_none()
     }

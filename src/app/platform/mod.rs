@@ -17,8 +17,65 @@ pub type Current = native::Native;
 #[cfg(target_arch = "wasm32")]
 pub type Current = web::Web;
 
+/// What happened outside the app's frame loop: files dropped or read, downloads, a link pasted
+/// into the page ([`Platform::take_events`]). The native window has only drops.
+// Each platform makes some of them: natively `Hover`, `Open` and `Failed`; the page all but
+// `Open`.
+#[allow(dead_code)]
+pub enum Event {
+    /// Files are dragged over the window (true) or not any more (false).
+    Hover(bool),
+    /// Paths or files dropped on the native window, to open.
+    Open(LoadSource),
+    /// `verb` ("reading", "downloading") `label`: `done` of `total` bytes (`total` 0 while
+    /// unknown).
+    Progress {
+        verb: &'static str,
+        label: String,
+        done: f64,
+        total: f64,
+    },
+    /// All files of one drop, one input selection, one download or the demo, read; `origin` is
+    /// how a link names them.
+    Files {
+        label: String,
+        files: Vec<crate::io::InputFile>,
+        origin: crate::app::view_link::ViewSource,
+    },
+    /// A DICOM set decoded as it was read (`FolderReader`): the volume, and the series list
+    /// when the files held several. `origin` is how a link names the files (`None` for another
+    /// series of the set shown: its origin stays).
+    Loaded {
+        loaded: Box<crate::io::Loaded>,
+        series: Option<crate::app::load::SeriesSet>,
+        origin: Option<crate::app::view_link::ViewSource>,
+    },
+    /// The PET series of a PET/CT study's files, read for the CT of `generation`.
+    PetLoaded {
+        loaded: Box<crate::io::Loaded>,
+        generation: u64,
+    },
+    /// Reading the PET series failed; the CT shown stays, without it.
+    PetFailed { message: String, generation: u64 },
+    /// The files of a PET/CT link's PET (`&pet=URL`), downloaded for the CT of `generation`.
+    PetFiles {
+        label: String,
+        files: Vec<crate::io::InputFile>,
+        generation: u64,
+    },
+    /// Reading failed; the message names the file.
+    Failed { message: String },
+    /// The user cancelled a download.
+    Cancelled { label: String },
+    /// A link was pasted into the address bar of the open page (only its fragment changed).
+    Link { fragment: String },
+}
+
 /// What the app asks of the platform it runs on.
 pub trait Platform {
+    /// What happened since the last frame (drops, the page's reads and downloads).
+    fn take_events(&mut self, ctx: &egui::Context) -> Vec<Event>;
+
     /// The "Open" menu's entries. Returns a load to start when the user chose one now (the
     /// page's file dialogs answer later, through its events).
     fn open_menu_ui(&mut self, ui: &mut egui::Ui) -> Option<LoadSource>;

@@ -1,7 +1,7 @@
 //! The native window's side of [`Platform`]: paths typed into "Open", files written into the
 //! pictures' folder, the demo CT embedded in the binary.
 
-use super::{LoadSource, Platform};
+use super::{Event, LoadSource, Platform};
 
 /// The native window.
 #[derive(Default)]
@@ -13,6 +13,41 @@ pub struct Native {
 }
 
 impl Platform for Native {
+    /// Files dropped on the window: paths when they have them, else their bytes.
+    fn take_events(&mut self, ctx: &egui::Context) -> Vec<Event> {
+        let (dropped, hovering) =
+            ctx.input(|i| (i.raw.dropped_files.clone(), !i.raw.hovered_files.is_empty()));
+        let mut events = vec![Event::Hover(hovering)];
+        if dropped.is_empty() {
+            return events;
+        }
+        let paths: Vec<std::path::PathBuf> = dropped
+            .iter()
+            .map(|f| f.path().to_path_buf())
+            .filter(|p| !p.as_os_str().is_empty())
+            .collect();
+        if paths.len() == dropped.len() {
+            events.push(Event::Open(LoadSource::Paths(paths)));
+            return events;
+        }
+        let mut files = Vec::new();
+        for f in &dropped {
+            let name = f.path().display().to_string();
+            match f.bytes() {
+                Ok(bytes) => files.push(crate::io::InputFile::new(name, bytes)),
+                Err(e) => {
+                    events.push(Event::Failed {
+                        message: format!("{name}: cannot read: {e}"),
+                    });
+                    return events;
+                }
+            }
+        }
+        let label = format!("{} dropped files", files.len());
+        events.push(Event::Open(LoadSource::Files { label, files }));
+        events
+    }
+
     fn open_menu_ui(&mut self, ui: &mut egui::Ui) -> Option<LoadSource> {
         let mut chosen = None;
         ui.menu_button("Open", |ui| {

@@ -14,6 +14,10 @@ use super::{LoadSource, Platform};
 pub struct Web;
 
 impl Platform for Web {
+    fn take_events(&mut self, _ctx: &egui::Context) -> Vec<super::Event> {
+        events::take_events()
+    }
+
     fn open_menu_ui(&mut self, ui: &mut egui::Ui) -> Option<LoadSource> {
         if ui
             .button("Open files…")
