@@ -68,6 +68,15 @@ pub enum LoadError {
     #[error("{file}: DICOM: {message}")]
     Dicom { file: String, message: String },
 
+    /// dicom-rs refused the file (`what` it was doing); `source` is its error.
+    #[error("{file}: DICOM: {what}")]
+    DicomRead {
+        file: String,
+        what: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+
     #[error("{file}: DICOM transfer syntax {uid} ({name}) is not supported: {reason}")]
     UnsupportedTransferSyntax {
         file: String,

@@ -42,7 +42,8 @@ fn expect_err(r: Result<Loaded, LoadError>, file: &str, words: &[&str]) -> LoadE
         Ok(l) => panic!("{file}: loaded {:?}", l.volume.dims),
         Err(e) => e,
     };
-    let m = e.to_string();
+    // As the user reads it: the error and its causes.
+    let m = shapecast::error::chain(&e);
     assert!(m.contains(file), "the error does not name {file}: {m}");
     for w in words {
         assert!(m.contains(w), "the error does not say {w:?}: {m}");

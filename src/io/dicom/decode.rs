@@ -209,13 +209,10 @@ pub(super) fn with_pixel_data<R>(
             if let Some(frags) = &fragments {
                 encapsulated::check_codestreams(&file.name, header, frags)?;
             }
-            decoded = obj.decode_pixel_data().map_err(|e| LoadError::Dicom {
+            decoded = obj.decode_pixel_data().map_err(|e| LoadError::DicomRead {
                 file: file.name.clone(),
-                message: format!(
-                    "cannot decode pixel data ({}): {}",
-                    header.transfer_syntax,
-                    crate::error::chain(&e)
-                ),
+                what: format!("cannot decode pixel data ({})", header.transfer_syntax),
+                source: Box::new(e),
             })?;
             decoded.data()
         }

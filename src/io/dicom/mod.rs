@@ -115,9 +115,10 @@ fn parse_located(
                 reason: "dicom-rs does not know this transfer syntax".to_owned(),
             };
         }
-        LoadError::Dicom {
+        LoadError::DicomRead {
             file: file.name.clone(),
-            message: crate::error::chain(&e),
+            what: "cannot read the data set".to_owned(),
+            source: Box::new(e),
         }
     })?;
     Ok(Some((obj, pixel_data)))
