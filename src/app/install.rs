@@ -27,6 +27,15 @@ const UPLOAD_SECONDS_PER_FRAME: f64 = 0.05;
 /// read faster (a PET read every frame for its overlay).
 pub const PACK_FROM_BYTES: usize = 64 << 20;
 
+/// Keeps `volume`'s voxels packed when they are [`PACK_FROM_BYTES`] or more (the viewer natively;
+/// `bench --whole-body` as the viewer does).
+pub fn pack_if_large(volume: &mut Volume) {
+    if volume.voxels.byte_len() >= PACK_FROM_BYTES {
+        let dense = std::mem::replace(&mut volume.voxels, crate::volume::Voxels::U8(Vec::new()));
+        volume.voxels = dense.packed(volume.dims);
+    }
+}
+
 impl ShapecastApp {
     /// Makes a loaded volume the displayed one (or says why it cannot be shown), with the
     /// series list of the files it came from (`None`: files of one series, another format, a
@@ -49,10 +58,8 @@ impl ShapecastApp {
                 volume.dims
             ));
         }
-        if self.platform.packs_voxels() && volume.voxels.byte_len() >= PACK_FROM_BYTES {
-            let dense =
-                std::mem::replace(&mut volume.voxels, crate::volume::Voxels::U8(Vec::new()));
-            volume.voxels = dense.packed(volume.dims);
+        if self.platform.packs_voxels() {
+            pack_if_large(&mut volume);
         }
         let (render, upload) = match RenderVolume::create(gpu, &volume) {
             Ok(r) => r,

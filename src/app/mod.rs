@@ -50,7 +50,7 @@ use crate::volume::Volume;
 
 pub use export::movie::MOVIE_FRAMES;
 pub use features::{DisplayMode, FeatureDisplay, FeatureEntry, FeatureParams, JobOutcome};
-pub use install::{PACK_FROM_BYTES, preset_for};
+pub use install::{PACK_FROM_BYTES, pack_if_large, preset_for};
 pub use load::{LoadSource, SeriesSet};
 pub use model::axes::SliceKind;
 pub use options::{AppOptions, StartWith};

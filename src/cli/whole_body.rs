@@ -188,12 +188,9 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
     volume.spacing_mm[2] = WHOLE_BODY_SLICE_MM;
     let load_s = t0.elapsed().as_secs_f64();
     let dense_mb = volume.voxels.byte_len() >> 20;
-    // Packed as the viewer keeps it (`app::PACK_FROM_BYTES`).
+    // Packed as the native viewer keeps it.
     let t = Instant::now();
-    if volume.voxels.byte_len() >= crate::app::PACK_FROM_BYTES {
-        let dense = std::mem::replace(&mut volume.voxels, crate::volume::Voxels::U8(Vec::new()));
-        volume.voxels = dense.packed(volume.dims);
-    }
+    crate::app::pack_if_large(&mut volume);
     let pack_s = t.elapsed().as_secs_f64();
     // Shared with the feature job, as the viewer does: one copy of the voxels.
     let volume = std::sync::Arc::new(volume);

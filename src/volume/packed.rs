@@ -253,6 +253,7 @@ fn take(words: &[u64], at: u64, bits: u8) -> u64 {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used)] // a failed expect is a failed test
 mod tests {
     use super::*;
     use crate::volume::Voxels;
