@@ -16,7 +16,6 @@ pub mod volume;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod cli;
-#[cfg(not(target_arch = "wasm32"))]
 pub mod files;
 
 pub use volume::{Modality, Volume, Voxels};

@@ -785,7 +785,26 @@ const RULES: &[Rule] = &[
         skip_tests: false,
     },
     Rule {
-        claim: "`anyhow` is named only in `src/cli`, `src/main.rs` and `app::run_native`",
+        claim: "in `src/app` only `src/app/platform/` and `src/app/pacs/transport/` ask \
+                `target_arch`",
+        scope: &["src/app/"],
+        patterns: &[Pattern::Ident("target_arch")],
+        allowed: &[
+            allow(
+                "src/app/platform/",
+                "`src/app/platform/`",
+                "the page's and the native window's sides",
+            ),
+            allow(
+                "src/app/pacs/transport/",
+                "`src/app/pacs/transport/`",
+                "the archive's tasks: `fetch` in the page, threads natively",
+            ),
+        ],
+        skip_tests: false,
+    },
+    Rule {
+        claim: "`anyhow` is named only in `src/cli` and `src/main.rs`",
         scope: &["src/"],
         patterns: &[Pattern::Ident("anyhow")],
         allowed: &[
@@ -794,13 +813,6 @@ const RULES: &[Rule] = &[
                 "src/main.rs",
                 "`src/main.rs`",
                 "the binary prints cli::run's error",
-            ),
-            // Exception to issue 30's rule (anyhow only in src/cli and main.rs): the native
-            // window's entry, which `shapecast view` calls, returns anyhow::Result.
-            allow(
-                "src/app/startup.rs",
-                "`app::run_native`",
-                "returns anyhow::Result",
             ),
         ],
         skip_tests: false,

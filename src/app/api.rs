@@ -110,7 +110,6 @@ impl ShapecastApp {
                 bytes: files.iter().map(crate::io::InputFile::len).sum(),
             }),
             LoadSource::Phantom(name) => Some(ViewSource::Phantom(name.clone())),
-            #[cfg(not(target_arch = "wasm32"))]
             LoadSource::Paths(_) => None,
             // Another series of the files shown: they came from where the shown one did.
             LoadSource::Series(_) => self.scene.as_ref().and_then(|s| s.origin.clone()),

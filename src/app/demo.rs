@@ -11,22 +11,6 @@ pub const DEMO_URL: &str = "demo/aorta_ct_cropped.nii.gz";
 /// Its dimensions (checked by the tests and the browser test).
 pub const DEMO_DIMS: [usize; 3] = [120, 126, 164];
 
-/// The demo CT's bytes, embedded natively (the web build fetches them instead of carrying 3.6 MB
-/// in the wasm).
-#[cfg(not(target_arch = "wasm32"))]
-pub fn demo_bytes() -> &'static [u8] {
-    include_bytes!("../../web/demo/aorta_ct_cropped.nii.gz")
-}
-
-/// The demo CT as a load source (natively; the web fetches it).
-#[cfg(not(target_arch = "wasm32"))]
-pub fn demo_source() -> super::load::LoadSource {
-    super::load::LoadSource::Files {
-        label: "demo CT".to_owned(),
-        files: vec![crate::io::InputFile::new(DEMO_FILE, demo_bytes().to_vec())],
-    }
-}
-
 pub const ATTRIBUTION: &str = "Demo CT: a cropped contrast-enhanced chest CT (heart, aorta, lung \
 vessels), 120 x 126 x 164 voxels at 1.5 mm, from the TotalSegmentator project by Jakob \
 Wasserthal and contributors (https://github.com/wasserth/TotalSegmentator, \

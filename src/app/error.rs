@@ -13,7 +13,6 @@ pub enum AppError {
     #[error(transparent)]
     Load(#[from] LoadError),
 
-    #[cfg(not(target_arch = "wasm32"))]
     #[error(transparent)]
     Files(#[from] crate::files::FilesError),
 

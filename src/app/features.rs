@@ -49,7 +49,7 @@ pub fn step_seconds_for(frame_s: f64, step_s: f64) -> f64 {
 /// about 4.5 times slower (bench.mjs 64, Li: 44% after 677 s, against done in 314 s with whole
 /// passes; docs/performance.md).
 pub fn paced(ctx: &GpuContext) -> bool {
-    !(cfg!(target_arch = "wasm32") && ctx.is_software())
+    !(ctx.in_browser() && ctx.is_software())
 }
 
 /// What the MIP and the slice overlay show.
@@ -424,7 +424,7 @@ impl FeatureManager {
         // is not what a frame costs: steps stay at `STEP_SECONDS` there.
         if let Some(step_s) = running.job.last_step_seconds()
             && paced(ctx)
-            && !cfg!(target_arch = "wasm32")
+            && !ctx.in_browser()
         {
             let seconds = step_seconds_for(frame_s, step_s);
             running.job.set_step_seconds(Some(seconds));

@@ -189,11 +189,11 @@ impl ShapecastApp {
         // The PET that came with a CT (a PET/CT study's folder) is read next, over it.
         self.pet.clear();
         if let (Some(set), Some(scene)) = (&self.series.set, &self.scene) {
-            self.pet.start_with(set, &scene.volume, self.generation);
+            self.pet
+                .start_with(set, &scene.volume, self.generation, &self.platform);
         }
         // ... and an archive's PET/CT study's PET series, retrieved over its CT.
         self.pacs_retrieve_pet(self.generation);
-        #[cfg(not(target_arch = "wasm32"))]
         if let Some(paths) = self.options.pet.take()
             && let Some(scene) = &self.scene
             && scene.volume.modality != crate::volume::Modality::Pt
@@ -225,7 +225,6 @@ impl ShapecastApp {
 impl ShapecastApp {
     /// Reads `source` as the PET of the CT shown and fuses it over it, replacing a PET shown
     /// (what `view CT --pet PET` does once the CT is shown). Nothing without a volume shown.
-    #[cfg(not(target_arch = "wasm32"))]
     pub fn open_pet(&mut self, source: LoadSource) {
         if self.scene.is_some() {
             self.pet.clear();

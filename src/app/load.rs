@@ -28,6 +28,21 @@ pub struct SeriesSet {
     pub chosen: usize,
 }
 
+mod read;
+
+use read::PathReader;
+
+/// The page's `File`s of a set of series (the browser), opaque here: only the page reads them
+/// again (`Platform::read_page_series`). Natively none is ever made.
+#[derive(Clone)]
+pub struct PageFiles(pub std::rc::Rc<dyn std::any::Any>);
+
+impl std::fmt::Debug for PageFiles {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("PageFiles")
+    }
+}
+
 /// Spacing the app renders the paper's phantoms at (as `shapecast phantom` does by default).
 pub const PHANTOM_SPACING_MM: f64 = 0.5;
 
@@ -39,8 +54,8 @@ pub enum LoadSource {
         label: String,
         files: Vec<InputFile>,
     },
-    /// Paths on this machine: files and folders (walked recursively), read step by step.
-    #[cfg(not(target_arch = "wasm32"))]
+    /// Paths on this machine: files and folders (walked recursively), read step by step
+    /// (natively; a page has no paths, and its load says so).
     Paths(Vec<std::path::PathBuf>),
     /// One of the paper's phantoms by name (`crate::phantom::NAMES`, "fig8-sphere"), or "demo".
     Phantom(String),
@@ -53,7 +68,6 @@ impl LoadSource {
     pub fn label(&self) -> String {
         match self {
             Self::Files { label, .. } => label.clone(),
-            #[cfg(not(target_arch = "wasm32"))]
             Self::Paths(paths) => match paths.as_slice() {
                 [one] => one.display().to_string(),
                 many => format!("{} files and folders", many.len()),
@@ -70,27 +84,25 @@ enum SetFiles {
     /// In memory, or natively read on demand from their paths.
     Inputs(Arc<Vec<InputFile>>),
     /// The page's `File`s (the browser): read again, whole and one at a time, when a series
-    /// is chosen (`web_files::load_series`), never held as bytes.
-    #[cfg(target_arch = "wasm32")]
-    Web(std::rc::Rc<Vec<web_sys::File>>),
+    /// is chosen (by the page, `Platform::read_page_series`), never held
+    /// as bytes. Natively a set never holds them (the type has no values there).
+    Page(PageFiles),
 }
 
 impl SeriesSet {
     /// The series of the page's `files` (by index into `list`'s files), `chosen` loaded.
-    #[cfg(target_arch = "wasm32")]
-    pub fn of_web_files(list: SeriesList, files: Vec<web_sys::File>, chosen: usize) -> Self {
+    pub fn of_page_files(list: SeriesList, files: PageFiles, chosen: usize) -> Self {
         Self {
             list: Arc::new(list),
-            files: SetFiles::Web(std::rc::Rc::new(files)),
+            files: SetFiles::Page(files),
             chosen,
         }
     }
 
     /// The page's files of a set read in the browser, when it is one.
-    #[cfg(target_arch = "wasm32")]
-    pub fn web_files(&self) -> Option<&[web_sys::File]> {
+    pub fn page_files(&self) -> Option<&PageFiles> {
         match &self.files {
-            SetFiles::Web(files) => Some(files),
+            SetFiles::Page(files) => Some(files),
             SetFiles::Inputs(_) => None,
         }
     }
@@ -135,11 +147,9 @@ pub enum LoadStep {
 }
 
 enum Stage {
-    #[cfg(not(target_arch = "wasm32"))]
     Listing(Vec<std::path::PathBuf>),
-    #[cfg(not(target_arch = "wasm32"))]
     Reading {
-        reader: native::Reader,
+        reader: PathReader,
         skipped: Vec<String>,
     },
     Decode {
@@ -180,7 +190,6 @@ impl LoadJob {
                 set,
                 announced: false,
             },
-            #[cfg(not(target_arch = "wasm32"))]
             LoadSource::Paths(paths) => Stage::Listing(paths),
             LoadSource::Phantom(name) => Stage::Phantom {
                 name,
@@ -207,14 +216,10 @@ impl LoadJob {
     /// Does the next bounded piece of work.
     pub fn step(&mut self) -> LoadStep {
         match std::mem::replace(&mut self.stage, Stage::Finished) {
-            #[cfg(not(target_arch = "wasm32"))]
-            Stage::Listing(paths) => match native::list(&paths) {
-                Ok((queue, skipped)) => {
-                    let what = format!("reading {} files", queue.len());
-                    self.stage = Stage::Reading {
-                        reader: native::Reader::new(queue),
-                        skipped,
-                    };
+            Stage::Listing(paths) => match PathReader::list(&paths) {
+                Ok((reader, skipped)) => {
+                    let what = format!("reading {} files", reader.remaining());
+                    self.stage = Stage::Reading { reader, skipped };
                     LoadStep::Working {
                         fraction: 0.0,
                         what,
@@ -222,7 +227,6 @@ impl LoadJob {
                 }
                 Err(e) => LoadStep::Failed(e),
             },
-            #[cfg(not(target_arch = "wasm32"))]
             Stage::Reading {
                 mut reader,
                 skipped,
@@ -232,19 +236,20 @@ impl LoadJob {
                 }
                 if reader.remaining() == 0 {
                     self.stage = Stage::Decode {
-                        files: reader.files,
+                        files: reader.into_files(),
                         announced: false,
                         skipped,
                     };
                     return self.step();
                 }
-                let fraction = reader.done_bytes as f32 / reader.total_bytes.max(1) as f32;
+                let (done, total) = reader.bytes();
+                let fraction = done as f32 / total.max(1) as f32;
                 let what = format!(
                     "reading {} of {} files ({:.0} of {:.0} MB)",
-                    reader.files.len(),
-                    reader.files.len() + reader.remaining(),
-                    reader.done_bytes as f64 / 1e6,
-                    reader.total_bytes as f64 / 1e6
+                    reader.files_read(),
+                    reader.files_read() + reader.remaining(),
+                    done as f64 / 1e6,
+                    total as f64 / 1e6
                 );
                 self.stage = Stage::Reading { reader, skipped };
                 LoadStep::Working {
@@ -330,9 +335,8 @@ impl LoadJob {
                 let limits = crate::io::Limits::default();
                 let loaded = match &set.files {
                     SetFiles::Inputs(files) => set.list.load(files, set.chosen, &limits),
-                    // Read asynchronously by `web_files::load_series`, not by a job.
-                    #[cfg(target_arch = "wasm32")]
-                    SetFiles::Web(_) => {
+                    // Read asynchronously by the page, not by a job.
+                    SetFiles::Page(_) => {
                         return LoadStep::Failed(AppError::Internal(
                             "a series of the page's files is read by the page",
                         ));
@@ -388,117 +392,6 @@ pub fn phantom_volume(name: &str) -> Option<Volume> {
     let p = crate::phantom::Phantom::by_name(name, None)?;
     let noise = p.default_noise_hu;
     Some(p.render_noisy([PHANTOM_SPACING_MM; 3], noise, 1))
-}
-
-#[cfg(not(target_arch = "wasm32"))]
-mod native {
-    use std::collections::VecDeque;
-    use std::path::PathBuf;
-    use std::sync::Arc;
-
-    use super::AppError;
-    use crate::files::DiskFile;
-    use crate::io::{FileSource as _, InputFile};
-
-    /// Bytes read per step: a frame or two of disk time.
-    const BYTES_PER_STEP: u64 = 48 << 20;
-
-    /// Bytes read at a time into the reader's scratch buffer.
-    const CHUNK_BYTES: usize = 1 << 20;
-
-    /// Expands folders (recursively, skipping hidden entries) into regular files with their
-    /// sizes (`crate::files`: no FIFOs, devices or links into folders; sizes capped), and
-    /// what was skipped.
-    #[allow(clippy::type_complexity)]
-    pub fn list(paths: &[PathBuf]) -> Result<(Vec<(PathBuf, u64)>, Vec<String>), AppError> {
-        let listing = crate::files::list(paths)?;
-        if listing.files.is_empty() {
-            return Err(crate::io::LoadError::NoFiles.into());
-        }
-        Ok((listing.files, listing.skipped))
-    }
-
-    /// The listed files read step by step, as the command line reads them: each becomes an
-    /// [`InputFile::on_demand`] (`crate::files::DiskFile`), so that decoding reads the payload
-    /// straight into the voxel buffer and the viewer never holds the file bytes beside the
-    /// voxels. Each file is first read through once, a bounded number of bytes per step into a
-    /// small scratch buffer that is not kept: the progress bar shows the disk's progress, and
-    /// the one decoding step then reads from the system's file cache rather than waiting on the
-    /// disk.
-    pub struct Reader {
-        queue: VecDeque<(PathBuf, u64)>,
-        /// The file being read through, and how far.
-        current: Option<(PathBuf, Arc<DiskFile>, u64)>,
-        pub files: Vec<InputFile>,
-        pub done_bytes: u64,
-        pub total_bytes: u64,
-        scratch: Vec<u8>,
-    }
-
-    impl Reader {
-        pub fn new(queue: Vec<(PathBuf, u64)>) -> Self {
-            let total_bytes = queue.iter().map(|(_, n)| n).sum();
-            Self {
-                queue: queue.into(),
-                current: None,
-                files: Vec::new(),
-                done_bytes: 0,
-                total_bytes,
-                scratch: Vec::new(),
-            }
-        }
-
-        /// Files still to be read (the one being read included).
-        pub fn remaining(&self) -> usize {
-            self.queue.len() + usize::from(self.current.is_some())
-        }
-
-        /// Reads about [`BYTES_PER_STEP`] bytes (a file costs at least one), finishing files
-        /// as they are read through; the error names the file.
-        pub fn read_some(&mut self) -> Result<(), AppError> {
-            let mut budget = BYTES_PER_STEP;
-            while budget > 0 {
-                let (path, source, at) = match self.current.take() {
-                    Some(c) => c,
-                    None => match self.queue.pop_front() {
-                        Some((path, _)) => {
-                            let source = DiskFile::open(&path)?;
-                            (path, Arc::new(source), 0)
-                        }
-                        None => break,
-                    },
-                };
-                let len = source.len();
-                let mut at = at;
-                while at < len && budget > 0 {
-                    let n = (len - at).min(CHUNK_BYTES as u64).min(budget) as usize;
-                    self.scratch.resize(n.max(self.scratch.len()), 0);
-                    source
-                        .read_exact_at(at, &mut self.scratch[..n])
-                        .map_err(|e| crate::files::FilesError::Read {
-                            path: path.display().to_string(),
-                            source: e,
-                        })?;
-                    at += n as u64;
-                    self.done_bytes += n as u64;
-                    budget -= n as u64;
-                }
-                if at < len {
-                    self.current = Some((path, source, at));
-                    break;
-                }
-                let file = InputFile::on_demand(path.to_string_lossy(), source).map_err(|e| {
-                    crate::files::FilesError::Read {
-                        path: path.display().to_string(),
-                        source: e,
-                    }
-                })?;
-                self.files.push(file);
-                budget = budget.saturating_sub(1);
-            }
-            Ok(())
-        }
-    }
 }
 
 #[cfg(test)]

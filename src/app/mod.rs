@@ -25,7 +25,7 @@ mod paint;
 mod panels;
 mod panes;
 mod pet;
-mod platform;
+pub mod platform;
 mod probe;
 mod publish;
 pub mod report;
@@ -64,8 +64,6 @@ use install::Uploading;
 use load::{LoadJob, LoadStep};
 use mip_view::{MipScene, MipView};
 use slices::{PaneInputs, SlicePane};
-#[cfg(not(target_arch = "wasm32"))]
-pub use startup::run_native;
 pub use startup::wgpu_options;
 
 /// The loaded volume and its intensity texture.
@@ -309,7 +307,7 @@ impl ShapecastApp {
         if self.features.running_request().is_none() {
             return;
         }
-        if cfg!(target_arch = "wasm32") {
+        if platform::IN_PAGE {
             ctx.request_repaint_after(std::time::Duration::from_millis(250));
         } else {
             ctx.request_repaint();

@@ -4,8 +4,7 @@
 use super::{DisplayMode, PacsTarget, ViewSource, ViewState, features};
 use crate::cpu::tf::Preset;
 
-#[cfg(target_arch = "wasm32")]
-use super::platform::web::files as web_files;
+use super::platform;
 
 /// What the app opens on.
 #[derive(Clone, Debug, PartialEq)]
@@ -14,8 +13,7 @@ pub enum StartWith {
     DemoCt,
     /// A phantom by name (`crate::phantom::NAMES`, "fig8-sphere", "demo").
     Phantom(String),
-    /// Files and folders on this machine (`shapecast view PATH...`).
-    #[cfg(not(target_arch = "wasm32"))]
+    /// Files and folders on this machine (`shapecast view PATH...`; natively).
     Paths(Vec<std::path::PathBuf>),
     /// Files downloaded from these URLs (the page's `?url=`, a link; web only).
     Urls(Vec<String>),
@@ -39,8 +37,7 @@ pub struct AppOptions {
     pub view: Option<ViewState>,
     /// What could not be read from the link, one message per field.
     pub link_problems: Vec<String>,
-    /// A PET to fuse over the CT that opens (`shapecast view CT --pet PET`).
-    #[cfg(not(target_arch = "wasm32"))]
+    /// A PET to fuse over the CT that opens (`shapecast view CT --pet PET`; natively).
     pub pet: Option<Vec<std::path::PathBuf>>,
     /// A PET to fuse over the CT that opens, by URL (the page's `&pet=URL`).
     pub pet_urls: Vec<String>,
@@ -55,7 +52,6 @@ impl Default for AppOptions {
             preset: None,
             view: None,
             link_problems: Vec::new(),
-            #[cfg(not(target_arch = "wasm32"))]
             pet: None,
             pet_urls: Vec::new(),
         }
@@ -69,67 +65,73 @@ impl AppOptions {
     /// `?preset=lymph-nodes|lung-nodules|airways|vessels` the preset, `?compute=0` waits for
     /// the Recompute button; a link's `#fragment` (a shared view, `view_link`) overrides them.
     pub fn from_environment() -> Self {
-        #[allow(unused_mut)]
+        let (query, fragment) = platform::page_query_and_fragment();
+        Self::from_address(&query, &fragment, platform::absolute_url)
+    }
+
+    /// The defaults changed by a page address's query parameters and fragment
+    /// ([`Self::from_environment`]); `absolute` resolves a URL against the page.
+    pub fn from_address(
+        query: &[(String, String)],
+        fragment: &str,
+        absolute: impl Fn(&str) -> String,
+    ) -> Self {
         let mut o = Self::default();
-        #[cfg(target_arch = "wasm32")]
-        {
-            let query = web_files::query_params();
-            let param = |name: &str| {
-                query
-                    .iter()
-                    .rev()
-                    .find(|(k, _)| k == name)
-                    .map(|(_, v)| v.clone())
+        let param = |name: &str| {
+            query
+                .iter()
+                .rev()
+                .find(|(k, _)| k == name)
+                .map(|(_, v)| v.clone())
+        };
+        if let Some(name) = param("phantom") {
+            o.start = StartWith::Phantom(name);
+        }
+        let urls: Vec<String> = query
+            .iter()
+            .filter(|(k, v)| k == "url" && !v.trim().is_empty())
+            .map(|(_, v)| absolute(v.trim()))
+            .collect();
+        if !urls.is_empty() {
+            o.start = StartWith::Urls(urls);
+        }
+        o.pet_urls = query
+            .iter()
+            .filter(|(k, v)| k == "pet" && !v.trim().is_empty())
+            .map(|(_, v)| absolute(v.trim()))
+            .collect();
+        if let Some(base) = param("dicomweb").filter(|b| !b.trim().is_empty()) {
+            // VolView's form too: a URL into the study or series (`.../studies/UID`).
+            let (base, study, series) = crate::io::dicomweb::split_target(&base);
+            let given = |k: &str| {
+                param(k)
+                    .map(|s| s.trim().to_owned())
+                    .filter(|s| !s.is_empty())
             };
-            if let Some(name) = param("phantom") {
-                o.start = StartWith::Phantom(name);
-            }
-            let urls: Vec<String> = query
-                .iter()
-                .filter(|(k, v)| k == "url" && !v.trim().is_empty())
-                .map(|(_, v)| web_files::absolute_url(v.trim()))
-                .collect();
-            if !urls.is_empty() {
-                o.start = StartWith::Urls(urls);
-            }
-            o.pet_urls = query
-                .iter()
-                .filter(|(k, v)| k == "pet" && !v.trim().is_empty())
-                .map(|(_, v)| web_files::absolute_url(v.trim()))
-                .collect();
-            if let Some(base) = param("dicomweb").filter(|b| !b.trim().is_empty()) {
-                // VolView's form too: a URL into the study or series (`.../studies/UID`).
-                let (base, study, series) = crate::io::dicomweb::split_target(&base);
-                let given = |k: &str| {
-                    param(k)
-                        .map(|s| s.trim().to_owned())
-                        .filter(|s| !s.is_empty())
-                };
-                // The URL's series goes with the URL's study only.
-                let (study, series) = match given("study") {
-                    Some(s) if Some(&s) != study.as_ref() => (s, given("series")),
-                    _ => (study.unwrap_or_default(), given("series").or(series)),
-                };
-                o.start = StartWith::DicomWeb(PacsTarget {
-                    base,
-                    study,
-                    series,
-                });
-            }
-            if let Some(m) = param("method").and_then(|m| DisplayMode::from_name(&m)) {
-                o.mode = m;
-            }
-            if let Some(p) = param("preset").and_then(|p| Preset::from_name(&p)) {
-                o.preset = Some(p);
-            }
-            if param("compute").as_deref() == Some("0") {
-                o.compute_on_load = false;
-            }
-            let (view, problems) = ViewState::from_fragment(&web_files::fragment());
-            o.link_problems = problems;
-            if view != ViewState::default() {
-                o.apply_link(view);
-            }
+            // The URL's series goes with the URL's study only.
+            let (study, series) = match given("study") {
+                Some(s) if Some(&s) != study.as_ref() => (s, given("series")),
+                _ => (study.unwrap_or_default(), given("series").or(series)),
+            };
+            o.start = StartWith::DicomWeb(PacsTarget {
+                base,
+                study,
+                series,
+            });
+        }
+        if let Some(m) = param("method").and_then(|m| DisplayMode::from_name(&m)) {
+            o.mode = m;
+        }
+        if let Some(p) = param("preset").and_then(|p| Preset::from_name(&p)) {
+            o.preset = Some(p);
+        }
+        if param("compute").as_deref() == Some("0") {
+            o.compute_on_load = false;
+        }
+        let (view, problems) = ViewState::from_fragment(fragment);
+        o.link_problems = problems;
+        if view != ViewState::default() {
+            o.apply_link(view);
         }
         o
     }
@@ -162,5 +164,101 @@ impl AppOptions {
             self.preset = Some(p.preset);
         }
         self.view = Some(view);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cpu::pipeline::Method;
+
+    fn query(pairs: &[(&str, &str)]) -> Vec<(String, String)> {
+        pairs
+            .iter()
+            .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))
+            .collect()
+    }
+
+    fn absolute(url: &str) -> String {
+        format!("https://viewer.example/{url}")
+    }
+
+    #[test]
+    fn an_address_without_query_or_fragment_starts_as_the_defaults() {
+        assert_eq!(
+            AppOptions::from_address(&[], "", absolute),
+            AppOptions::default()
+        );
+    }
+
+    #[test]
+    fn the_query_names_the_volumes_the_method_the_preset_and_the_wait() {
+        let o = AppOptions::from_address(
+            &query(&[
+                ("url", "ct.nii.gz"),
+                ("url", " "),
+                ("url", "https://data.example/mask.nii.gz"),
+                ("pet", "pet.zip"),
+                ("method", "rst"),
+                ("preset", "airways"),
+                ("compute", "0"),
+            ]),
+            "",
+            absolute,
+        );
+        assert_eq!(
+            o.start,
+            StartWith::Urls(vec![
+                "https://viewer.example/ct.nii.gz".to_owned(),
+                "https://viewer.example/https://data.example/mask.nii.gz".to_owned(),
+            ])
+        );
+        assert_eq!(
+            o.pet_urls,
+            vec!["https://viewer.example/pet.zip".to_owned()]
+        );
+        assert_eq!(o.mode, DisplayMode::Features(Method::Rst));
+        assert_eq!(o.preset, Some(Preset::Airways));
+        assert!(!o.compute_on_load);
+        assert!(o.link_problems.is_empty());
+    }
+
+    #[test]
+    fn a_dicomweb_url_into_a_study_keeps_its_series_unless_another_study_is_named() {
+        let url = "https://pacs.example/dicom-web/studies/1.2.3/series/1.2.3.4";
+        let o = AppOptions::from_address(&query(&[("dicomweb", url)]), "", absolute);
+        assert_eq!(
+            o.start,
+            StartWith::DicomWeb(PacsTarget {
+                base: "https://pacs.example/dicom-web".to_owned(),
+                study: "1.2.3".to_owned(),
+                series: Some("1.2.3.4".to_owned()),
+            })
+        );
+        let o = AppOptions::from_address(
+            &query(&[("dicomweb", url), ("study", "9.8.7")]),
+            "",
+            absolute,
+        );
+        assert_eq!(
+            o.start,
+            StartWith::DicomWeb(PacsTarget {
+                base: "https://pacs.example/dicom-web".to_owned(),
+                study: "9.8.7".to_owned(),
+                series: None,
+            })
+        );
+    }
+
+    #[test]
+    fn a_fragment_overrides_the_query_and_its_problems_are_kept() {
+        let o = AppOptions::from_address(
+            &query(&[("phantom", "fig8-sphere"), ("method", "rst")]),
+            "#v=1&demo=1&mode=intensity&rays=7",
+            absolute,
+        );
+        assert_eq!(o.start, StartWith::DemoCt);
+        assert_eq!(o.mode, DisplayMode::Intensity);
+        assert!(!o.link_problems.is_empty(), "{:?}", o.link_problems);
     }
 }

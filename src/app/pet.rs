@@ -20,6 +20,7 @@ use glam::{DAffine3, DVec3};
 use super::load::{LoadJob, LoadSource, LoadStep, SeriesSet};
 use super::mip_view::{MipScene, MipView};
 use super::model::axes::PaneAxes;
+use super::platform::Platform;
 use super::view_link::PetView;
 use crate::gpu::GpuContext;
 use crate::gpu::volume_texture::RenderVolume;
@@ -256,7 +257,13 @@ impl PetState {
 
     /// Starts loading the PET series of `set` (the files the CT of `generation` came from),
     /// when the CT is a CT and the files hold a PET. True when a load started.
-    pub fn start_with(&mut self, set: &SeriesSet, ct: &Volume, generation: u64) -> bool {
+    pub fn start_with(
+        &mut self,
+        set: &SeriesSet,
+        ct: &Volume,
+        generation: u64,
+        platform: &impl Platform,
+    ) -> bool {
         if ct.modality != Modality::Ct {
             return false;
         }
@@ -265,11 +272,10 @@ impl PetState {
         };
         let set = set.with_chosen(index);
         self.loading_for = Some(generation);
-        #[cfg(target_arch = "wasm32")]
-        if set.web_files().is_some() {
-            super::platform::web::files::load_pet_series(set, generation);
+        // The page's files are read by the page; others by a job.
+        let Some(set) = platform.read_page_series(set, Some(generation)) else {
             return true;
-        }
+        };
         self.job = Some(LoadJob::new(LoadSource::Series(set)));
         true
     }

@@ -5,6 +5,7 @@
 
 use super::ShapecastApp;
 use super::load::{LoadSource, SeriesSet};
+use super::platform::Platform as _;
 use crate::io::SeriesEntry;
 use crate::status::SeriesStatus;
 
@@ -131,18 +132,17 @@ impl ShapecastApp {
         if index >= set.list.entries().len() {
             return;
         }
-        #[cfg(target_arch = "wasm32")]
-        if set.web_files().is_some() {
+        let set = set.with_chosen(index);
+        let label = set.label();
+        let Some(set) = self.platform.read_page_series(set, None) else {
             // The page's files: read again by the page, one at a time.
-            let set = set.with_chosen(index);
             self.cancel_upload();
-            self.load_progress = Some((0.0, format!("opening {}", set.label())));
-            super::platform::web::files::load_series(set);
+            self.load_progress = Some((0.0, format!("opening {label}")));
             self.series.loading = Some(index);
             return;
-        }
+        };
         let origin = self.scene.as_ref().and_then(|s| s.origin.clone());
-        self.open_from(LoadSource::Series(set.with_chosen(index)), origin);
+        self.open_from(LoadSource::Series(set), origin);
         self.series.loading = Some(index);
     }
 }

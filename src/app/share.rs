@@ -250,12 +250,16 @@ impl ShapecastApp {
         }
         if let Some(p) = &view.pet {
             self.pet.apply_view(p);
-            // A PET the link names by URL and that is not here yet comes with this CT.
-            #[cfg(target_arch = "wasm32")]
+            // A PET the link names by URL and that is not here yet comes with this CT (in
+            // the page; natively the error says how to give it).
             if self.pet.layer.is_none() && !self.pet.loading() && !p.urls.is_empty() {
-                self.pet.urls = p.urls.clone();
-                self.pet.awaiting(generation);
-                super::platform::web::fetch::fetch_pet_urls(p.urls.clone(), generation);
+                match self.platform.fetch_pet(p.urls.clone(), generation) {
+                    Ok(()) => {
+                        self.pet.urls = p.urls.clone();
+                        self.pet.awaiting(generation);
+                    }
+                    Err(why) => self.error(why),
+                }
             }
         }
         self.measure

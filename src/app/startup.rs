@@ -10,39 +10,15 @@ pub fn wgpu_options() -> eframe::egui_wgpu::WgpuConfiguration {
     use eframe::egui_wgpu::{WgpuConfiguration, WgpuSetup, WgpuSetupCreateNew};
     let mut create = WgpuSetupCreateNew::without_display_handle();
     create.device_descriptor = Arc::new(crate::gpu::context::device_descriptor);
-    #[cfg(target_arch = "wasm32")]
-    {
-        create.instance_descriptor.backends = wgpu::Backends::BROWSER_WEBGPU;
-    }
-    #[cfg(not(target_arch = "wasm32"))]
-    {
-        create.instance_descriptor.backends =
-            wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
-    }
+    create.instance_descriptor.backends = if platform::IN_PAGE {
+        wgpu::Backends::BROWSER_WEBGPU
+    } else {
+        wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY)
+    };
     WgpuConfiguration {
         wgpu_setup: WgpuSetup::CreateNew(create),
         ..Default::default()
     }
-}
-
-/// Opens the viewer in a native window.
-#[cfg(not(target_arch = "wasm32"))]
-pub fn run_native(options: AppOptions) -> anyhow::Result<()> {
-    let native = eframe::NativeOptions {
-        renderer: eframe::Renderer::Wgpu,
-        wgpu_options: wgpu_options(),
-        viewport: egui::ViewportBuilder::default()
-            .with_title("Shapecast")
-            .with_inner_size([1440.0, 900.0])
-            .with_drag_and_drop(true),
-        ..Default::default()
-    };
-    eframe::run_native(
-        "Shapecast",
-        native,
-        Box::new(move |cc| Ok(Box::new(ShapecastApp::with_options(cc, options)))),
-    )
-    .map_err(|e| anyhow::anyhow!("could not open the viewer window: {e}"))
 }
 
 impl ShapecastApp {
@@ -60,19 +36,13 @@ impl ShapecastApp {
             .map(GpuContext::from_render_state);
         let mut status = AppStatus::default();
         // Asked now, so that the answer is in before the first volume (a link's) is uploaded.
-        #[cfg(target_arch = "wasm32")]
         if let Some(g) = &gpu {
             crate::gpu::volume_texture::ask_render_attachment_3d(g);
         }
         match &gpu {
             Some(g) => {
-                #[cfg(target_arch = "wasm32")]
-                let name = crate::gpu::context::browser_adapter_name()
-                    .unwrap_or_else(|| g.adapter_info.name.clone());
-                #[cfg(not(target_arch = "wasm32"))]
-                let name = g.adapter_info.name.clone();
                 status.adapter = Some(AdapterStatus {
-                    name,
+                    name: g.adapter_name(),
                     backend: format!("{:?}", g.adapter_info.backend),
                 });
                 log::info!("GPU context:\n{}", g.describe());
@@ -153,7 +123,6 @@ impl ShapecastApp {
         match self.options.start.clone() {
             StartWith::DemoCt => self.open_demo_ct(),
             StartWith::Phantom(name) => self.open(LoadSource::Phantom(name)),
-            #[cfg(not(target_arch = "wasm32"))]
             StartWith::Paths(paths) => self.open(LoadSource::Paths(paths)),
             StartWith::Urls(urls) => self.open_urls(urls),
             StartWith::DicomWeb(target) => self.open_dicomweb(target),

@@ -119,13 +119,14 @@ fn view(args: ViewArgs) -> anyhow::Result<()> {
         (None, true) => StartWith::DemoCt,
         (None, false) => StartWith::Paths(args.paths),
     };
-    crate::app::run_native(AppOptions {
+    crate::app::platform::native::run_native(AppOptions {
         start,
         mode,
         preset,
         pet: args.pet.map(|p| vec![p]),
         ..AppOptions::default()
     })
+    .map_err(|e| anyhow::anyhow!("could not open the viewer window: {e}"))
 }
 
 /// Runs a parsed command line; the error is printed by `main` as one line.

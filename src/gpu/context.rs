@@ -121,6 +121,11 @@ impl GpuContext {
         self.features.contains(wgpu::Features::FLOAT32_FILTERABLE)
     }
 
+    /// Whether the device is the browser's WebGPU (the page), not a native one.
+    pub fn in_browser(&self) -> bool {
+        self.adapter_info.backend == wgpu::Backend::BrowserWebGpu
+    }
+
     /// Whether the adapter renders on the CPU (lavapipe natively; in the browser a fallback
     /// adapter such as SwiftShader, which WebGPU reports as `isFallbackAdapter`).
     pub fn is_software(&self) -> bool {
@@ -295,4 +300,16 @@ pub fn set_browser_adapter_name(name: String) {
 #[cfg(target_arch = "wasm32")]
 pub fn browser_adapter_name() -> Option<String> {
     BROWSER_ADAPTER.with(|a| a.borrow().clone())
+}
+
+impl GpuContext {
+    /// The adapter's name as the status shows it: the browser's description of it on the web
+    /// ([`set_browser_adapter_name`]), wgpu's natively.
+    pub fn adapter_name(&self) -> String {
+        #[cfg(target_arch = "wasm32")]
+        if let Some(name) = browser_adapter_name() {
+            return name;
+        }
+        self.adapter_info.name.clone()
+    }
 }

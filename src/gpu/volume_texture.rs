@@ -208,12 +208,15 @@ const PROBE_YES: u8 = 2;
 const PROBE_NO: u8 = 3;
 
 /// Asks the browser, once, whether a 3D texture may be a render attachment (the viewer asks at
-/// start, so that the answer is in before its first volume; [`intensity_usage`]).
-#[cfg(target_arch = "wasm32")]
+/// start, so that the answer is in before its first volume; [`intensity_usage`]). Natively
+/// there is nothing to ask: the device's features answer.
 pub fn ask_render_attachment_3d(ctx: &GpuContext) {
+    #[cfg(target_arch = "wasm32")]
     if RENDER_ATTACHMENT_3D.load(Ordering::Acquire) == PROBE_UNKNOWN {
         probe_render_attachment_3d(ctx);
     }
+    #[cfg(not(target_arch = "wasm32"))]
+    let _ = ctx;
 }
 
 /// Creates a 1-voxel 3D texture with RENDER_ATTACHMENT in an error scope and records, when the

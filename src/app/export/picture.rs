@@ -90,9 +90,8 @@ impl ShapecastApp {
     }
 
     /// Natively, where pictures are written (the current folder unless set).
-    #[cfg(not(target_arch = "wasm32"))]
     pub fn set_picture_dir(&mut self, dir: std::path::PathBuf) {
-        self.platform.picture_dir = Some(dir);
+        self.platform.set_save_dir(dir);
     }
 
     /// The last picture made (tests; the page downloads it, natively it is written to a file).

@@ -19,7 +19,6 @@
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
-mod backend;
 mod patient;
 mod pet;
 mod store;
@@ -31,11 +30,15 @@ use pet::{PET_TASK, PetRetrieval};
 pub(super) use store::StoreJob;
 use store::{STORE_TASK, StoreDone};
 
+mod transport;
+
+use super::platform::Platform as _;
 use super::{ShapecastApp, ViewSource};
 use crate::io::dicomweb::{
     self, Auth, Base, DicomWebError, SeriesInfo, StudyInfo, StudySearch, pick_series,
 };
 use crate::io::{Loaded, Patient};
+use transport as backend;
 
 /// A study to open: the archive's DICOMweb root (absolute, or relative to the page's origin),
 /// the study, and the series (`None`: the chooser's pick).
@@ -47,7 +50,7 @@ pub struct PacsTarget {
 }
 
 /// What the archive's work reports back.
-enum Event {
+pub(in crate::app) enum Event {
     Studies(Result<Vec<StudyInfo>, DicomWebError>),
     Study {
         target: PacsTarget,
@@ -70,13 +73,13 @@ enum Event {
 /// Where answers go: each is tagged with the task it belongs to, so a cancelled or replaced
 /// task's late answers are dropped.
 #[derive(Clone, Default)]
-struct Inbox {
+pub(in crate::app) struct Inbox {
     queue: Arc<Mutex<VecDeque<(u64, Event)>>>,
     ctx: Arc<Mutex<Option<egui::Context>>>,
 }
 
 impl Inbox {
-    fn push(&self, task: u64, event: Event) {
+    pub(in crate::app) fn push(&self, task: u64, event: Event) {
         if let Ok(mut q) = self.queue.lock() {
             q.push_back((task, event));
         }
@@ -140,9 +143,6 @@ pub(super) struct Pacs {
     pub stored_at: Option<f64>,
     /// The loaded study's patient (the line above the panes).
     pub patient: Option<Patient>,
-    /// The window title set last (native).
-    #[cfg(not(target_arch = "wasm32"))]
-    title: Option<String>,
 }
 
 impl Pacs {
@@ -191,16 +191,13 @@ impl ShapecastApp {
         if let Ok(mut c) = self.pacs.inbox.ctx.lock() {
             *c = Some(ctx.clone());
         }
-        #[cfg(target_arch = "wasm32")]
-        {
-            if let Some(token) = backend::take_fragment_token() {
-                self.pacs.token = token;
-            }
-            if backend::query_has_token() {
-                self.error(
-                    "a token in the address's query (?token=) is sent to servers and kept in their logs, so it was not used: give it after # (#token=...), or type it under \"Open from PACS…\"".to_owned(),
-                );
-            }
+        if let Some(token) = super::platform::take_fragment_token() {
+            self.pacs.token = token;
+        }
+        if super::platform::query_has_token() {
+            self.error(
+                "a token in the address's query (?token=) is sent to servers and kept in their logs, so it was not used: give it after # (#token=...), or type it under \"Open from PACS…\"".to_owned(),
+            );
         }
     }
 
@@ -462,17 +459,10 @@ impl ShapecastApp {
     /// Natively the window title names the patient too (the page's title never does: it is
     /// the tab's name in a browser's history).
     fn pacs_title(&mut self, ctx: &egui::Context) {
-        #[cfg(not(target_arch = "wasm32"))]
-        {
-            let title = match self.pacs.patient.as_ref().and_then(patient_line) {
-                Some(line) => format!("Shapecast: {line}"),
-                None => "Shapecast".to_owned(),
-            };
-            if self.pacs.title.as_ref() != Some(&title) {
-                ctx.send_viewport_cmd(egui::ViewportCommand::Title(title.clone()));
-                self.pacs.title = Some(title);
-            }
-        }
-        let _ = ctx;
+        let title = match self.pacs.patient.as_ref().and_then(patient_line) {
+            Some(line) => format!("Shapecast: {line}"),
+            None => "Shapecast".to_owned(),
+        };
+        self.platform.set_title(ctx, title);
     }
 }

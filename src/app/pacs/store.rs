@@ -2,7 +2,8 @@
 //! (`app::report`) sent into the study the volume came from, as a Secondary Capture series and a
 //! TID 1500 Structured Report (`io::dicomweb::stow`, `io::dicomweb::sr`), on a task of its own.
 
-use super::{ShapecastApp, ViewSource, backend};
+use super::transport as backend;
+use super::{ShapecastApp, ViewSource};
 use crate::io::dicomweb::{self, Base, DicomWebError, stow};
 
 /// A rotation of the MIP to store into the study its series came from.
@@ -25,7 +26,7 @@ impl StoreJob {
     /// reading has one and the series allows it: else why not, beside).
     /// The frames are let go once in the instance (a large pane's frames are hundreds of MB:
     /// the page must not hold them beside the request).
-    pub(super) fn instances(
+    pub(in crate::app) fn instances(
         &mut self,
         source: &stow::SourceSeries,
     ) -> Result<(Vec<stow::Instance>, Option<String>), DicomWebError> {
@@ -65,7 +66,11 @@ impl StoreJob {
         )
     }
 
-    pub(super) fn done(&self, instances: &[stow::Instance], skipped: Option<String>) -> StoreDone {
+    pub(in crate::app) fn done(
+        &self,
+        instances: &[stow::Instance],
+        skipped: Option<String>,
+    ) -> StoreDone {
         StoreDone {
             series: instances.iter().map(|i| i.series_uid.clone()).collect(),
             frames: self.frame_count,
@@ -83,7 +88,7 @@ impl StoreJob {
 }
 
 /// What "Store to PACS" stored.
-pub(super) struct StoreDone {
+pub(in crate::app) struct StoreDone {
     /// The series made: the rotation's, then the report's.
     series: Vec<String>,
     frames: usize,

@@ -1,21 +1,39 @@
 //! What differs between the page and the native window, behind one small trait ([`Platform`]),
 //! so that the rest of the app does not ask which it runs in: the "Open" menu, handing a saved
 //! file to the user, the demo CT, the page's downloads and the page's address. The page's
-//! files, downloads and events live in `web/`; the native window's side in `native.rs`.
+//! files, downloads and events live in `web/`; the native window's side in `native/`. This is
+//! where the app's `cfg(target_arch = "wasm32")` lives: each platform module names the same
+//! types and functions, re-exported here.
 
-use super::load::LoadSource;
+use super::load::{LoadSource, SeriesSet};
 
 #[cfg(not(target_arch = "wasm32"))]
-mod native;
+pub(crate) mod native;
 #[cfg(target_arch = "wasm32")]
-pub mod web;
+pub(crate) mod web;
+
+#[cfg(not(target_arch = "wasm32"))]
+use native as current;
+#[cfg(target_arch = "wasm32")]
+use web as current;
 
 /// The platform the app runs on.
-#[cfg(not(target_arch = "wasm32"))]
-pub type Current = native::Native;
-/// The platform the app runs on.
-#[cfg(target_arch = "wasm32")]
-pub type Current = web::Web;
+pub type Current = current::This;
+
+/// The page address's query parameters and its fragment (`#...`; natively none).
+pub use current::page_query_and_fragment;
+
+/// A URL resolved against the page's address (natively as given).
+pub use current::absolute_url;
+
+/// `#token=...` of the page's address, removed from the address bar (natively none).
+pub use current::take_fragment_token;
+
+/// Whether the page's query names a token (refused: a query is sent to servers and logged).
+pub use current::query_has_token;
+
+/// True in the page (WebAssembly in a browser), false in the native window.
+pub const IN_PAGE: bool = cfg!(target_arch = "wasm32");
 
 /// What happened outside the app's frame loop: files dropped or read, downloads, a link pasted
 /// into the page ([`Platform::take_events`]). The native window has only drops.
@@ -84,6 +102,10 @@ pub trait Platform {
     /// the pictures' folder natively. Says where it went.
     fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String>;
 
+    /// Where [`Self::deliver`] writes files natively; the page hands them to the browser's
+    /// downloads, which choose the folder, so it keeps none.
+    fn set_save_dir(&mut self, dir: std::path::PathBuf);
+
     /// Sets up what reaches the app from outside its frames (the page's drops and inputs);
     /// called once, at the first frame.
     fn install(&self, ctx: &egui::Context) -> Result<(), String>;
@@ -108,6 +130,16 @@ pub trait Platform {
 
     /// The address of the page, which a link to the view starts with (empty natively).
     fn page_address(&self) -> String;
+
+    /// Names the window `title` (natively; a page's title is the tab's name in the browser's
+    /// history, so it never names the patient).
+    fn set_title(&mut self, ctx: &egui::Context, title: String);
+
+    /// Reads another series of the page's files (`set`'s chosen one) as the page reads files,
+    /// to be shown (`pet_for` `None`) or as the PET of the CT of generation `pet_for`; its
+    /// events bring the volume. Hands `set` back when its files are not the page's: a
+    /// [`super::load::LoadJob`] reads those.
+    fn read_page_series(&self, set: SeriesSet, pet_for: Option<u64>) -> Option<SeriesSet>;
 
     /// Whether a large volume's CPU copy is kept packed (`Voxels::packed`). Packing holds the
     /// dense and the packed copy at once; natively the dense one then goes back to the system,

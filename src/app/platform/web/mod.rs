@@ -7,7 +7,55 @@ pub mod fetch;
 pub mod files;
 pub mod js_bytes;
 
-use super::{LoadSource, Platform};
+use super::{LoadSource, Platform, SeriesSet};
+
+/// The page.
+pub type This = Web;
+
+pub use files::absolute_url;
+
+/// The page address's query parameters and its fragment.
+pub fn page_query_and_fragment() -> (Vec<(String, String)>, String) {
+    (files::query_params(), files::fragment())
+}
+
+/// `#token=...` of the page's address, removed from the address bar (the rest of the
+/// fragment stays).
+pub fn take_fragment_token() -> Option<String> {
+    let window = web_sys::window()?;
+    let hash = window.location().hash().ok()?;
+    let fragment = hash.trim_start_matches('#');
+    let params = crate::io::url::parse_params(fragment);
+    let token = params
+        .iter()
+        .rev()
+        .find(|(k, _)| k == "token")
+        .map(|(_, v)| v.clone())?;
+    let rest: Vec<&str> = fragment
+        .split('&')
+        .filter(|kv| kv.split('=').next() != Some("token"))
+        .collect();
+    let location = window.location();
+    let url = format!(
+        "{}{}{}",
+        location.pathname().unwrap_or_default(),
+        location.search().unwrap_or_default(),
+        if rest.is_empty() {
+            String::new()
+        } else {
+            format!("#{}", rest.join("&"))
+        }
+    );
+    if let Ok(history) = window.history() {
+        let _ = history.replace_state_with_url(&wasm_bindgen::JsValue::NULL, "", Some(&url));
+    }
+    Some(token)
+}
+
+/// Whether the page's query names a token (refused).
+pub fn query_has_token() -> bool {
+    files::query_params().iter().any(|(k, _)| k == "token")
+}
 
 /// The page.
 #[derive(Default)]
@@ -40,6 +88,8 @@ impl Platform for Web {
         download(name, bytes).map_err(|e| crate::io::js::error_text(&e))?;
         Ok(format!("{name} (your downloads)"))
     }
+
+    fn set_save_dir(&mut self, _dir: std::path::PathBuf) {}
 
     fn install(&self, ctx: &egui::Context) -> Result<(), String> {
         files::install(ctx)
@@ -75,6 +125,17 @@ impl Platform for Web {
                 Some(format!("{}{}", l.origin().ok()?, l.pathname().ok()?))
             })
             .unwrap_or_default()
+    }
+
+    fn set_title(&mut self, _ctx: &egui::Context, _title: String) {}
+
+    fn read_page_series(&self, set: SeriesSet, pet_for: Option<u64>) -> Option<SeriesSet> {
+        set.page_files()?;
+        match pet_for {
+            None => files::load_series(set),
+            Some(generation) => files::load_pet_series(set, generation),
+        }
+        None
     }
 
     fn packs_voxels(&self) -> bool {

@@ -204,8 +204,9 @@ pub(super) async fn read_dicom_set(files: &[Named], label: &str, total: f64) -> 
         }),
         Ok(FolderRead::List(list)) => {
             let chosen = list.default_choice();
-            let handles = files.iter().map(|f| f.file.clone()).collect();
-            let set = crate::app::load::SeriesSet::of_web_files(list, handles, chosen);
+            let handles: Vec<web_sys::File> = files.iter().map(|f| f.file.clone()).collect();
+            let handles = crate::app::load::PageFiles(std::rc::Rc::new(handles));
+            let set = crate::app::load::SeriesSet::of_page_files(list, handles, chosen);
             read_series(set, SeriesFor::Shown(Some(origin))).await;
         }
         Err(e) => push(WebEvent::Failed {
@@ -232,7 +233,10 @@ pub(super) async fn read_series(set: crate::app::load::SeriesSet, purpose: Serie
             generation,
         },
     };
-    let Some(files) = set.web_files() else {
+    let Some(files) = set
+        .page_files()
+        .and_then(|f| f.0.downcast_ref::<Vec<web_sys::File>>())
+    else {
         return;
     };
     let limits = crate::io::Limits::default();

@@ -1,7 +1,52 @@
 //! The native window's side of [`Platform`]: paths typed into "Open", files written into the
 //! pictures' folder, the demo CT embedded in the binary.
 
-use super::{Event, LoadSource, Platform};
+use super::{Event, LoadSource, Platform, SeriesSet};
+
+/// The native window.
+pub type This = Native;
+
+/// Opens the viewer in a native window (`shapecast view`).
+pub fn run_native(options: crate::app::AppOptions) -> Result<(), eframe::Error> {
+    let native = eframe::NativeOptions {
+        renderer: eframe::Renderer::Wgpu,
+        wgpu_options: crate::app::wgpu_options(),
+        viewport: egui::ViewportBuilder::default()
+            .with_title("Shapecast")
+            .with_inner_size([1440.0, 900.0])
+            .with_drag_and_drop(true),
+        ..Default::default()
+    };
+    eframe::run_native(
+        "Shapecast",
+        native,
+        Box::new(move |cc| {
+            Ok(Box::new(crate::app::ShapecastApp::with_options(
+                cc, options,
+            )))
+        }),
+    )
+}
+
+/// The native window has no address: no query, no fragment.
+pub fn page_query_and_fragment() -> (Vec<(String, String)>, String) {
+    (Vec::new(), String::new())
+}
+
+/// Natively a URL stays as given.
+pub fn absolute_url(url: &str) -> String {
+    url.to_owned()
+}
+
+/// The native window has no address to carry a token.
+pub fn take_fragment_token() -> Option<String> {
+    None
+}
+
+/// The native window has no address to carry a token.
+pub fn query_has_token() -> bool {
+    false
+}
 
 /// The native window.
 #[derive(Default)]
@@ -9,7 +54,9 @@ pub struct Native {
     /// The "Open" field's path.
     open_path: String,
     /// Where saved pictures and movies are written (`None`: the current folder).
-    pub picture_dir: Option<std::path::PathBuf>,
+    picture_dir: Option<std::path::PathBuf>,
+    /// The window title set last.
+    title: Option<String>,
 }
 
 impl Platform for Native {
@@ -77,12 +124,25 @@ impl Platform for Native {
         Ok(shown.display().to_string())
     }
 
+    fn set_save_dir(&mut self, dir: std::path::PathBuf) {
+        self.picture_dir = Some(dir);
+    }
+
     fn install(&self, _ctx: &egui::Context) -> Result<(), String> {
         Ok(())
     }
 
+    /// The demo CT, embedded in the binary (the page fetches it instead of carrying 3.6 MB in
+    /// the wasm).
     fn demo(&self) -> Option<LoadSource> {
-        Some(crate::app::demo::demo_source())
+        let bytes = include_bytes!("../../../../web/demo/aorta_ct_cropped.nii.gz");
+        Some(LoadSource::Files {
+            label: "demo CT".to_owned(),
+            files: vec![crate::io::InputFile::new(
+                crate::app::demo::DEMO_FILE,
+                bytes.to_vec(),
+            )],
+        })
     }
 
     fn fetch(&self, urls: Vec<String>) -> Result<(), String> {
@@ -107,6 +167,17 @@ impl Platform for Native {
 
     fn page_address(&self) -> String {
         String::new()
+    }
+
+    fn set_title(&mut self, ctx: &egui::Context, title: String) {
+        if self.title.as_ref() != Some(&title) {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Title(title.clone()));
+            self.title = Some(title);
+        }
+    }
+
+    fn read_page_series(&self, set: SeriesSet, _pet_for: Option<u64>) -> Option<SeriesSet> {
+        Some(set)
     }
 
     fn packs_voxels(&self) -> bool {
