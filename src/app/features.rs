@@ -3,6 +3,7 @@
 //! computed [`FeatureTexture`]s keyed by method and parameters (switching modes never recomputes
 //! what exists), and the one running [`FeatureJob`], stepped once per frame and cancellable.
 
+use super::error::AppError;
 use crate::compute::pipeline::{FeatureJob, JobOptions, JobState, Waker};
 use crate::cpu::features::FeatureMap;
 use crate::cpu::pipeline::{Method, Request};
@@ -372,7 +373,7 @@ impl FeatureManager {
         ctx: &GpuContext,
         volume: &Arc<Volume>,
         request: Request,
-    ) -> Result<(), String> {
+    ) -> Result<(), AppError> {
         self.cancel();
         // The job reads its slices from the loaded volume itself (no copy per computation).
         // Its steps follow the device's speed, so that a frame of the viewer never waits behind
@@ -402,10 +403,13 @@ impl FeatureManager {
                 });
                 Ok(())
             }
-            Err(e) => {
-                let message = format!("{}: {e}", method_name(request.method));
-                self.last = Some((request, JobOutcome::Failed(message.clone())));
-                Err(message)
+            Err(source) => {
+                let e = AppError::Features {
+                    method: method_name(request.method),
+                    source,
+                };
+                self.last = Some((request, JobOutcome::Failed(e.message())));
+                Err(e)
             }
         }
     }

@@ -117,7 +117,7 @@ impl ShapecastApp {
             wake.request_repaint_after(std::time::Duration::from_millis(1));
         }));
         if let Err(e) = self.platform.install(ctx) {
-            self.error(format!("drag and drop is unavailable: {e}"));
+            self.error(e);
         }
         self.pacs_start(ctx);
         match self.options.start.clone() {

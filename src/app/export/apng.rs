@@ -2,6 +2,8 @@
 
 use std::sync::{Arc, Mutex};
 
+use super::ExportError;
+
 /// The APNG being written: the encoder writes into a buffer shared with us, since `png`'s
 /// writer does not give its output back.
 #[derive(Clone, Default)]
@@ -37,14 +39,17 @@ impl ApngWriter {
     }
 
     /// Writes the header of an APNG of `frames` frames of `size` that loops for ever at `fps`.
-    pub fn new(size: [u32; 2], frames: u32, fps: u16) -> Result<Self, String> {
+    pub fn new(size: [u32; 2], frames: u32, fps: u16) -> Result<Self, ExportError> {
         let bytes = SharedBytes::default();
         let mut encoder = png::Encoder::new(bytes.clone(), size[0], size[1]);
         encoder.set_color(png::ColorType::Rgba);
         encoder.set_depth(png::BitDepth::Eight);
         // Fast: a frame is encoded within one app frame.
         encoder.set_compression(png::Compression::Fast);
-        let e = |e: png::EncodingError| format!("encoding the movie: {e}");
+        let e = |source| ExportError::Encode {
+            what: "the movie".to_owned(),
+            source,
+        };
         encoder.set_animated(frames, 0).map_err(e)?;
         encoder.set_frame_delay(1, fps.max(1)).map_err(e)?;
         let writer = encoder.write_header().map_err(e)?;
@@ -58,15 +63,15 @@ impl ApngWriter {
     }
 
     /// Adds the next frame (tightly packed RGBA8 rows, top first).
-    pub fn push(&mut self, rgba: &[u8]) -> Result<(), String> {
+    pub fn push(&mut self, rgba: &[u8]) -> Result<(), ExportError> {
         let want = self.size[0] as usize * self.size[1] as usize * 4;
         if rgba.len() != want || self.written >= self.frames {
-            return Err(format!(
-                "movie frame {} of {}: {} bytes, expected {want}",
-                self.written + 1,
-                self.frames,
-                rgba.len()
-            ));
+            return Err(ExportError::FrameSize {
+                frame: self.written + 1,
+                frames: self.frames,
+                got: rgba.len(),
+                want,
+            });
         }
         // Opaque whatever the frame holds (the ray caster writes alpha 1; the pane is opaque).
         let opaque: Vec<u8> = rgba
@@ -75,29 +80,29 @@ impl ApngWriter {
             .collect();
         self.writer
             .write_image_data(&opaque)
-            .map_err(|e| format!("encoding movie frame {}: {e}", self.written + 1))?;
+            .map_err(|source| ExportError::Encode {
+                what: format!("movie frame {}", self.written + 1),
+                source,
+            })?;
         self.written += 1;
         Ok(())
     }
 
     /// The APNG's bytes, once every frame is in.
-    pub fn finish(self) -> Result<Vec<u8>, String> {
+    pub fn finish(self) -> Result<Vec<u8>, ExportError> {
         // `png` would close an APNG that announces more frames than it holds.
         if self.written != self.frames {
-            return Err(format!(
-                "the movie has {} of its {} frames",
-                self.written, self.frames
-            ));
+            return Err(ExportError::Unfinished {
+                written: self.written,
+                frames: self.frames,
+            });
         }
         let bytes = self.bytes.clone();
-        self.writer
-            .finish()
-            .map_err(|e| format!("finishing the movie: {e}"))?;
-        let out = bytes
-            .0
-            .lock()
-            .map_err(|_| "the movie's buffer is poisoned".to_owned())?
-            .clone();
+        self.writer.finish().map_err(|source| ExportError::Encode {
+            what: "the movie's end".to_owned(),
+            source,
+        })?;
+        let out = bytes.0.lock().map_err(|_| ExportError::Poisoned)?.clone();
         Ok(out)
     }
 }
@@ -114,8 +119,17 @@ mod tests {
             let rgba: Vec<u8> = (0..6).flat_map(|p| [f * 50, p * 10, 7, 0]).collect();
             w.push(&rgba).expect("frame");
         }
-        assert!(w.push(&[0; 24]).is_err(), "one frame too many");
-        assert!(w.push(&[0; 5]).is_err(), "wrong size");
+        assert!(
+            matches!(
+                w.push(&[0; 24]),
+                Err(ExportError::FrameSize { frame: 4, .. })
+            ),
+            "one frame too many"
+        );
+        assert!(
+            matches!(w.push(&[0; 5]), Err(ExportError::FrameSize { got: 5, .. })),
+            "wrong size"
+        );
         let png = w.finish().expect("finish");
         let mut reader = png::Decoder::new(std::io::Cursor::new(png))
             .read_info()
@@ -133,6 +147,9 @@ mod tests {
     fn too_few_frames_is_an_error() {
         let mut w = ApngWriter::new([2, 2], 2, 12).expect("header");
         w.push(&[0; 16]).expect("frame");
-        assert!(w.finish().is_err());
+        assert!(matches!(
+            w.finish(),
+            Err(ExportError::Unfinished { written: 1, .. })
+        ));
     }
 }

@@ -7,6 +7,8 @@ pub mod apng;
 pub mod movie;
 pub mod picture;
 
+pub use super::error::ExportError;
+
 /// The picture and the movie being made, and the last of each.
 #[derive(Default)]
 pub(super) struct Export {

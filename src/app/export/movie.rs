@@ -18,8 +18,10 @@
 
 use std::collections::VecDeque;
 
+use super::ExportError;
 use super::apng::ApngWriter;
 use crate::app::ShapecastApp;
+use crate::app::error::AppError;
 use crate::gpu::readback::PendingTexture;
 use crate::gpu::volume_texture::FeatureTexture;
 use crate::render::camera::Camera;
@@ -60,7 +62,7 @@ enum Sink {
 }
 
 impl Sink {
-    fn new(destination: Destination, size: [u32; 2], frames: u32) -> Result<Self, String> {
+    fn new(destination: Destination, size: [u32; 2], frames: u32) -> Result<Self, ExportError> {
         Ok(match destination {
             Destination::File => Self::Apng(ApngWriter::new(size, frames, FPS)?),
             Destination::Pacs => Self::Frames(Vec::with_capacity(frames as usize)),
@@ -74,7 +76,7 @@ impl Sink {
         }
     }
 
-    fn push(&mut self, rgba: Vec<u8>) -> Result<(), String> {
+    fn push(&mut self, rgba: Vec<u8>) -> Result<(), ExportError> {
         match self {
             Self::Apng(w) => w.push(&rgba),
             Self::Frames(f) => {
@@ -189,7 +191,7 @@ impl ShapecastApp {
         if let Some((frames, destination)) = self.export.movie.requested.take()
             && let Err(e) = self.start_movie(frames, destination)
         {
-            self.error(format!("{}: {e}", action(destination)));
+            self.error(AppError::export(action(destination), e));
         }
         if self.export.movie.making.is_none() {
             return;
@@ -200,34 +202,31 @@ impl ShapecastApp {
             Ok(false) => self.finish_movie(),
             Err(e) => {
                 let what = self.export.movie.making.take().map(|m| m.destination);
-                self.error(format!(
-                    "{}: {e}",
-                    action(what.unwrap_or(Destination::File))
+                self.error(AppError::export(
+                    action(what.unwrap_or(Destination::File)),
+                    e,
                 ));
             }
         }
     }
 
-    fn start_movie(&mut self, frames: u32, destination: Destination) -> Result<(), String> {
+    fn start_movie(&mut self, frames: u32, destination: Destination) -> Result<(), ExportError> {
         let (Some(gpu), Some(scene)) = (&self.gpu, &self.scene) else {
-            return Err("no volume is shown".to_owned());
+            return Err(ExportError::NoVolume);
         };
-        let size = self
-            .mip_view
-            .full_size()
-            .ok_or("the MIP pane has not been drawn yet; show it first")?;
+        let size = self.mip_view.full_size().ok_or(ExportError::PaneNotDrawn)?;
         let size = match destination {
             Destination::File => size,
             Destination::Pacs => stored_size(size),
         };
         let features = self.shown_features().map(|f| f.texture.clone());
-        let target = RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?;
+        let target = RaycastTarget::new(gpu, size)?;
         let source = match destination {
             Destination::File => None,
             Destination::Pacs => Some(
                 self.pacs_source()
                     .map(|(_, study, series)| (study, series))
-                    .ok_or("the volume shown did not come from an archive")?,
+                    .ok_or(ExportError::NotFromArchive)?,
             ),
         };
         let settings = self.mip_view.frame_settings();
@@ -283,9 +282,9 @@ impl ShapecastApp {
 
     /// One step: frames that arrived are encoded, then a band of rows is drawn. `Ok(false)`
     /// once every frame is in.
-    fn step_movie(&mut self) -> Result<bool, String> {
+    fn step_movie(&mut self) -> Result<bool, ExportError> {
         let (Some(gpu), Some(scene)) = (&self.gpu, &self.scene) else {
-            return Err("the volume was closed".to_owned());
+            return Err(ExportError::VolumeClosed);
         };
         let request = self.mip_view.mode.as_ref().and(self.displayed_request());
         let features = request
@@ -295,7 +294,7 @@ impl ShapecastApp {
             return Ok(false);
         };
         if m.volume != scene.render.intensity {
-            return Err("stopped: another volume is shown".to_owned());
+            return Err(ExportError::VolumeReplaced);
         }
         if m.features.as_ref() != features.map(|f| &f.texture) {
             // The features arrived (asked for before they were computed) or another mode is
@@ -314,7 +313,12 @@ impl ShapecastApp {
                     m.reads.pop_front();
                     m.sink.push(rgba)?;
                 }
-                Some(Err(e)) => return Err(format!("reading frame {} back: {e}", m.encoded() + 1)),
+                Some(Err(source)) => {
+                    return Err(ExportError::Readback {
+                        frame: m.encoded() + 1,
+                        source,
+                    });
+                }
             }
         }
         if m.encoded() == m.frames {
@@ -392,7 +396,7 @@ impl ShapecastApp {
         };
         let png = match writer.finish() {
             Ok(png) => png,
-            Err(e) => return self.error(format!("Save movie: {e}")),
+            Err(e) => return self.error(AppError::export(action(Destination::File), e)),
         };
         let movie = Movie {
             name: MOVIE_NAME.to_owned(),
@@ -405,7 +409,7 @@ impl ShapecastApp {
                 "movie saved: {place} ({frames} frames of {}x{}, an animated PNG)",
                 size[0], size[1]
             )),
-            Err(e) => self.error(format!("Save movie: {e}")),
+            Err(e) => self.error(AppError::export(action(Destination::File), e.into())),
         }
         self.export.movie.last = Some(movie);
     }

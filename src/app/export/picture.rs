@@ -7,6 +7,9 @@
 
 use std::sync::{Arc, Mutex};
 
+use super::ExportError;
+use crate::app::error::AppError;
+use crate::app::error::SaveError;
 use crate::app::platform::Platform as _;
 use crate::app::{PaneId, ShapecastApp};
 
@@ -37,14 +40,14 @@ pub fn crop_png(
     image: &egui::ColorImage,
     rect: egui::Rect,
     pixels_per_point: f32,
-) -> Result<(Vec<u8>, [u32; 2]), String> {
+) -> Result<(Vec<u8>, [u32; 2]), ExportError> {
     let [w, h] = image.size;
     let x0 = ((rect.left() * pixels_per_point).round().max(0.0) as usize).min(w);
     let y0 = ((rect.top() * pixels_per_point).round().max(0.0) as usize).min(h);
     let x1 = ((rect.right() * pixels_per_point).round().max(0.0) as usize).min(w);
     let y1 = ((rect.bottom() * pixels_per_point).round().max(0.0) as usize).min(h);
     if x1 <= x0 || y1 <= y0 {
-        return Err(format!("the pane ({rect:?}) is not on the screen"));
+        return Err(ExportError::OffScreen(format!("{rect:?}")));
     }
     let mut rgba = Vec::with_capacity((x1 - x0) * (y1 - y0) * 4);
     for y in y0..y1 {
@@ -61,9 +64,15 @@ pub fn crop_png(
     encoder
         .write_header()
         .and_then(|mut w| w.write_image_data(&rgba))
-        .map_err(|e| format!("encoding the picture as PNG: {e}"))?;
+        .map_err(|source| ExportError::Encode {
+            what: "the picture as PNG".to_owned(),
+            source,
+        })?;
     Ok((png, size))
 }
+
+/// What the error list calls the action.
+const SAVE_PICTURE: &str = "Save picture";
 
 impl ShapecastApp {
     /// Asks for a picture of `pane` (made from the pixels of a frame or two later, once the
@@ -140,15 +149,15 @@ impl ShapecastApp {
                 .and_then(|p| p.area_rect),
         };
         let Some(rect) = rect else {
-            return self.error(format!(
-                "Save picture: the {} pane is not shown",
-                pane.name()
+            return self.error(AppError::export(
+                SAVE_PICTURE,
+                ExportError::PaneNotShown(pane.name()),
             ));
         };
         let ppp = ctx.pixels_per_point();
         let (png, size) = match crop_png(&image, rect, ppp) {
             Ok(p) => p,
-            Err(e) => return self.error(format!("Save picture: {e}")),
+            Err(e) => return self.error(AppError::export(SAVE_PICTURE, e)),
         };
         let picture = Picture {
             name: format!("{}-{}.png", self.file_stem(), pane.name()),
@@ -157,7 +166,7 @@ impl ShapecastApp {
         };
         match self.deliver(&picture.name, &picture.png) {
             Ok(place) => self.notes.push(format!("picture saved: {place}")),
-            Err(e) => self.error(format!("Save picture: {e}")),
+            Err(e) => self.error(AppError::export(SAVE_PICTURE, e.into())),
         }
         self.export.picture.last = Some(picture);
     }
@@ -180,7 +189,7 @@ impl ShapecastApp {
 
     /// Hands a file made here (a picture, a movie) to the user: a download in the page, a file
     /// in the pictures' folder natively. Says where it went.
-    pub(in crate::app) fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String> {
+    pub(in crate::app) fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, SaveError> {
         self.platform.deliver(name, bytes)
     }
 
@@ -235,6 +244,9 @@ mod tests {
         // (3, 2) of the image is (1, 1) of the crop from (2, 1).
         assert_eq!(&buf[(3 + 1) * 4..(3 + 1) * 4 + 4], &[200, 10, 20, 255]);
         let off = egui::Rect::from_min_size(egui::pos2(50.0, 50.0), egui::vec2(4.0, 4.0));
-        assert!(crop_png(&image, off, 1.0).is_err());
+        assert!(matches!(
+            crop_png(&image, off, 1.0),
+            Err(ExportError::OffScreen(_))
+        ));
     }
 }

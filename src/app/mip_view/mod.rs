@@ -388,7 +388,7 @@ impl MipView {
                     self.pending = None;
                 }
                 Some(Err(e)) => {
-                    self.error = Some(format!("pick: {e}"));
+                    self.error = Some(format!("pick: {}", crate::error::chain(&e)));
                     self.pending = None;
                 }
             }
@@ -481,7 +481,7 @@ impl MipView {
                     }
                 }
                 Err(e) => {
-                    self.error = Some(e);
+                    self.error = Some(crate::error::chain(&e));
                     self.refining = None;
                 }
             }

@@ -2,6 +2,7 @@
 //! rows) rendered into the pane's target or an off-screen one.
 
 use super::*;
+use crate::render::raycast::RaycastError;
 
 /// What a frame shows: the volume, and the features over it.
 #[derive(Clone, Copy)]
@@ -29,11 +30,8 @@ impl MipView {
         settings: &RenderSettings,
         target: &mut RaycastTarget,
         band: Band,
-    ) -> Result<(), String> {
-        self.prepare(gpu, shown)?;
-        let Some(caster) = &self.caster else {
-            return Err("the ray caster is not ready".to_owned());
-        };
+    ) -> Result<(), RaycastError> {
+        let caster = self.prepare(gpu, shown)?;
         let scene = Scene {
             volume: shown.volume,
             features: shown.features,
@@ -41,20 +39,20 @@ impl MipView {
             feature_bricks: self.feature_bricks.as_ref(),
         };
         let span = self.pacer.open(gpu);
-        caster
-            .render(gpu, &scene, camera, settings, target, band.rows)
-            .map_err(|e| e.to_string())?;
+        let rendered = caster.render(gpu, &scene, camera, settings, target, band.rows);
+        // Kept whether or not the frame went well (remade only when it cannot be made).
+        self.caster = Some(caster);
+        rendered?;
         self.pacer.submitted(gpu, band.samples, span);
         Ok(())
     }
 
-    /// The ray caster, and brick tables started for the textures shown.
-    pub(super) fn prepare(&mut self, gpu: &GpuContext, shown: Shown<'_>) -> Result<(), String> {
-        if self.caster.is_none() {
-            self.caster = Some(Raycaster::new(gpu).map_err(|e| e.to_string())?);
-        }
-        let Some(caster) = &self.caster else {
-            return Err("the ray caster is not ready".to_owned());
+    /// The ray caster (made the first time), with brick tables started for the textures
+    /// shown; the caller puts it back in `self.caster`.
+    fn prepare(&mut self, gpu: &GpuContext, shown: Shown<'_>) -> Result<Raycaster, RaycastError> {
+        let caster = match self.caster.take() {
+            Some(c) => c,
+            None => Raycaster::new(gpu)?,
         };
         if !self
             .bricks
@@ -71,7 +69,7 @@ impl MipView {
         {
             self.feature_bricks = Some(caster.start_bricks(gpu, BrickSource::Features(f)));
         }
-        Ok(())
+        Ok(caster)
     }
 
     /// Renders `band` of the pane's frame into its target `slot` (made or remade at `size`),
@@ -84,16 +82,17 @@ impl MipView {
         settings: &RenderSettings,
         (slot, size): (usize, [u32; 2]),
         band: Band,
-    ) -> Result<(), String> {
-        let resized = self.targets[slot].as_ref().is_none_or(|t| t.size != size);
+    ) -> Result<(), RaycastError> {
         // A new target is made before the old one goes: if it cannot be, the old one stays.
-        let made = if resized {
-            Some(RaycastTarget::new(gpu, size).map_err(|e| e.to_string())?)
-        } else {
-            None
-        };
-        let Some(mut target) = made.or_else(|| self.targets[slot].take()) else {
-            return Err("the ray caster is not ready".to_owned());
+        let (mut target, resized) = match self.targets[slot].take() {
+            Some(t) if t.size == size => (t, false),
+            old => match RaycastTarget::new(gpu, size) {
+                Ok(t) => (t, true),
+                Err(e) => {
+                    self.targets[slot] = old;
+                    return Err(e);
+                }
+            },
         };
         let camera = self.camera;
         let result = self.render_offscreen(gpu, shown, &camera, settings, &mut target, band);

@@ -2,6 +2,7 @@
 //! as a dropped folder's PET is.
 
 use super::*;
+use crate::app::error::AppError;
 
 /// The tag of a PET retrieval's task ids: their own range, apart from the dialog's tasks
 /// (`Pacs::task`), so that neither replaces nor receives the other's answers.
@@ -45,7 +46,12 @@ impl ShapecastApp {
         let parsed = Base::parse(&target.base).and_then(|b| Ok((b, self.pacs.auth()?)));
         let (base, auth) = match parsed {
             Ok(x) => x,
-            Err(e) => return self.error(format!("PET: {}", crate::error::chain(&e))),
+            Err(source) => {
+                return self.error(AppError::Archive {
+                    action: "PET",
+                    source,
+                });
+            }
         };
         // Its own task: the dialog's next search or study does not cancel it, a new CT does.
         self.pacs.pet_tasks += 1;
@@ -81,7 +87,10 @@ impl ShapecastApp {
             }
             Err(e) => {
                 if self.pet.failed(retrieval.generation) {
-                    self.error(format!("PET: {}", crate::error::chain(&e)));
+                    self.error(AppError::Archive {
+                        action: "PET",
+                        source: e,
+                    });
                 }
             }
         }

@@ -4,7 +4,11 @@
 
 use super::transport as backend;
 use super::{ShapecastApp, ViewSource};
+use crate::app::error::{AppError, ExportError};
 use crate::io::dicomweb::{self, Base, DicomWebError, stow};
+
+/// What the error list calls the action.
+const STORE: &str = "Store to PACS";
 
 /// A rotation of the MIP to store into the study its series came from.
 pub(in crate::app) struct StoreJob {
@@ -141,16 +145,20 @@ impl ShapecastApp {
     /// token the study was opened with.
     pub(in crate::app) fn pacs_store(&mut self, job: StoreJob) {
         let Some((base, study, series)) = self.pacs_source() else {
-            return self
-                .error("Store to PACS: the volume shown did not come from an archive".to_owned());
+            return self.error(AppError::export(STORE, ExportError::NotFromArchive));
         };
         if (study.as_str(), series.as_str()) != (job.study.as_str(), job.series.as_str()) {
-            return self.error("Store to PACS: another series is shown now; not stored".to_owned());
+            return self.error(AppError::export(STORE, ExportError::SeriesChanged));
         }
         let parsed = Base::parse(&base).and_then(|b| Ok((b, self.pacs.auth()?)));
         let (base, auth) = match parsed {
             Ok(x) => x,
-            Err(e) => return self.error(format!("Store to PACS: {}", crate::error::chain(&e))),
+            Err(source) => {
+                return self.error(AppError::Archive {
+                    action: STORE,
+                    source,
+                });
+            }
         };
         if let Some((_, old)) = self.pacs.store.take() {
             old.cancel();
@@ -198,7 +206,10 @@ impl ShapecastApp {
                         crate::error::chain(&e)
                     ));
                 }
-                self.error(format!("Store to PACS: {}", crate::error::chain(&e)));
+                self.error(AppError::Archive {
+                    action: STORE,
+                    source: e,
+                });
             }
         }
     }

@@ -5,6 +5,7 @@
 //! where the app's `cfg(target_arch = "wasm32")` lives: each platform module names the same
 //! types and functions, re-exported here.
 
+use super::error::{PlatformError, SaveError};
 use super::load::{LoadSource, SeriesSet};
 
 #[cfg(not(target_arch = "wasm32"))]
@@ -100,7 +101,7 @@ pub trait Platform {
 
     /// Hands a saved file (a picture, a movie) to the user: a download in the page, a file in
     /// the pictures' folder natively. Says where it went.
-    fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String>;
+    fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, SaveError>;
 
     /// Where [`Self::deliver`] writes files natively; the page hands them to the browser's
     /// downloads, which choose the folder, so it keeps none.
@@ -108,7 +109,7 @@ pub trait Platform {
 
     /// Sets up what reaches the app from outside its frames (the page's drops and inputs);
     /// called once, at the first frame.
-    fn install(&self, ctx: &egui::Context) -> Result<(), String>;
+    fn install(&self, ctx: &egui::Context) -> Result<(), PlatformError>;
 
     /// Starts getting the demo CT: its source when it is at hand (natively it is embedded in
     /// the binary), `None` while it is fetched (the page: it arrives with the page's events).
@@ -116,7 +117,7 @@ pub trait Platform {
 
     /// Starts downloading volumes by URL (the page's `?url=`, a link); the error says why this
     /// platform cannot.
-    fn fetch(&self, urls: Vec<String>) -> Result<(), String>;
+    fn fetch(&self, urls: Vec<String>) -> Result<(), PlatformError>;
 
     /// Whether one of the page's downloads (`?url=`) is running ([`Self::cancel_download`]).
     fn downloading(&self) -> bool;
@@ -126,7 +127,7 @@ pub trait Platform {
 
     /// Starts downloading a PET/CT link's PET (`&pet=URL`) for the CT of `generation`; the
     /// error says why this platform cannot.
-    fn fetch_pet(&self, urls: Vec<String>, generation: u64) -> Result<(), String>;
+    fn fetch_pet(&self, urls: Vec<String>, generation: u64) -> Result<(), PlatformError>;
 
     /// The address of the page, which a link to the view starts with (empty natively).
     fn page_address(&self) -> String;

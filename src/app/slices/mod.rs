@@ -22,10 +22,13 @@ use eframe::egui_wgpu::RenderState;
 
 use glam::DVec3;
 
+use super::error::AppError;
 use super::measure::{self, MeasureKind, Measurement, Tool};
 use crate::gpu::GpuContext;
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
-use crate::render::slice::{Overlay, SliceImage, SlicePlane, SliceRenderer, SliceRequest};
+use crate::render::slice::{
+    Overlay, SliceError, SliceImage, SlicePlane, SliceRenderer, SliceRequest,
+};
 use crate::volume::{Volume, orientation_label};
 
 pub use super::model::axes::{PaneAxes, PaneView, SliceKind, pane_axes};
@@ -68,7 +71,8 @@ pub struct PaneResponse {
     pub toggle_maximise: bool,
     /// A measurement drawn this frame.
     pub measured: Option<Measurement>,
-    pub error: Option<String>,
+    /// The pane's slice could not be drawn.
+    pub error: Option<AppError>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -271,8 +275,11 @@ impl SlicePane {
         crosshair[axes.fixed] = slice_now;
         let slice = slice_now;
 
-        if let Err(e) = self.render_if_needed(inputs, axes, slice) {
-            out.error = Some(e);
+        if let Err(source) = self.render_if_needed(inputs, axes, slice) {
+            out.error = Some(AppError::Pane {
+                pane: self.kind.name(),
+                source,
+            });
         }
 
         // Mouse: pan, window, measure or move the crosshair.
@@ -458,7 +465,7 @@ impl SlicePane {
         inputs: &PaneInputs<'_>,
         axes: PaneAxes,
         slice: usize,
-    ) -> Result<(), String> {
+    ) -> Result<(), SliceError> {
         let request = SliceRequest {
             plane: SlicePlane {
                 fixed: axes.fixed,
@@ -479,16 +486,13 @@ impl SlicePane {
         }
         let reuse = self.image.take();
         let reused_size = reuse.as_ref().map(|i| i.size);
-        let image = inputs
-            .renderer
-            .render(
-                inputs.gpu,
-                inputs.render_volume,
-                inputs.features.map(|(t, _)| t),
-                &request,
-                reuse,
-            )
-            .map_err(|e| format!("{} pane: {e}", self.kind.name()))?;
+        let image = inputs.renderer.render(
+            inputs.gpu,
+            inputs.render_volume,
+            inputs.features.map(|(t, _)| t),
+            &request,
+            reuse,
+        )?;
         if self.texture_id.is_none() || reused_size != Some(image.size) {
             super::paint::show_texture(
                 inputs.render_state,

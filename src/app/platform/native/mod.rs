@@ -1,7 +1,7 @@
 //! The native window's side of [`Platform`]: paths typed into "Open", files written into the
 //! pictures' folder, the demo CT embedded in the binary.
 
-use super::{Event, LoadSource, Platform, SeriesSet};
+use super::{Event, LoadSource, Platform, PlatformError, SaveError, SeriesSet};
 
 /// The native window.
 pub type This = Native;
@@ -114,12 +114,15 @@ impl Platform for Native {
         chosen
     }
 
-    fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String> {
+    fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, SaveError> {
         let path = self
             .picture_dir
             .as_ref()
             .map_or_else(|| std::path::PathBuf::from(name), |d| d.join(name));
-        std::fs::write(&path, bytes).map_err(|e| format!("writing {}: {e}", path.display()))?;
+        std::fs::write(&path, bytes).map_err(|source| SaveError::Write {
+            path: path.display().to_string(),
+            source,
+        })?;
         let shown = std::path::absolute(&path).unwrap_or(path);
         Ok(shown.display().to_string())
     }
@@ -128,7 +131,7 @@ impl Platform for Native {
         self.picture_dir = Some(dir);
     }
 
-    fn install(&self, _ctx: &egui::Context) -> Result<(), String> {
+    fn install(&self, _ctx: &egui::Context) -> Result<(), PlatformError> {
         Ok(())
     }
 
@@ -145,11 +148,10 @@ impl Platform for Native {
         })
     }
 
-    fn fetch(&self, urls: Vec<String>) -> Result<(), String> {
-        Err(format!(
-            "{}: opening a volume by URL works in the browser; download it and open the file",
-            urls.join(", ")
-        ))
+    fn fetch(&self, urls: Vec<String>) -> Result<(), PlatformError> {
+        Err(PlatformError::UrlsNatively {
+            urls: urls.join(", "),
+        })
     }
 
     fn downloading(&self) -> bool {
@@ -158,11 +160,10 @@ impl Platform for Native {
 
     fn cancel_download(&self) {}
 
-    fn fetch_pet(&self, urls: Vec<String>, _generation: u64) -> Result<(), String> {
-        Err(format!(
-            "{}: a PET by URL opens in the browser; natively give --pet PATH",
-            urls.join(", ")
-        ))
+    fn fetch_pet(&self, urls: Vec<String>, _generation: u64) -> Result<(), PlatformError> {
+        Err(PlatformError::PetUrlsNatively {
+            urls: urls.join(", "),
+        })
     }
 
     fn page_address(&self) -> String {

@@ -7,7 +7,7 @@ pub mod fetch;
 pub mod files;
 pub mod js_bytes;
 
-use super::{LoadSource, Platform, SeriesSet};
+use super::{LoadSource, Platform, PlatformError, SaveError, SeriesSet};
 
 /// The page.
 pub type This = Web;
@@ -84,15 +84,15 @@ impl Platform for Web {
         None
     }
 
-    fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, String> {
-        download(name, bytes).map_err(|e| crate::io::js::error_text(&e))?;
+    fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, SaveError> {
+        download(name, bytes).map_err(|e| SaveError::Download(crate::io::js::error_text(&e)))?;
         Ok(format!("{name} (your downloads)"))
     }
 
     fn set_save_dir(&mut self, _dir: std::path::PathBuf) {}
 
-    fn install(&self, ctx: &egui::Context) -> Result<(), String> {
-        files::install(ctx)
+    fn install(&self, ctx: &egui::Context) -> Result<(), PlatformError> {
+        files::install(ctx).map_err(PlatformError::DropUnavailable)
     }
 
     fn demo(&self) -> Option<LoadSource> {
@@ -100,7 +100,7 @@ impl Platform for Web {
         None
     }
 
-    fn fetch(&self, urls: Vec<String>) -> Result<(), String> {
+    fn fetch(&self, urls: Vec<String>) -> Result<(), PlatformError> {
         fetch::fetch_urls(urls);
         Ok(())
     }
@@ -113,7 +113,7 @@ impl Platform for Web {
         fetch::cancel();
     }
 
-    fn fetch_pet(&self, urls: Vec<String>, generation: u64) -> Result<(), String> {
+    fn fetch_pet(&self, urls: Vec<String>, generation: u64) -> Result<(), PlatformError> {
         fetch::fetch_pet_urls(urls, generation);
         Ok(())
     }
