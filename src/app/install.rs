@@ -4,6 +4,7 @@
 
 use super::platform::Platform as _;
 use super::*;
+use crate::gpu::volume_texture::RenderVolumeError;
 
 /// A loaded volume whose intensity texture is being written, slab by slab over frames (a
 /// whole-body CT is 1 GB: seconds of uploading in one frame would stop the viewer); it is
@@ -63,13 +64,7 @@ impl ShapecastApp {
         }
         let (render, upload) = match RenderVolume::create(gpu, &volume) {
             Ok(r) => r,
-            Err(e) => {
-                self.loading_origin = None;
-                return self.load_failed(super::error::AppError::Upload {
-                    volume: volume.source.clone(),
-                    source: e,
-                });
-            }
+            Err(e) => return self.upload_refused(volume, notes, patient, series, e),
         };
         self.uploading = Some(Uploading {
             patient,
@@ -81,6 +76,41 @@ impl ShapecastApp {
             upload,
         });
         self.advance_upload();
+    }
+
+    /// The device refused `volume`'s texture: when it had no memory for it, a copy half as
+    /// large along its longest axis is installed instead, said so (again, until it fits or is
+    /// too small to be worth showing); any other refusal fails the load.
+    fn upload_refused(
+        &mut self,
+        volume: Volume,
+        mut notes: Vec<String>,
+        patient: Option<crate::io::Patient>,
+        series: Option<load::SeriesSet>,
+        error: RenderVolumeError,
+    ) {
+        if let RenderVolumeError::OutOfMemory { bytes, .. } = &error
+            && let Some((reduced, factors)) = halved(&volume)
+        {
+            notes.push(format!(
+                "the GPU had no memory for the {:?} voxels' texture ({:.0} MB): shown and computed as {:?} voxels, averaged {factors:?}",
+                volume.dims,
+                *bytes as f64 / 1e6,
+                reduced.dims
+            ));
+            drop(volume);
+            let loaded = crate::io::Loaded {
+                volume: reduced,
+                notes,
+                patient,
+            };
+            return self.install(loaded, series);
+        }
+        self.loading_origin = None;
+        self.load_failed(super::error::AppError::Upload {
+            volume: volume.source.clone(),
+            source: error,
+        });
     }
 
     /// Stops uploading a volume when another load begins: the newer one is what the user asked
@@ -116,12 +146,24 @@ impl ShapecastApp {
         // Slabs while the frame's time lasts and the GPU keeps up (`ready`: a bounded number
         // in flight, so a slow device does not queue the whole volume in shared memory).
         while up.upload.ready() {
-            if up.upload.step(gpu, &up.volume, &up.render) {
-                if let Some(up) = self.uploading.take() {
-                    self.load_progress = None;
-                    self.finish_install(up);
+            match up.upload.step(gpu, &up.volume, &up.render) {
+                Ok(false) => {}
+                Ok(true) => {
+                    if let Some(up) = self.uploading.take() {
+                        self.load_progress = None;
+                        self.finish_install(up);
+                    }
+                    return;
                 }
-                return;
+                // A browser answers a refused texture a frame or more after it was made.
+                Err(e) => {
+                    if let Some(up) = self.uploading.take() {
+                        self.load_progress = None;
+                        self.loading_origin = up.origin;
+                        self.upload_refused(up.volume, up.notes, up.patient, up.series, e);
+                    }
+                    return;
+                }
             }
             if started.elapsed().as_secs_f64() >= UPLOAD_SECONDS_PER_FRAME {
                 break;
@@ -269,4 +311,35 @@ pub fn preset_for(volume: &crate::volume::Volume, is_ct: bool) -> (Preset, Strin
             100.0 * fraction
         ),
     )
+}
+
+/// `volume` averaged by 2 along its longest axis (in voxels), and the factors; `None` once that
+/// axis is 32 voxels or fewer (a copy that small shows nothing worth reading).
+fn halved(volume: &Volume) -> Option<(Volume, [usize; 3])> {
+    let longest = (0..3).max_by_key(|&a| volume.dims[a])?;
+    if volume.dims[longest] <= 32 {
+        return None;
+    }
+    let mut factors = [1; 3];
+    factors[longest] = 2;
+    Some((volume.reduced(factors), factors))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_refused_volume_is_halved_along_its_longest_axis_until_small() {
+        let volume = Volume::from_f32([40, 30, 70], [0.8, 0.8, 0.8], vec![7.0; 40 * 30 * 70]);
+        let (half, factors) = halved(&volume).expect("70 slices halve");
+        assert_eq!(factors, [1, 1, 2]);
+        assert_eq!(half.dims, [40, 30, 35]);
+        assert_eq!(half.spacing_mm, [0.8, 0.8, 1.6]);
+        let (quarter, factors) = halved(&half).expect("40 columns halve");
+        assert_eq!(factors, [2, 1, 1]);
+        assert_eq!(quarter.dims, [20, 30, 35]);
+        let small = Volume::from_f32([32, 16, 8], [1.0; 3], vec![0.0; 32 * 16 * 8]);
+        assert!(halved(&small).is_none(), "32 voxels is as small as it gets");
+    }
 }

@@ -216,7 +216,7 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
     let (mut slabs, mut largest_s) = (0usize, 0f64);
     loop {
         let step = Instant::now();
-        let done = upload.step(&ctx, &volume, &render_volume);
+        let done = upload.step(&ctx, &volume, &render_volume)?;
         ctx.device
             .poll(wgpu::PollType::wait_indefinitely())
             .context("waiting for the GPU")?;

@@ -4,6 +4,7 @@
 //! reads (the hand-off between `crate::compute` and `crate::render`). Kernels live in
 //! `crate::compute` (features) and `crate::render` (projections and slices).
 
+pub mod alloc;
 pub mod checks;
 pub mod context;
 pub mod kernel;

@@ -23,6 +23,7 @@
 //!
 //! Both are on the volume's own voxel grid (the input grid), whatever grid features used.
 
+use super::alloc::{AllocCheck, Allocation};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU32, Ordering};
 
@@ -99,6 +100,49 @@ pub enum RenderVolumeError {
     Empty,
     #[error("feature components have {got} values, the volume has {want} voxels")]
     Length { got: usize, want: usize },
+    /// The device has no memory for the texture (`what`: "intensity", "features").
+    #[error("the GPU has no memory for the {what} ({:.0} MB): {detail}", *.bytes as f64 / 1e6)]
+    OutOfMemory {
+        what: String,
+        bytes: u64,
+        detail: String,
+    },
+}
+
+/// The bytes of a 3D texture of `dims` at `bytes_per_texel`.
+pub fn texture_bytes(dims: [u32; 3], bytes_per_texel: u64) -> u64 {
+    dims.iter().map(|&d| u64::from(d)).product::<u64>() * bytes_per_texel
+}
+
+/// `texture_3d` in an out-of-memory error scope: the texture, and the device's answer
+/// ([`AllocCheck`]); refused at once (natively) is an error.
+fn texture_3d_checked(
+    ctx: &GpuContext,
+    label: &str,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> Result<(wgpu::Texture, AllocCheck), RenderVolumeError> {
+    let (texture, mut check) =
+        AllocCheck::around(ctx, || texture_3d(ctx, label, dims, format, usage));
+    match check.poll() {
+        Allocation::Refused(detail) => Err(out_of_memory(label, dims, format, detail)),
+        Allocation::Waiting | Allocation::Granted => Ok((texture, check)),
+    }
+}
+
+/// The error of a refused texture of `dims` in `format`.
+fn out_of_memory(
+    label: &str,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    detail: String,
+) -> RenderVolumeError {
+    RenderVolumeError::OutOfMemory {
+        what: label.to_owned(),
+        bytes: texture_bytes(dims, u64::from(format.block_copy_size(None).unwrap_or(4))),
+        detail,
+    }
 }
 
 /// Checks that `dims` fit a 3D texture on this device.
@@ -265,7 +309,7 @@ impl RenderVolume {
     /// Uploads `volume` slab by slab (the CPU never holds a second full-size copy).
     pub fn upload(ctx: &GpuContext, volume: &Volume) -> Result<Self, RenderVolumeError> {
         let (render, mut upload) = Self::create(ctx, volume)?;
-        while !upload.step(ctx, volume, &render) {}
+        while !upload.step(ctx, volume, &render)? {}
         Ok(render)
     }
 
@@ -277,13 +321,13 @@ impl RenderVolume {
     ) -> Result<(Self, IntensityUpload), RenderVolumeError> {
         let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
         check_dims(ctx, dims)?;
-        let intensity = texture_3d(
+        let (intensity, alloc) = texture_3d_checked(
             ctx,
             "intensity",
             dims,
             INTENSITY_FORMAT,
             intensity_usage(ctx),
-        );
+        )?;
         let intensity_view = intensity.create_view(&wgpu::TextureViewDescriptor::default());
         let value_range = volume.value_range().unwrap_or((0.0, 1.0));
         let render = Self {
@@ -296,6 +340,7 @@ impl RenderVolume {
             value_scale: texture_value_scale(value_range),
         };
         let upload = IntensityUpload {
+            alloc,
             next_z: 0,
             per: slices_per_chunk(dims, 2, UPLOAD_SLAB_BYTES),
             in_flight: Arc::new(AtomicU32::new(0)),
@@ -307,6 +352,9 @@ impl RenderVolume {
 /// Writing a [`RenderVolume`]'s intensity, one slab of at most 16 MiB per step.
 #[derive(Debug)]
 pub struct IntensityUpload {
+    /// The device's answer to the texture: nothing is written before it is in (in a
+    /// browser a refused texture would fail every write).
+    alloc: AllocCheck,
     next_z: u32,
     per: u32,
     /// Slabs submitted that the GPU has not finished (counted down by the queue's callback).
@@ -332,11 +380,24 @@ impl IntensityUpload {
     }
 
     /// Writes the next slab of `volume` (the volume `render` was created for); true once the
-    /// last one is written.
-    pub fn step(&mut self, ctx: &GpuContext, volume: &Volume, render: &RenderVolume) -> bool {
+    /// last one is written. Writes nothing while the device has not said whether it granted
+    /// the texture; an error when it refused it.
+    pub fn step(
+        &mut self,
+        ctx: &GpuContext,
+        volume: &Volume,
+        render: &RenderVolume,
+    ) -> Result<bool, RenderVolumeError> {
         let dims = render.dims;
+        match self.alloc.poll() {
+            Allocation::Waiting => return Ok(false),
+            Allocation::Refused(detail) => {
+                return Err(out_of_memory("intensity", dims, INTENSITY_FORMAT, detail));
+            }
+            Allocation::Granted => {}
+        }
         if self.next_z >= dims[2] {
-            return true;
+            return Ok(true);
         }
         let z0 = self.next_z;
         let nz = self.per.min(dims[2] - z0);
@@ -371,7 +432,7 @@ impl IntensityUpload {
             in_flight.fetch_sub(1, Ordering::AcqRel);
         });
         self.next_z += nz;
-        self.next_z >= dims[2]
+        Ok(self.next_z >= dims[2])
     }
 }
 
@@ -464,8 +525,18 @@ impl FeatureTexture {
 impl FeatureTexture {
     /// An empty feature texture the GPU pipeline copies into and renderers sample.
     pub fn new(ctx: &GpuContext, dims: [u32; 3], label: &str) -> Result<Self, RenderVolumeError> {
+        Self::new_checked(ctx, dims, label).map(|(t, _)| t)
+    }
+
+    /// [`Self::new`] and the device's answer to the texture ([`AllocCheck`]: natively a
+    /// refusal is already the error; in a browser the owner polls it before using it).
+    pub fn new_checked(
+        ctx: &GpuContext,
+        dims: [u32; 3],
+        label: &str,
+    ) -> Result<(Self, AllocCheck), RenderVolumeError> {
         check_dims(ctx, dims)?;
-        let texture = texture_3d(
+        let (texture, alloc) = texture_3d_checked(
             ctx,
             label,
             dims,
@@ -473,15 +544,21 @@ impl FeatureTexture {
             wgpu::TextureUsages::TEXTURE_BINDING
                 | wgpu::TextureUsages::COPY_DST
                 | wgpu::TextureUsages::COPY_SRC,
-        );
+        )?;
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        Ok(Self {
+        let texture = Self {
             dims,
             texture,
             view,
             max: [0.0; 3],
             p999: [0.0; 3],
-        })
+        };
+        Ok((texture, alloc))
+    }
+
+    /// The error of this texture refused by the device (`detail`: its words).
+    pub fn out_of_memory(&self, detail: String) -> RenderVolumeError {
+        out_of_memory("features", self.dims, FEATURE_FORMAT, detail)
     }
 
     /// A feature texture filled from CPU components (e.g. the CPU reference's output).

@@ -8,6 +8,7 @@ mod eigen_common;
 #[path = "../gpu_common/mod.rs"]
 mod gpu_common;
 
+mod alloc;
 mod eigen;
 mod hessian;
 mod memory;

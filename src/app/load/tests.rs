@@ -40,15 +40,20 @@ fn decoding_is_announced_before_it_runs() {
     assert_eq!(r.unwrap().volume.dims, volume.dims);
 }
 
+/// A zip archive holding `bytes` as `name`.
+fn zip_of(name: &str, bytes: &[u8]) -> Vec<u8> {
+    use std::io::Write as _;
+    let mut w = ::zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    w.start_file(name, ::zip::write::SimpleFileOptions::default())
+        .unwrap();
+    w.write_all(bytes).unwrap();
+    w.finish().unwrap().into_inner()
+}
+
 #[test]
 fn a_zip_archive_is_unpacked_and_loaded() {
-    use std::io::Write as _;
     let (volume, nii) = sphere_nii();
-    let mut w = ::zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
-    w.start_file("scan/s.nii", ::zip::write::SimpleFileOptions::default())
-        .unwrap();
-    w.write_all(&nii).unwrap();
-    let zip = w.finish().unwrap().into_inner();
+    let zip = zip_of("scan/s.nii", &nii);
     let (_, r) = run_file("s.zip", zip);
     let loaded = r.unwrap();
     assert_eq!(loaded.volume.dims, volume.dims);
@@ -61,13 +66,8 @@ fn a_zip_archive_is_unpacked_and_loaded() {
 
 #[test]
 fn a_zip_archive_on_disk_is_read_on_demand_and_unpacked() {
-    use std::io::Write as _;
     let (volume, nii) = sphere_nii();
-    let mut w = ::zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
-    w.start_file("scan/s.nii", ::zip::write::SimpleFileOptions::default())
-        .unwrap();
-    w.write_all(&nii).unwrap();
-    let zip = w.finish().unwrap().into_inner();
+    let zip = zip_of("scan/s.nii", &nii);
     let dir = std::env::temp_dir().join(format!("shapecast-load-zip-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("s.zip");

@@ -28,6 +28,7 @@ mod plan;
 mod record;
 mod record_rst;
 
+use crate::gpu::alloc::{AllocCheck, Allocation};
 use std::collections::VecDeque;
 use std::sync::Arc;
 
@@ -201,6 +202,9 @@ pub struct FeatureJob {
     kernels: Kernels,
     buffers: Buffers,
     texture: FeatureTexture,
+    /// The device's answer to the feature texture: nothing is recorded before it is in (a
+    /// browser answers a frame or more later).
+    alloc: AllocCheck,
     /// The volume's values are read slice by slice from here (compact voxels, not f32).
     volume: Arc<Volume>,
     options: JobOptions,
@@ -360,6 +364,13 @@ impl FeatureJob {
         ctx.device
             .poll(wgpu::PollType::Poll)
             .map_err(ReadbackError::from)?;
+        match self.alloc.poll() {
+            Allocation::Waiting => return Ok(self.state()),
+            Allocation::Refused(detail) => {
+                return Err(PipelineError::Texture(self.texture.out_of_memory(detail)));
+            }
+            Allocation::Granted => {}
+        }
         if let Some(flight) = &self.busy {
             let Some(secs) = flight.seconds() else {
                 return Ok(self.state());

@@ -15,7 +15,7 @@ impl FeatureJob {
         let input = Grid::of(&volume);
         let resolved = req.resolve(&input)?;
         let dims = volume.dims.map(to_u32);
-        let texture = FeatureTexture::new(ctx, dims, "features")?;
+        let (texture, alloc) = FeatureTexture::new_checked(ctx, dims, "features")?;
         let compute = resolved.compute;
         let factors = resolved.factors;
         let mut notes = resolved.notes.clone();
@@ -165,6 +165,7 @@ impl FeatureJob {
             kernels,
             buffers,
             texture,
+            alloc,
             volume,
             options,
             sigmas_mm,

@@ -268,6 +268,19 @@ impl SampleLayout {
         last.checked_add(1)?.checked_mul(self.ty.size() as u64)
     }
 
+    /// Refuses the layout when its samples run past the `len` bytes given (the file is
+    /// truncated) or its voxels would exceed the voxel budget.
+    fn check_present(&self, file: &str, len: u64, limits: &Limits) -> Result<(), LoadError> {
+        let span = self
+            .span_bytes()
+            .and_then(|s| s.checked_add(self.offset as u64))
+            .unwrap_or(u64::MAX);
+        if span > len {
+            return Err(LoadError::truncated(file, "voxel data", span, len));
+        }
+        self.check_voxel_budget(file, limits)
+    }
+
     /// Refuses the voxels of this layout when they would exceed the voxel budget.
     fn check_voxel_budget(&self, file: &str, limits: &Limits) -> Result<(), LoadError> {
         check_voxel_budget(
@@ -312,14 +325,7 @@ fn decode_source(
     layout: SampleLayout,
     limits: &Limits,
 ) -> Result<Voxels, LoadError> {
-    let span = layout
-        .span_bytes()
-        .and_then(|s| s.checked_add(layout.offset as u64))
-        .unwrap_or(u64::MAX);
-    if span > data.len() {
-        return Err(LoadError::truncated(file, "voxel data", span, data.len()));
-    }
-    layout.check_voxel_budget(file, limits)?;
+    layout.check_present(file, data.len(), limits)?;
     let n = layout.count;
     let offset = layout.offset as u64;
     let swap = (layout.endian == Endian::Little) != cfg!(target_endian = "little");
@@ -478,19 +484,7 @@ pub(crate) fn decode_samples(
     layout: SampleLayout,
     limits: &Limits,
 ) -> Result<Voxels, LoadError> {
-    let span = layout
-        .span_bytes()
-        .and_then(|s| s.checked_add(layout.offset as u64))
-        .unwrap_or(u64::MAX);
-    if span > bytes.len() as u64 {
-        return Err(LoadError::truncated(
-            file,
-            "voxel data",
-            span,
-            bytes.len() as u64,
-        ));
-    }
-    layout.check_voxel_budget(file, limits)?;
+    layout.check_present(file, bytes.len() as u64, limits)?;
     let n = layout.count;
     let size = layout.ty.size();
     let step = layout.stride_samples * size;
