@@ -40,8 +40,10 @@ pub fn pack_if_large(volume: &mut Volume) {
 impl ShapecastApp {
     /// Makes a loaded volume the displayed one (or says why it cannot be shown), with the
     /// series list of the files it came from (`None`: files of one series, another format, a
-    /// phantom, an archive's retrieval). A volume the GPU refused changes nothing. Its texture
-    /// is written over frames (`Uploading`); a small volume is installed in this frame.
+    /// phantom, an archive's retrieval). A volume the GPU cannot show changes nothing; one it
+    /// has no memory for is shown halved (`upload_refused`). Its texture is written over frames
+    /// (`Uploading`); natively a small volume is installed in this frame (a browser answers for
+    /// the texture's memory a frame or more later).
     pub(super) fn install(&mut self, loaded: crate::io::Loaded, series: Option<load::SeriesSet>) {
         let Some(gpu) = &self.gpu else { return };
         let patient = loaded.patient;
@@ -145,7 +147,8 @@ impl ShapecastApp {
         let started = web_time::Instant::now();
         // Slabs while the frame's time lasts and the GPU keeps up (`ready`: a bounded number
         // in flight, so a slow device does not queue the whole volume in shared memory).
-        while up.upload.ready() {
+        // Nothing is written before the device has answered for the texture (the next frames).
+        while up.upload.ready() && !up.upload.waiting() {
             match up.upload.step(gpu, &up.volume, &up.render) {
                 Ok(false) => {}
                 Ok(true) => {

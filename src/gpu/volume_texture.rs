@@ -309,6 +309,9 @@ impl RenderVolume {
     /// Uploads `volume` slab by slab (the CPU never holds a second full-size copy).
     pub fn upload(ctx: &GpuContext, volume: &Volume) -> Result<Self, RenderVolumeError> {
         let (render, mut upload) = Self::create(ctx, volume)?;
+        // A browser answers the allocation between frames, never inside this loop: it writes
+        // at once (natively the answer is in, and a refusal was `create`'s error).
+        upload.wait_for_answer = false;
         while !upload.step(ctx, volume, &render)? {}
         Ok(render)
     }
@@ -341,6 +344,7 @@ impl RenderVolume {
         };
         let upload = IntensityUpload {
             alloc,
+            wait_for_answer: true,
             next_z: 0,
             per: slices_per_chunk(dims, 2, UPLOAD_SLAB_BYTES),
             in_flight: Arc::new(AtomicU32::new(0)),
@@ -355,6 +359,8 @@ pub struct IntensityUpload {
     /// The device's answer to the texture: nothing is written before it is in (in a
     /// browser a refused texture would fail every write).
     alloc: AllocCheck,
+    /// Whether [`IntensityUpload::step`] waits for that answer (a blocking upload cannot).
+    wait_for_answer: bool,
     next_z: u32,
     per: u32,
     /// Slabs submitted that the GPU has not finished (counted down by the queue's callback).
@@ -374,6 +380,12 @@ impl IntensityUpload {
         self.in_flight.load(Ordering::Acquire) < UPLOAD_SLABS_IN_FLIGHT
     }
 
+    /// Whether the device has not yet said whether it granted the texture (a browser answers
+    /// a frame or more after it was made): [`Self::step`] writes nothing until it has.
+    pub fn waiting(&mut self) -> bool {
+        self.wait_for_answer && self.alloc.poll() == Allocation::Waiting
+    }
+
     /// The fraction written so far.
     pub fn fraction(&self, render: &RenderVolume) -> f32 {
         self.next_z as f32 / render.dims[2].max(1) as f32
@@ -390,11 +402,11 @@ impl IntensityUpload {
     ) -> Result<bool, RenderVolumeError> {
         let dims = render.dims;
         match self.alloc.poll() {
-            Allocation::Waiting => return Ok(false),
+            Allocation::Waiting if self.wait_for_answer => return Ok(false),
             Allocation::Refused(detail) => {
                 return Err(out_of_memory("intensity", dims, INTENSITY_FORMAT, detail));
             }
-            Allocation::Granted => {}
+            Allocation::Waiting | Allocation::Granted => {}
         }
         if self.next_z >= dims[2] {
             return Ok(true);

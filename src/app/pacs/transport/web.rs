@@ -1,4 +1,4 @@
-//! The page's transport: `fetch` tasks; and the token a page's address may carry.
+//! The page's transport: `fetch` tasks.
 
 use std::rc::Rc;
 
