@@ -11,83 +11,137 @@ use super::{Layout, LoadSource, PaneId, ShapecastApp, SliceKind, WindowPreset, d
 
 const FEATURE_NAMES: [&str; 3] = ["vesselness", "airwayness", "blobness"];
 
+/// What the user asked for in the top bar, applied after it is drawn.
+#[derive(Clone, Debug)]
+pub(in crate::app) enum TopEvent {
+    Open(LoadSource),
+    OpenDemo,
+    Mode(DisplayMode),
+    Layout(Layout),
+    ToggleAbout,
+}
+
+/// The "Demo" menu: the demo CT and the paper's phantoms.
+fn demo_menu(ui: &mut egui::Ui) -> Option<TopEvent> {
+    let mut event = None;
+    ui.menu_button("Demo", |ui| {
+        if ui.button("Demo CT (chest CTA, 1.5 mm)").clicked() {
+            event = Some(TopEvent::OpenDemo);
+            ui.close();
+        }
+        ui.separator();
+        ui.label("Phantoms of the paper (0.5 mm, HU):");
+        for name in crate::phantom::NAMES
+            .iter()
+            .chain(crate::phantom::EXTRA_NAMES.iter())
+        {
+            if ui.button(*name).clicked() {
+                event = Some(TopEvent::Open(LoadSource::Phantom((*name).to_owned())));
+                ui.close();
+            }
+        }
+    });
+    event
+}
+
+/// The display modes, `mode` selected; `computed` says whether a method's features with the
+/// current parameters are kept. Returns the mode clicked and the buttons as named controls.
+fn mode_bar(
+    ui: &mut egui::Ui,
+    mode: DisplayMode,
+    computed: impl Fn(crate::cpu::pipeline::Method) -> bool,
+) -> (Option<TopEvent>, Vec<(String, egui::Rect)>) {
+    let mut event = None;
+    let mut controls = Vec::new();
+    ui.label("Mode:");
+    for m in DisplayMode::ALL {
+        let r = ui.selectable_label(mode == m, m.label());
+        let r = match m.method() {
+            Some(method) => r.on_hover_text(if computed(method) {
+                "computed: switches at once"
+            } else if method == crate::cpu::pipeline::Method::Rst {
+                "computes the RST features with the current parameters: rays from every voxel, several times the Hessian's time (the status says how long)"
+            } else {
+                "computes the features with the current parameters"
+            }),
+            None => r.on_hover_text("grey values only"),
+        };
+        controls.push((format!("mode:{}", m.name()), r.rect));
+        if r.clicked() && mode != m {
+            event = Some(TopEvent::Mode(m));
+        }
+    }
+    (event, controls)
+}
+
+/// The layouts, `layout` selected. Returns the layout clicked and the buttons as named controls.
+fn layout_bar(ui: &mut egui::Ui, layout: Layout) -> (Option<TopEvent>, Vec<(String, egui::Rect)>) {
+    let mut event = None;
+    let mut controls = Vec::new();
+    ui.label("Layout:");
+    for (l, label) in [
+        (Layout::MipAndSlices, "MIP + slices"),
+        (Layout::Grid, "2×2"),
+        (Layout::Single(PaneId::Mip), "MIP"),
+        (Layout::Single(PaneId::Slice(SliceKind::Axial)), "Axial"),
+        (Layout::Single(PaneId::Slice(SliceKind::Coronal)), "Coronal"),
+        (
+            Layout::Single(PaneId::Slice(SliceKind::Sagittal)),
+            "Sagittal",
+        ),
+    ] {
+        let r = ui.selectable_label(layout == l, label);
+        controls.push((format!("layout:{}", l.name()), r.rect));
+        if r.clicked() {
+            event = Some(TopEvent::Layout(l));
+        }
+    }
+    (event, controls)
+}
+
 impl ShapecastApp {
+    /// Draws the top bar, then applies what the user asked for in it (the link, picture and
+    /// movie buttons act themselves: they are the export's).
     pub(super) fn top_bar_ui(&mut self, ui: &mut egui::Ui) {
+        let mut events = Vec::new();
         egui::MenuBar::new().ui(ui, |ui| {
             ui.heading("Shapecast");
             ui.separator();
-            self.open_menu_ui(ui);
-            ui.menu_button("Demo", |ui| {
-                if ui.button("Demo CT (chest CTA, 1.5 mm)").clicked() {
-                    self.open_demo_ct();
-                    ui.close();
-                }
-                ui.separator();
-                ui.label("Phantoms of the paper (0.5 mm, HU):");
-                for name in crate::phantom::NAMES
-                    .iter()
-                    .chain(crate::phantom::EXTRA_NAMES.iter())
-                {
-                    if ui.button(*name).clicked() {
-                        self.open(LoadSource::Phantom((*name).to_owned()));
-                        ui.close();
-                    }
-                }
+            events.extend(self.platform.open_menu_ui(ui).map(TopEvent::Open));
+            events.extend(demo_menu(ui));
+            ui.separator();
+            let (features, applied) = (&self.features, &self.applied);
+            let (mode, controls) = mode_bar(ui, self.mode, |method| {
+                features.find(&applied.request(method)).is_some()
             });
+            events.extend(mode);
+            self.controls.extend(controls);
             ui.separator();
-            ui.label("Mode:");
-            for m in DisplayMode::ALL {
-                let r = ui.selectable_label(self.mode == m, m.label());
-                let r = match m.method() {
-                    Some(method) => {
-                        let cached = self.features.find(&self.applied.request(method)).is_some();
-                        r.on_hover_text(if cached {
-                            "computed: switches at once"
-                        } else if method == crate::cpu::pipeline::Method::Rst {
-                            "computes the RST features with the current parameters: rays from every voxel, several times the Hessian's time (the status says how long)"
-                        } else {
-                            "computes the features with the current parameters"
-                        })
-                    }
-                    None => r.on_hover_text("grey values only"),
-                };
-                self.control(&format!("mode:{}", m.name()), r.rect);
-                if r.clicked() && self.mode != m {
-                    self.set_mode(m);
-                }
-            }
-            ui.separator();
-            ui.label("Layout:");
-            let before = self.reading.layout;
-            for (layout, label) in [
-                (Layout::MipAndSlices, "MIP + slices"),
-                (Layout::Grid, "2×2"),
-                (Layout::Single(PaneId::Mip), "MIP"),
-                (Layout::Single(PaneId::Slice(SliceKind::Axial)), "Axial"),
-                (Layout::Single(PaneId::Slice(SliceKind::Coronal)), "Coronal"),
-                (
-                    Layout::Single(PaneId::Slice(SliceKind::Sagittal)),
-                    "Sagittal",
-                ),
-            ] {
-                let r = ui.selectable_label(self.reading.layout == layout, label);
-                self.control(&format!("layout:{}", layout.name()), r.rect);
-                if r.clicked() {
-                    self.reading.layout = layout;
-                }
-            }
-            if self.reading.layout != before && !matches!(self.reading.layout, Layout::Single(_)) {
-                self.reading.multi_layout = self.reading.layout;
-            }
+            let (layout, controls) = layout_bar(ui, self.reading.layout);
+            events.extend(layout);
+            self.controls.extend(controls);
             ui.separator();
             self.copy_link_ui(ui);
             self.save_picture_ui(ui);
             self.save_movie_ui(ui);
             ui.separator();
             if ui.button("About & data").clicked() {
-                self.windows.show_about = !self.windows.show_about;
+                events.push(TopEvent::ToggleAbout);
             }
         });
+        for e in events {
+            match e {
+                TopEvent::Open(source) => self.open(source),
+                TopEvent::OpenDemo => self.open_demo_ct(),
+                TopEvent::Mode(m) => {
+                    if self.mode != m {
+                        self.set_mode(m);
+                    }
+                }
+                TopEvent::Layout(l) => self.set_layout(l),
+                TopEvent::ToggleAbout => self.windows.show_about = !self.windows.show_about,
+            }
+        }
     }
 
     pub(super) fn open_demo_ct(&mut self) {
@@ -97,12 +151,6 @@ impl ShapecastApp {
                 self.cancel_upload();
                 self.load_progress = Some((0.0, "fetching the demo CT".to_owned()));
             }
-        }
-    }
-
-    fn open_menu_ui(&mut self, ui: &mut egui::Ui) {
-        if let Some(source) = self.platform.open_menu_ui(ui) {
-            self.open(source);
         }
     }
 
