@@ -236,9 +236,37 @@ impl Volume {
             }
             out
         }
+        /// `reduce` of a packed volume, `f[2]` slices decoded at a time.
+        fn reduce_packed<T: Copy>(
+            p: &Packed,
+            f: [usize; 3],
+            dims: [usize; 3],
+            narrow: impl Fn(i32) -> T,
+        ) -> Vec<T> {
+            let d = p.dims();
+            let plane = d[0] * d[1];
+            let mut raw = vec![0i32; plane * f[2]];
+            let mut out = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
+            for k in 0..dims[2] {
+                let z0 = k * f[2];
+                let nz = f[2].min(d[2] - z0);
+                let slab = &mut raw[..plane * nz];
+                p.decode_into(z0 * plane, slab);
+                let (src, fk, one) = ([d[0], d[1], nz], [f[0], f[1], nz], [dims[0], dims[1], 1]);
+                let plane = reduce(slab, src, fk, one, f64::from, |x| x.round() as i32);
+                out.extend(plane.into_iter().map(&narrow));
+            }
+            out
+        }
         let d = self.dims;
         let voxels = match &self.voxels {
-            Voxels::Packed(p) => return self.with_voxels(p.unpack()).reduced(factors),
+            // Block slab by block slab, so that reducing a packed volume never holds a dense
+            // copy of the whole (the viewer halves one the GPU has no memory for).
+            Voxels::Packed(p) => match p.stored() {
+                packed::Stored::U8 => Voxels::U8(reduce_packed(p, f, dims, |x| x as u8)),
+                packed::Stored::I16 => Voxels::I16(reduce_packed(p, f, dims, |x| x as i16)),
+                packed::Stored::U16 => Voxels::U16(reduce_packed(p, f, dims, |x| x as u16)),
+            },
             Voxels::U8(v) => Voxels::U8(reduce(v, d, f, dims, f64::from, |x| x.round() as u8)),
             Voxels::I16(v) => Voxels::I16(reduce(v, d, f, dims, f64::from, |x| x.round() as i16)),
             Voxels::U16(v) => Voxels::U16(reduce(v, d, f, dims, f64::from, |x| x.round() as u16)),

@@ -104,6 +104,10 @@ impl Packed {
         self.len() == 0
     }
 
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
     pub fn stored(&self) -> Stored {
         self.stored
     }

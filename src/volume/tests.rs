@@ -62,4 +62,25 @@ mod reduced {
         // The first voxel is the centre of the first block: 1 mm further along z.
         assert_eq!(r.origin_mm, [10.0, 20.0, 31.0]);
     }
+
+    #[test]
+    fn a_packed_volume_reduces_to_what_its_dense_copy_does() {
+        let dims = [19, 11, 13];
+        let n = dims[0] * dims[1] * dims[2];
+        // Smooth (a brick spans a few values), so that packing makes it smaller.
+        let values: Vec<i16> = (0..n)
+            .map(|i| (i % 19 + 2 * ((i / 19) % 11) + 3 * (i / 209)) as i16 - 1000)
+            .collect();
+        let dense = Volume::from_f32(dims, [0.8, 0.8, 1.5], vec![0.0; n])
+            .with_voxels(Voxels::I16(values.clone()));
+        let packed = dense.with_voxels(Voxels::I16(values).packed(dims));
+        assert!(matches!(packed.voxels, Voxels::Packed(_)));
+        for factors in [[1, 1, 2], [2, 1, 1], [3, 2, 4]] {
+            let (a, b) = (dense.reduced(factors), packed.reduced(factors));
+            assert_eq!(a.dims, b.dims);
+            assert_eq!(a.origin_mm, b.origin_mm);
+            assert_eq!(a.spacing_mm, b.spacing_mm);
+            assert_eq!(a.voxels, b.voxels, "factors {factors:?}");
+        }
+    }
 }
