@@ -93,8 +93,11 @@ pub enum LoadError {
         message: String,
     },
 
-    #[error("DICOM series {series}: {message}")]
-    DicomSeries { series: String, message: String },
+    #[error("DICOM series {series}: {problem}")]
+    DicomSeries {
+        series: String,
+        problem: SeriesProblem,
+    },
 
     #[error("{file}: out of memory allocating {bytes} bytes for {what}")]
     OutOfMemory {
@@ -105,6 +108,31 @@ pub enum LoadError {
 
     #[error("{file}: cannot write: {message}")]
     Write { file: String, message: String },
+}
+
+/// What is wrong with a DICOM series as a whole (its files each read).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SeriesProblem {
+    /// None of `files` DICOM files holds an image; `names`: the first few.
+    #[error("none of the {files} DICOM files holds an image ({names})")]
+    NoImage { files: usize, names: String },
+    /// `file` stores its pixels unlike the series' first file.
+    #[error("{file} stores pixels differently from {first} (BitsAllocated/PixelRepresentation)")]
+    MixedPixels { file: String, first: String },
+    #[error("no series")]
+    NoSeries,
+    /// Entry `number` (from 1) of a list of `count` series.
+    #[error("no series {number} in a list of {count}")]
+    NotListed { number: usize, count: usize },
+    /// The files given to load a listed series are not those that were listed.
+    #[error("the {given} files given are not the {listed} files listed; list them again")]
+    FilesChanged { given: usize, listed: usize },
+    #[error("no image in this series")]
+    NoImageInSeries,
+    /// A state the code should never reach.
+    #[error("internal: {0}")]
+    Internal(&'static str),
 }
 
 /// What is wrong with a compressed stream ([`LoadError::Decompress`]).

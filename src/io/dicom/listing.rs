@@ -8,7 +8,7 @@ use glam::DVec3;
 use super::series;
 use super::stacks::{self, Stack};
 use super::{FileHeader, read_header};
-use crate::io::{InputFile, Limits, LoadError, Loaded};
+use crate::io::{InputFile, Limits, LoadError, Loaded, SeriesProblem};
 
 /// The plane of a stack's images, from its ImageOrientationPatient.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -290,18 +290,20 @@ impl SeriesList {
             .get(index)
             .ok_or_else(|| LoadError::DicomSeries {
                 series: "-".to_owned(),
-                message: format!("no series {} in a list of {}", index + 1, self.stacks.len()),
+                problem: SeriesProblem::NotListed {
+                    number: index + 1,
+                    count: self.stacks.len(),
+                },
             })?;
         let same_files = files.len() == self.names.len()
             && files.iter().zip(&self.names).all(|(f, n)| f.name == *n);
         if !same_files {
             return Err(LoadError::DicomSeries {
                 series: stack.series_uid.clone(),
-                message: format!(
-                    "the {} files given are not the {} files listed; list them again",
-                    files.len(),
-                    self.names.len()
-                ),
+                problem: SeriesProblem::FilesChanged {
+                    given: files.len(),
+                    listed: self.names.len(),
+                },
             });
         }
         let chosen: Vec<(&InputFile, &FileHeader)> = stack
@@ -313,7 +315,7 @@ impl SeriesList {
         let Some(&(_, first)) = chosen.first() else {
             return Err(LoadError::DicomSeries {
                 series: stack.series_uid.clone(),
-                message: "no image in this series".to_owned(),
+                problem: SeriesProblem::NoImageInSeries,
             });
         };
         let mut volume = series::assemble(&stack.series_uid, &chosen, limits, release)?;

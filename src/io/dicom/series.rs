@@ -11,7 +11,7 @@ use super::pixels::{pixel_target, volume_rescale};
 use super::{FileHeader, FrameInfo};
 use crate::io::geometry::checked_grid;
 use crate::io::raw;
-use crate::io::{InputFile, Limits, LoadError};
+use crate::io::{InputFile, Limits, LoadError, SeriesProblem};
 use crate::volume::{PetScale, Volume, Voxels};
 
 /// One frame of the chosen series: which file, which frame in it, and its header values.
@@ -39,12 +39,14 @@ pub(super) fn no_image_error(names: &[&str]) -> LoadError {
         },
         many => LoadError::DicomSeries {
             series: "-".to_owned(),
-            message: format!(
-                "none of the {} DICOM files holds an image ({}{})",
-                many.len(),
-                many.iter().take(3).copied().collect::<Vec<_>>().join(", "),
-                if many.len() > 3 { ", ..." } else { "" }
-            ),
+            problem: SeriesProblem::NoImage {
+                files: many.len(),
+                names: format!(
+                    "{}{}",
+                    many.iter().take(3).copied().collect::<Vec<_>>().join(", "),
+                    if many.len() > 3 { ", ..." } else { "" }
+                ),
+            },
         },
     }
 }
@@ -172,9 +174,10 @@ pub(super) fn layout<'a>(files: &[(&str, &'a FileHeader)]) -> Result<Layout<'a>,
         {
             return Err(LoadError::DicomSeries {
                 series: first.series_uid.clone(),
-                message: format!(
-                    "{f} stores pixels differently from {name0} (BitsAllocated/PixelRepresentation)"
-                ),
+                problem: SeriesProblem::MixedPixels {
+                    file: f.to_string(),
+                    first: name0.to_string(),
+                },
             });
         }
     }

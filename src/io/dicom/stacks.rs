@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use super::FileHeader;
-use crate::io::LoadError;
+use crate::io::{LoadError, SeriesProblem};
 
 /// Images that make one volume: one series' images of one size and one orientation.
 #[derive(Clone, Debug)]
@@ -145,7 +145,7 @@ pub(super) fn choose_stack(
     let mut stacks = group_stacks(headers);
     let chosen = default_stack(&stacks, headers).ok_or_else(|| LoadError::DicomSeries {
         series: "-".to_owned(),
-        message: "no series".to_owned(),
+        problem: SeriesProblem::NoSeries,
     })?;
     other_stack_notes(&stacks, chosen, headers, notes);
     let stack = stacks.swap_remove(chosen);

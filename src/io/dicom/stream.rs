@@ -12,7 +12,7 @@ use super::series::{self, layout};
 use super::stacks::choose_stack;
 use super::{FileHeader, read_header};
 use crate::io::raw::try_vec;
-use crate::io::{InputFile, Limits, LoadError, Loaded};
+use crate::io::{InputFile, Limits, LoadError, Loaded, SeriesProblem};
 use crate::volume::Voxels;
 
 /// Frames that share a size and a stored type, in arrival order.
@@ -251,11 +251,10 @@ impl SeriesBuilder {
                 if self.files_seen > names.len() {
                     LoadError::DicomSeries {
                         series: "-".to_owned(),
-                        message: format!(
-                            "none of the {} DICOM files holds an image ({}, ...)",
-                            self.files_seen,
-                            names.join(", ")
-                        ),
+                        problem: SeriesProblem::NoImage {
+                            files: self.files_seen,
+                            names: format!("{}, ...", names.join(", ")),
+                        },
                     }
                 } else if names.is_empty() {
                     LoadError::NoFiles
@@ -281,10 +280,10 @@ impl SeriesBuilder {
         if let Some(other) = chosen.iter().find(|a| a.stage != stage_index) {
             return Err(LoadError::DicomSeries {
                 series,
-                message: format!(
-                    "{} stores pixels differently from {} (BitsAllocated/PixelRepresentation)",
-                    other.name, chosen[0].name
-                ),
+                problem: SeriesProblem::MixedPixels {
+                    file: other.name.clone(),
+                    first: chosen[0].name.clone(),
+                },
             });
         }
         let (target, same_rescale) =
@@ -303,7 +302,9 @@ impl SeriesBuilder {
             if std::mem::discriminant(&target.empty()) != std::mem::discriminant(&stage.voxels) {
                 return Err(LoadError::DicomSeries {
                     series,
-                    message: "internal: the staged voxel type differs from the volume's".to_owned(),
+                    problem: SeriesProblem::Internal(
+                        "the staged voxel type differs from the volume's",
+                    ),
                 });
             }
             permute(&mut stage.voxels, &order, frame_len);
