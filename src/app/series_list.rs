@@ -90,38 +90,51 @@ pub(super) fn status_of(state: &SeriesState) -> Vec<SeriesStatus> {
         .collect()
 }
 
+/// The list of `set`'s series (`loading`: the entry being loaded). Returns the entry clicked
+/// (not the one shown or loading) and each row as a named control.
+pub(super) fn series_section(
+    ui: &mut egui::Ui,
+    set: &SeriesSet,
+    loading: Option<usize>,
+) -> (Option<usize>, Vec<(String, egui::Rect)>) {
+    let mut controls = Vec::new();
+    ui.separator();
+    ui.label(egui::RichText::new(format!("Series ({})", set.list.entries().len())).strong())
+        .on_hover_text("the files given hold several series; click one to load it");
+    let mut pick = None;
+    for (i, e) in set.list.entries().iter().enumerate() {
+        let mut text = row_text(e);
+        if loading == Some(i) {
+            text.push_str("  (loading…)");
+        }
+        let r = ui
+            .selectable_label(
+                i == set.chosen,
+                format!("{text}\n    {}", row_description(e)),
+            )
+            .on_hover_text(format!(
+                "{} × {} pixels, {} file{}",
+                e.cols,
+                e.rows,
+                e.files,
+                if e.files == 1 { "" } else { "s" }
+            ));
+        controls.push((format!("series:{i}"), r.rect));
+        if r.clicked() && i != set.chosen && loading != Some(i) {
+            pick = Some(i);
+        }
+    }
+    (pick, controls)
+}
+
 impl ShapecastApp {
     /// The series of the files loaded, when they hold several; a click loads one.
     pub(super) fn series_ui(&mut self, ui: &mut egui::Ui) {
         let Some(set) = self.series.set.clone() else {
             return;
         };
-        ui.separator();
-        ui.label(egui::RichText::new(format!("Series ({})", set.list.entries().len())).strong())
-            .on_hover_text("the files given hold several series; click one to load it");
-        let mut pick = None;
-        for (i, e) in set.list.entries().iter().enumerate() {
-            let mut text = row_text(e);
-            if self.series.loading == Some(i) {
-                text.push_str("  (loading…)");
-            }
-            let r = ui
-                .selectable_label(
-                    i == set.chosen,
-                    format!("{text}\n    {}", row_description(e)),
-                )
-                .on_hover_text(format!(
-                    "{} × {} pixels, {} file{}",
-                    e.cols,
-                    e.rows,
-                    e.files,
-                    if e.files == 1 { "" } else { "s" }
-                ));
-            self.control(&format!("series:{i}"), r.rect);
-            if r.clicked() && i != set.chosen && self.series.loading != Some(i) {
-                pick = Some(i);
-            }
-        }
+        let (pick, controls) = series_section(ui, &set, self.series.loading);
+        self.controls.extend(controls);
         if let Some(i) = pick {
             self.open_series(&set, i);
         }

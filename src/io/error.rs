@@ -65,8 +65,8 @@ pub enum LoadError {
     )]
     MissingDataFile { file: String, data_file: String },
 
-    #[error("{file}: DICOM: {message}")]
-    Dicom { file: String, message: String },
+    #[error("{file}: DICOM: {problem}")]
+    Dicom { file: String, problem: DicomProblem },
 
     /// dicom-rs refused the file (`what` it was doing); `source` is its error.
     #[error("{file}: DICOM: {what}")]
@@ -108,6 +108,50 @@ pub enum LoadError {
 
     #[error("{file}: cannot write: {message}")]
     Write { file: String, message: String },
+}
+
+/// What is wrong with one DICOM file.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DicomProblem {
+    #[error("holds no image (no Rows and Columns)")]
+    NoImage,
+    /// Sequences nested deeper than `limit` at element (`group`,`element`), byte `at`.
+    #[error(
+        "sequences nested more than {limit} deep (at ({group:04X},{element:04X}), byte {at} of the data set); real files stay under 10, so the file is corrupt or crafted"
+    )]
+    NestedTooDeep {
+        limit: usize,
+        group: u16,
+        element: u16,
+        at: u64,
+    },
+    /// A delimitation item (FFFE,`element`) at byte `at` with a length other than 0.
+    #[error(
+        "delimitation item (FFFE,{element:04X}) at byte {at} has length {len}; the standard requires 0 (the file is corrupt)"
+    )]
+    DelimiterLength { element: u16, at: usize, len: u64 },
+    /// The items of encapsulated (compressed) pixel data, in the decoder's words.
+    #[error("encapsulated pixel data: {0}")]
+    Encapsulated(String),
+    /// RLE Lossless pixel data, in the decoder's words.
+    #[error("RLE Lossless: {0}")]
+    Rle(String),
+    #[error("RLE Lossless: {compressed} compressed bytes cannot hold {total} bytes of pixels")]
+    RleTooSmall { compressed: usize, total: usize },
+    /// A compressed fragment's own image size against the header's.
+    #[error("fragment {fragment}: the compressed image is {found}, but the header says {declared}")]
+    FragmentSize {
+        fragment: usize,
+        found: String,
+        declared: String,
+    },
+    /// Frame `frame`'s samples could not be stored, in the decoder's words.
+    #[error("frame {frame}: {message}")]
+    Frame { frame: usize, message: String },
+    /// A state the code should never reach.
+    #[error("internal: {0}")]
+    Internal(&'static str),
 }
 
 /// What is wrong with a DICOM series as a whole (its files each read).

@@ -24,7 +24,7 @@ pub use dicom::{
     FolderRead, FolderReader, SeriesBuilder, SeriesEntry, SeriesList, SliceOrientation,
     decodable_transfer_syntaxes, entry_builder, finish_entry, load_entry,
 };
-pub use error::{Corruption, LoadError, SeriesProblem};
+pub use error::{Corruption, DicomProblem, LoadError, SeriesProblem};
 pub use input::{Chunk, Chunked, FileSource, HEAD_BYTES, InputFile, MemorySource};
 
 use crate::volume::Volume;

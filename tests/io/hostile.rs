@@ -219,6 +219,17 @@ fn a_small_hand_written_dicom_loads() {
     assert_eq!(v.value_at(2, 3, 0), 11.0);
 }
 
+/// Whether `e` refuses sequences nested beyond the limit of 64.
+fn too_deep(e: &LoadError) -> bool {
+    matches!(
+        e,
+        LoadError::Dicom {
+            problem: shapecast::io::DicomProblem::NestedTooDeep { limit: 64, .. },
+            ..
+        }
+    )
+}
+
 #[test]
 fn nesting_within_the_limit_loads_and_beyond_it_is_refused() {
     let ok = dicom_file(EXPLICIT_LE, &native_slice(2, 2, 20));
@@ -230,7 +241,8 @@ fn nesting_within_the_limit_loads_and_beyond_it_is_refused() {
     assert!(deep.len() < 400_000);
     let (r, peak, allocations) =
         peak_and_allocations_during(|| load_one("deep.dcm", deep, &Limits::default()));
-    expect_err(r, "deep.dcm", &["nested more than 64"]);
+    let e = expect_err(r, "deep.dcm", &["nested more than 64"]);
+    assert!(too_deep(&e), "{e:?}");
     assert!(peak < 8 * MIB, "peak {peak} bytes");
     // Counted, not timed: one allocation a level (10,000) would be the recursion back.
     assert!(allocations < 1_000, "{allocations} allocations");
@@ -241,7 +253,8 @@ fn nesting_within_the_limit_loads_and_beyond_it_is_refused() {
         dicom_file(EXPLICIT_LE, &native_slice(2, 2, 65)),
         &Limits::default(),
     );
-    expect_err(r, "d65.dcm", &["nested"]);
+    let e = expect_err(r, "d65.dcm", &["nested"]);
+    assert!(too_deep(&e), "{e:?}");
     let r = load_one(
         "d64.dcm",
         dicom_file(EXPLICIT_LE, &native_slice(2, 2, 64)),
@@ -256,7 +269,8 @@ fn deflated_nesting_is_refused_too() {
     f.extend_from_slice(&raw_deflate(&native_slice(2, 2, 10_000)));
     for load in [load_one, load_on_demand] {
         let r = load("deep-deflated.dcm", f.clone(), &Limits::default());
-        expect_err(r, "deep-deflated.dcm", &["nested more than 64"]);
+        let e = expect_err(r, "deep-deflated.dcm", &["nested more than 64"]);
+        assert!(too_deep(&e), "{e:?}");
     }
 }
 

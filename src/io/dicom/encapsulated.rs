@@ -8,7 +8,7 @@ use dicom_dictionary_std::tags;
 use dicom_object::DefaultDicomObject;
 
 use super::FileHeader;
-use crate::io::LoadError;
+use crate::io::{DicomProblem, LoadError};
 
 pub(super) const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
 
@@ -117,7 +117,7 @@ pub(super) fn locate_fragments(
 ) -> Result<FragmentsInFile, LoadError> {
     let bad = |message: String| LoadError::Dicom {
         file: file.name.clone(),
-        message: format!("encapsulated pixel data: {message}"),
+        problem: DicomProblem::Encapsulated(message),
     };
     let len = file.len();
     let mut pos = at;
@@ -302,7 +302,7 @@ pub(super) fn decode_rle(
 ) -> Result<Vec<u8>, LoadError> {
     let err = |message: String| LoadError::Dicom {
         file: file.to_owned(),
-        message: format!("RLE Lossless: {message}"),
+        problem: DicomProblem::Rle(message),
     };
     let n_frames = h.frames.len();
     if frags.len() < n_frames {
@@ -407,14 +407,12 @@ pub(super) fn check_rle_size(
         .and_then(|b| b.checked_mul(h.frames.len()))
         .ok_or_else(|| LoadError::Dicom {
             file: file.to_owned(),
-            message: "RLE Lossless: frame size overflows".to_owned(),
+            problem: DicomProblem::Rle("frame size overflows".to_owned()),
         })?;
     if total / 64 > compressed.saturating_add(1 << 16) {
         return Err(LoadError::Dicom {
             file: file.to_owned(),
-            message: format!(
-                "RLE Lossless: {compressed} compressed bytes cannot hold {total} bytes of pixels"
-            ),
+            problem: DicomProblem::RleTooSmall { compressed, total },
         });
     }
     Ok(total)
@@ -533,10 +531,14 @@ pub(super) fn check_codestream(
         {
             return Err(LoadError::Dicom {
                 file: file.to_owned(),
-                message: format!(
-                    "fragment {f}: the compressed image is {cols}x{rows}, {bits} bits, {components} component(s), but the header says {}x{}, {} bits allocated, {} sample(s) per pixel",
-                    h.cols, h.rows, h.bits_allocated, h.samples_per_pixel
-                ),
+                problem: DicomProblem::FragmentSize {
+                    fragment: f,
+                    found: format!("{cols}x{rows}, {bits} bits, {components} component(s)"),
+                    declared: format!(
+                        "{}x{}, {} bits allocated, {} sample(s) per pixel",
+                        h.cols, h.rows, h.bits_allocated, h.samples_per_pixel
+                    ),
+                },
             });
         }
     }

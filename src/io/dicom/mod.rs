@@ -68,7 +68,7 @@ pub(super) fn open_located(
     let contents = file.contents()?;
     parse_located(file, &contents, headers_only, limits, false)?.ok_or_else(|| LoadError::Dicom {
         file: file.name.clone(),
-        message: "internal: a whole file's header read gave no result".to_owned(),
+        problem: crate::io::DicomProblem::Internal("a whole file's header read gave no result"),
     })
 }
 

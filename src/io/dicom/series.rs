@@ -11,7 +11,7 @@ use super::pixels::{pixel_target, volume_rescale};
 use super::{FileHeader, FrameInfo};
 use crate::io::geometry::checked_grid;
 use crate::io::raw;
-use crate::io::{InputFile, Limits, LoadError, SeriesProblem};
+use crate::io::{DicomProblem, InputFile, Limits, LoadError, SeriesProblem};
 use crate::volume::{PetScale, Volume, Voxels};
 
 /// One frame of the chosen series: which file, which frame in it, and its header values.
@@ -35,7 +35,7 @@ pub(super) fn no_image_error(names: &[&str]) -> LoadError {
     match names {
         [one] => LoadError::Dicom {
             file: (*one).to_owned(),
-            message: "holds no image (no Rows and Columns)".to_owned(),
+            problem: DicomProblem::NoImage,
         },
         many => LoadError::DicomSeries {
             series: "-".to_owned(),

@@ -188,7 +188,7 @@ impl SeriesBuilder {
                 )
                 .map_err(|message| LoadError::Dicom {
                     file: file.name.clone(),
-                    message: format!("frame {k}: {message}"),
+                    problem: crate::io::DicomProblem::Frame { frame: k, message },
                 })?;
             }
             Ok(())

@@ -428,12 +428,12 @@ impl Walk<'_> {
                     if depth > MAX_SEQUENCE_DEPTH {
                         return Err(LoadError::Dicom {
                             file: file.to_owned(),
-                            message: format!(
-                                "sequences nested more than {MAX_SEQUENCE_DEPTH} deep (at ({:04X},{:04X}), byte {} of the data set); real files stay under 10, so the file is corrupt or crafted",
-                                tag.group(),
-                                tag.element(),
-                                pos.get()
-                            ),
+                            problem: crate::io::DicomProblem::NestedTooDeep {
+                                limit: MAX_SEQUENCE_DEPTH,
+                                group: tag.group(),
+                                element: tag.element(),
+                                at: pos.get() as u64,
+                            },
                         });
                     }
                     None

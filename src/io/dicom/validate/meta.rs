@@ -75,10 +75,11 @@ impl Walker<'_> {
                     0xE0DD | 0xE00D if len != 0 => {
                         return Err(LoadError::Dicom {
                             file: self.file.to_owned(),
-                            message: format!(
-                                "delimitation item (FFFE,{element:04X}) at byte {at} has length \
-                                 {len}; the standard requires 0 (the file is corrupt)"
-                            ),
+                            problem: crate::io::DicomProblem::DelimiterLength {
+                                element,
+                                at,
+                                len: len as u64,
+                            },
                         });
                     }
                     0xE0DD => in_fragments = false,
