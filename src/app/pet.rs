@@ -23,6 +23,7 @@ use super::model::axes::PaneAxes;
 use super::platform::Platform;
 use super::view_link::PetView;
 use crate::gpu::GpuContext;
+use crate::gpu::alloc::{AllocCheck, Allocation};
 use crate::gpu::volume_texture::RenderVolume;
 use crate::render::camera::Camera;
 use crate::render::fusion::{hot_iron, pet_alpha};
@@ -42,6 +43,8 @@ pub struct PetLayer {
     pub notes: Vec<String>,
     /// The PET's own 3D texture, for its MIP (`None` where the GPU refused it).
     pub render: Option<RenderVolume>,
+    /// The device's answer to that texture while a browser has not given it.
+    render_alloc: Option<AllocCheck>,
 }
 
 impl PetLayer {
@@ -67,6 +70,7 @@ impl PetLayer {
             alone: false,
             notes,
             render: None,
+            render_alloc: None,
         }
     }
 
@@ -323,6 +327,21 @@ impl PetState {
         generation: u64,
         gpu: Option<&GpuContext>,
     ) -> Option<String> {
+        // A browser answers for the PET's texture a frame or more after it was made: refused,
+        // the PET MIP goes (its slices stay).
+        if let Some(layer) = &mut self.layer
+            && let Some(check) = &mut layer.render_alloc
+        {
+            match check.poll() {
+                Allocation::Waiting => {}
+                Allocation::Granted => layer.render_alloc = None,
+                Allocation::Refused(detail) => {
+                    layer.render_alloc = None;
+                    let e = layer.render.take().map(|r| r.out_of_memory(detail));
+                    return e.map(|e| format!("PET MIP: {e} (the fused slices still show it)"));
+                }
+            }
+        }
         let job = self.job.as_mut()?;
         // The job is for the CT it was started for (`clear` drops it with a new CT).
         let Some(loading_for) = self.loading_for else {
@@ -350,6 +369,10 @@ impl PetState {
     /// Whether a PET is being decoded in the app's frames (they must keep coming).
     pub fn busy(&self) -> bool {
         self.job.is_some()
+            || self
+                .layer
+                .as_ref()
+                .is_some_and(|l| l.render_alloc.is_some())
     }
 
     /// Whether a PET for the CT of `generation` is awaited (its download may be decoded).
@@ -398,8 +421,11 @@ impl PetState {
         if let Some(gpu) = gpu {
             // The PET is small beside its CT (a whole-body PET of 200 x 200 x 700 is 56 MB
             // of texture): uploaded in one go.
-            match RenderVolume::upload(gpu, &layer.volume) {
-                Ok(r) => layer.render = Some(r),
+            match RenderVolume::upload_checked(gpu, &layer.volume) {
+                Ok((r, check)) => {
+                    layer.render = Some(r);
+                    layer.render_alloc = Some(check);
+                }
                 Err(e) => message = Some(format!("PET MIP: {e} (the fused slices still show it)")),
             }
         }

@@ -23,6 +23,16 @@
 //!
 //! Both are on the volume's own voxel grid (the input grid), whatever grid features used.
 
+mod histogram;
+mod rgb9e5;
+
+pub use histogram::{
+    HISTOGRAM_BINS, feature_statistics, histogram_bin, histogram_bin_upper, histogram_quantile,
+    reference_of,
+};
+use rgb9e5::pow2;
+pub use rgb9e5::{RGB9E5_MAX, decode_rgb9e5, encode_rgb9e5, feature_texel};
+
 use super::alloc::{AllocCheck, Allocation};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -48,44 +58,6 @@ pub fn texture_value_scale(range: (f32, f32)) -> f32 {
     let e = ((m.to_bits() >> 23) & 0xff) as i32 - 127;
     // m * 2^(14 - e) lies in [2^14, 2^15).
     pow2((14 - e).clamp(-126, 127))
-}
-
-/// The largest value a shared-exponent texel holds: (2^9 - 1) / 2^9 * 2^16.
-pub const RGB9E5_MAX: f32 = 65408.0;
-
-/// 2^k for an integer k in f32's normal range, exactly.
-fn pow2(k: i32) -> f32 {
-    f32::from_bits(((k + 127) as u32) << 23)
-}
-
-/// Encodes three non-negative values as an `Rgb9e5Ufloat` texel (the algorithm of
-/// EXT_texture_shared_exponent, with round to nearest; shaders/pack_features.wgsl does the same
-/// arithmetic, all of it exact in f32, so both give the same bits). NaN and negative values are
-/// stored as 0, values above [`RGB9E5_MAX`] as the maximum.
-pub fn encode_rgb9e5(v: [f32; 3]) -> u32 {
-    let c = v.map(|x| if x > 0.0 { x.min(RGB9E5_MAX) } else { 0.0 });
-    let m = c[0].max(c[1]).max(c[2]);
-    // floor(log2(m)) from the exponent bits (m < 2^-15 counts as 2^-16: the smallest exponent).
-    let e_m = ((m.to_bits() >> 23) & 0xff) as i32 - 127;
-    let mut e = e_m.max(-16) + 16;
-    let top = (m * pow2(24 - e) + 0.5).floor();
-    if top >= 512.0 {
-        e += 1;
-    }
-    let scale = pow2(24 - e);
-    let q = c.map(|x| ((x * scale + 0.5).floor() as u32).min(511));
-    q[0] | (q[1] << 9) | (q[2] << 18) | ((e as u32) << 27)
-}
-
-/// Decodes an `Rgb9e5Ufloat` texel (what a shader's `textureLoad` returns).
-pub fn decode_rgb9e5(t: u32) -> [f32; 3] {
-    let scale = pow2(((t >> 27) & 31) as i32 - 24);
-    [t & 511, (t >> 9) & 511, (t >> 18) & 511].map(|q| q as f32 * scale)
-}
-
-/// The values a feature texel holds for `v` (the twins' feature data).
-pub fn feature_texel(v: [f32; 3]) -> [f32; 3] {
-    decode_rgb9e5(encode_rgb9e5(v))
 }
 
 /// Why a volume cannot be shown on this device.
@@ -306,14 +278,29 @@ pub struct RenderVolume {
 }
 
 impl RenderVolume {
-    /// Uploads `volume` slab by slab (the CPU never holds a second full-size copy).
+    /// Uploads `volume` slab by slab (the CPU never holds a second full-size copy). Natively a
+    /// texture the device has no memory for is the error; a browser answers a frame or more
+    /// later, which [`Self::upload_checked`] lets the caller poll.
     pub fn upload(ctx: &GpuContext, volume: &Volume) -> Result<Self, RenderVolumeError> {
+        Self::upload_checked(ctx, volume).map(|(render, _)| render)
+    }
+
+    /// The error of this texture refused by the device (`detail`: its words).
+    pub fn out_of_memory(&self, detail: String) -> RenderVolumeError {
+        out_of_memory("intensity", self.dims, INTENSITY_FORMAT, detail)
+    }
+
+    /// [`Self::upload`], and the device's answer to the texture (in a browser still to come:
+    /// the texture is written at once, and is not to be drawn if the answer is a refusal).
+    pub fn upload_checked(
+        ctx: &GpuContext,
+        volume: &Volume,
+    ) -> Result<(Self, AllocCheck), RenderVolumeError> {
         let (render, mut upload) = Self::create(ctx, volume)?;
-        // A browser answers the allocation between frames, never inside this loop: it writes
-        // at once (natively the answer is in, and a refusal was `create`'s error).
+        // A browser answers the allocation between frames, never inside this loop.
         upload.wait_for_answer = false;
         while !upload.step(ctx, volume, &render)? {}
-        Ok(render)
+        Ok((render, upload.alloc))
     }
 
     /// The texture for `volume`, not yet written, and the upload that writes it a slab per
@@ -459,71 +446,6 @@ pub struct FeatureTexture {
     /// what a gain of 1 shows as full colour, so that one metal voxel or a contrast bolus does
     /// not dim every other structure; `[0; 3]` until known (then `max` serves).
     pub p999: [f32; 3],
-}
-
-/// Bins of the feature histograms: 32 per octave from 2^-10 to 2^20 (2.2% wide), kept by the
-/// pack kernel (`shaders/pack_features.wgsl`, the same binning) for [`FeatureTexture::p999`].
-pub const HISTOGRAM_BINS: usize = 960;
-const BINS_PER_OCTAVE: f32 = 32.0;
-const LOWEST_OCTAVE: f32 = -10.0;
-
-/// The histogram bin of a positive value (the kernel's `bin_of`).
-pub fn histogram_bin(v: f32) -> Option<usize> {
-    if !(v > 0.0 && v.is_finite()) {
-        return None;
-    }
-    let b = ((v.log2() - LOWEST_OCTAVE) * BINS_PER_OCTAVE).floor();
-    Some(b.clamp(0.0, (HISTOGRAM_BINS - 1) as f32) as usize)
-}
-
-/// The upper edge of a bin (a percentile is reported as the upper edge of its bin).
-pub fn histogram_bin_upper(bin: usize) -> f32 {
-    2f32.powf((bin as f32 + 1.0) / BINS_PER_OCTAVE + LOWEST_OCTAVE)
-}
-
-/// The `q` quantile (0..1) of the values a histogram counted, as its bin's upper edge, clamped to
-/// `max`; 0 when it counted nothing.
-pub fn histogram_quantile(counts: &[u32], q: f64, max: f32) -> f32 {
-    let total: u64 = counts.iter().map(|&c| u64::from(c)).sum();
-    if total == 0 {
-        return 0.0;
-    }
-    let want = (q * total as f64).ceil().max(1.0) as u64;
-    let mut seen = 0u64;
-    for (bin, &c) in counts.iter().enumerate() {
-        seen += u64::from(c);
-        if seen >= want {
-            return histogram_bin_upper(bin).min(max);
-        }
-    }
-    max
-}
-
-/// The maxima and the 99.9th percentiles of the positive values of three components, as the
-/// pack kernel keeps them (the CPU twin of [`FeatureTexture::max`] and [`FeatureTexture::p999`]).
-pub fn feature_statistics(components: &Components3) -> ([f32; 3], [f32; 3]) {
-    let max: [f32; 3] = std::array::from_fn(|c| {
-        components[c]
-            .iter()
-            .copied()
-            .fold(0.0, f32::max)
-            .min(65504.0)
-    });
-    let p999 = std::array::from_fn(|c| {
-        let mut counts = vec![0u32; HISTOGRAM_BINS];
-        for &v in &components[c] {
-            if let Some(b) = histogram_bin(v.clamp(-65504.0, 65504.0)) {
-                counts[b] += 1;
-            }
-        }
-        histogram_quantile(&counts, 0.999, max[c])
-    });
-    (max, p999)
-}
-
-/// What a gain of 1 shows as full colour, from [`feature_statistics`].
-pub fn reference_of(max: [f32; 3], p999: [f32; 3]) -> [f32; 3] {
-    std::array::from_fn(|c| if p999[c] > 0.0 { p999[c] } else { max[c] })
 }
 
 impl FeatureTexture {
