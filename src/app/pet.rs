@@ -337,7 +337,7 @@ impl PetState {
                 Allocation::Granted => layer.render_alloc = None,
                 Allocation::Refused(detail) => {
                     layer.render_alloc = None;
-                    let e = layer.render.take().map(|r| r.out_of_memory(detail));
+                    let e = layer.render.take().map(|r| r.out_of_memory("PET", detail));
                     return e.map(|e| format!("PET MIP: {e} (the fused slices still show it)"));
                 }
             }

@@ -38,6 +38,15 @@ impl std::fmt::Debug for AllocCheck {
     }
 }
 
+/// The device's words for a refusal: natively wgpu-core's, with their causes; in a browser
+/// wgpu's own (its source is the JavaScript error object, which prints as "<WebGPU Error>").
+fn words(e: &wgpu::Error) -> String {
+    #[cfg(target_arch = "wasm32")]
+    return e.to_string();
+    #[cfg(not(target_arch = "wasm32"))]
+    crate::error::chain(e)
+}
+
 impl AllocCheck {
     /// Runs `make` (creating textures or buffers) in an out-of-memory error scope, and asks
     /// for the answer once (natively it is in).
@@ -60,7 +69,7 @@ impl AllocCheck {
                 self.answer = None;
                 self.state = match error {
                     None => Allocation::Granted,
-                    Some(e) => Allocation::Refused(crate::error::chain(&e)),
+                    Some(e) => Allocation::Refused(words(&e)),
                 };
             }
         }

@@ -285,9 +285,10 @@ impl RenderVolume {
         Self::upload_checked(ctx, volume).map(|(render, _)| render)
     }
 
-    /// The error of this texture refused by the device (`detail`: its words).
-    pub fn out_of_memory(&self, detail: String) -> RenderVolumeError {
-        out_of_memory("intensity", self.dims, INTENSITY_FORMAT, detail)
+    /// The error of this texture refused by the device: `what` it held ("intensity", "PET"),
+    /// `detail` the device's words.
+    pub fn out_of_memory(&self, what: &str, detail: String) -> RenderVolumeError {
+        out_of_memory(what, self.dims, INTENSITY_FORMAT, detail)
     }
 
     /// [`Self::upload`], and the device's answer to the texture (in a browser still to come:
