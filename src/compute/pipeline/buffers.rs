@@ -99,6 +99,19 @@ pub(super) fn starts(ranges: &[std::ops::Range<usize>; 3]) -> [u32; 3] {
 }
 
 impl Buffers {
+    /// The bytes of all the buffers.
+    pub(super) fn bytes(&self) -> u64 {
+        [&self.input, &self.out_core, &self.small, &self.norm]
+            .into_iter()
+            .chain(&self.tmp)
+            .chain(&self.work)
+            .chain(self.vol.iter())
+            .chain(self.chunk_out.iter())
+            .chain(self.out_in.iter())
+            .map(wgpu::Buffer::size)
+            .sum()
+    }
+
     pub(super) fn new(
         ctx: &GpuContext,
         bricks: &[Brick],

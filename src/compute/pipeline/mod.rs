@@ -74,6 +74,13 @@ pub enum PipelineError {
     Record(#[from] crate::gpu::checks::RecordError),
     #[error("the RST's rays: {0}")]
     Rays(#[from] crate::compute::rst::RstConfigError),
+    /// The device has no memory for `what`.
+    #[error("the GPU has no memory for {what} ({:.0} MB): {detail}", *.bytes as f64 / 1e6)]
+    OutOfMemory {
+        what: &'static str,
+        bytes: u64,
+        detail: String,
+    },
     /// A step ran before the one that prepares what it needs (a bug, not an input).
     #[error("the feature job's {0} is missing (steps out of order)")]
     Missing(&'static str),
@@ -205,6 +212,8 @@ pub struct FeatureJob {
     /// The device's answer to the feature texture: nothing is recorded before it is in (a
     /// browser answers a frame or more later).
     alloc: AllocCheck,
+    /// The same for the brick buffers.
+    buffers_alloc: AllocCheck,
     /// The volume's values are read slice by slice from here (compact voxels, not f32).
     volume: Arc<Volume>,
     options: JobOptions,
@@ -358,6 +367,15 @@ impl FeatureJob {
         &self.notes
     }
 
+    /// The error of brick buffers the device refused (`detail`: its words).
+    fn buffers_refused(&self, detail: String) -> PipelineError {
+        PipelineError::OutOfMemory {
+            what: "the feature job's brick buffers",
+            bytes: self.buffers.bytes(),
+            detail,
+        }
+    }
+
     /// Does the next bounded piece of work, or nothing while the GPU is busy with the last.
     pub fn step(&mut self, ctx: &GpuContext) -> Result<JobState, PipelineError> {
         #[cfg(not(target_arch = "wasm32"))]
@@ -369,6 +387,11 @@ impl FeatureJob {
             Allocation::Refused(detail) => {
                 return Err(PipelineError::Texture(self.texture.out_of_memory(detail)));
             }
+            Allocation::Granted => {}
+        }
+        match self.buffers_alloc.poll() {
+            Allocation::Waiting => return Ok(self.state()),
+            Allocation::Refused(detail) => return Err(self.buffers_refused(detail)),
             Allocation::Granted => {}
         }
         if let Some(flight) = &self.busy {

@@ -112,14 +112,23 @@ impl FeatureJob {
         );
         let rst_slices_per_step = ((per_step / core_plane.max(1)) as usize).max(1);
         let step_seconds = options.step_seconds;
-        let buffers = Buffers::new(
-            ctx,
-            &slabs,
-            &noise_slabs,
-            resampled,
-            &req,
-            rst_slices_per_step,
-        );
+        let (buffers, mut buffers_alloc) = AllocCheck::around(ctx, || {
+            Buffers::new(
+                ctx,
+                &slabs,
+                &noise_slabs,
+                resampled,
+                &req,
+                rst_slices_per_step,
+            )
+        });
+        if let Allocation::Refused(detail) = buffers_alloc.poll() {
+            return Err(PipelineError::OutOfMemory {
+                what: "the feature job's brick buffers",
+                bytes: buffers.bytes(),
+                detail,
+            });
+        }
         for s in 0..slabs.len() {
             tasks.push_back(Task::Prepare(s));
             match req.method {
@@ -166,6 +175,7 @@ impl FeatureJob {
             buffers,
             texture,
             alloc,
+            buffers_alloc,
             volume,
             options,
             sigmas_mm,
