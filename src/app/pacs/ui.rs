@@ -1,7 +1,7 @@
 //! The PACS bar above the panes ("Open from PACS…", Cancel, "Store to PACS" for a series from an
 //! archive, the patient line) and the dialog: server, token, study search, studies, series.
 
-use super::{PacsTarget, patient_line, study_summary};
+use super::{Pacs, PacsTarget, patient_line, study_summary};
 use crate::app::ShapecastApp;
 use crate::io::dicomweb::StudySearch;
 
@@ -51,220 +51,303 @@ impl ShapecastApp {
     }
 
     fn pacs_dialog_ui(&mut self, ui: &mut egui::Ui) {
-        egui::Grid::new("pacs-server")
-            .num_columns(2)
-            .show(ui, |ui| {
-                let l = ui.label("DICOMweb server");
+        let (events, controls) = dialog(ui, &mut self.pacs);
+        self.controls.extend(controls);
+        for e in events {
+            match e {
+                DialogEvent::Search => self.pacs_search(),
+                DialogEvent::Cancel => self.cancel_dicomweb(),
+                DialogEvent::OpenStudy { target, auto_open } => {
+                    self.pacs_open_study(target, auto_open);
+                }
+                DialogEvent::Retrieve(target) => self.pacs_retrieve(target),
+            }
+        }
+    }
+}
+
+/// What the user asked for in the "Open from PACS" dialog, applied after it is drawn.
+#[derive(Clone, Debug, PartialEq)]
+enum DialogEvent {
+    /// Search with the fields (from the page its offset says).
+    Search,
+    Cancel,
+    /// Open a study's series list (`auto_open`: and the chooser's series).
+    OpenStudy {
+        target: PacsTarget,
+        auto_open: bool,
+    },
+    /// Retrieve a series.
+    Retrieve(PacsTarget),
+}
+
+/// The dialog: server, token, search fields (edited in place), studies and series. Returns what
+/// was asked for and the named controls.
+fn dialog(ui: &mut egui::Ui, pacs: &mut Pacs) -> (Vec<DialogEvent>, Vec<(String, egui::Rect)>) {
+    let mut events = Vec::new();
+    let mut controls: Vec<(String, egui::Rect)> = Vec::new();
+    egui::Grid::new("pacs-server")
+        .num_columns(2)
+        .show(ui, |ui| {
+            let l = ui.label("DICOMweb server");
+            let r = ui
+                .add(
+                    egui::TextEdit::singleline(&mut pacs.server)
+                        .hint_text("/dicom-web, or https://pacs.example.org/dicom-web")
+                        .desired_width(420.0),
+                )
+                .labelled_by(l.id);
+            controls.push(("pacs-server".to_owned(), r.rect));
+            ui.end_row();
+            let l = ui.label("Bearer token");
+            let r = ui
+                .add(
+                    egui::TextEdit::singleline(&mut pacs.token)
+                        .password(true)
+                        .hint_text("optional; never put into a link")
+                        .desired_width(420.0),
+                )
+                .labelled_by(l.id);
+            controls.push(("pacs-token".to_owned(), r.rect));
+            ui.end_row();
+        });
+    if let Some(m) = &pacs.message {
+        let colour = if pacs.needs_token {
+            egui::Color32::from_rgb(255, 190, 90)
+        } else {
+            egui::Color32::from_rgb(255, 140, 140)
+        };
+        ui.colored_label(colour, m);
+    }
+    if pacs.needs_token
+        && let Some((target, auto_open)) = pacs.last.clone()
+    {
+        let enabled = !pacs.token.trim().is_empty() && pacs.busy.is_none();
+        let r = ui.add_enabled(enabled, egui::Button::new("Open again with the token"));
+        // Published only when it can be clicked (a token typed), for automation.
+        if enabled {
+            controls.push(("pacs-retry".to_owned(), r.rect));
+        }
+        if r.clicked() {
+            pacs.needs_token = false;
+            events.push(match target.series {
+                Some(_) if auto_open => DialogEvent::Retrieve(target),
+                _ => DialogEvent::OpenStudy { target, auto_open },
+            });
+        }
+    }
+    ui.separator();
+    ui.label(egui::RichText::new("Find a study").strong());
+    let mut go = false;
+    egui::Grid::new("pacs-search")
+        .num_columns(2)
+        .show(ui, |ui| {
+            for (label, value, hint, name) in [
+                (
+                    "Patient ID",
+                    &mut pacs.search.patient_id,
+                    "e.g. 12345 or 123*",
+                    "pacs-patient-id",
+                ),
+                (
+                    "Patient name",
+                    &mut pacs.search.patient_name,
+                    "e.g. DOE^JANE or DOE*",
+                    "pacs-patient-name",
+                ),
+                (
+                    "Accession number",
+                    &mut pacs.search.accession_number,
+                    "",
+                    "pacs-accession",
+                ),
+                (
+                    "Modality",
+                    &mut pacs.search.modality,
+                    "e.g. CT, MR or PT",
+                    "pacs-modality",
+                ),
+                (
+                    "Study date",
+                    &mut pacs.search.study_date,
+                    "YYYYMMDD or YYYYMMDD-YYYYMMDD",
+                    "pacs-date",
+                ),
+            ] {
+                let l = ui.label(label);
                 let r = ui
                     .add(
-                        egui::TextEdit::singleline(&mut self.pacs.server)
-                            .hint_text("/dicom-web, or https://pacs.example.org/dicom-web")
-                            .desired_width(420.0),
+                        egui::TextEdit::singleline(value)
+                            .hint_text(hint)
+                            .desired_width(260.0),
                     )
                     .labelled_by(l.id);
-                self.control("pacs-server", r.rect);
+                go |= r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+                controls.push((name.to_owned(), r.rect));
                 ui.end_row();
-                let l = ui.label("Bearer token");
-                let r = ui
-                    .add(
-                        egui::TextEdit::singleline(&mut self.pacs.token)
-                            .password(true)
-                            .hint_text("optional; never put into a link")
-                            .desired_width(420.0),
-                    )
-                    .labelled_by(l.id);
-                self.control("pacs-token", r.rect);
-                ui.end_row();
-            });
-        if let Some(m) = &self.pacs.message {
-            let colour = if self.pacs.needs_token {
-                egui::Color32::from_rgb(255, 190, 90)
-            } else {
-                egui::Color32::from_rgb(255, 140, 140)
-            };
-            ui.colored_label(colour, m);
-        }
-        if self.pacs.needs_token
-            && let Some((target, auto_open)) = self.pacs.last.clone()
-        {
-            let enabled = !self.pacs.token.trim().is_empty() && self.pacs.busy.is_none();
-            let r = ui.add_enabled(enabled, egui::Button::new("Open again with the token"));
-            // Published only when it can be clicked (a token typed), for automation.
-            if enabled {
-                self.control("pacs-retry", r.rect);
-            }
-            if r.clicked() {
-                self.pacs.needs_token = false;
-                match target.series {
-                    Some(_) if auto_open => self.pacs_retrieve(target),
-                    _ => self.pacs_open_study(target, auto_open),
-                }
-            }
-        }
-        ui.separator();
-        ui.label(egui::RichText::new("Find a study").strong());
-        let mut go = false;
-        egui::Grid::new("pacs-search")
-            .num_columns(2)
-            .show(ui, |ui| {
-                for (label, value, hint, name) in [
-                    (
-                        "Patient ID",
-                        &mut self.pacs.search.patient_id,
-                        "e.g. 12345 or 123*",
-                        "pacs-patient-id",
-                    ),
-                    (
-                        "Patient name",
-                        &mut self.pacs.search.patient_name,
-                        "e.g. DOE^JANE or DOE*",
-                        "pacs-patient-name",
-                    ),
-                    (
-                        "Accession number",
-                        &mut self.pacs.search.accession_number,
-                        "",
-                        "pacs-accession",
-                    ),
-                    (
-                        "Modality",
-                        &mut self.pacs.search.modality,
-                        "e.g. CT, MR or PT",
-                        "pacs-modality",
-                    ),
-                    (
-                        "Study date",
-                        &mut self.pacs.search.study_date,
-                        "YYYYMMDD or YYYYMMDD-YYYYMMDD",
-                        "pacs-date",
-                    ),
-                ] {
-                    let l = ui.label(label);
-                    let r = ui
-                        .add(
-                            egui::TextEdit::singleline(value)
-                                .hint_text(hint)
-                                .desired_width(260.0),
-                        )
-                        .labelled_by(l.id);
-                    go |= r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-                    self.controls.push((name.to_owned(), r.rect));
-                    ui.end_row();
-                }
-            });
-        if go {
-            // Enter in a field: a new search, from its first page.
-            self.pacs.search.offset = 0;
-        }
-        ui.horizontal(|ui| {
-            let r = ui.button("Search");
-            self.control("pacs-search", r.rect);
-            if r.clicked() {
-                // A new search starts on its first page.
-                self.pacs.search.offset = 0;
-                go = true;
-            }
-            let page = StudySearch::LIMIT;
-            if self.pacs.search.offset > 0 {
-                let r = ui.button("Previous");
-                self.control("pacs-previous", r.rect);
-                if r.clicked() {
-                    self.pacs.search.offset = self.pacs.search.offset.saturating_sub(page);
-                    go = true;
-                }
-            }
-            if self.pacs.more {
-                let r = ui.button(format!("Next {page}"));
-                self.control("pacs-next", r.rect);
-                if r.clicked() {
-                    self.pacs.search.offset += page;
-                    go = true;
-                }
-            }
-            if let Some(b) = &self.pacs.busy {
-                ui.spinner();
-                ui.label(b.as_str());
-                if ui.small_button("Cancel").clicked() {
-                    self.cancel_dicomweb();
-                }
             }
         });
-        if go {
-            self.pacs_search();
+    if go {
+        // Enter in a field: a new search, from its first page.
+        pacs.search.offset = 0;
+    }
+    ui.horizontal(|ui| {
+        let r = ui.button("Search");
+        controls.push(("pacs-search".to_owned(), r.rect));
+        if r.clicked() {
+            // A new search starts on its first page.
+            pacs.search.offset = 0;
+            go = true;
         }
-        let mut open_study = None;
-        if !self.pacs.studies.is_empty() {
-            ui.separator();
-            ui.label(egui::RichText::new("Studies").strong());
-            egui::ScrollArea::vertical()
-                .id_salt("pacs-studies")
-                .max_height(160.0)
-                .show(ui, |ui| {
-                    for (i, s) in self.pacs.studies.iter().enumerate() {
-                        let current = self
-                            .pacs
-                            .study
-                            .as_ref()
-                            .is_some_and(|(_, c)| c.study_uid == s.study_uid);
-                        let r = ui.selectable_label(current, study_summary(s));
-                        self.controls.push((format!("pacs-study:{i}"), r.rect));
-                        if r.clicked() {
-                            open_study = Some(s.study_uid.clone());
-                        }
-                    }
-                });
-        }
-        if let Some(study) = open_study {
-            let target = PacsTarget {
-                base: self.pacs.server.clone(),
-                study,
-                series: None,
-            };
-            self.pacs_open_study(target, false);
-        }
-        let mut retrieve = None;
-        if let Some((base, study)) = &self.pacs.study
-            && !self.pacs.series.is_empty()
-        {
-            ui.separator();
-            ui.label(egui::RichText::new(format!("Series of study {}", study.study_uid)).strong());
-            egui::ScrollArea::vertical()
-                .id_salt("pacs-series")
-                .max_height(200.0)
-                .show(ui, |ui| {
-                    for (i, s) in self.pacs.series.iter().enumerate() {
-                        let mut text = s.summary();
-                        if self.pacs.preselected == Some(i) {
-                            text.push_str("  (preselected)");
-                        }
-                        let r = ui.selectable_label(self.pacs.selected == Some(i), text);
-                        self.controls.push((format!("pacs-series:{i}"), r.rect));
-                        if r.clicked() {
-                            self.pacs.selected = Some(i);
-                        }
-                        if r.double_clicked() {
-                            retrieve = Some(i);
-                        }
-                    }
-                });
-            let r = ui.add_enabled(
-                self.pacs.selected.is_some(),
-                egui::Button::new("Open series"),
-            );
-            self.controls.push(("pacs-open-series".to_owned(), r.rect));
+        let page = StudySearch::LIMIT;
+        if pacs.search.offset > 0 {
+            let r = ui.button("Previous");
+            controls.push(("pacs-previous".to_owned(), r.rect));
             if r.clicked() {
-                retrieve = self.pacs.selected;
-            }
-            if let Some(i) = retrieve
-                && let Some(s) = self.pacs.series.get(i)
-            {
-                let target = PacsTarget {
-                    base: base.clone(),
-                    study: study.study_uid.clone(),
-                    series: Some(s.series_uid.clone()),
-                };
-                self.pacs_retrieve(target);
+                pacs.search.offset = pacs.search.offset.saturating_sub(page);
+                go = true;
             }
         }
+        if pacs.more {
+            let r = ui.button(format!("Next {page}"));
+            controls.push(("pacs-next".to_owned(), r.rect));
+            if r.clicked() {
+                pacs.search.offset += page;
+                go = true;
+            }
+        }
+        if let Some(b) = &pacs.busy {
+            ui.spinner();
+            ui.label(b.as_str());
+            if ui.small_button("Cancel").clicked() {
+                events.push(DialogEvent::Cancel);
+            }
+        }
+    });
+    if go {
+        events.push(DialogEvent::Search);
+    }
+    let mut open_study = None;
+    if !pacs.studies.is_empty() {
+        ui.separator();
+        ui.label(egui::RichText::new("Studies").strong());
+        egui::ScrollArea::vertical()
+            .id_salt("pacs-studies")
+            .max_height(160.0)
+            .show(ui, |ui| {
+                for (i, s) in pacs.studies.iter().enumerate() {
+                    let current = pacs
+                        .study
+                        .as_ref()
+                        .is_some_and(|(_, c)| c.study_uid == s.study_uid);
+                    let r = ui.selectable_label(current, study_summary(s));
+                    controls.push((format!("pacs-study:{i}"), r.rect));
+                    if r.clicked() {
+                        open_study = Some(s.study_uid.clone());
+                    }
+                }
+            });
+    }
+    if let Some(study) = open_study {
+        let target = PacsTarget {
+            base: pacs.server.clone(),
+            study,
+            series: None,
+        };
+        events.push(DialogEvent::OpenStudy {
+            target,
+            auto_open: false,
+        });
+    }
+    let mut retrieve = None;
+    if let Some((base, study)) = &pacs.study
+        && !pacs.series.is_empty()
+    {
+        ui.separator();
+        ui.label(egui::RichText::new(format!("Series of study {}", study.study_uid)).strong());
+        egui::ScrollArea::vertical()
+            .id_salt("pacs-series")
+            .max_height(200.0)
+            .show(ui, |ui| {
+                for (i, s) in pacs.series.iter().enumerate() {
+                    let mut text = s.summary();
+                    if pacs.preselected == Some(i) {
+                        text.push_str("  (preselected)");
+                    }
+                    let r = ui.selectable_label(pacs.selected == Some(i), text);
+                    controls.push((format!("pacs-series:{i}"), r.rect));
+                    if r.clicked() {
+                        pacs.selected = Some(i);
+                    }
+                    if r.double_clicked() {
+                        retrieve = Some(i);
+                    }
+                }
+            });
+        let r = ui.add_enabled(pacs.selected.is_some(), egui::Button::new("Open series"));
+        controls.push(("pacs-open-series".to_owned(), r.rect));
+        if r.clicked() {
+            retrieve = pacs.selected;
+        }
+        if let Some(i) = retrieve
+            && let Some(s) = pacs.series.get(i)
+        {
+            let target = PacsTarget {
+                base: base.clone(),
+                study: study.study_uid.clone(),
+                series: Some(s.series_uid.clone()),
+            };
+            events.push(DialogEvent::Retrieve(target));
+        }
+    }
+    (events, controls)
+}
+
+#[cfg(test)]
+mod tests {
+    use egui_kittest::Harness;
+    use egui_kittest::kittest::Queryable as _;
+
+    use super::*;
+    use crate::io::dicomweb::StudyInfo;
+
+    /// The dialog asks; it does not search or open itself. "Search" starts again from the first
+    /// page, and a study clicked is opened on the server typed.
+    #[test]
+    fn the_dialog_asks_for_a_search_from_the_first_page_and_for_the_study_clicked() {
+        let mut pacs = Pacs {
+            server: "https://pacs.example.org/dicom-web".to_owned(),
+            ..Pacs::default()
+        };
+        pacs.search.offset = 40;
+        pacs.studies = vec![StudyInfo {
+            study_uid: "1.2.3".to_owned(),
+            description: Some("CT CHEST".to_owned()),
+            ..StudyInfo::default()
+        }];
+        let mut h = Harness::new_ui_state(
+            |ui, (pacs, events): &mut (Pacs, Vec<DialogEvent>)| {
+                let (asked, _) = dialog(ui, pacs);
+                events.extend(asked);
+            },
+            (pacs, Vec::new()),
+        );
+        h.get_by_label("Search").click();
+        h.run();
+        assert_eq!(h.state().0.search.offset, 0);
+        assert_eq!(h.state().1, vec![DialogEvent::Search]);
+        h.get_by_label_contains("CT CHEST").click();
+        h.run();
+        assert_eq!(
+            h.state().1.last(),
+            Some(&DialogEvent::OpenStudy {
+                target: PacsTarget {
+                    base: "https://pacs.example.org/dicom-web".to_owned(),
+                    study: "1.2.3".to_owned(),
+                    series: None,
+                },
+                auto_open: false,
+            })
+        );
     }
 }
