@@ -339,15 +339,18 @@ mod tests {
         h.get_by_label_contains("CT CHEST").click();
         h.run();
         assert_eq!(
-            h.state().1.last(),
-            Some(&DialogEvent::OpenStudy {
-                target: PacsTarget {
-                    base: "https://pacs.example.org/dicom-web".to_owned(),
-                    study: "1.2.3".to_owned(),
-                    series: None,
-                },
-                auto_open: false,
-            })
+            h.state().1,
+            vec![
+                DialogEvent::Search,
+                DialogEvent::OpenStudy {
+                    target: PacsTarget {
+                        base: "https://pacs.example.org/dicom-web".to_owned(),
+                        study: "1.2.3".to_owned(),
+                        series: None,
+                    },
+                    auto_open: false,
+                }
+            ]
         );
     }
 }

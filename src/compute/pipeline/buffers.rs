@@ -2,6 +2,7 @@
 //! small helpers that size them and place a slab: bytes per voxel for the memory budget, the
 //! halo a method needs, a box's kernel grid, a core's place within its brick.
 
+use super::PipelineError;
 use crate::compute::slab::Brick;
 use crate::cpu::Grid;
 use crate::cpu::gaussian::kernel_radius_vox;
@@ -110,6 +111,15 @@ impl Buffers {
             .chain(self.out_in.iter())
             .map(wgpu::Buffer::size)
             .sum()
+    }
+
+    /// The error of these buffers refused by the device (`detail`: its words).
+    pub(super) fn refused(&self, detail: String) -> PipelineError {
+        PipelineError::OutOfMemory {
+            what: "the feature job's brick buffers",
+            bytes: self.bytes(),
+            detail,
+        }
     }
 
     pub(super) fn new(

@@ -367,15 +367,6 @@ impl FeatureJob {
         &self.notes
     }
 
-    /// The error of brick buffers the device refused (`detail`: its words).
-    fn buffers_refused(&self, detail: String) -> PipelineError {
-        PipelineError::OutOfMemory {
-            what: "the feature job's brick buffers",
-            bytes: self.buffers.bytes(),
-            detail,
-        }
-    }
-
     /// Does the next bounded piece of work, or nothing while the GPU is busy with the last.
     pub fn step(&mut self, ctx: &GpuContext) -> Result<JobState, PipelineError> {
         #[cfg(not(target_arch = "wasm32"))]
@@ -391,7 +382,7 @@ impl FeatureJob {
         }
         match self.buffers_alloc.poll() {
             Allocation::Waiting => return Ok(self.state()),
-            Allocation::Refused(detail) => return Err(self.buffers_refused(detail)),
+            Allocation::Refused(detail) => return Err(self.buffers.refused(detail)),
             Allocation::Granted => {}
         }
         if let Some(flight) = &self.busy {

@@ -123,11 +123,7 @@ impl FeatureJob {
             )
         });
         if let Allocation::Refused(detail) = buffers_alloc.poll() {
-            return Err(PipelineError::OutOfMemory {
-                what: "the feature job's brick buffers",
-                bytes: buffers.bytes(),
-                detail,
-            });
+            return Err(buffers.refused(detail));
         }
         for s in 0..slabs.len() {
             tasks.push_back(Task::Prepare(s));
