@@ -471,14 +471,14 @@ impl FeatureManager {
     /// GPU memory the kept methods' textures hold, and the budget beyond which the least
     /// recently used is dropped, bytes.
     pub fn memory(&self) -> (u64, u64) {
-        let used = self.entries.iter().map(|e| texture_bytes(&e.texture)).sum();
+        let used = self.entries.iter().map(|e| e.texture.bytes()).sum();
         (used, self.budget_bytes)
     }
 
     fn insert(&mut self, request: Request, texture: FeatureTexture, notes: Vec<String>) {
         self.entries.retain(|e| e.request != request);
         self.clock += 1;
-        let bytes_each = texture_bytes(&texture);
+        let bytes_each = texture.bytes();
         self.entries.push(FeatureEntry {
             request,
             texture,
@@ -501,11 +501,6 @@ impl FeatureManager {
             self.entries.remove(oldest);
         }
     }
-}
-
-fn texture_bytes(t: &FeatureTexture) -> u64 {
-    t.dims.iter().map(|&d| u64::from(d)).product::<u64>()
-        * u64::from(crate::gpu::volume_texture::FEATURE_TEXEL_BYTES)
 }
 
 #[cfg(test)]

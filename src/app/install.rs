@@ -329,6 +329,7 @@ fn halved(volume: &Volume) -> Option<(Volume, [usize; 3])> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used)] // a failed expect is a failed test
 mod tests {
     use super::*;
 

@@ -496,6 +496,11 @@ impl FeatureTexture {
         out_of_memory("features", self.dims, FEATURE_FORMAT, detail)
     }
 
+    /// The texture's bytes on the device.
+    pub fn bytes(&self) -> u64 {
+        texture_bytes(self.dims, u64::from(FEATURE_TEXEL_BYTES))
+    }
+
     /// A feature texture filled from CPU components (e.g. the CPU reference's output).
     pub fn from_components(
         ctx: &GpuContext,

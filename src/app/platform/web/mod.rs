@@ -23,7 +23,7 @@ pub fn page_query_and_fragment() -> (Vec<(String, String)>, String) {
 /// fragment stays).
 pub fn take_fragment_token() -> Option<String> {
     let window = web_sys::window()?;
-    let hash = window.location().hash().ok()?;
+    let hash = files::fragment();
     let fragment = hash.trim_start_matches('#');
     let params = crate::io::url::parse_params(fragment);
     let token = params
