@@ -302,28 +302,6 @@ impl ShapecastApp {
         }
     }
 
-    /// The "Copy link" button.
-    pub(super) fn copy_link_ui(&mut self, ui: &mut egui::Ui) {
-        let r = ui.button("Copy link").on_hover_text(
-            "copies a link to exactly this view (volume, mode, parameters, camera, windows, layout); the view is in the link's #fragment, which browsers never send to a server",
-        );
-        self.control("copy-link", r.rect);
-        if r.clicked() {
-            let link = self.link();
-            ui.ctx().copy_text(link);
-            self.windows.link_copied_at = Some(ui.ctx().input(|i| i.time));
-        }
-        if let Some(t) = self.windows.link_copied_at {
-            if ui.ctx().input(|i| i.time) - t < 2.0 {
-                ui.label(egui::RichText::new("copied").small());
-                ui.ctx()
-                    .request_repaint_after(std::time::Duration::from_millis(500));
-            } else {
-                self.windows.link_copied_at = None;
-            }
-        }
-    }
-
     /// Remembers where a control was drawn (published for automation as
     /// `window.shapecastStatus.controls`, in CSS pixels).
     pub(super) fn control(&mut self, name: &str, rect: egui::Rect) {

@@ -165,6 +165,16 @@ impl ShapecastApp {
         self.export.movie.requested.map(|(n, _)| (0, n))
     }
 
+    /// `(frames encoded, frames, where they go)` of the movie being made or asked for.
+    pub(in crate::app) fn movie_shown(&self) -> Option<(u32, u32, Destination)> {
+        let movie = &self.export.movie;
+        match (&movie.making, movie.requested) {
+            (Some(m), _) => Some((m.encoded(), m.frames, m.destination)),
+            (None, Some((n, d))) => Some((0, n, d)),
+            (None, None) => None,
+        }
+    }
+
     /// Whether the frames being made (or asked for) go to the archive.
     pub fn movie_stores_to_pacs(&self) -> bool {
         self.export
@@ -412,81 +422,6 @@ impl ShapecastApp {
             Err(e) => self.error(AppError::export(action(Destination::File), e.into())),
         }
         self.export.movie.last = Some(movie);
-    }
-
-    /// The "Save movie" button (beside "Save picture").
-    pub(in crate::app) fn save_movie_ui(&mut self, ui: &mut egui::Ui) {
-        let r = ui
-            .add_enabled(
-                self.scene.is_some() && self.movie_progress().is_none(),
-                egui::Button::new("Save movie"),
-            )
-            .on_hover_text(format!(
-                "a full turn of the MIP as an animated PNG, {MOVIE_FRAMES} frames (M)"
-            ));
-        self.control("save-movie", r.rect);
-        if r.clicked() {
-            let ctx = ui.ctx().clone();
-            self.save_movie(&ctx, MOVIE_FRAMES);
-        }
-    }
-
-    /// The "Store to PACS" button (in the PACS bar): shown when the volume came from an archive.
-    pub(in crate::app) fn store_pacs_ui(&mut self, ui: &mut egui::Ui) {
-        if !self.shows_archive_series() {
-            return;
-        }
-        let r = ui
-            .add_enabled(
-                self.movie_progress().is_none() && !self.storing_to_pacs(),
-                egui::Button::new("Store to PACS"),
-            )
-            .on_hover_text(format!(
-                "the MIP's full turn ({MOVIE_FRAMES} frames) as a Secondary Capture series in this study of the archive, beside the source series"
-            ));
-        self.control("store-pacs", r.rect);
-        if r.clicked() {
-            let ctx = ui.ctx().clone();
-            self.store_to_pacs(&ctx, MOVIE_FRAMES);
-        }
-        if self.storing_to_pacs() {
-            ui.spinner();
-            ui.label(egui::RichText::new("sending to the archive").small());
-        } else if let Some(t) = self.pacs.stored_at {
-            if ui.ctx().input(|i| i.time) - t < 4.0 {
-                ui.label(egui::RichText::new("stored").small())
-                    .on_hover_text("the series is in the study (see Notes)");
-                ui.ctx()
-                    .request_repaint_after(std::time::Duration::from_millis(500));
-            } else {
-                self.pacs.stored_at = None;
-            }
-        }
-    }
-
-    /// The status bar's progress of the movie being made, with its Cancel.
-    pub(in crate::app) fn movie_progress_ui(&mut self, ui: &mut egui::Ui) {
-        let Some((done, frames)) = self.movie_progress() else {
-            return;
-        };
-        ui.add(
-            egui::ProgressBar::new(done as f32 / frames.max(1) as f32)
-                .desired_width(200.0)
-                .text(format!(
-                    "{}: frame {done} of {frames}",
-                    match self.export.movie.making.as_ref().map(|m| m.destination) {
-                        Some(Destination::Pacs) => "storing to PACS",
-                        _ => "saving the movie",
-                    }
-                )),
-        );
-        let r = ui
-            .small_button("Cancel")
-            .on_hover_text("stop making the movie");
-        self.control("cancel-movie", r.rect);
-        if r.clicked() {
-            self.cancel_movie();
-        }
     }
 }
 

@@ -192,38 +192,6 @@ impl ShapecastApp {
     pub(in crate::app) fn deliver(&self, name: &str, bytes: &[u8]) -> Result<String, SaveError> {
         self.platform.deliver(name, bytes)
     }
-
-    /// The "Save picture" menu: one entry per pane shown.
-    pub(in crate::app) fn save_picture_ui(&mut self, ui: &mut egui::Ui) {
-        ui.menu_button("Save picture", |ui| {
-            ui.label("A PNG of a pane as shown, with its letters and scale bar:");
-            for (label, pane) in [
-                ("MIP pane", PaneId::Mip),
-                ("Axial pane", PaneId::Slice(crate::app::SliceKind::Axial)),
-                (
-                    "Coronal pane",
-                    PaneId::Slice(crate::app::SliceKind::Coronal),
-                ),
-                (
-                    "Sagittal pane",
-                    PaneId::Slice(crate::app::SliceKind::Sagittal),
-                ),
-            ] {
-                let shown = match self.reading.layout {
-                    crate::app::Layout::Single(p) => p == pane,
-                    _ => true,
-                };
-                if ui
-                    .add_enabled(shown && self.scene.is_some(), egui::Button::new(label))
-                    .clicked()
-                {
-                    let ctx = ui.ctx().clone();
-                    self.save_picture(&ctx, pane);
-                    ui.close();
-                }
-            }
-        });
-    }
 }
 
 #[cfg(test)]

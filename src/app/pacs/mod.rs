@@ -22,7 +22,7 @@ use std::sync::{Arc, Mutex};
 mod patient;
 mod pet;
 mod store;
-mod ui;
+pub(super) mod ui;
 
 pub use patient::patient_line;
 use patient::{merge_patient, study_summary};
@@ -125,7 +125,7 @@ pub(super) struct Pacs {
     /// The error this dialog last put in the app's list (taken away once a study opens).
     error_shown: Option<String>,
     /// What the running task does, if one runs.
-    busy: Option<String>,
+    pub busy: Option<String>,
     retrieving: bool,
     task: u64,
     running: Option<backend::Task>,

@@ -1,40 +1,56 @@
-//! The PACS bar above the panes ("Open from PACS…", Cancel, "Store to PACS" for a series from an
-//! archive, the patient line) and the dialog: server, token, study search, studies, series.
+//! The PACS bar's widgets ("Open from PACS…", Cancel, the patient line; the app puts the
+//! export's "Store to PACS" between them) and the dialog: server, token, study search, studies,
+//! series.
 
-use super::{Pacs, PacsTarget, patient_line, study_summary};
+use super::{Pacs, PacsTarget, study_summary};
 use crate::app::ShapecastApp;
 use crate::io::dicomweb::StudySearch;
 
-impl ShapecastApp {
-    /// The bar above the panes: "Open from PACS…", the retrieval's Cancel, "Store to PACS",
-    /// the patient line.
-    pub(in crate::app) fn pacs_bar_ui(&mut self, ui: &mut egui::Ui) {
-        ui.horizontal(|ui| {
-            let r = ui
-                .button("Open from PACS…")
-                .on_hover_text("find a study in an archive over DICOMweb (QIDO-RS) and open one of its series (WADO-RS)");
-            self.control("open-pacs", r.rect);
-            if r.clicked() {
-                self.pacs.dialog = true;
-            }
-            if self.pacs.busy.is_some() {
-                let r = ui
-                    .small_button("Cancel")
-                    .on_hover_text("stop the archive's requests; the volume shown stays");
-                self.control("cancel-pacs", r.rect);
-                if r.clicked() {
-                    self.cancel_dicomweb();
-                }
-            }
-            self.store_pacs_ui(ui);
-            if let Some(line) = self.pacs.patient.as_ref().and_then(patient_line) {
-                ui.separator();
-                ui.label(egui::RichText::new(line).strong())
-                    .on_hover_text("from the study's DICOM header; shown on this screen only, never put into a link or sent anywhere");
-            }
-        });
-    }
+/// What the user asked for in the PACS bar.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(in crate::app) enum BarEvent {
+    /// Open the "Open from PACS" dialog.
+    OpenDialog,
+    /// Stop the archive's requests.
+    Cancel,
+}
 
+/// The PACS bar's own buttons: "Open from PACS…", and Cancel while the archive is `busy`.
+pub(in crate::app) fn bar_buttons(
+    ui: &mut egui::Ui,
+    busy: bool,
+    controls: &mut Vec<(String, egui::Rect)>,
+) -> Option<BarEvent> {
+    let mut event = None;
+    let r = ui.button("Open from PACS…").on_hover_text(
+        "find a study in an archive over DICOMweb (QIDO-RS) and open one of its series (WADO-RS)",
+    );
+    controls.push(("open-pacs".to_owned(), r.rect));
+    if r.clicked() {
+        event = Some(BarEvent::OpenDialog);
+    }
+    if busy {
+        let r = ui
+            .small_button("Cancel")
+            .on_hover_text("stop the archive's requests; the volume shown stays");
+        controls.push(("cancel-pacs".to_owned(), r.rect));
+        if r.clicked() {
+            event = Some(BarEvent::Cancel);
+        }
+    }
+    event
+}
+
+/// The patient line of the study shown (from its header), after a separator.
+pub(in crate::app) fn patient_label(ui: &mut egui::Ui, line: Option<String>) {
+    if let Some(line) = line {
+        ui.separator();
+        ui.label(egui::RichText::new(line).strong())
+            .on_hover_text("from the study's DICOM header; shown on this screen only, never put into a link or sent anywhere");
+    }
+}
+
+impl ShapecastApp {
     /// The "Open from PACS" dialog.
     pub(in crate::app) fn pacs_window_ui(&mut self, ctx: &egui::Context) {
         if !self.pacs.dialog {
@@ -310,6 +326,27 @@ mod tests {
 
     use super::*;
     use crate::io::dicomweb::StudyInfo;
+
+    /// The bar asks for the dialog, and offers Cancel only while the archive is busy.
+    #[test]
+    fn the_bar_opens_the_dialog_and_cancels_only_while_busy() {
+        let mut h = Harness::new_ui_state(
+            |ui, (busy, events): &mut (bool, Vec<BarEvent>)| {
+                let mut controls = Vec::new();
+                events.extend(bar_buttons(ui, *busy, &mut controls));
+                assert_eq!(controls.len(), 1 + usize::from(*busy));
+            },
+            (false, Vec::new()),
+        );
+        assert!(h.query_by_label("Cancel").is_none());
+        h.get_by_label("Open from PACS…").click();
+        h.run();
+        h.state_mut().0 = true;
+        h.run();
+        h.get_by_label("Cancel").click();
+        h.run();
+        assert_eq!(h.state().1, vec![BarEvent::OpenDialog, BarEvent::Cancel]);
+    }
 
     /// The dialog asks; it does not search or open itself. "Search" starts again from the first
     /// page, and a study clicked is opened on the server typed.

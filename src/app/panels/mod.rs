@@ -5,7 +5,12 @@
 
 mod side;
 
+use super::export::buttons::{
+    ExportEvent, StoreShown, copy_link_button, movie_progress, save_movie_button,
+    save_picture_menu, store_button,
+};
 use super::features::{self, DisplayMode};
+use super::pacs::ui::{self as pacs_ui, BarEvent};
 use super::platform::Platform as _;
 use super::{Layout, LoadSource, PaneId, ShapecastApp, SliceKind, WindowPreset, demo};
 
@@ -19,6 +24,7 @@ pub(in crate::app) enum TopEvent {
     Mode(DisplayMode),
     Layout(Layout),
     ToggleAbout,
+    Export(ExportEvent),
 }
 
 /// The "Demo" menu: the demo CT and the paper's phantoms.
@@ -100,8 +106,7 @@ fn layout_bar(ui: &mut egui::Ui, layout: Layout) -> (Option<TopEvent>, Vec<(Stri
 }
 
 impl ShapecastApp {
-    /// Draws the top bar, then applies what the user asked for in it (the link, picture and
-    /// movie buttons act themselves: they are the export's).
+    /// Draws the top bar, then applies what the user asked for in it.
     pub(super) fn top_bar_ui(&mut self, ui: &mut egui::Ui) {
         let mut events = Vec::new();
         egui::MenuBar::new().ui(ui, |ui| {
@@ -121,9 +126,15 @@ impl ShapecastApp {
             events.extend(layout);
             self.controls.extend(controls);
             ui.separator();
-            self.copy_link_ui(ui);
-            self.save_picture_ui(ui);
-            self.save_movie_ui(ui);
+            let mut controls = Vec::new();
+            let copied_at = &mut self.windows.link_copied_at;
+            events.extend(copy_link_button(ui, copied_at, &mut controls).map(TopEvent::Export));
+            let has_volume = self.scene.is_some();
+            let picture = save_picture_menu(ui, self.reading.layout, has_volume);
+            events.extend(picture.map(TopEvent::Export));
+            let movie = has_volume && self.movie_progress().is_none();
+            events.extend(save_movie_button(ui, movie, &mut controls).map(TopEvent::Export));
+            self.controls.extend(controls);
             ui.separator();
             if ui.button("About & data").clicked() {
                 events.push(TopEvent::ToggleAbout);
@@ -140,7 +151,45 @@ impl ShapecastApp {
                 }
                 TopEvent::Layout(l) => self.set_layout(l),
                 TopEvent::ToggleAbout => self.windows.show_about = !self.windows.show_about,
+                TopEvent::Export(e) => self.apply_export(ui.ctx(), e),
             }
+        }
+    }
+
+    /// The bar above the panes: the PACS bar's buttons, "Store to PACS" for a volume from an
+    /// archive, the patient line; then applies what was asked.
+    pub(super) fn pacs_bar_ui(&mut self, ui: &mut egui::Ui) {
+        let mut controls = Vec::new();
+        let store = self.shows_archive_series().then(|| {
+            let enabled = self.movie_progress().is_none() && !self.storing_to_pacs();
+            (enabled, self.storing_to_pacs())
+        });
+        let busy = self.pacs.busy.is_some();
+        let patient = self.patient_line();
+        let stored_at = &mut self.pacs.stored_at;
+        let (asked, export) = ui
+            .horizontal(|ui| {
+                let asked = pacs_ui::bar_buttons(ui, busy, &mut controls);
+                let export = store.and_then(|(enabled, storing)| {
+                    let shown = StoreShown {
+                        enabled,
+                        storing,
+                        stored_at,
+                    };
+                    store_button(ui, shown, &mut controls)
+                });
+                pacs_ui::patient_label(ui, patient);
+                (asked, export)
+            })
+            .inner;
+        self.controls.extend(controls);
+        match asked {
+            Some(BarEvent::OpenDialog) => self.pacs.dialog = true,
+            Some(BarEvent::Cancel) => self.cancel_dicomweb(),
+            None => {}
+        }
+        if let Some(e) = export {
+            self.apply_export(ui.ctx(), e);
         }
     }
 
@@ -178,7 +227,12 @@ impl ShapecastApp {
                     self.features.cancel();
                 }
             }
-            self.movie_progress_ui(ui);
+            let mut controls = Vec::new();
+            let movie = movie_progress(ui, self.movie_shown(), &mut controls);
+            self.controls.extend(controls);
+            if let Some(e) = movie {
+                self.apply_export(ui.ctx(), e);
+            }
             if let Some(a) = &self.status.adapter {
                 ui.separator();
                 ui.label(egui::RichText::new(format!("GPU: {} ({})", a.name, a.backend)).small());
