@@ -5,7 +5,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::super::{Event, Inbox, PacsTarget, StoreJob};
 use crate::io::dicomweb::client::Client;
-use crate::io::dicomweb::{Auth, Base, StudySearch};
+use crate::io::dicomweb::{Auth, Base, DicomWebError, StudySearch};
 
 /// A running task: cancelling drops its answers (a blocking request in flight ends on its
 /// own).
@@ -36,6 +36,21 @@ fn spawn(task: u64, inbox: Inbox, work: impl FnOnce(&dyn Fn(Event)) + Send + 'st
     Task(cancelled)
 }
 
+/// Runs `work` with a client for `base` on its own thread (`work` may send events as it goes);
+/// its answer, or the client's failure (a bad address), is the event `event` makes of it.
+fn run<T>(
+    (base, auth): (Base, Auth),
+    task: u64,
+    inbox: Inbox,
+    work: impl FnOnce(&Client, &dyn Fn(Event)) -> Result<T, DicomWebError> + Send + 'static,
+    event: impl FnOnce(Result<T, DicomWebError>) -> Event + Send + 'static,
+) -> Task {
+    spawn(task, inbox, move |send| {
+        let result = Client::new(base, auth).and_then(|c| work(&c, send));
+        send(event(result));
+    })
+}
+
 pub(in crate::app) fn search(
     base: Base,
     auth: Auth,
@@ -43,10 +58,8 @@ pub(in crate::app) fn search(
     task: u64,
     inbox: Inbox,
 ) -> Task {
-    spawn(task, inbox, move |send| {
-        let r = Client::new(base, auth).and_then(|c| c.search_studies(&search));
-        send(Event::Studies(r));
-    })
+    let work = move |c: &Client, _: &dyn Fn(Event)| c.search_studies(&search);
+    run((base, auth), task, inbox, work, Event::Studies)
 }
 
 pub(in crate::app) fn study(
@@ -56,11 +69,11 @@ pub(in crate::app) fn study(
     task: u64,
     inbox: Inbox,
 ) -> Task {
-    spawn(task, inbox, move |send| {
-        let result = Client::new(base, auth)
-            .and_then(|c| Ok((c.find_study(&target.study)?, c.list_series(&target.study)?)));
-        send(Event::Study { target, result });
-    })
+    let study = target.study.clone();
+    let work =
+        move |c: &Client, _: &dyn Fn(Event)| Ok((c.find_study(&study)?, c.list_series(&study)?));
+    let event = move |result| Event::Study { target, result };
+    run((base, auth), task, inbox, work, event)
 }
 
 pub(in crate::app) fn retrieve(
@@ -70,23 +83,25 @@ pub(in crate::app) fn retrieve(
     task: u64,
     inbox: Inbox,
 ) -> Task {
-    spawn(task, inbox, move |send| {
-        let series = target.series.clone().unwrap_or_default();
-        let result = Client::new(base, auth).and_then(|c| {
-            c.retrieve(&target.study, &series, &mut |p| {
-                send(Event::Progress {
-                    done: p.instances_done,
-                    total: p.instances_total,
-                    bytes: p.bytes,
-                    estimate: p.bytes_estimate,
-                });
-            })
-        });
-        send(Event::Retrieved {
-            target,
-            result: Box::new(result),
-        });
-    })
+    let (study, series) = (
+        target.study.clone(),
+        target.series.clone().unwrap_or_default(),
+    );
+    let work = move |c: &Client, send: &dyn Fn(Event)| {
+        c.retrieve(&study, &series, &mut |p| {
+            send(Event::Progress {
+                done: p.instances_done,
+                total: p.instances_total,
+                bytes: p.bytes,
+                estimate: p.bytes_estimate,
+            });
+        })
+    };
+    let event = move |result| Event::Retrieved {
+        target,
+        result: Box::new(result),
+    };
+    run((base, auth), task, inbox, work, event)
 }
 
 /// Stores a rotation into its study (the source series' metadata, then STOW-RS).
@@ -97,16 +112,14 @@ pub(in crate::app) fn store(
     task: u64,
     inbox: Inbox,
 ) -> Task {
-    spawn(task, inbox, move |send| {
+    let work = move |c: &Client, _: &dyn Fn(Event)| {
         let mut job = job;
-        let result = Client::new(base, auth).and_then(|c| {
-            let source = c.source_series(&job.study, &job.series)?;
-            let (instances, skipped) = job.instances(&source)?;
-            let stored = c.store(&job.study, &instances)?;
-            let mut done = job.done(&instances, skipped);
-            done.warnings = stored.warnings;
-            Ok(done)
-        });
-        send(Event::Stored(result));
-    })
+        let source = c.source_series(&job.study, &job.series)?;
+        let (instances, skipped) = job.instances(&source)?;
+        let stored = c.store(&job.study, &instances)?;
+        let mut done = job.done(&instances, skipped);
+        done.warnings = stored.warnings;
+        Ok(done)
+    };
+    run((base, auth), task, inbox, work, Event::Stored)
 }

@@ -17,36 +17,31 @@ impl Task {
     }
 }
 
-fn client(
-    base: Base,
-    auth: Auth,
-    task: u64,
-    inbox: &Inbox,
-    fail: impl FnOnce(DicomWebError) -> Event,
-) -> Option<Rc<WebClient>> {
-    match WebClient::new(base, auth) {
-        Ok(c) => Some(Rc::new(c)),
-        Err(e) => {
-            inbox.push(task, fail(e));
-            None
-        }
-    }
-}
-
-/// Runs `work` on a client for `base` as a `fetch` task; a client that cannot be made (a bad
-/// address) is `fail`'s event at once.
-fn run<F: std::future::Future<Output = ()> + 'static>(
+/// Runs `work` with a client for `base` as a `fetch` task (`work` gets the inbox for events
+/// it sends as it goes); its answer, or the client's failure (a bad address, at once), is the
+/// event `event` makes of it.
+fn run<T, F: std::future::Future<Output = Result<T, DicomWebError>> + 'static>(
     (base, auth): (Base, Auth),
     task: u64,
-    inbox: &Inbox,
-    fail: impl FnOnce(DicomWebError) -> Event,
-    work: impl FnOnce(Rc<WebClient>) -> F,
+    inbox: Inbox,
+    work: impl FnOnce(Rc<WebClient>, Inbox) -> F,
+    event: impl FnOnce(Result<T, DicomWebError>) -> Event + 'static,
 ) -> Task {
-    let Some(c) = client(base, auth, task, inbox, fail) else {
-        return Task(None);
-    };
-    wasm_bindgen_futures::spawn_local(work(c.clone()));
-    Task(Some(c))
+    match WebClient::new(base, auth) {
+        Err(e) => {
+            inbox.push(task, event(Err(e)));
+            Task(None)
+        }
+        Ok(client) => {
+            let client = Rc::new(client);
+            let answer = work(client.clone(), inbox.clone());
+            wasm_bindgen_futures::spawn_local(async move {
+                let result = answer.await;
+                inbox.push(task, event(result));
+            });
+            Task(Some(client))
+        }
+    }
 }
 
 pub(in crate::app) fn search(
@@ -56,17 +51,8 @@ pub(in crate::app) fn search(
     task: u64,
     inbox: Inbox,
 ) -> Task {
-    let fail = |e| Event::Studies(Err(e));
-    run(
-        (base, auth),
-        task,
-        &inbox.clone(),
-        fail,
-        move |client| async move {
-            let r = client.search_studies(&search).await;
-            inbox.push(task, Event::Studies(r));
-        },
-    )
+    let work = |c: Rc<WebClient>, _| async move { c.search_studies(&search).await };
+    run((base, auth), task, inbox, work, Event::Studies)
 }
 
 pub(in crate::app) fn study(
@@ -76,26 +62,12 @@ pub(in crate::app) fn study(
     task: u64,
     inbox: Inbox,
 ) -> Task {
-    let t = target.clone();
-    let fail = |e| Event::Study {
-        target: t,
-        result: Err(e),
+    let study = target.study.clone();
+    let work = |c: Rc<WebClient>, _| async move {
+        Ok((c.find_study(&study).await?, c.list_series(&study).await?))
     };
-    run(
-        (base, auth),
-        task,
-        &inbox.clone(),
-        fail,
-        move |client| async move {
-            let result = async {
-                let info = client.find_study(&target.study).await?;
-                let series = client.list_series(&target.study).await?;
-                Ok((info, series))
-            }
-            .await;
-            inbox.push(task, Event::Study { target, result });
-        },
-    )
+    let event = move |result| Event::Study { target, result };
+    run((base, auth), task, inbox, work, event)
 }
 
 pub(in crate::app) fn retrieve(
@@ -105,41 +77,29 @@ pub(in crate::app) fn retrieve(
     task: u64,
     inbox: Inbox,
 ) -> Task {
-    let t = target.clone();
-    let fail = |e| Event::Retrieved {
-        target: t,
-        result: Box::new(Err(e)),
-    };
-    run(
-        (base, auth),
-        task,
-        &inbox.clone(),
-        fail,
-        move |client| async move {
-            let series = target.series.clone().unwrap_or_default();
-            let progress_inbox = inbox.clone();
-            let result = client
-                .retrieve(&target.study, &series, &mut |p| {
-                    progress_inbox.push(
-                        task,
-                        Event::Progress {
-                            done: p.retrieval.instances_done,
-                            total: p.retrieval.instances_total,
-                            bytes: p.streamed_bytes.max(p.retrieval.bytes),
-                            estimate: p.retrieval.bytes_estimate,
-                        },
-                    );
-                })
-                .await;
-            inbox.push(
+    let (study, series) = (
+        target.study.clone(),
+        target.series.clone().unwrap_or_default(),
+    );
+    let work = move |c: Rc<WebClient>, progress: Inbox| async move {
+        c.retrieve(&study, &series, &mut |p| {
+            progress.push(
                 task,
-                Event::Retrieved {
-                    target,
-                    result: Box::new(result),
+                Event::Progress {
+                    done: p.retrieval.instances_done,
+                    total: p.retrieval.instances_total,
+                    bytes: p.streamed_bytes.max(p.retrieval.bytes),
+                    estimate: p.retrieval.bytes_estimate,
                 },
             );
-        },
-    )
+        })
+        .await
+    };
+    let event = move |result| Event::Retrieved {
+        target,
+        result: Box::new(result),
+    };
+    run((base, auth), task, inbox, work, event)
 }
 
 /// Stores a rotation into its study (the source series' metadata, then STOW-RS).
@@ -150,24 +110,14 @@ pub(in crate::app) fn store(
     task: u64,
     inbox: Inbox,
 ) -> Task {
-    let fail = |e| Event::Stored(Err(e));
-    run(
-        (base, auth),
-        task,
-        &inbox.clone(),
-        fail,
-        move |client| async move {
-            let result = async {
-                let mut job = job;
-                let source = client.source_series(&job.study, &job.series).await?;
-                let (instances, skipped) = job.instances(&source)?;
-                let stored = client.store(&job.study, &instances).await?;
-                let mut done = job.done(&instances, skipped);
-                done.warnings = stored.warnings;
-                Ok(done)
-            }
-            .await;
-            inbox.push(task, Event::Stored(result));
-        },
-    )
+    let work = |c: Rc<WebClient>, _| async move {
+        let mut job = job;
+        let source = c.source_series(&job.study, &job.series).await?;
+        let (instances, skipped) = job.instances(&source)?;
+        let stored = c.store(&job.study, &instances).await?;
+        let mut done = job.done(&instances, skipped);
+        done.warnings = stored.warnings;
+        Ok(done)
+    };
+    run((base, auth), task, inbox, work, Event::Stored)
 }
