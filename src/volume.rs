@@ -448,6 +448,12 @@ impl Volume {
         Some(sum as f32)
     }
 
+    /// Its grid as a reader is told it: "512 × 512 × 30 voxels, 0.703 × 0.703 × 8.000 mm".
+    pub fn grid_text(&self) -> String {
+        let ([i, j, k], [x, y, z]) = (self.dims, self.spacing_mm);
+        format!("{i} × {j} × {k} voxels, {x:.3} × {y:.3} × {z:.3} mm")
+    }
+
     /// Physical size of the volume's bounding box (centre to centre of the outer voxels), mm.
     pub fn extent_mm(&self) -> [f64; 3] {
         std::array::from_fn(|a| (self.dims[a].max(1) - 1) as f64 * self.spacing_mm[a])

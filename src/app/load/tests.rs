@@ -50,18 +50,20 @@ fn zip_of(name: &str, bytes: &[u8]) -> Vec<u8> {
     w.finish().unwrap().into_inner()
 }
 
+/// The sphere of `sphere_nii`, loaded from `s.zip/scan/s.nii`.
+fn the_sphere_from_the_zip(r: Result<Box<Loaded>, AppError>, volume: &Volume) {
+    let loaded = r.unwrap();
+    assert_eq!(loaded.volume.dims, volume.dims);
+    let source = &loaded.volume.source;
+    assert!(source.contains("s.zip/scan/s.nii"), "{source}");
+}
+
 #[test]
 fn a_zip_archive_is_unpacked_and_loaded() {
     let (volume, nii) = sphere_nii();
     let zip = zip_of("scan/s.nii", &nii);
     let (_, r) = run_file("s.zip", zip);
-    let loaded = r.unwrap();
-    assert_eq!(loaded.volume.dims, volume.dims);
-    assert!(
-        loaded.volume.source.contains("s.zip/scan/s.nii"),
-        "{}",
-        loaded.volume.source
-    );
+    the_sphere_from_the_zip(r, &volume);
 }
 
 #[test]
@@ -73,13 +75,7 @@ fn a_zip_archive_on_disk_is_read_on_demand_and_unpacked() {
     let path = dir.join("s.zip");
     std::fs::write(&path, zip).unwrap();
     let (_, r) = run(LoadJob::new(LoadSource::Paths(vec![path])));
-    let loaded = r.unwrap();
-    assert_eq!(loaded.volume.dims, volume.dims);
-    assert!(
-        loaded.volume.source.contains("s.zip/scan/s.nii"),
-        "{}",
-        loaded.volume.source
-    );
+    the_sphere_from_the_zip(r, &volume);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -27,8 +27,9 @@ pub(super) mod ui;
 pub use patient::patient_line;
 use patient::{merge_patient, study_summary};
 use pet::{PET_TASK, PetRetrieval};
+use store::STORE_TASK;
+pub(in crate::app) use store::StoreDone;
 pub(super) use store::StoreJob;
-use store::{STORE_TASK, StoreDone};
 
 mod transport;
 

@@ -256,16 +256,7 @@ impl ShapecastApp {
                     Some(s) => {
                         let v = &s.volume;
                         ui.label(&v.source);
-                        ui.label(format!(
-                            "{} × {} × {} voxels, {:.3} × {:.3} × {:.3} mm, {}",
-                            v.dims[0],
-                            v.dims[1],
-                            v.dims[2],
-                            v.spacing_mm[0],
-                            v.spacing_mm[1],
-                            v.spacing_mm[2],
-                            v.modality.as_str()
-                        ));
+                        ui.label(format!("{}, {}", v.grid_text(), v.modality.as_str()));
                     }
                     None => {
                         ui.label("nothing loaded");

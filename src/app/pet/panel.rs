@@ -16,13 +16,8 @@ impl PetState {
         ui.strong("PET (fused over the CT)");
         let v = &layer.volume;
         ui.label(format!(
-            "{} x {} x {} at {:.2} x {:.2} x {:.2} mm, {}",
-            v.dims[0],
-            v.dims[1],
-            v.dims[2],
-            v.spacing_mm[0],
-            v.spacing_mm[1],
-            v.spacing_mm[2],
+            "{}, {}",
+            v.grid_text(),
             match v.pet.as_ref().and_then(|p| p.suv_factor) {
                 Some(1.0) => "stored as SUVbw".to_owned(),
                 Some(f) => format!("SUVbw (factor {f:.4e})"),

@@ -70,13 +70,8 @@ fn the_percentile_is_the_nearest_rank_of_the_sorted_values() {
         let k = ((0.999 * f.len() as f64).ceil() as usize).clamp(1, f.len()) - 1;
         *f.select_nth_unstable_by(k, f32::total_cmp).1
     };
-    let mut seed = 7u64;
-    let mut next = || {
-        seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (seed >> 33) as f32 / (1u64 << 31) as f32
-    };
+    let mut rng = crate::testing::Lcg::new(7);
+    let mut next = || rng.unit();
     let cases: Vec<Vec<f32>> = vec![
         vec![],
         vec![f32::NAN, f32::INFINITY],

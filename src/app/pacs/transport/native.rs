@@ -3,9 +3,10 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::super::{Event, Inbox, PacsTarget, StoreJob};
+use super::super::{Event, Inbox, StoreDone, StoreJob};
+use crate::io::Loaded;
 use crate::io::dicomweb::client::Client;
-use crate::io::dicomweb::{Auth, Base, DicomWebError, StudySearch};
+use crate::io::dicomweb::{Auth, Base, DicomWebError, SeriesInfo, StudyInfo, StudySearch};
 
 /// A running task: cancelling drops its answers (a blocking request in flight ends on its
 /// own).
@@ -38,7 +39,7 @@ fn spawn(task: u64, inbox: Inbox, work: impl FnOnce(&dyn Fn(Event)) + Send + 'st
 
 /// Runs `work` with a client for `base` on its own thread (`work` may send events as it goes);
 /// its answer, or the client's failure (a bad address), is the event `event` makes of it.
-fn run<T>(
+pub(super) fn run<T>(
     (base, auth): (Base, Auth),
     task: u64,
     inbox: Inbox,
@@ -51,43 +52,27 @@ fn run<T>(
     })
 }
 
-pub(in crate::app) fn search(
-    base: Base,
-    auth: Auth,
-    search: StudySearch,
-    task: u64,
-    inbox: Inbox,
-) -> Task {
-    let work = move |c: &Client, _: &dyn Fn(Event)| c.search_studies(&search);
-    run((base, auth), task, inbox, work, Event::Studies)
+/// Blocking work on a client; it may send events (progress) as it goes.
+pub(super) trait Work<T>:
+    FnOnce(&Client, &dyn Fn(Event)) -> Result<T, DicomWebError> + Send + 'static
+{
 }
 
-pub(in crate::app) fn study(
-    base: Base,
-    auth: Auth,
-    target: PacsTarget,
-    task: u64,
-    inbox: Inbox,
-) -> Task {
-    let study = target.study.clone();
-    let work =
-        move |c: &Client, _: &dyn Fn(Event)| Ok((c.find_study(&study)?, c.list_series(&study)?));
-    let event = move |result| Event::Study { target, result };
-    run((base, auth), task, inbox, work, event)
+impl<T, F> Work<T> for F where
+    F: FnOnce(&Client, &dyn Fn(Event)) -> Result<T, DicomWebError> + Send + 'static
+{
 }
 
-pub(in crate::app) fn retrieve(
-    base: Base,
-    auth: Auth,
-    target: PacsTarget,
-    task: u64,
-    inbox: Inbox,
-) -> Task {
-    let (study, series) = (
-        target.study.clone(),
-        target.series.clone().unwrap_or_default(),
-    );
-    let work = move |c: &Client, send: &dyn Fn(Event)| {
+pub(super) fn search(search: StudySearch) -> impl Work<Vec<StudyInfo>> {
+    move |c: &Client, _: &dyn Fn(Event)| c.search_studies(&search)
+}
+
+pub(super) fn study(study: String) -> impl Work<(StudyInfo, Vec<SeriesInfo>)> {
+    move |c: &Client, _: &dyn Fn(Event)| Ok((c.find_study(&study)?, c.list_series(&study)?))
+}
+
+pub(super) fn retrieve(study: String, series: String, _task: u64) -> impl Work<Loaded> {
+    move |c: &Client, send: &dyn Fn(Event)| {
         c.retrieve(&study, &series, &mut |p| {
             send(Event::Progress {
                 done: p.instances_done,
@@ -96,23 +81,11 @@ pub(in crate::app) fn retrieve(
                 estimate: p.bytes_estimate,
             });
         })
-    };
-    let event = move |result| Event::Retrieved {
-        target,
-        result: Box::new(result),
-    };
-    run((base, auth), task, inbox, work, event)
+    }
 }
 
-/// Stores a rotation into its study (the source series' metadata, then STOW-RS).
-pub(in crate::app) fn store(
-    base: Base,
-    auth: Auth,
-    job: StoreJob,
-    task: u64,
-    inbox: Inbox,
-) -> Task {
-    let work = move |c: &Client, _: &dyn Fn(Event)| {
+pub(super) fn store(job: StoreJob) -> impl Work<StoreDone> {
+    move |c: &Client, _: &dyn Fn(Event)| {
         let mut job = job;
         let source = c.source_series(&job.study, &job.series)?;
         let (instances, skipped) = job.instances(&source)?;
@@ -120,6 +93,5 @@ pub(in crate::app) fn store(
         let mut done = job.done(&instances, skipped);
         done.warnings = stored.warnings;
         Ok(done)
-    };
-    run((base, auth), task, inbox, work, Event::Stored)
+    }
 }

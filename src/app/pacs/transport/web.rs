@@ -1,10 +1,13 @@
 //! The page's transport: `fetch` tasks.
 
+use std::future::Future;
+use std::pin::Pin;
 use std::rc::Rc;
 
-use super::super::{Event, Inbox, PacsTarget, StoreJob};
+use super::super::{Event, Inbox, StoreDone, StoreJob};
+use crate::io::Loaded;
 use crate::io::dicomweb::web::WebClient;
-use crate::io::dicomweb::{Auth, Base, DicomWebError, StudySearch};
+use crate::io::dicomweb::{Auth, Base, DicomWebError, SeriesInfo, StudyInfo, StudySearch};
 
 /// A running task: cancelling aborts its requests.
 pub(in crate::app) struct Task(Option<Rc<WebClient>>);
@@ -17,14 +20,17 @@ impl Task {
     }
 }
 
+/// What a task's work answers, in time.
+pub(super) type Answer<T> = Pin<Box<dyn Future<Output = Result<T, DicomWebError>>>>;
+
 /// Runs `work` with a client for `base` as a `fetch` task (`work` gets the inbox for events
 /// it sends as it goes); its answer, or the client's failure (a bad address, at once), is the
 /// event `event` makes of it.
-fn run<T, F: std::future::Future<Output = Result<T, DicomWebError>> + 'static>(
+pub(super) fn run<T: 'static>(
     (base, auth): (Base, Auth),
     task: u64,
     inbox: Inbox,
-    work: impl FnOnce(Rc<WebClient>, Inbox) -> F,
+    work: impl FnOnce(Rc<WebClient>, Inbox) -> Answer<T>,
     event: impl FnOnce(Result<T, DicomWebError>) -> Event + 'static,
 ) -> Task {
     match WebClient::new(base, auth) {
@@ -44,80 +50,51 @@ fn run<T, F: std::future::Future<Output = Result<T, DicomWebError>> + 'static>(
     }
 }
 
-pub(in crate::app) fn search(
-    base: Base,
-    auth: Auth,
+pub(super) fn search(
     search: StudySearch,
-    task: u64,
-    inbox: Inbox,
-) -> Task {
-    let work = |c: Rc<WebClient>, _| async move { c.search_studies(&search).await };
-    run((base, auth), task, inbox, work, Event::Studies)
+) -> impl FnOnce(Rc<WebClient>, Inbox) -> Answer<Vec<StudyInfo>> {
+    |c, _| Box::pin(async move { c.search_studies(&search).await })
 }
 
-pub(in crate::app) fn study(
-    base: Base,
-    auth: Auth,
-    target: PacsTarget,
-    task: u64,
-    inbox: Inbox,
-) -> Task {
-    let study = target.study.clone();
-    let work = |c: Rc<WebClient>, _| async move {
-        Ok((c.find_study(&study).await?, c.list_series(&study).await?))
-    };
-    let event = move |result| Event::Study { target, result };
-    run((base, auth), task, inbox, work, event)
+pub(super) fn study(
+    study: String,
+) -> impl FnOnce(Rc<WebClient>, Inbox) -> Answer<(StudyInfo, Vec<SeriesInfo>)> {
+    |c, _| Box::pin(async move { Ok((c.find_study(&study).await?, c.list_series(&study).await?)) })
 }
 
-pub(in crate::app) fn retrieve(
-    base: Base,
-    auth: Auth,
-    target: PacsTarget,
+pub(super) fn retrieve(
+    study: String,
+    series: String,
     task: u64,
-    inbox: Inbox,
-) -> Task {
-    let (study, series) = (
-        target.study.clone(),
-        target.series.clone().unwrap_or_default(),
-    );
-    let work = move |c: Rc<WebClient>, progress: Inbox| async move {
-        c.retrieve(&study, &series, &mut |p| {
-            progress.push(
-                task,
-                Event::Progress {
-                    done: p.retrieval.instances_done,
-                    total: p.retrieval.instances_total,
-                    bytes: p.streamed_bytes.max(p.retrieval.bytes),
-                    estimate: p.retrieval.bytes_estimate,
-                },
-            );
+) -> impl FnOnce(Rc<WebClient>, Inbox) -> Answer<Loaded> {
+    move |c, progress| {
+        Box::pin(async move {
+            c.retrieve(&study, &series, &mut |p| {
+                progress.push(
+                    task,
+                    Event::Progress {
+                        done: p.retrieval.instances_done,
+                        total: p.retrieval.instances_total,
+                        bytes: p.streamed_bytes.max(p.retrieval.bytes),
+                        estimate: p.retrieval.bytes_estimate,
+                    },
+                );
+            })
+            .await
         })
-        .await
-    };
-    let event = move |result| Event::Retrieved {
-        target,
-        result: Box::new(result),
-    };
-    run((base, auth), task, inbox, work, event)
+    }
 }
 
-/// Stores a rotation into its study (the source series' metadata, then STOW-RS).
-pub(in crate::app) fn store(
-    base: Base,
-    auth: Auth,
-    job: StoreJob,
-    task: u64,
-    inbox: Inbox,
-) -> Task {
-    let work = |c: Rc<WebClient>, _| async move {
-        let mut job = job;
-        let source = c.source_series(&job.study, &job.series).await?;
-        let (instances, skipped) = job.instances(&source)?;
-        let stored = c.store(&job.study, &instances).await?;
-        let mut done = job.done(&instances, skipped);
-        done.warnings = stored.warnings;
-        Ok(done)
-    };
-    run((base, auth), task, inbox, work, Event::Stored)
+pub(super) fn store(job: StoreJob) -> impl FnOnce(Rc<WebClient>, Inbox) -> Answer<StoreDone> {
+    |c, _| {
+        Box::pin(async move {
+            let mut job = job;
+            let source = c.source_series(&job.study, &job.series).await?;
+            let (instances, skipped) = job.instances(&source)?;
+            let stored = c.store(&job.study, &instances).await?;
+            let mut done = job.done(&instances, skipped);
+            done.warnings = stored.warnings;
+            Ok(done)
+        })
+    }
 }
