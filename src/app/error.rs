@@ -73,10 +73,103 @@ pub enum AppError {
     #[error("internal: {0}")]
     Internal(&'static str),
 
-    /// Text the app composed itself, from a part whose errors are not typed yet (the page's
-    /// file reads, whose causes are JavaScript values).
+    #[error(transparent)]
+    Page(#[from] PageError),
+
+    /// The PET over the CT could not be read or shown; the CT stays.
+    #[error("PET")]
+    Pet(#[source] Box<AppError>),
+
+    /// Text the app composed itself (a few notes of the app's own).
     #[error("{0}")]
     Other(String),
+}
+
+/// What the page (or a file dropped on the native window) could not read or download. `words`
+/// are the browser's own (a JavaScript error's message; egui's text for a drop), the one cause
+/// it gives.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PageError {
+    #[error("{file}: cannot read: {words}")]
+    CannotRead { file: String, words: String },
+
+    #[error("{file}: cannot open: {words}")]
+    CannotOpen { file: String, words: String },
+
+    #[error("{folder}: cannot list the folder: {words}")]
+    CannotList { folder: String, words: String },
+
+    #[error("{file}: {:.1} GB is more than a browser tab can read as one file (4 GiB at most)", *.bytes / 1e9)]
+    FileTooLarge { file: String, bytes: f64 },
+
+    #[error("{label}: the dropped folder holds no files")]
+    EmptyDrop { label: String },
+
+    #[error("cannot start a download: {words}")]
+    DownloadNotStarted { words: String },
+
+    #[error("{label}: download cancelled")]
+    DownloadCancelled { label: String },
+
+    #[error("{url}: {problem}")]
+    Download {
+        url: String,
+        problem: DownloadProblem,
+    },
+
+    #[error("{url}: could not fetch the demo CT: {words}")]
+    Demo { url: String, words: String },
+
+    #[error("no window object")]
+    NoWindow,
+}
+
+/// Why a download by URL failed, as the reader is told what to do about it.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DownloadProblem {
+    #[error(
+        "this site's Content-Security-Policy does not allow downloads from {host}; whoever hosts Shapecast can add it to connect-src (see \"Deploy\" in Shapecast's README), or download the file and drop it here"
+    )]
+    Policy { host: String },
+
+    #[error(
+        "a page served over HTTPS may not download over plain http; use the https:// address of the file, or download it and drop it here"
+    )]
+    PlainHttp,
+
+    #[error("no answer from the server (network error); check the address and the connection")]
+    NoAnswer,
+
+    /// Another site's server that did not allow this page (`page`) to read its file (CORS).
+    #[error(
+        "the download was refused or got no answer. The server at {host} must allow this site ({page}) to read the file: it has to send the header Access-Control-Allow-Origin (see \"Deploy\" in Shapecast's README). Check the address, ask the server's administrator, or download the file and drop it here"
+    )]
+    Refused { host: String, page: String },
+
+    #[error("not found on the server (HTTP {status}); check the address")]
+    NotFound { status: u16 },
+
+    #[error(
+        "the server at {host} refused access (HTTP {status}): the file needs a login or a permission that a link cannot carry. Open the address in a tab, download the file and drop it here"
+    )]
+    Forbidden { host: String, status: u16 },
+
+    /// `answer`: "HTTP 503 Service Unavailable".
+    #[error("the server at {host} answered {answer}; try again later or check the address")]
+    Status { host: String, answer: String },
+
+    #[error("{:.0} MB is more than this browser tab can hold for one volume (at most {:.0} MB); open a smaller or downsampled series, or use the desktop app (shapecast view)", *.bytes as f64 / 1e6, *.most as f64 / 1e6)]
+    TooLarge { bytes: u64, most: u64 },
+
+    #[error(
+        "the server sent a web page, not a volume (perhaps a login or an error page). Open the address in a tab to see it; a direct link to the file is needed, or download it and drop it here"
+    )]
+    WebPage,
+
+    #[error("the download broke off after {:.1} MB ({words}); try again", *.bytes as f64 / 1e6)]
+    BrokeOff { bytes: u64, words: String },
 }
 
 /// Why a picture or a movie was not made or not saved.
@@ -217,6 +310,32 @@ mod tests {
             source: RenderVolumeError::Empty,
         };
         assert_eq!(e.message(), "big.nrrd: the volume is empty");
+    }
+
+    #[test]
+    fn the_page_s_failures_read_as_before_and_a_pet_s_are_named() {
+        let e = AppError::from(PageError::Download {
+            url: "https://x.org/ct.nii".to_owned(),
+            problem: DownloadProblem::Status {
+                host: "x.org".to_owned(),
+                answer: "HTTP 503 Service Unavailable".to_owned(),
+            },
+        });
+        assert_eq!(
+            e.message(),
+            "https://x.org/ct.nii: the server at x.org answered HTTP 503 Service Unavailable; try again later or check the address"
+        );
+        let e = AppError::Pet(Box::new(
+            PageError::FileTooLarge {
+                file: "pet.nii".to_owned(),
+                bytes: 5.0e9,
+            }
+            .into(),
+        ));
+        assert_eq!(
+            e.message(),
+            "PET: pet.nii: 5.0 GB is more than a browser tab can read as one file (4 GiB at most)"
+        );
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! file inputs, downloads of `?url=` links and PETs, progress, a link pasted into the address
 //! bar).
 
+use super::error::AppError;
 use super::platform::{Event, Platform as _};
 use super::{LoadSource, ShapecastApp};
 
@@ -79,18 +80,15 @@ impl ShapecastApp {
                             .start_source(LoadSource::Files { label, files }, generation);
                     }
                 }
-                Event::PetFailed {
-                    message,
-                    generation,
-                } => {
+                Event::PetFailed { error, generation } => {
                     if self.pet.failed(generation) {
-                        self.error(format!("PET: {message}"));
+                        self.error(AppError::Pet(Box::new(error)));
                     }
                 }
-                Event::Failed { message } => {
+                Event::Failed { error } => {
                     self.load_progress = None;
                     self.series.loading = None;
-                    self.load_failed(message);
+                    self.load_failed(error);
                 }
                 Event::Cancelled { label } => {
                     self.load_progress = None;

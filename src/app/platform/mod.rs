@@ -75,15 +75,18 @@ pub enum Event {
         generation: u64,
     },
     /// Reading the PET series failed; the CT shown stays, without it.
-    PetFailed { message: String, generation: u64 },
+    PetFailed {
+        error: crate::app::error::AppError,
+        generation: u64,
+    },
     /// The files of a PET/CT link's PET (`&pet=URL`), downloaded for the CT of `generation`.
     PetFiles {
         label: String,
         files: Vec<crate::io::InputFile>,
         generation: u64,
     },
-    /// Reading failed; the message names the file.
-    Failed { message: String },
+    /// Reading failed; the error names the file.
+    Failed { error: crate::app::error::AppError },
     /// The user cancelled a download.
     Cancelled { label: String },
     /// A link was pasted into the address bar of the open page (only its fragment changed).

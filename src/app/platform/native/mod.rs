@@ -83,8 +83,13 @@ impl Platform for Native {
             match f.bytes() {
                 Ok(bytes) => files.push(crate::io::InputFile::new(name, bytes)),
                 Err(e) => {
+                    // egui gives the reason as text.
+                    let error = crate::app::error::PageError::CannotRead {
+                        file: name,
+                        words: e,
+                    };
                     events.push(Event::Failed {
-                        message: format!("{name}: cannot read: {e}"),
+                        error: error.into(),
                     });
                     return events;
                 }

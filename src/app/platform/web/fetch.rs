@@ -9,6 +9,7 @@
 //! https page), a web page where a volume was expected (a login page), or a size this tab cannot
 //! hold. The volume on screen stays.
 
+use crate::app::error::{AppError, DownloadProblem, PageError};
 use std::cell::RefCell;
 
 use wasm_bindgen::JsCast as _;
@@ -75,7 +76,10 @@ pub fn fetch_urls(urls: Vec<String>) {
         Ok(c) => c,
         Err(e) => {
             push(WebEvent::Failed {
-                message: format!("cannot start a download: {}", js_error(&e)),
+                error: PageError::DownloadNotStarted {
+                    words: js_error(&e),
+                }
+                .into(),
             });
             return;
         }
@@ -104,7 +108,7 @@ pub fn fetch_urls(urls: Vec<String>) {
             // Replaced by a newer download or drop: that one reports.
             Ok(_) => {}
             Err(Failure::Cancelled) => push(WebEvent::Cancelled { label }),
-            Err(Failure::Message(message)) => push(WebEvent::Failed { message }),
+            Err(Failure::Error(error)) => push(WebEvent::Failed { error }),
         }
     });
 }
@@ -117,7 +121,10 @@ pub fn fetch_pet_urls(urls: Vec<String>, generation: u64) {
         Ok(c) => c,
         Err(e) => {
             push(WebEvent::PetFailed {
-                message: format!("cannot start a download: {}", js_error(&e)),
+                error: PageError::DownloadNotStarted {
+                    words: js_error(&e),
+                }
+                .into(),
                 generation,
             });
             return;
@@ -135,20 +142,23 @@ pub fn fetch_pet_urls(urls: Vec<String>, generation: u64) {
                 generation,
             }),
             Err(Failure::Cancelled) => push(WebEvent::PetFailed {
-                message: format!("{label}: download cancelled"),
+                error: PageError::DownloadCancelled { label }.into(),
                 generation,
             }),
-            Err(Failure::Message(message)) => push(WebEvent::PetFailed {
-                message,
-                generation,
-            }),
+            Err(Failure::Error(error)) => push(WebEvent::PetFailed { error, generation }),
         }
     });
 }
 
 enum Failure {
     Cancelled,
-    Message(String),
+    Error(AppError),
+}
+
+impl From<PageError> for Failure {
+    fn from(e: PageError) -> Self {
+        Self::Error(e.into())
+    }
 }
 
 /// The file name a URL's path ends in (decoded), as loaders pair headers with data files.
@@ -185,7 +195,7 @@ async fn download_all(
         let limit = max_download_bytes() - total_bytes;
         let bytes = download(url, &label, controller, limit, report).await?;
         total_bytes += bytes.len();
-        files.push(js_bytes::into_input(bytes, name).map_err(Failure::Message)?);
+        files.push(js_bytes::into_input(bytes, name).map_err(Failure::Error)?);
     }
     Ok(files)
 }
@@ -196,8 +206,8 @@ fn origin_of_page() -> String {
         .unwrap_or_default()
 }
 
-/// The message for a fetch the browser refused without saying why.
-fn refusal_message(url: &str) -> String {
+/// Why the browser refused a fetch without saying why.
+fn refusal(url: &str) -> DownloadProblem {
     let page = origin_of_page();
     let host = host_of(url);
     let blocked = BLOCKED.with(|b| {
@@ -206,53 +216,37 @@ fn refusal_message(url: &str) -> String {
             .any(|u| !u.is_empty() && (url.starts_with(u.as_str()) || u.contains(&host)))
     });
     if blocked {
-        return format!(
-            "{url}: this site's Content-Security-Policy does not allow downloads from {host}; whoever hosts Shapecast can add it to connect-src (see \"Deploy\" in Shapecast's README), or download the file and drop it here"
-        );
-    }
-    if url.starts_with("http:") && page.starts_with("https:") {
-        return format!(
-            "{url}: a page served over HTTPS may not download over plain http; use the https:// address of the file, or download it and drop it here"
-        );
-    }
-    let same_site = url.starts_with(&format!("{page}/"));
-    if same_site {
-        format!(
-            "{url}: no answer from the server (network error); check the address and the connection"
-        )
+        DownloadProblem::Policy { host }
+    } else if url.starts_with("http:") && page.starts_with("https:") {
+        DownloadProblem::PlainHttp
+    } else if url.starts_with(&format!("{page}/")) {
+        DownloadProblem::NoAnswer
     } else {
-        format!(
-            "{url}: the download was refused or got no answer. The server at {host} must allow this site ({page}) to read the file: it has to send the header Access-Control-Allow-Origin (see \"Deploy\" in Shapecast's README). Check the address, ask the server's administrator, or download the file and drop it here"
-        )
+        DownloadProblem::Refused { host, page }
     }
 }
 
-fn status_message(url: &str, status: u16, text: &str) -> String {
+/// What an HTTP status other than success means to the reader.
+fn status_problem(url: &str, status: u16, text: &str) -> DownloadProblem {
     let host = host_of(url);
     match status {
-        404 | 410 => format!("{url}: not found on the server (HTTP {status}); check the address"),
-        401 | 403 => format!(
-            "{url}: the server at {host} refused access (HTTP {status}): the file needs a login or a permission that a link cannot carry. Open the address in a tab, download the file and drop it here"
-        ),
-        _ => format!(
-            "{url}: the server at {host} answered HTTP {status}{}{text}; try again later or check the address",
-            if text.is_empty() { "" } else { " " }
-        ),
+        404 | 410 => DownloadProblem::NotFound { status },
+        401 | 403 => DownloadProblem::Forbidden { host, status },
+        _ => DownloadProblem::Status {
+            host,
+            answer: format!(
+                "HTTP {status}{}{text}",
+                if text.is_empty() { "" } else { " " }
+            ),
+        },
     }
 }
 
-fn too_large(url: &str, bytes: u64) -> String {
-    format!(
-        "{url}: {:.0} MB is more than this browser tab can hold for one volume (at most {:.0} MB); open a smaller or downsampled series, or use the desktop app (shapecast view)",
-        bytes as f64 / 1e6,
-        max_download_bytes() as f64 / 1e6
-    )
-}
-
-fn html_message(url: &str) -> String {
-    format!(
-        "{url}: the server sent a web page, not a volume (perhaps a login or an error page). Open the address in a tab to see it; a direct link to the file is needed, or download it and drop it here"
-    )
+fn too_large(bytes: u64) -> DownloadProblem {
+    DownloadProblem::TooLarge {
+        bytes,
+        most: max_download_bytes(),
+    }
 }
 
 /// Whether bytes look like an HTML page (after whitespace and a byte order mark).
@@ -276,9 +270,14 @@ async fn download(
     room: u64,
     report: bool,
 ) -> Result<JsBytes, Failure> {
-    let fail = |m: String| Failure::Message(m);
+    let fail = |problem| {
+        Failure::from(PageError::Download {
+            url: url.to_owned(),
+            problem,
+        })
+    };
     let signal = controller.signal();
-    let window = web_sys::window().ok_or_else(|| fail("no window object".to_owned()))?;
+    let window = web_sys::window().ok_or(PageError::NoWindow)?;
     if report {
         push(WebEvent::Progress {
             verb: "downloading",
@@ -296,12 +295,12 @@ async fn download(
             log::warn!("fetch {url}: {}", js_error(&e));
             // The policy's violation event comes as a task of its own, after the rejection.
             sleep_ms(50).await;
-            return Err(fail(refusal_message(url)));
+            return Err(fail(refusal(url)));
         }
     };
     let response: web_sys::Response = response.unchecked_into();
     if !response.ok() {
-        return Err(fail(status_message(
+        return Err(fail(status_problem(
             url,
             response.status(),
             &response.status_text(),
@@ -316,7 +315,7 @@ async fn download(
         .to_ascii_lowercase();
     if content_type.starts_with("text/html") {
         controller.abort();
-        return Err(fail(html_message(url)));
+        return Err(fail(DownloadProblem::WebPage));
     }
     // The declared length; with a Content-Encoding it counts the compressed bytes, while the
     // body arrives decoded, so it is only a progress hint there.
@@ -335,7 +334,7 @@ async fn download(
         && n > room
     {
         controller.abort();
-        return Err(fail(too_large(url, n)));
+        return Err(fail(too_large(n)));
     }
     // The chunks stay JavaScript's, gathered into 16 MiB buffers as they arrive: the loader
     // reads them on demand and lets each go once read, so the wasm memory never holds the file
@@ -353,17 +352,16 @@ async fn download(
             Ok(None) => break,
             Err(_) if signal.aborted() => return Err(Failure::Cancelled),
             Err(e) => {
-                return Err(fail(format!(
-                    "{url}: the download broke off after {:.1} MB ({}); try again",
-                    bytes.len() as f64 / 1e6,
-                    js_error(&e)
-                )));
+                return Err(fail(DownloadProblem::BrokeOff {
+                    bytes: bytes.len(),
+                    words: js_error(&e),
+                }));
             }
         };
         let new_len = bytes.len() + u64::from(array.length());
         if new_len > room {
             controller.abort();
-            return Err(fail(too_large(url, new_len)));
+            return Err(fail(too_large(new_len)));
         }
         bytes.push(&array);
         // A progress event per ~256 KB is plenty (chunks are often 16-64 KB).
@@ -379,7 +377,7 @@ async fn download(
     }
     let bytes = bytes.finish();
     if looks_like_html(&bytes.head(1024)) {
-        return Err(fail(html_message(url)));
+        return Err(fail(DownloadProblem::WebPage));
     }
     Ok(bytes)
 }

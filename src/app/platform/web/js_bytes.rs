@@ -8,6 +8,7 @@
 //! buffers detached), so the page holds about the file's bytes or the voxels, not both; other
 //! bytes are garbage once the load has dropped its `InputFile`.
 
+use crate::app::error::AppError;
 use std::sync::Arc;
 
 use crate::io::{Chunk, Chunked, InputFile};
@@ -130,7 +131,7 @@ impl Gathered {
 }
 
 /// The file for the loaders, read on demand from JavaScript's memory.
-pub fn into_input(bytes: JsBytes, name: String) -> Result<InputFile, String> {
+pub fn into_input(bytes: JsBytes, name: String) -> Result<InputFile, AppError> {
     InputFile::on_demand(name.clone(), Arc::new(bytes))
-        .map_err(|e| format!("{name}: cannot read: {e}"))
+        .map_err(|source| crate::files::FilesError::Read { path: name, source }.into())
 }

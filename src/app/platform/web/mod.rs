@@ -92,7 +92,7 @@ impl Platform for Web {
     fn set_save_dir(&mut self, _dir: std::path::PathBuf) {}
 
     fn install(&self, ctx: &egui::Context) -> Result<(), PlatformError> {
-        files::install(ctx).map_err(PlatformError::DropUnavailable)
+        files::install(ctx)
     }
 
     fn demo(&self) -> Option<LoadSource> {

@@ -20,6 +20,7 @@ use wasm_bindgen::JsValue;
 use wasm_bindgen::closure::Closure;
 use wasm_bindgen_futures::JsFuture;
 
+use crate::app::error::{PageError, PlatformError};
 use crate::app::platform::web::js_bytes::{self, JsBytes};
 use crate::app::view_link::ViewSource;
 use crate::io::InputFile;
@@ -44,10 +45,13 @@ fn set_hover(on: bool) {
 }
 
 /// Installs the drag-and-drop listeners and the file inputs' change listeners (once).
-pub fn install(ctx: &egui::Context) -> Result<(), String> {
+pub fn install(ctx: &egui::Context) -> Result<(), PlatformError> {
     crate::app::platform::web::events::set_context(ctx);
-    let window = web_sys::window().ok_or("no window object")?;
-    let document = window.document().ok_or("no document object")?;
+    let unavailable = |words: &str| PlatformError::DropUnavailable(words.to_owned());
+    let window = web_sys::window().ok_or_else(|| unavailable("no window object"))?;
+    let document = window
+        .document()
+        .ok_or_else(|| unavailable("no document object"))?;
 
     let over = Closure::<dyn FnMut(web_sys::DragEvent)>::new(|event: web_sys::DragEvent| {
         event.prevent_default();
@@ -60,7 +64,7 @@ pub fn install(ctx: &egui::Context) -> Result<(), String> {
     for name in ["dragenter", "dragover"] {
         window
             .add_event_listener_with_callback_and_bool(name, over.as_ref().unchecked_ref(), true)
-            .map_err(|e| js_error(&e))?;
+            .map_err(|e| unavailable(&js_error(&e)))?;
     }
     over.forget();
 
@@ -78,7 +82,7 @@ pub fn install(ctx: &egui::Context) -> Result<(), String> {
             leave.as_ref().unchecked_ref(),
             true,
         )
-        .map_err(|e| js_error(&e))?;
+        .map_err(|e| unavailable(&js_error(&e)))?;
     leave.forget();
 
     let drop = Closure::<dyn FnMut(web_sys::DragEvent)>::new(|event: web_sys::DragEvent| {
@@ -91,7 +95,7 @@ pub fn install(ctx: &egui::Context) -> Result<(), String> {
     });
     window
         .add_event_listener_with_callback_and_bool("drop", drop.as_ref().unchecked_ref(), true)
-        .map_err(|e| js_error(&e))?;
+        .map_err(|e| unavailable(&js_error(&e)))?;
     drop.forget();
 
     // A link pasted into the address bar of an open page changes only the fragment, which does
@@ -104,7 +108,7 @@ pub fn install(ctx: &egui::Context) -> Result<(), String> {
     });
     window
         .add_event_listener_with_callback("hashchange", link.as_ref().unchecked_ref())
-        .map_err(|e| js_error(&e))?;
+        .map_err(|e| unavailable(&js_error(&e)))?;
     link.forget();
 
     crate::app::platform::web::fetch::install();
@@ -129,7 +133,7 @@ pub fn install(ctx: &egui::Context) -> Result<(), String> {
         });
         input
             .add_event_listener_with_callback("change", change.as_ref().unchecked_ref())
-            .map_err(|e| js_error(&e))?;
+            .map_err(|e| unavailable(&js_error(&e)))?;
         change.forget();
     }
     Ok(())
@@ -221,13 +225,13 @@ fn on_drop(dt: &web_sys::DataTransfer) {
                 files.extend(plain);
                 if files.is_empty() {
                     push(WebEvent::Failed {
-                        message: format!("{label}: the dropped folder holds no files"),
+                        error: PageError::EmptyDrop { label }.into(),
                     });
                 } else {
                     read_all(files).await;
                 }
             }
-            Err(message) => push(WebEvent::Failed { message }),
+            Err(e) => push(WebEvent::Failed { error: e.into() }),
         }
     });
 }
@@ -241,7 +245,7 @@ fn drop_label(entries: &[web_sys::FileSystemEntry], plain: &[Named]) -> String {
 }
 
 /// Files under the dropped entries (folders walked depth first, hidden entries skipped).
-async fn walk(entries: Vec<web_sys::FileSystemEntry>) -> Result<Vec<Named>, String> {
+async fn walk(entries: Vec<web_sys::FileSystemEntry>) -> Result<Vec<Named>, PageError> {
     let mut out = Vec::new();
     let mut stack: Vec<web_sys::FileSystemEntry> = entries.into_iter().rev().collect();
     while let Some(entry) = stack.pop() {
@@ -257,7 +261,10 @@ async fn walk(entries: Vec<web_sys::FileSystemEntry>) -> Result<Vec<Named>, Stri
             });
             let file = JsFuture::from(promise)
                 .await
-                .map_err(|e| format!("{name}: cannot open: {}", js_error(&e)))?;
+                .map_err(|e| PageError::CannotOpen {
+                    file: name.clone(),
+                    words: js_error(&e),
+                })?;
             out.push(Named {
                 name,
                 file: file.unchecked_into(),
@@ -277,7 +284,10 @@ async fn walk(entries: Vec<web_sys::FileSystemEntry>) -> Result<Vec<Named>, Stri
                 });
                 let batch = JsFuture::from(promise)
                     .await
-                    .map_err(|e| format!("{name}: cannot list the folder: {}", js_error(&e)))?;
+                    .map_err(|e| PageError::CannotList {
+                        folder: name.clone(),
+                        words: js_error(&e),
+                    })?;
                 let batch: js_sys::Array = batch.unchecked_into();
                 if batch.length() == 0 {
                     break;
@@ -322,28 +332,28 @@ pub fn fetch_demo() {
                 files: vec![InputFile::new(crate::app::demo::DEMO_FILE, bytes)],
                 origin: ViewSource::Demo,
             }),
-            Err(e) => push(WebEvent::Failed {
-                message: format!(
-                    "{}: could not fetch the demo CT: {e}",
-                    crate::app::demo::DEMO_URL
-                ),
-            }),
+            Err(e) => push(WebEvent::Failed { error: e.into() }),
         }
     });
 }
 
-async fn fetch_bytes(url: &str) -> Result<Vec<u8>, String> {
-    let window = web_sys::window().ok_or("no window object")?;
+/// The demo's bytes.
+async fn fetch_bytes(url: &str) -> Result<Vec<u8>, PageError> {
+    let fail = |words: String| PageError::Demo {
+        url: url.to_owned(),
+        words,
+    };
+    let window = web_sys::window().ok_or(PageError::NoWindow)?;
     let response = JsFuture::from(window.fetch_with_str(url))
         .await
-        .map_err(|e| js_error(&e))?;
+        .map_err(|e| fail(js_error(&e)))?;
     let response: web_sys::Response = response.unchecked_into();
     if !response.ok() {
-        return Err(format!("HTTP {}", response.status()));
+        return Err(fail(format!("HTTP {}", response.status())));
     }
-    let buffer = JsFuture::from(response.array_buffer().map_err(|e| js_error(&e))?)
+    let buffer = JsFuture::from(response.array_buffer().map_err(|e| fail(js_error(&e)))?)
         .await
-        .map_err(|e| js_error(&e))?;
+        .map_err(|e| fail(js_error(&e)))?;
     Ok(js_sys::Uint8Array::new(&buffer).to_vec())
 }
 

@@ -2,16 +2,23 @@
 //! whole), a DICOM set decoded file by file as it is read, a chosen series read again.
 
 use super::*;
+use crate::app::error::{AppError, PageError};
 
 /// Why a file could not be read, naming it.
-pub(super) fn cannot_read(f: &Named, e: &JsValue) -> String {
-    format!("{}: cannot read: {}", f.name, js_error(e))
+pub(super) fn cannot_read(f: &Named, e: &JsValue) -> PageError {
+    PageError::CannotRead {
+        file: f.name.clone(),
+        words: js_error(e),
+    }
 }
 
 /// A blob's bytes as JavaScript holds them (not copied into the wasm memory). A blob of 4 GiB
 /// or more is refused: a `Uint8Array`'s length is 32-bit here, and the page's limits (1.5 GiB
 /// of voxels, 2 GiB per decompression) hold less anyway.
-pub(super) async fn read_js(f: &Named, blob: &web_sys::Blob) -> Result<js_sys::Uint8Array, String> {
+pub(super) async fn read_js(
+    f: &Named,
+    blob: &web_sys::Blob,
+) -> Result<js_sys::Uint8Array, PageError> {
     too_large(f, blob.size())?;
     match JsFuture::from(blob.array_buffer()).await {
         Ok(buffer) => Ok(js_sys::Uint8Array::new(&buffer)),
@@ -20,13 +27,12 @@ pub(super) async fn read_js(f: &Named, blob: &web_sys::Blob) -> Result<js_sys::U
 }
 
 /// Refuses a file or blob of 4 GiB or more ([`read_js`]).
-pub(super) fn too_large(f: &Named, size: f64) -> Result<(), String> {
+pub(super) fn too_large(f: &Named, size: f64) -> Result<(), PageError> {
     if size > f64::from(u32::MAX) {
-        return Err(format!(
-            "{}: {:.1} GB is more than a browser tab can read as one file (4 GiB at most)",
-            f.name,
-            size / 1e9
-        ));
+        return Err(PageError::FileTooLarge {
+            file: f.name.clone(),
+            bytes: size,
+        });
     }
     Ok(())
 }
@@ -40,7 +46,7 @@ pub(super) async fn read_chunked(
     label: &str,
     done: f64,
     total: f64,
-) -> Result<JsBytes, String> {
+) -> Result<JsBytes, PageError> {
     too_large(f, f.file.size())?;
     let reader: web_sys::ReadableStreamDefaultReader =
         f.file.stream().get_reader().unchecked_into();
@@ -65,12 +71,12 @@ pub(super) async fn read_chunked(
 }
 
 /// A file's bytes, read whole into the wasm memory (one DICOM image at a time).
-pub(super) async fn read_file(f: &Named) -> Result<Vec<u8>, String> {
+pub(super) async fn read_file(f: &Named) -> Result<Vec<u8>, PageError> {
     Ok(read_js(f, &f.file).await?.to_vec())
 }
 
 /// The first bytes of a file (enough to tell its format: `io::sniff`).
-pub(super) async fn read_head(f: &Named) -> Result<Vec<u8>, String> {
+pub(super) async fn read_head(f: &Named) -> Result<Vec<u8>, PageError> {
     let end = f.file.size().min(crate::io::HEAD_BYTES as f64);
     let blob = f
         .file
@@ -129,15 +135,15 @@ pub(super) async fn read_all(files: Vec<Named>) {
         // into the voxels.
         let read = match read_chunked(&f, &label, done, total).await {
             Ok(bytes) => js_bytes::into_input(bytes, f.name),
-            Err(e) => Err(e),
+            Err(e) => Err(e.into()),
         };
         match read {
             Ok(file) => {
                 done += f.file.size();
                 out.push(file);
             }
-            Err(message) => {
-                push(WebEvent::Failed { message });
+            Err(error) => {
+                push(WebEvent::Failed { error });
                 return;
             }
         }
@@ -173,8 +179,10 @@ pub(super) async fn read_dicom_set(files: &[Named], label: &str, total: f64) -> 
         });
         let bytes = match read_file(f).await {
             Ok(b) => b,
-            Err(message) => {
-                push(WebEvent::Failed { message });
+            Err(error) => {
+                push(WebEvent::Failed {
+                    error: error.into(),
+                });
                 return true;
             }
         };
@@ -182,9 +190,7 @@ pub(super) async fn read_dicom_set(files: &[Named], label: &str, total: f64) -> 
         match crate::io::sniff(&f.name, &bytes) {
             Format::Dicom => {
                 if let Err(e) = reader.push(InputFile::new(f.name.clone(), bytes)) {
-                    push(WebEvent::Failed {
-                        message: crate::error::chain(&e),
-                    });
+                    push(WebEvent::Failed { error: e.into() });
                     return true;
                 }
             }
@@ -209,9 +215,7 @@ pub(super) async fn read_dicom_set(files: &[Named], label: &str, total: f64) -> 
             let set = crate::app::load::SeriesSet::of_page_files(list, handles, chosen);
             read_series(set, SeriesFor::Shown(Some(origin))).await;
         }
-        Err(e) => push(WebEvent::Failed {
-            message: crate::error::chain(&e),
-        }),
+        Err(e) => push(WebEvent::Failed { error: e.into() }),
     }
     true
 }
@@ -226,12 +230,9 @@ pub(super) enum SeriesFor {
 }
 
 pub(super) async fn read_series(set: crate::app::load::SeriesSet, purpose: SeriesFor) {
-    let fail = |message: String| match purpose {
-        SeriesFor::Shown(_) => WebEvent::Failed { message },
-        SeriesFor::Pet(generation) => WebEvent::PetFailed {
-            message,
-            generation,
-        },
+    let fail = |error: AppError| match purpose {
+        SeriesFor::Shown(_) => WebEvent::Failed { error },
+        SeriesFor::Pet(generation) => WebEvent::PetFailed { error, generation },
     };
     let Some(files) = set
         .page_files()
@@ -268,11 +269,11 @@ pub(super) async fn read_series(set: crate::app::load::SeriesSet, purpose: Serie
         let pushed = match read_file(&named).await {
             Ok(bytes) => builder
                 .push(crate::io::InputFile::new(named.name, bytes))
-                .map_err(|e| crate::error::chain(&e)),
-            Err(message) => Err(message),
+                .map_err(AppError::from),
+            Err(e) => Err(e.into()),
         };
-        if let Err(message) = pushed {
-            push(fail(message));
+        if let Err(error) = pushed {
+            push(fail(error));
             return;
         }
         done += file.size();
@@ -288,11 +289,9 @@ pub(super) async fn read_series(set: crate::app::load::SeriesSet, purpose: Serie
             generation,
         }),
         (Err(e), purpose) => push(match purpose {
-            SeriesFor::Shown(_) => WebEvent::Failed {
-                message: crate::error::chain(&e),
-            },
+            SeriesFor::Shown(_) => WebEvent::Failed { error: e.into() },
             SeriesFor::Pet(generation) => WebEvent::PetFailed {
-                message: crate::error::chain(&e),
+                error: e.into(),
                 generation,
             },
         }),
