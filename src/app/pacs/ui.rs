@@ -6,6 +6,15 @@ use super::{Pacs, PacsTarget, study_summary};
 use crate::app::ShapecastApp;
 use crate::io::dicomweb::StudySearch;
 
+/// The study search's fields, in the order of `StudySearch`'s: label, hint, control name.
+const SEARCH_FIELDS: [(&str, &str, &str); 5] = [
+    ("Patient ID", "e.g. 12345 or 123*", "pacs-patient-id"),
+    ("Patient name", "e.g. DOE^JANE or DOE*", "pacs-patient-name"),
+    ("Accession number", "", "pacs-accession"),
+    ("Modality", "e.g. CT, MR or PT", "pacs-modality"),
+    ("Study date", "YYYYMMDD or YYYYMMDD-YYYYMMDD", "pacs-date"),
+];
+
 /// What the user asked for in the PACS bar.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(in crate::app) enum BarEvent {
@@ -158,38 +167,15 @@ fn dialog(ui: &mut egui::Ui, pacs: &mut Pacs) -> (Vec<DialogEvent>, Vec<(String,
     egui::Grid::new("pacs-search")
         .num_columns(2)
         .show(ui, |ui| {
-            for (label, value, hint, name) in [
-                (
-                    "Patient ID",
-                    &mut pacs.search.patient_id,
-                    "e.g. 12345 or 123*",
-                    "pacs-patient-id",
-                ),
-                (
-                    "Patient name",
-                    &mut pacs.search.patient_name,
-                    "e.g. DOE^JANE or DOE*",
-                    "pacs-patient-name",
-                ),
-                (
-                    "Accession number",
-                    &mut pacs.search.accession_number,
-                    "",
-                    "pacs-accession",
-                ),
-                (
-                    "Modality",
-                    &mut pacs.search.modality,
-                    "e.g. CT, MR or PT",
-                    "pacs-modality",
-                ),
-                (
-                    "Study date",
-                    &mut pacs.search.study_date,
-                    "YYYYMMDD or YYYYMMDD-YYYYMMDD",
-                    "pacs-date",
-                ),
-            ] {
+            let f = &mut pacs.search;
+            let values = [
+                &mut f.patient_id,
+                &mut f.patient_name,
+                &mut f.accession_number,
+                &mut f.modality,
+                &mut f.study_date,
+            ];
+            for ((label, hint, name), value) in SEARCH_FIELDS.into_iter().zip(values) {
                 let l = ui.label(label);
                 let r = ui
                     .add(

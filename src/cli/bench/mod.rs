@@ -262,20 +262,16 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     });
     let gaussian = Gaussian::new(&ctx)?;
     let smooth_out = f32_buffer(d, "bench smoothed", n);
+    // Records the smoothing of the input into `smooth_out` with `kernel`.
+    let smooth = |e: &mut wgpu::CommandEncoder, kernel: &SeparableKernel| {
+        let mut r = Recorder::new(&ctx, e);
+        gaussian.record_separable(&mut r, &slab, kernel, &input, &tmp, &smooth_out)
+    };
     let mut python_sigmas = None;
     let mut hessian_gpu = None;
     if which != "rst" {
         let kernel = SeparableKernel::smooth(&ctx, 1.0, volume.spacing_mm);
-        let g = timed(&ctx, |e| {
-            Ok(gaussian.record_separable(
-                &mut Recorder::new(&ctx, e),
-                &slab,
-                &kernel,
-                &input,
-                &tmp,
-                &smooth_out,
-            )?)
-        })?;
+        let g = timed(&ctx, |e| Ok(smooth(e, &kernel)?))?;
         let cpu = (!args.no_cpu).then(|| {
             let t = Instant::now();
             let _ = gaussian_smooth(&grid, &values, 1.0);
@@ -376,14 +372,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         // The RST reads (I, g) packed in one texture; the structure tensor reads g as buffers.
         let packed = crate::compute::gradient::packed_texture(&ctx, &slab, "bench (I, g)")?;
         let g = timed(&ctx, |e| {
-            gaussian.record_separable(
-                &mut Recorder::new(&ctx, e),
-                &slab,
-                &kernel,
-                &input,
-                &tmp,
-                &smooth_out,
-            )?;
+            smooth(e, &kernel)?;
             gradient.record(
                 &mut Recorder::new(&ctx, e),
                 &slab,

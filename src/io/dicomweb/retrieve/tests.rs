@@ -24,6 +24,15 @@ fn retrieval(n: i32) -> Retrieval {
     .unwrap()
 }
 
+/// A 401 without credentials: a final answer, never retried.
+fn unauthorized() -> DicomWebError {
+    DicomWebError::Unauthorized {
+        status: 401,
+        url: "u".to_owned(),
+        credentials: None,
+    }
+}
+
 fn part(bytes: Vec<u8>) -> Part {
     Part {
         index: 1,
@@ -103,16 +112,7 @@ fn a_second_failure_or_a_final_answer_ends_the_retrieval() {
 
     let mut r = retrieval(2);
     let f = r.next_fetch().unwrap();
-    let e = r
-        .failed(
-            f.id,
-            DicomWebError::Unauthorized {
-                status: 401,
-                url: "u".to_owned(),
-                credentials: None,
-            },
-        )
-        .unwrap_err();
+    let e = r.failed(f.id, unauthorized()).unwrap_err();
     assert!(matches!(e, DicomWebError::Unauthorized { .. }));
     assert!(
         r.next_fetch().is_some(),
@@ -231,16 +231,7 @@ fn a_refused_series_request_falls_back_to_instances_unless_unauthorized() {
 
     let mut r = retrieval(2).series_first();
     let whole = r.next_fetch().unwrap();
-    let e = r
-        .failed(
-            whole.id,
-            DicomWebError::Unauthorized {
-                status: 401,
-                url: "u".to_owned(),
-                credentials: None,
-            },
-        )
-        .unwrap_err();
+    let e = r.failed(whole.id, unauthorized()).unwrap_err();
     assert!(matches!(e, DicomWebError::Unauthorized { .. }));
 }
 

@@ -59,20 +59,25 @@ fn frames(n: usize, w: u32, h: u32) -> Vec<Vec<u8>> {
         .collect()
 }
 
+/// A turn of `frames` of `width` x `height` pixels.
+fn rotation(frames: &[Vec<u8>], width: u32, height: u32) -> Rotation<'_> {
+    Rotation {
+        width,
+        height,
+        frames,
+        description: "shape MIP, RST".to_owned(),
+        derivation: "test".to_owned(),
+        step_deg: 360.0 / frames.len().max(1) as f64,
+        stable_key: None,
+    }
+}
+
 #[test]
 fn a_secondary_capture_reads_back_frame_by_frame() {
     let frames = frames(3, 5, 4);
-    let rotation = Rotation {
-        width: 5,
-        height: 4,
-        frames: &frames,
-        description: "shape MIP, RST".to_owned(),
-        derivation: "test".to_owned(),
-        step_deg: 120.0,
-        stable_key: None,
-    };
+    let turn = rotation(&frames, 5, 4);
     let now = DicomNow::from_unix(1_732_838_400, 0);
-    let made = secondary_capture(&source(), &rotation, &now, 9001).unwrap();
+    let made = secondary_capture(&source(), &turn, &now, 9001).unwrap();
     let obj = dicom_object::from_reader(&made.bytes[128..]).unwrap();
     let get = |t: Tag| obj.element(t).unwrap().to_str().unwrap().trim().to_owned();
     assert_eq!(get(tags::SOP_CLASS_UID), made.sop_class_uid);
@@ -104,44 +109,21 @@ fn a_secondary_capture_reads_back_frame_by_frame() {
         &source(),
         &Rotation {
             frames: &other,
-            ..rotation
+            ..turn
         },
         &now,
         9001,
     )
     .unwrap();
     assert_ne!(again.sop_instance_uid, made.sop_instance_uid);
-    assert!(
-        secondary_capture(
-            &source(),
-            &Rotation {
-                width: 6,
-                height: 4,
-                frames: &frames,
-                description: String::new(),
-                derivation: String::new(),
-                step_deg: 1.0,
-                stable_key: None,
-            },
-            &now,
-            1
-        )
-        .is_err()
-    );
+    // Frames that are not width x height pixels.
+    assert!(secondary_capture(&source(), &rotation(&frames, 6, 4), &now, 1).is_err());
 }
 
 #[test]
 fn the_body_and_the_answers() {
     let frames = frames(1, 2, 2);
-    let rotation = Rotation {
-        width: 2,
-        height: 2,
-        frames: &frames,
-        description: "x".to_owned(),
-        derivation: String::new(),
-        step_deg: 360.0,
-        stable_key: None,
-    };
+    let rotation = rotation(&frames, 2, 2);
     let made = secondary_capture(&source(), &rotation, &DicomNow::from_unix(0, 0), 1).unwrap();
     let (ct, body) = request_body(std::slice::from_ref(&made));
     let boundary = ct.split("boundary=").nth(1).unwrap();

@@ -343,7 +343,7 @@ async fn fetch_bytes(url: &str) -> Result<Vec<u8>, PageError> {
         url: url.to_owned(),
         words,
     };
-    let window = web_sys::window().ok_or(PageError::NoWindow)?;
+    let window = web_sys::window().ok_or_else(|| fail("no window object".to_owned()))?;
     let response = JsFuture::from(window.fetch_with_str(url))
         .await
         .map_err(|e| fail(js_error(&e)))?;
