@@ -12,8 +12,6 @@ pub mod io;
 pub mod phantom;
 pub mod render;
 pub mod status;
-#[cfg(test)]
-mod testing;
 pub mod volume;
 
 #[cfg(not(target_arch = "wasm32"))]

@@ -25,6 +25,8 @@ pub mod rays;
 pub mod resample;
 pub mod rst;
 pub mod structure_tensor;
+#[cfg(test)]
+pub(crate) mod testing;
 pub mod tf;
 
 pub use eigen::{Sym3, eigenvalues_sorted};

@@ -584,7 +584,7 @@ mod tests {
         // Rounding carries into the exponent: 511.75 needs 2^10 steps of 1.
         assert_eq!(feature_texel([511.75, 0.0, 0.0]), [512.0, 0.0, 0.0]);
         // Every channel within half a step of the texel's largest: (1/512 .. 1/1024 of it).
-        let mut rng = crate::testing::Lcg::new(12345);
+        let mut rng = crate::cpu::testing::Lcg::new(12345);
         let mut next = || rng.unit();
         for _ in 0..200_000 {
             let scale = 2f32.powf(next() * 35.0 - 20.0);

@@ -70,7 +70,7 @@ fn the_percentile_is_the_nearest_rank_of_the_sorted_values() {
         let k = ((0.999 * f.len() as f64).ceil() as usize).clamp(1, f.len()) - 1;
         *f.select_nth_unstable_by(k, f32::total_cmp).1
     };
-    let mut rng = crate::testing::Lcg::new(7);
+    let mut rng = crate::cpu::testing::Lcg::new(7);
     let mut next = || rng.unit();
     let cases: Vec<Vec<f32>> = vec![
         vec![],

@@ -1,4 +1,4 @@
-//! Helpers for the crate's own unit tests.
+//! Helpers for the crate's own unit tests (here, where every module may use them).
 
 /// A reproducible stream of uniform numbers (a 64-bit LCG, Knuth's MMIX constants): random
 /// cases that are the same on every run.
