@@ -30,13 +30,20 @@ pub(super) fn row_text(e: &SeriesEntry) -> String {
         if e.images == 1 { "" } else { "s" }
     );
     if let Some(t) = e.thickness_mm() {
-        s.push_str(&format!("  {t} mm"));
+        s.push_str(&format!("  {} mm", short_mm(t)));
     }
     s.push_str(&format!("  {}", e.orientation.name()));
     if e.part.1 > 1 {
         s.push_str(&format!(" (part {} of {})", e.part.0 + 1, e.part.1));
     }
     s
+}
+
+/// A thickness to the micrometre, without trailing zeros: 3.2700000000000005 -> "3.27",
+/// 0.625 -> "0.625", 5.0 -> "5".
+fn short_mm(t: f64) -> String {
+    let s = format!("{t:.3}");
+    s.trim_end_matches('0').trim_end_matches('.').to_owned()
 }
 
 /// The series' number and description on a second line: "#3 HEAD STD".
@@ -157,5 +164,19 @@ impl ShapecastApp {
         let origin = self.scene.as_ref().and_then(|s| s.origin.clone());
         self.open_from(LoadSource::Series(set), origin);
         self.series.loading = Some(index);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thicknesses_are_short_and_keep_what_a_reader_reads() {
+        assert_eq!(short_mm(1.09 * 3.0), "3.27"); // 3.2700000000000005
+        assert_eq!(short_mm(0.625), "0.625");
+        assert_eq!(short_mm(5.0), "5");
+        assert_eq!(short_mm(1.5), "1.5");
+        assert_eq!(short_mm(0.1 * 6.0), "0.6"); // 0.6000000000000001
     }
 }
