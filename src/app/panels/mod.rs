@@ -109,36 +109,40 @@ impl ShapecastApp {
     /// Draws the top bar, then applies what the user asked for in it.
     pub(super) fn top_bar_ui(&mut self, ui: &mut egui::Ui) {
         let mut events = Vec::new();
+        // Wrapped: on a narrow window (1280 px with the side panel) the bar takes a second row
+        // rather than cutting off its last entries ("About & data" holds the demo's licence).
         egui::MenuBar::new().ui(ui, |ui| {
-            ui.heading("Shapecast");
-            ui.separator();
-            events.extend(self.platform.open_menu_ui(ui).map(TopEvent::Open));
-            events.extend(demo_menu(ui));
-            ui.separator();
-            let (features, applied) = (&self.features, &self.applied);
-            let (mode, controls) = mode_bar(ui, self.mode, |method| {
-                features.find(&applied.request(method)).is_some()
+            ui.horizontal_wrapped(|ui| {
+                ui.heading("Shapecast");
+                ui.separator();
+                events.extend(self.platform.open_menu_ui(ui).map(TopEvent::Open));
+                events.extend(demo_menu(ui));
+                ui.separator();
+                let (features, applied) = (&self.features, &self.applied);
+                let (mode, controls) = mode_bar(ui, self.mode, |method| {
+                    features.find(&applied.request(method)).is_some()
+                });
+                events.extend(mode);
+                self.controls.extend(controls);
+                ui.separator();
+                let (layout, controls) = layout_bar(ui, self.reading.layout);
+                events.extend(layout);
+                self.controls.extend(controls);
+                ui.separator();
+                let mut controls = Vec::new();
+                let copied_at = &mut self.windows.link_copied_at;
+                events.extend(copy_link_button(ui, copied_at, &mut controls).map(TopEvent::Export));
+                let has_volume = self.scene.is_some();
+                let picture = save_picture_menu(ui, self.reading.layout, has_volume);
+                events.extend(picture.map(TopEvent::Export));
+                let movie = has_volume && self.movie_progress().is_none();
+                events.extend(save_movie_button(ui, movie, &mut controls).map(TopEvent::Export));
+                self.controls.extend(controls);
+                ui.separator();
+                if ui.button("About & data").clicked() {
+                    events.push(TopEvent::ToggleAbout);
+                }
             });
-            events.extend(mode);
-            self.controls.extend(controls);
-            ui.separator();
-            let (layout, controls) = layout_bar(ui, self.reading.layout);
-            events.extend(layout);
-            self.controls.extend(controls);
-            ui.separator();
-            let mut controls = Vec::new();
-            let copied_at = &mut self.windows.link_copied_at;
-            events.extend(copy_link_button(ui, copied_at, &mut controls).map(TopEvent::Export));
-            let has_volume = self.scene.is_some();
-            let picture = save_picture_menu(ui, self.reading.layout, has_volume);
-            events.extend(picture.map(TopEvent::Export));
-            let movie = has_volume && self.movie_progress().is_none();
-            events.extend(save_movie_button(ui, movie, &mut controls).map(TopEvent::Export));
-            self.controls.extend(controls);
-            ui.separator();
-            if ui.button("About & data").clicked() {
-                events.push(TopEvent::ToggleAbout);
-            }
         });
         for e in events {
             match e {
