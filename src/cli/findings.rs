@@ -230,7 +230,7 @@ pub fn to_json(volume: &Volume, found: &Findings, shown: usize) -> serde_json::V
         "gate": found.gate.describe(),
         "transfer_function_hu": [found.tf.d_min, found.tf.d_max],
         "noise_hu": found.noise_hu,
-        "dropped": {"outside": found.outside, "dense": found.dense, "small": found.small},
+        "dropped": {"outside": found.outside, "dense": found.dense, "cut": found.cut, "small": found.small},
     })
 }
 
@@ -378,13 +378,14 @@ pub fn table(volume: &Volume, found: &Findings, shown: usize) -> String {
         out += &format!("... {more} more (--all lists them)\n");
     }
     out += &format!(
-        "{} finding(s) {}; score 1 = the blobness's 99.9th percentile there ({:.3}); dropped: {} outside, {} dense (mean above {} HU), {} smaller than {} mm; + = reached the ray length\n",
+        "{} finding(s) {}; score 1 = the blobness's 99.9th percentile there ({:.3}); dropped: {} outside, {} dense (mean above {} HU), {} cut by the volume's edge, {} smaller than {} mm; + = reached the ray length\n",
         found.findings.len(),
         found.gate.describe(),
         found.reference,
         found.outside,
         found.dense,
         findings::DENSE_ABOVE_HU,
+        found.cut,
         found.small,
         findings::SMALLEST_MM
     );

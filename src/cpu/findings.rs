@@ -19,8 +19,9 @@
 //!    neighbourhood, is merged into it. Size (volume, equivalent diameter) and HU (mean, max) are
 //!    the region's.
 //! 4. **Not a nodule or a node.** A region of mean HU above [`DENSE_ABOVE_HU`] is bone, metal or
-//!    undiluted contrast; a region outside the preset's domain, or smaller than [`SMALLEST_MM`],
-//!    is dropped. All are counted.
+//!    undiluted contrast; a region that reaches a face of the volume is cut by the field of view
+//!    (its shape unknown, its features near the face the kernels' padding); a region outside the
+//!    preset's domain, or smaller than [`SMALLEST_MM`], is dropped. All are counted.
 
 use std::collections::HashMap;
 
@@ -114,10 +115,11 @@ pub struct Findings {
     pub noise_hu: Option<f64>,
     /// Every candidate, strongest first ([`SHOWN`] of them are listed before "more").
     pub findings: Vec<Finding>,
-    /// Candidates dropped as outside the domain, as dense (bone, metal, contrast), and as
-    /// smaller than [`SMALLEST_MM`].
+    /// Candidates dropped as outside the domain, as dense (bone, metal, contrast), as cut by
+    /// the volume's edge, and as smaller than [`SMALLEST_MM`].
     pub outside: usize,
     pub dense: usize,
+    pub cut: usize,
     pub small: usize,
 }
 
@@ -165,6 +167,7 @@ pub fn find<H: Samples + ?Sized>(
         findings: Vec::new(),
         outside: 0,
         dense: 0,
+        cut: 0,
         small: 0,
     };
     if reference.is_nan() || reference <= 0.0 {
@@ -210,6 +213,9 @@ pub fn find<H: Samples + ?Sized>(
         let diameter_mm = (6.0 * volume_ml * 1000.0 / std::f64::consts::PI).cbrt();
         let keep = if mean_hu > DENSE_ABOVE_HU {
             result.dense += 1;
+            false
+        } else if touches_face(grid, &region.voxels) {
+            result.cut += 1;
             false
         } else if !domain.admits(peak, core, &region.voxels) {
             result.outside += 1;
@@ -374,6 +380,16 @@ fn core_hu<H: Samples + ?Sized>(grid: &Grid, hu: &H, n: usize) -> f64 {
         count += 1.0;
     }
     sum / count
+}
+
+/// Whether a region reaches a face of the volume: a structure the scan's field of view cuts
+/// (a cropped volume's sides, every scan's first and last slices), whose size and shape are not
+/// known and whose features near the face come from the kernels' padding, not from the scan.
+fn touches_face(grid: &Grid, voxels: &[usize]) -> bool {
+    voxels.iter().any(|&n| {
+        let c = grid.ijk(n);
+        (0..3).any(|a| c[a] == 0 || c[a] + 1 == grid.dims[a])
+    })
 }
 
 struct Region {

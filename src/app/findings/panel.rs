@@ -30,10 +30,11 @@ impl FindingsState {
                     crate::app::features::preset_label(l.preset),
                 ))
                 .on_hover_text(format!(
-                    "dropped: {} outside, {} dense (mean above {} HU), {} smaller than {} mm; made in {:.2} s",
+                    "dropped: {} outside, {} dense (mean above {} HU), {} cut by the volume's edge, {} smaller than {} mm; made in {:.2} s",
                     l.findings.outside,
                     l.findings.dense,
                     crate::cpu::findings::DENSE_ABOVE_HU,
+                    l.findings.cut,
                     l.findings.small,
                     crate::cpu::findings::SMALLEST_MM,
                     l.seconds

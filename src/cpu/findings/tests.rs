@@ -29,6 +29,21 @@ fn ball(grid: &Grid, hu: &mut [f32], feature: &mut [f32], c: [usize; 3], r_mm: f
     }
 }
 
+/// A cropped volume: body everywhere (no air at its faces), a soft-tissue ball inside it and
+/// the same ball cut by its first slice.
+#[test]
+fn a_structure_cut_by_the_volume_s_edge_is_counted_not_listed() {
+    let grid = Grid::new([40, 40, 40], [2.0; 3]);
+    let mut hu = vec![0.0f32; grid.len()];
+    let mut feature = vec![0.0f32; grid.len()];
+    ball(&grid, &mut hu, &mut feature, [20, 20, 20], 6.0, 60.0);
+    ball(&grid, &mut hu, &mut feature, [10, 10, 1], 6.0, 60.0);
+    let found = find(&grid, &hu, &feature, Preset::Vessels).expect("same lengths");
+    let listed: Vec<[usize; 3]> = found.findings.iter().map(|f| f.voxel).collect();
+    assert_eq!(listed, [[20, 20, 20]], "{found:?}");
+    assert_eq!(found.cut, 1, "{found:?}");
+}
+
 #[test]
 fn a_nodule_in_the_lung_is_found_with_its_size_and_a_bone_blob_is_not() {
     let (grid, mut hu) = chest([60, 60, 60], [2.0; 3]);
