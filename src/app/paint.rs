@@ -32,23 +32,29 @@ pub fn draw_scale_bar(painter: &egui::Painter, area: egui::Rect, points_per_mm: 
     let length = mm as f32 * points_per_mm;
     let right = area.right_bottom() + egui::vec2(-10.0, -10.0);
     let left = right - egui::vec2(length, 0.0);
+    // Light on a dark outline: readable on a CT's black and on a PET MIP's white alike.
+    let outline = egui::Stroke::new(4.0, egui::Color32::from_black_alpha(170));
     let stroke = egui::Stroke::new(2.0, egui::Color32::from_gray(235));
-    painter.line_segment([left, right], stroke);
-    for p in [left, right] {
-        painter.line_segment([p - egui::vec2(0.0, 5.0), p], stroke);
+    for s in [outline, stroke] {
+        painter.line_segment([left, right], s);
+        for p in [left, right] {
+            painter.line_segment([p - egui::vec2(0.0, 5.0), p], s);
+        }
     }
     let label = if mm >= 1.0 {
         format!("{mm:.0} mm")
     } else {
         format!("{mm} mm")
     };
-    painter.text(
-        left + egui::vec2(0.5 * length, -4.0),
-        egui::Align2::CENTER_BOTTOM,
-        label,
-        egui::FontId::proportional(12.0),
-        egui::Color32::from_gray(235),
-    );
+    let at = left + egui::vec2(0.5 * length, -4.0);
+    let font = egui::FontId::proportional(12.0);
+    for (offset, colour) in [
+        (egui::vec2(1.0, 1.0), egui::Color32::from_black_alpha(200)),
+        (egui::Vec2::ZERO, egui::Color32::from_gray(235)),
+    ] {
+        let (label, font) = (label.clone(), font.clone());
+        painter.text(at + offset, egui::Align2::CENTER_BOTTOM, label, font, colour);
+    }
 }
 
 /// Shows a GPU texture in egui under `id`: registered the first time, pointed at the new view

@@ -31,7 +31,8 @@ fn flash(
     if ui.ctx().input(|i| i.time) - t < seconds {
         ui.ctx()
             .request_repaint_after(std::time::Duration::from_millis(500));
-        Some(ui.label(egui::RichText::new(word).small()))
+        let done = egui::Color32::from_rgb(140, 220, 140);
+        Some(ui.label(egui::RichText::new(word).color(done)))
     } else {
         *at = None;
         None
