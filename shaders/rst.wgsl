@@ -1,5 +1,5 @@
 // The radial structure tensor ray kernel (twin: `rst_tensor_at` in src/cpu/rst.rs, docs/science.md RST
-// items 3-7; keep the structs in sync with src/compute/rst.rs). One invocation per output voxel casts
+// items 3-7; keep the structs in sync with src/compute/rst/mod.rs). One invocation per output voxel casts
 // every ray from the voxel centre, samples the smoothed intensity I and the gradient g by
 // trilinear interpolation (by default done here from 8 `textureLoad`s of the packed
 // (I, gx, gy, gz) rgba32float texture that gradient.wgsl writes, positions clamped onto the slab:
@@ -63,7 +63,7 @@ struct Ray {
     step_vox: vec4<f32>,
 }
 
-// How the rays read (I, g), fixed per pipeline (src/compute/rst.rs): false = 8 `textureLoad`s and
+// How the rays read (I, g), fixed per pipeline (src/compute/rst/mod.rs): false = 8 `textureLoad`s and
 // the twin's weights in f32 (the bit-level twin tests); true = one `textureSampleLevel` with the
 // linear clamp-to-edge sampler (the texture unit's weights: fewer fetches, within a tolerance of
 // the twin). Only for a device with FLOAT32_FILTERABLE (rgba32float is not filterable in core

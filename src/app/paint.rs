@@ -53,7 +53,13 @@ pub fn draw_scale_bar(painter: &egui::Painter, area: egui::Rect, points_per_mm: 
         (egui::Vec2::ZERO, egui::Color32::from_gray(235)),
     ] {
         let (label, font) = (label.clone(), font.clone());
-        painter.text(at + offset, egui::Align2::CENTER_BOTTOM, label, font, colour);
+        painter.text(
+            at + offset,
+            egui::Align2::CENTER_BOTTOM,
+            label,
+            font,
+            colour,
+        );
     }
 }
 

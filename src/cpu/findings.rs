@@ -19,9 +19,9 @@
 //!    neighbourhood, is merged into it. Size (volume, equivalent diameter) and HU (mean, max) are
 //!    the region's.
 //! 4. **Not a nodule or a node.** A region of mean HU above [`DENSE_ABOVE_HU`] is bone, metal or
-//!    undiluted contrast; a region that reaches a face of the volume is cut by the field of view
-//!    (its shape unknown, its features near the face the kernels' padding); a region outside the
-//!    preset's domain, or smaller than [`SMALLEST_MM`], is dropped. All are counted.
+//!    undiluted contrast; a region outside the preset's domain, a region that reaches a face of
+//!    the volume (cut by the field of view: its shape unknown, its features near the face the
+//!    kernels' padding), or one smaller than [`SMALLEST_MM`], is dropped. All are counted.
 
 use std::collections::HashMap;
 
@@ -214,11 +214,11 @@ pub fn find<H: Samples + ?Sized>(
         let keep = if mean_hu > DENSE_ABOVE_HU {
             result.dense += 1;
             false
-        } else if touches_face(grid, &region.voxels) {
-            result.cut += 1;
-            false
         } else if !domain.admits(peak, core, &region.voxels) {
             result.outside += 1;
+            false
+        } else if touches_face(grid, &region.voxels) {
+            result.cut += 1;
             false
         } else if diameter_mm < SMALLEST_MM {
             result.small += 1;
@@ -385,10 +385,12 @@ fn core_hu<H: Samples + ?Sized>(grid: &Grid, hu: &H, n: usize) -> f64 {
 /// Whether a region reaches a face of the volume: a structure the scan's field of view cuts
 /// (a cropped volume's sides, every scan's first and last slices), whose size and shape are not
 /// known and whose features near the face come from the kernels' padding, not from the scan.
+/// An axis of fewer than 3 voxels has no inside and is not asked (a single slice's findings are
+/// judged in its plane).
 fn touches_face(grid: &Grid, voxels: &[usize]) -> bool {
     voxels.iter().any(|&n| {
         let c = grid.ijk(n);
-        (0..3).any(|a| c[a] == 0 || c[a] + 1 == grid.dims[a])
+        (0..3).any(|a| grid.dims[a] >= 3 && (c[a] == 0 || c[a] + 1 == grid.dims[a]))
     })
 }
 

@@ -19,7 +19,7 @@ pub(in crate::app) enum ExportEvent {
 /// Named controls drawn (published as `window.shapecastStatus.controls`).
 pub(in crate::app) type Controls = Vec<(String, egui::Rect)>;
 
-/// "copied", "stored": a small word for `seconds` after `at` (the app's time); `at` is
+/// "copied", "stored": a word in green for `seconds` after `at` (the app's time); `at` is
 /// cleared after.
 fn flash(
     ui: &mut egui::Ui,

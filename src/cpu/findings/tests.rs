@@ -42,6 +42,14 @@ fn a_structure_cut_by_the_volume_s_edge_is_counted_not_listed() {
     let listed: Vec<[usize; 3]> = found.findings.iter().map(|f| f.voxel).collect();
     assert_eq!(listed, [[20, 20, 20]], "{found:?}");
     assert_eq!(found.cut, 1, "{found:?}");
+
+    // Two slices have no inside along z: a ball in the plane is judged in it, not cut.
+    let grid = Grid::new([40, 40, 2], [2.0; 3]);
+    let mut hu = vec![0.0f32; grid.len()];
+    let mut feature = vec![0.0f32; grid.len()];
+    ball(&grid, &mut hu, &mut feature, [20, 20, 0], 6.0, 60.0);
+    let found = find(&grid, &hu, &feature, Preset::Vessels).expect("same lengths");
+    assert_eq!((found.findings.len(), found.cut), (1, 0), "{found:?}");
 }
 
 #[test]
