@@ -27,49 +27,9 @@ struct Params {
 // the histogram of component c's positive values (bins of src/gpu/volume_texture.rs, the twin).
 @group(0) @binding(3) var<storage, read_write> maxima: array<atomic<u32>>;
 
-const BINS: u32 = 960u;
-const BINS_PER_OCTAVE: f32 = 32.0;
-const LOWEST_OCTAVE: f32 = -10.0;
-
-fn bin_of(v: f32) -> u32 {
-    let b = floor((log2(v) - LOWEST_OCTAVE) * BINS_PER_OCTAVE);
-    return u32(clamp(b, 0.0, f32(BINS - 1u)));
-}
+#import rgb9e5.wgsl
 
 var<workgroup> wg_max: array<atomic<u32>, 3>;
-
-const F16_MAX: f32 = 65504.0;
-
-const RGB9E5_MAX: f32 = 65408.0;
-
-// 2^k for an integer k in f32's normal range, exactly.
-fn pow2(k: i32) -> f32 {
-    return bitcast<f32>(u32(k + 127) << 23u);
-}
-
-// EXT_texture_shared_exponent's encoding with round to nearest; every step is exact in f32
-// (products by powers of two, additions of 0.5 to values whose ulp allows it, floor).
-fn encode_rgb9e5(v: vec3<f32>) -> u32 {
-    let c = min(max(v, vec3<f32>(0.0)), vec3<f32>(RGB9E5_MAX));
-    let m = max(c.x, max(c.y, c.z));
-    let e_m = i32((bitcast<u32>(m) >> 23u) & 0xffu) - 127;
-    var e = max(e_m, -16) + 16;
-    let top = floor(m * pow2(24 - e) + 0.5);
-    if top >= 512.0 {
-        e = e + 1;
-    }
-    let scale = pow2(24 - e);
-    let q = min(vec3<u32>(floor(c * scale + vec3<f32>(0.5))), vec3<u32>(511u));
-    return q.x | (q.y << 9u) | (q.z << 18u) | (u32(e) << 27u);
-}
-
-fn finite_or_zero(v: f32) -> f32 {
-    // NaN fails every comparison; infinities are clamped below.
-    if !(v == v) {
-        return 0.0;
-    }
-    return clamp(v, -F16_MAX, F16_MAX);
-}
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) li: u32) {

@@ -45,7 +45,10 @@ struct Params {
     row0: u32,
     // One past the last row of this dispatch.
     row_end: u32,
-    _pad0: u32,
+    // The feature texture's level: 0 a texel per voxel; L > 0 each texel the maximum of a block
+    // of 2^L voxels per axis (max-pooled). A sample then takes the largest of the blocks its
+    // eight voxels lie in: never below the full-resolution sample, so no maximum is lost.
+    feature_level: u32,
     _pad1: u32,
 }
 
@@ -183,7 +186,26 @@ fn intensity_at(c: Cell, q: vec3<f32>) -> f32 {
     return lerp1(lerp1(v00, v10, c.f.y), lerp1(v01, v11, c.f.y), c.f.z);
 }
 
+// A max-pooled level: the largest of the texels of the blocks holding the sample's 8 voxels.
+fn pooled_features_at(c: Cell) -> vec4<f32> {
+    let l = vec3<u32>(params.feature_level);
+    let a = vec3<i32>(vec3<u32>(c.i0) >> l);
+    let b = vec3<i32>(vec3<u32>(c.i1) >> l);
+    var m = textureLoad(features, a, 0);
+    m = max(m, textureLoad(features, vec3<i32>(b.x, a.y, a.z), 0));
+    m = max(m, textureLoad(features, vec3<i32>(a.x, b.y, a.z), 0));
+    m = max(m, textureLoad(features, vec3<i32>(b.x, b.y, a.z), 0));
+    m = max(m, textureLoad(features, vec3<i32>(a.x, a.y, b.z), 0));
+    m = max(m, textureLoad(features, vec3<i32>(b.x, a.y, b.z), 0));
+    m = max(m, textureLoad(features, vec3<i32>(a.x, b.y, b.z), 0));
+    m = max(m, textureLoad(features, b, 0));
+    return m;
+}
+
 fn features_at(c: Cell, q: vec3<f32>) -> vec4<f32> {
+    if params.feature_level > 0u {
+        return pooled_features_at(c);
+    }
     if filtered() {
         return textureSampleLevel(features, linear_clamp, uvw_of(q), 0.0);
     }

@@ -13,10 +13,14 @@ const BRICK: u32 = 8u;
 
 // A pass makes the brick slices z0 .. z0 + nz (the viewer spreads a large volume's table over
 // frames).
+// `level`: the source's level (features may be max-pooled: texel m holds the maximum of the
+// voxels m * 2^level ..); `dims`: the volume's voxels, which the bricks cover.
 struct Slices {
     z0: u32,
     nz: u32,
+    level: u32,
     _pad0: u32,
+    dims: vec3<u32>,
     _pad1: u32,
 }
 
@@ -25,11 +29,13 @@ struct Slices {
 // Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants).
 @group(0) @binding(2) var<storage, read> slices: Slices;
 
+// The source texels of brick b: its voxels, or at a pooled level the blocks that hold them.
 fn voxel_range(b: vec3<u32>) -> array<vec3<u32>, 2> {
-    let n = textureDimensions(source);
+    let n = slices.dims;
     let lo = b * BRICK;
     let hi = min(lo + vec3<u32>(BRICK), n - vec3<u32>(1u));
-    return array<vec3<u32>, 2>(lo, hi);
+    let l = vec3<u32>(slices.level);
+    return array<vec3<u32>, 2>(lo >> l, hi >> l);
 }
 
 @compute @workgroup_size(4, 4, 4)

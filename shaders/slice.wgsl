@@ -19,6 +19,11 @@ struct Params {
     window_hi: f32,
     // Per feature (V, A, B): opacity = clamp(value * scale, 0, 1) * scale.w; 0 switches it off.
     scale: vec4<f32>,
+    // The feature texture's level: L > 0 reads the max-pooled texel of the voxel's block.
+    feature_level: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // Storage, not uniform: see `params` in gaussian.wgsl (lavapipe's per-dispatch variants).
@@ -45,7 +50,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let g = window01(v, params.window_lo, params.window_hi);
     var rgb = vec3<f32>(g, g, g);
     if params.overlay == 1u {
-        let f = textureLoad(features, vec3<i32>(p), 0).xyz;
+        let f = textureLoad(features, vec3<i32>(p >> vec3<u32>(params.feature_level)), 0).xyz;
         let a = clamp(f * params.scale.xyz, vec3<f32>(0.0), vec3<f32>(1.0)) * params.scale.w;
         rgb = rgb + (VESSEL_RGB - rgb) * a.x;
         rgb = rgb + (AIRWAY_RGB - rgb) * a.y;

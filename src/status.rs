@@ -56,6 +56,11 @@ pub struct FeatureStatus {
     pub fraction: f32,
     /// How many methods are computed and kept on the GPU.
     pub cached: usize,
+    /// The displayed features' level: 0 full resolution, L kept max-pooled by 2^L per axis
+    /// within the GPU budget.
+    pub level: u32,
+    /// The GPU budget of the volume textures, MiB.
+    pub gpu_budget_mib: u64,
 }
 
 /// The shared crosshair (the MIP's slab centre).
@@ -262,6 +267,8 @@ mod web {
             set(o, "state", f.state.as_str());
             set(o, "fraction", f64::from(f.fraction));
             set(o, "cached", f.cached as f64);
+            set(o, "level", f64::from(f.level));
+            set(o, "gpuBudgetMib", f.gpu_budget_mib as f64);
         });
         set(&obj, "features", features);
         let crosshair = object(status.crosshair.as_ref(), |o, c| {

@@ -11,7 +11,8 @@ use crate::cpu::rays::RAY_COUNTS;
 use crate::cpu::rst::DEFAULT_STEP_MM;
 use crate::cpu::tf::{Preset, TransferFunction};
 use crate::gpu::GpuContext;
-use crate::gpu::volume_texture::FeatureTexture;
+use crate::gpu::budget::{GpuBudget, feature_level, level_text};
+use crate::gpu::volume_texture::{FeatureTexture, texture_bytes};
 use crate::volume::Volume;
 use std::sync::Arc;
 
@@ -280,6 +281,8 @@ pub struct FeatureManager {
     clock: u64,
     /// Bytes of feature textures kept at most (the newest is always kept).
     budget_bytes: u64,
+    /// The GPU budget of the volume textures: what decides each job's feature level.
+    gpu_budget: GpuBudget,
     /// Given to every job: asks the viewer for a frame when a step is done.
     waker: Option<Waker>,
 }
@@ -293,12 +296,34 @@ impl Default for FeatureManager {
             next_id: 1,
             clock: 0,
             budget_bytes: 1 << 30,
+            gpu_budget: GpuBudget::user_mib(1536),
             waker: None,
         }
     }
 }
 
 impl FeatureManager {
+    /// A manager whose jobs keep their features within `budget` (with the intensity).
+    pub fn with_budget(budget: GpuBudget) -> Self {
+        Self {
+            gpu_budget: budget,
+            ..Self::default()
+        }
+    }
+
+    /// The GPU budget the jobs plan with.
+    pub fn gpu_budget(&self) -> GpuBudget {
+        self.gpu_budget
+    }
+
+    /// The feature level a job for `volume` writes within the budget (0: full resolution),
+    /// beside the intensity texture at full resolution.
+    pub fn level_for(&self, ctx: &GpuContext, volume: &Volume) -> u32 {
+        let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
+        let bytes = self.gpu_budget.for_features(texture_bytes(dims, 2));
+        feature_level(dims, bytes, ctx.limits.max_texture_dimension_3d)
+    }
+
     /// What jobs call when a step is done on the GPU (the viewer: ask for a frame).
     pub fn set_waker(&mut self, wake: Waker) {
         self.waker = Some(wake);
@@ -380,8 +405,12 @@ impl FeatureManager {
         // more than `STEP_SECONDS` of feature work (more only where its own frames are slower):
         // a step is timed by the device's timestamps around it (or, without them, from when
         // the work queued before it was done), so a slow frame does not count as the step's.
+        let feature_level = self.level_for(ctx, volume);
+        let intensity = texture_bytes(volume.dims.map(|d| d as u32), 2);
+        self.budget_bytes = self.gpu_budget.for_features(intensity);
         let options = JobOptions {
             step_seconds: paced(ctx).then_some(STEP_SECONDS),
+            feature_level,
             ..JobOptions::default()
         };
         let job = FeatureJob::shared(ctx, Arc::clone(volume), &request, options);
@@ -441,7 +470,15 @@ impl FeatureManager {
             }
             Ok(JobState::Done) => {
                 let r = self.running.take()?;
-                let notes = r.job.notes().to_vec();
+                let mut notes = r.job.notes().to_vec();
+                let level = r.job.feature_level();
+                if level > 0 {
+                    notes.push(format!(
+                        "features kept at {} within the GPU budget of {} MiB: the MIP shows every maximum; the slices and the probe show a block's maximum; findings need full resolution",
+                        level_text(level),
+                        self.gpu_budget.mib()
+                    ));
+                }
                 let method = r.request.method;
                 match r.job.finish() {
                     Some(texture) => {

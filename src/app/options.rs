@@ -41,6 +41,9 @@ pub struct AppOptions {
     pub pet: Option<Vec<std::path::PathBuf>>,
     /// A PET to fuse over the CT that opens, by URL (the page's `&pet=URL`).
     pub pet_urls: Vec<String>,
+    /// The GPU memory budget for the volume textures, MiB (`--gpu-budget-mib`, the page's
+    /// `?gpu_budget_mib=`); `None`: the adapter's rule (`gpu::budget::GpuBudget`).
+    pub gpu_budget_mib: Option<u64>,
 }
 
 impl Default for AppOptions {
@@ -54,6 +57,7 @@ impl Default for AppOptions {
             link_problems: Vec::new(),
             pet: None,
             pet_urls: Vec::new(),
+            gpu_budget_mib: None,
         }
     }
 }
@@ -128,8 +132,16 @@ impl AppOptions {
         if param("compute").as_deref() == Some("0") {
             o.compute_on_load = false;
         }
+        match param("gpu_budget_mib").map(|v| v.trim().parse::<u64>()) {
+            Some(Ok(mib)) if mib > 0 => o.gpu_budget_mib = Some(mib),
+            Some(_) => o.link_problems.push(
+                "gpu_budget_mib: not a whole number of MiB above 0; the adapter's budget is used"
+                    .to_owned(),
+            ),
+            None => {}
+        }
         let (view, problems) = ViewState::from_fragment(fragment);
-        o.link_problems = problems;
+        o.link_problems.extend(problems);
         if view != ViewState::default() {
             o.apply_link(view);
         }

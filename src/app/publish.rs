@@ -95,6 +95,11 @@ impl ShapecastApp {
             state: state.to_owned(),
             fraction,
             cached: self.features.len(),
+            level: request
+                .as_ref()
+                .and_then(|r| self.features.find(r))
+                .map_or(0, |e| e.texture.level),
+            gpu_budget_mib: self.features.gpu_budget().mib(),
         });
         s.layout = self.reading.layout.name().to_owned();
         s.error = self.errors.last().cloned();

@@ -52,6 +52,11 @@ impl ShapecastApp {
                 status.error = Some("eframe started without a wgpu renderer".to_owned());
             }
         }
+        // The GPU budget for the volume textures: the user's, or the adapter's rule.
+        let gpu_budget = gpu.as_ref().map_or_else(
+            || crate::gpu::budget::GpuBudget::user_mib(options.gpu_budget_mib.unwrap_or(1536)),
+            |g| crate::gpu::budget::GpuBudget::choose(&g.adapter_info, options.gpu_budget_mib),
+        );
         let mut errors = options.link_problems.clone();
         errors.truncate(5);
         let pending_view = options.view.clone().map(share::PendingView::new);
@@ -81,7 +86,7 @@ impl ShapecastApp {
             generation: 0,
             errors,
             notes: Vec::new(),
-            features: FeatureManager::default(),
+            features: FeatureManager::with_budget(gpu_budget),
             applied: params.clone(),
             params,
             display: FeatureDisplay::default(),

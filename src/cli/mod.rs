@@ -98,6 +98,10 @@ pub struct ViewArgs {
     /// A PET of the same patient (file or folder) fused over the CT, read on its own grid.
     #[arg(long)]
     pub pet: Option<std::path::PathBuf>,
+    /// GPU memory for the volume textures, MiB (default: 3 GiB on a discrete GPU, 1.5 GiB
+    /// otherwise). Over it the features are kept max-pooled at 1/2, 1/4, ... resolution.
+    #[arg(long)]
+    pub gpu_budget_mib: Option<u64>,
 }
 
 fn view(args: ViewArgs) -> anyhow::Result<()> {
@@ -123,6 +127,7 @@ fn view(args: ViewArgs) -> anyhow::Result<()> {
         start,
         mode,
         preset,
+        gpu_budget_mib: args.gpu_budget_mib,
         pet: args.pet.map(|p| vec![p]),
         ..AppOptions::default()
     })

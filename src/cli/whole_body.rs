@@ -43,6 +43,7 @@ pub struct Options<'a> {
     pub preset: Preset,
     pub webgpu_limits: bool,
     pub budget_mib: Option<u64>,
+    pub gpu_budget_mib: Option<u64>,
     pub size: [u32; 2],
     pub png: Option<&'a Path>,
 }
@@ -270,9 +271,19 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
 
     let mut request = Request::new(opts.method);
     request.preset = opts.preset;
-    // Paced as the viewer paces its steps.
+    // Paced as the viewer paces its steps, the features at the level the GPU budget allows.
+    let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
+    let (gpu_budget, feature_level) =
+        crate::gpu::budget::plan_features(&ctx, dims, opts.gpu_budget_mib);
+    println!(
+        "GPU budget {} MiB ({:?}): features at {}",
+        gpu_budget.mib(),
+        gpu_budget.source,
+        crate::gpu::budget::level_text(feature_level)
+    );
     let options = JobOptions {
         step_seconds: Some(crate::app::features::STEP_SECONDS),
+        feature_level,
         ..super::bench::job_options(opts.webgpu_limits, opts.budget_mib)
     };
     let t = Instant::now();

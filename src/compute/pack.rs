@@ -26,6 +26,27 @@ struct Params {
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 48);
 
+/// Mirrors `PoolParams` in pool_features.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct PoolParams {
+    out_dims: [u32; 3],
+    level: u32,
+    src_dims: [u32; 3],
+    src_y0: u32,
+    box_y0: u32,
+    box_ny: u32,
+    box_z0: u32,
+    box_nz: u32,
+    src_z0: u32,
+    out_y0: u32,
+    out_z0: u32,
+    pitch: u32,
+    box_nx: u32,
+    _pad: [u32; 3],
+}
+const _: () = assert!(std::mem::size_of::<PoolParams>() == 80);
+
 /// Where a packed box comes from and goes to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PackBox {
@@ -56,6 +77,8 @@ impl PackBox {
 /// The pack pipeline and the running maxima of the features it packed.
 pub struct Pack {
     pipeline: wgpu::ComputePipeline,
+    /// Into a max-pooled level (pool_features.wgsl).
+    pool: wgpu::ComputePipeline,
     /// Three u32 (float bits of the non-negative maxima), `COPY_SRC` for readback.
     pub maxima: wgpu::Buffer,
     /// The staging buffer, kept and reused by every chunk (grown when a box needs more) instead
@@ -67,6 +90,8 @@ impl Pack {
     pub fn new(ctx: &GpuContext) -> Result<Self, shaders::ShaderSourceError> {
         let module = shaders::create_module(&ctx.device, "pack_features.wgsl")?;
         let pipeline = checks::labelled_pipeline(ctx, "pack_features", &module, "main");
+        let pool_module = shaders::create_module(&ctx.device, "pool_features.wgsl")?;
+        let pool = checks::labelled_pipeline(ctx, "pool_features", &pool_module, "pool");
         let maxima = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("feature maxima and histograms"),
             size: Self::MAXIMA_BYTES,
@@ -77,6 +102,7 @@ impl Pack {
         });
         Ok(Self {
             pipeline,
+            pool,
             maxima,
             staging: std::sync::Mutex::new(None),
         })
@@ -104,6 +130,10 @@ impl Pack {
         at: PackBox,
         slices: std::ops::Range<u32>,
     ) {
+        if dst.level > 0 {
+            self.record_pooled_slices(rec, src, dst, at, slices);
+            return;
+        }
         let [nx, ny] = [at.src_dims[0], at.ny];
         let nz = slices.end.min(at.src_dims[2]);
         // Copies into a texture take rows of a multiple of 256 bytes; the staging buffer of one
@@ -136,6 +166,122 @@ impl Pack {
                 (dims, src_z0, pitch),
             );
             src_z0 += dims[2];
+        }
+    }
+
+    /// [`Self::record_slices`] into a max-pooled level: each chunk of the box's slices becomes
+    /// the pooled texels its voxels fall in, each the maximum of its block's voxels in the
+    /// chunk and of what the texture holds already (blocks that the box's or the chunk's edges
+    /// cut are finished by the next one). The box spans whole rows along x.
+    fn record_pooled_slices(
+        &self,
+        rec: &mut Recorder<'_>,
+        src: &wgpu::Buffer,
+        dst: &FeatureTexture,
+        at: PackBox,
+        slices: std::ops::Range<u32>,
+    ) {
+        let level = dst.level;
+        let f = dst.block();
+        let nx = at.src_dims[0];
+        let nz = slices.end.min(at.src_dims[2]);
+        if nz <= slices.start || at.ny == 0 || nx == 0 {
+            return;
+        }
+        let pnx = nx.div_ceil(f);
+        let out_y0 = at.y0 >> level;
+        let pny = (at.y0 + at.ny - 1) / f + 1 - out_y0;
+        let row_bytes =
+            (pnx * FEATURE_TEXEL_BYTES).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let pitch = row_bytes / FEATURE_TEXEL_BYTES;
+        let limit = rec
+            .ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(rec.ctx.limits.max_buffer_size);
+        let pooled_slice_bytes = u64::from(row_bytes) * u64::from(pny);
+        // Pooled slices per chunk, whole blocks of voxel slices (a chunk may start inside a
+        // block: it then takes one pooled slice more).
+        let pooled_per_chunk = (limit / pooled_slice_bytes.max(1)).clamp(2, 1 << 16) as u32 - 1;
+        let voxels_per_chunk = pooled_per_chunk.saturating_mul(f).max(1);
+        let staging = self.staging(
+            rec.ctx,
+            (pooled_slice_bytes * u64::from(pooled_per_chunk + 1)).max(4),
+            limit,
+        );
+        let view = dst
+            .texture
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        let mut s0 = slices.start;
+        while s0 < nz {
+            let box_z0 = at.z0 + s0;
+            // End on a block's edge where the slices allow, so that chunks share few texels.
+            let end = ((box_z0 + voxels_per_chunk) / f * f).max(box_z0 + 1) - at.z0;
+            let s1 = end.min(nz);
+            let box_nz = s1 - s0;
+            let out_z0 = box_z0 >> level;
+            let pnz = (box_z0 + box_nz - 1) / f + 1 - out_z0;
+            let out_dims = [pnx, pny, pnz];
+            let params = params_buffer(
+                &rec.ctx.device,
+                "pool params",
+                &PoolParams {
+                    out_dims,
+                    level,
+                    src_dims: at.src_dims,
+                    src_y0: at.src_y0,
+                    box_y0: at.y0,
+                    box_ny: at.ny,
+                    box_z0,
+                    box_nz,
+                    src_z0: s0,
+                    out_y0,
+                    out_z0,
+                    pitch,
+                    box_nx: nx,
+                    _pad: [0; 3],
+                },
+            );
+            let bind = kernel::bind_group(
+                &rec.ctx.device,
+                "pool",
+                &self.pool,
+                [
+                    params.as_entire_binding(),
+                    src.as_entire_binding(),
+                    staging.as_entire_binding(),
+                    self.maxima.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&view),
+                ],
+            );
+            let groups = SlabGrid::new(out_dims, [1.0; 3]).workgroups(WORKGROUP);
+            checks::dispatch(rec.encoder, "pool", &self.pool, &bind, groups);
+            rec.encoder.copy_buffer_to_texture(
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &staging,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(row_bytes),
+                        rows_per_image: Some(pny),
+                    },
+                },
+                wgpu::TexelCopyTextureInfo {
+                    texture: &dst.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: out_y0,
+                        z: out_z0,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::Extent3d {
+                    width: pnx,
+                    height: pny,
+                    depth_or_array_layers: pnz,
+                },
+            );
+            s0 = s1;
         }
     }
 

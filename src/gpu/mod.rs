@@ -5,6 +5,7 @@
 //! `crate::compute` (features) and `crate::render` (projections and slices).
 
 pub mod alloc;
+pub mod budget;
 pub mod checks;
 pub mod context;
 pub mod kernel;

@@ -12,7 +12,9 @@ macro_rules! shader_files {
 pub const FILES: &[(&str, &str)] = shader_files![
     "common.wgsl",
     "noise_windows.wgsl",
+    "rgb9e5.wgsl",
     "pack_features.wgsl",
+    "pool_features.wgsl",
     "eigen.wgsl",
     "feature_maps.wgsl",
     "gaussian.wgsl",

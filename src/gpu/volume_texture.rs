@@ -21,15 +21,22 @@
 //!   Features are non-negative (negative values are stored as 0). `max` is the largest value of
 //!   each feature, for default gains.
 //!
-//! Both are on the volume's own voxel grid (the input grid), whatever grid features used.
+//! Both are on the volume's own voxel grid (the input grid), whatever grid features used. A
+//! feature texture may be a max-pooled level of it ([`FeatureTexture::level`] L > 0: texel m
+//! holds, per channel, the maximum over the 2^L x 2^L x 2^L voxels `m * 2^L ..`): what the GPU
+//! budget ([`super::budget`]) allows when the full resolution does not fit. For a MIP a
+//! max-pooled level is exact at its own resolution (the maximum over a pixel's footprint is the
+//! maximum of the blocks' maxima), so no blob disappears from the projection.
 
 mod histogram;
+mod pool;
 mod rgb9e5;
 
 pub use histogram::{
     HISTOGRAM_BINS, feature_statistics, histogram_bin, histogram_bin_upper, histogram_quantile,
     reference_of,
 };
+pub use pool::pool_texels;
 use rgb9e5::pow2;
 pub use rgb9e5::{RGB9E5_MAX, decode_rgb9e5, encode_rgb9e5, feature_texel};
 
@@ -436,9 +443,21 @@ impl IntensityUpload {
     }
 }
 
-/// One method's features `(V, A, B, 0)` on the volume's grid, as a 3D texture.
+/// The dims of max-pooled level `level` of a volume of `dims`: `ceil(n / 2^level)` per axis.
+pub fn level_dims(dims: [u32; 3], level: u32) -> [u32; 3] {
+    dims.map(|n| n.div_ceil(1u32 << level.min(31)).max(1))
+}
+
+/// One method's features `(V, A, B, 0)` on the volume's grid, as a 3D texture: at full
+/// resolution (level 0) or as a max-pooled level of it.
 pub struct FeatureTexture {
+    /// The volume's grid the features describe (voxels).
     pub dims: [u32; 3],
+    /// 0: a texel per voxel; L > 0: each texel the per-channel maximum of a block of 2^L voxels
+    /// per axis ([`level_dims`]).
+    pub level: u32,
+    /// The texture's own size: `level_dims(dims, level)`.
+    pub texture_dims: [u32; 3],
     pub texture: wgpu::Texture,
     pub view: wgpu::TextureView,
     /// The largest value of each feature; `[0; 3]` until known.
@@ -455,6 +474,18 @@ impl FeatureTexture {
     pub fn reference(&self) -> [f32; 3] {
         reference_of(self.max, self.p999)
     }
+
+    /// The texel that holds voxel `voxel` (clamped into the texture).
+    pub fn texel_of(&self, voxel: [u32; 3]) -> [u32; 3] {
+        std::array::from_fn(|a| {
+            (voxel[a] >> self.level.min(31)).min(self.texture_dims[a].saturating_sub(1))
+        })
+    }
+
+    /// Voxels per texel along each axis (1 at full resolution).
+    pub fn block(&self) -> u32 {
+        1u32 << self.level.min(31)
+    }
 }
 
 impl FeatureTexture {
@@ -470,11 +501,25 @@ impl FeatureTexture {
         dims: [u32; 3],
         label: &str,
     ) -> Result<(Self, AllocCheck), RenderVolumeError> {
-        check_dims(ctx, dims)?;
+        Self::new_level_checked(ctx, dims, 0, label)
+    }
+
+    /// [`Self::new_checked`] for max-pooled level `level` of a volume of `dims`.
+    pub fn new_level_checked(
+        ctx: &GpuContext,
+        dims: [u32; 3],
+        level: u32,
+        label: &str,
+    ) -> Result<(Self, AllocCheck), RenderVolumeError> {
+        if dims.contains(&0) {
+            return Err(RenderVolumeError::Empty);
+        }
+        let texture_dims = level_dims(dims, level);
+        check_dims(ctx, texture_dims)?;
         let (texture, alloc) = texture_3d_checked(
             ctx,
             label,
-            dims,
+            texture_dims,
             FEATURE_FORMAT,
             wgpu::TextureUsages::TEXTURE_BINDING
                 | wgpu::TextureUsages::COPY_DST
@@ -483,6 +528,8 @@ impl FeatureTexture {
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
         let texture = Self {
             dims,
+            level,
+            texture_dims,
             texture,
             view,
             max: [0.0; 3],
@@ -493,12 +540,44 @@ impl FeatureTexture {
 
     /// The error of this texture refused by the device (`detail`: its words).
     pub fn out_of_memory(&self, detail: String) -> RenderVolumeError {
-        out_of_memory("features", self.dims, FEATURE_FORMAT, detail)
+        out_of_memory("features", self.texture_dims, FEATURE_FORMAT, detail)
     }
 
     /// The texture's bytes on the device.
     pub fn bytes(&self) -> u64 {
-        texture_bytes(self.dims, u64::from(FEATURE_TEXEL_BYTES))
+        texture_bytes(self.texture_dims, u64::from(FEATURE_TEXEL_BYTES))
+    }
+
+    /// Level `level` of the features `components` as a texture ([`pool_texels`], the pool
+    /// kernel's twin); level 0 is [`Self::from_components`].
+    pub fn from_components_level(
+        ctx: &GpuContext,
+        dims: [u32; 3],
+        level: u32,
+        components: &Components3,
+        label: &str,
+    ) -> Result<Self, RenderVolumeError> {
+        if level == 0 {
+            return Self::from_components(ctx, dims, components, label);
+        }
+        let want = dims.iter().map(|&d| d as usize).product::<usize>();
+        if let Some(c) = components.iter().find(|c| c.len() != want) {
+            return Err(RenderVolumeError::Length { got: c.len(), want });
+        }
+        let (mut tex, _) = Self::new_level_checked(ctx, dims, level, label)?;
+        let texels = pool_texels(components, dims, level);
+        let td = tex.texture_dims;
+        write_slices(
+            ctx,
+            &tex.texture,
+            td,
+            FEATURE_TEXEL_BYTES,
+            0,
+            td[2],
+            bytemuck::cast_slice(&texels),
+        );
+        (tex.max, tex.p999) = feature_statistics(components);
+        Ok(tex)
     }
 
     /// A feature texture filled from CPU components (e.g. the CPU reference's output).
@@ -558,7 +637,7 @@ pub fn read_texture_blocking(
     let bytes = crate::gpu::readback::read_texture_blocking(
         ctx,
         &tex.texture,
-        tex.dims,
+        tex.texture_dims,
         FEATURE_TEXEL_BYTES,
     )?;
     Ok(decode_feature_texels(&bytes).flatten().collect())

@@ -21,12 +21,14 @@ pub struct TexelProbe {
 }
 
 impl TexelProbe {
-    /// Copies the texels at `voxels` (clamped into the texture) and starts mapping them.
+    /// Copies the texels at `voxels` (clamped into the volume; at a max-pooled level the
+    /// texels of their blocks) and starts mapping them.
     pub fn start(ctx: &GpuContext, features: &FeatureTexture, voxels: &[[u32; 3]]) -> Self {
         let size = voxels.len().max(1) as u64 * TEXEL_BYTES;
         let read = PendingRead::start_with(ctx, size, "texel probe", |encoder, staging| {
             for (n, v) in voxels.iter().enumerate() {
-                let origin = std::array::from_fn(|a| v[a].min(features.dims[a].saturating_sub(1)));
+                // The texel of the voxel (at a pooled level, its block's maximum).
+                let origin = features.texel_of(*v);
                 copy_texel(
                     encoder,
                     &features.texture,

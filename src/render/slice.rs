@@ -33,8 +33,10 @@ struct Params {
     window_lo: f32,
     window_hi: f32,
     scale: [f32; 4],
+    feature_level: u32,
+    _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 64);
+const _: () = assert!(std::mem::size_of::<Params>() == 80);
 
 /// Which plane of the volume: the voxel axis held fixed at `index`, and the voxel axes that run
 /// across (image x) and vertically (image y).
@@ -169,6 +171,8 @@ impl SliceRenderer {
             window_lo: request.window.0 * volume.value_scale,
             window_hi: request.window.1 * volume.value_scale,
             scale,
+            feature_level: features.map_or(0, |f| f.level),
+            _pad: [0; 3],
         };
         let params_buf = params_buffer(&ctx.device, "slice params", &params);
         let feature_view = features.map_or(&self.no_features, |f| &f.view);
@@ -218,6 +222,23 @@ pub fn cpu_twin(
     features: Option<&Components3>,
     request: &SliceRequest,
 ) -> Vec<[u8; 4]> {
+    cpu_twin_level(values, dims, features, 0, request)
+}
+
+/// [`cpu_twin`] with the features at max-pooled level `level` (each voxel shows its block's
+/// texel, as the kernel reads a pooled texture).
+pub fn cpu_twin_level(
+    values: &[f32],
+    dims: [usize; 3],
+    features: Option<&Components3>,
+    level: u32,
+    request: &SliceRequest,
+) -> Vec<[u8; 4]> {
+    let dims_u32 = dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
+    let pooled = features
+        .filter(|_| level > 0)
+        .map(|f| crate::gpu::volume_texture::pool_texels(f, dims_u32, level));
+    let pooled_dims = crate::gpu::volume_texture::level_dims(dims_u32, level).map(|d| d as usize);
     let plane = request.plane;
     let (w, h) = (dims[plane.across], dims[plane.vertical]);
     // The texture's scale, from the values' range as `RenderVolume::create` takes it.
@@ -241,7 +262,14 @@ pub fn cpu_twin(
             let g = ((v - lo) / (hi - lo).max(1e-6)).clamp(0.0, 1.0);
             let mut rgb = [g; 3];
             if let (Some(o), Some(f)) = (request.overlay, features) {
-                let texel = crate::gpu::volume_texture::feature_texel([f[0][n], f[1][n], f[2][n]]);
+                let texel = match &pooled {
+                    Some(t) => {
+                        let b = p.map(|v| v >> level);
+                        let m = b[0] + pooled_dims[0] * (b[1] + pooled_dims[1] * b[2]);
+                        crate::gpu::volume_texture::decode_rgb9e5(t[m])
+                    }
+                    None => crate::gpu::volume_texture::feature_texel([f[0][n], f[1][n], f[2][n]]),
+                };
                 for (c, colour) in FEATURE_RGB.iter().enumerate() {
                     let a = (texel[c] * o.scale[c]).clamp(0.0, 1.0) * o.opacity.clamp(0.0, 1.0);
                     for (out, col) in rgb.iter_mut().zip(colour) {

@@ -11,6 +11,7 @@ mod gpu_common;
 mod alloc;
 mod eigen;
 mod hessian;
+mod levels;
 mod memory;
 mod pipeline;
 mod raycast;

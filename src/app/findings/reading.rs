@@ -69,6 +69,12 @@ impl FindingsState {
                     "findings read blobness: show Hessian, Li or RST ({} has none)",
                     method_name(method)
                 ));
+            } else if entry.texture.level > 0 {
+                // The ranks read each voxel's blobness; a pooled level holds blocks' maxima.
+                self.message = Some(format!(
+                    "findings need full-resolution features: this volume's are kept at {} within the GPU budget (--gpu-budget-mib natively, gpu_budget_mib in the page's address)",
+                    crate::gpu::budget::level_text(entry.texture.level)
+                ));
             } else if self.asked {
                 // (Until asked, no list: the panel's button, N or a link's marks ask.)
                 match PendingSlabs::start(

@@ -81,6 +81,10 @@ pub struct BenchArgs {
     /// (default: the app's, `JobOptions::default`).
     #[arg(long)]
     pub budget_mib: Option<u64>,
+    /// With --whole-body: GPU memory for the volume textures, MiB (default: the adapter's
+    /// rule, as the viewer). Over it the features are kept max-pooled.
+    #[arg(long)]
+    pub gpu_budget_mib: Option<u64>,
 }
 
 /// The feature job's options for a benchmark: WebGPU's default limits if asked for, the
@@ -199,6 +203,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             preset,
             webgpu_limits: args.webgpu_limits,
             budget_mib: args.budget_mib,
+            gpu_budget_mib: args.gpu_budget_mib,
             size: [768, 768],
             png: args.png.as_deref(),
         });

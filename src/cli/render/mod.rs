@@ -108,6 +108,10 @@ pub struct RenderArgs {
     /// buffer), as many browsers grant, instead of this adapter's.
     #[arg(long)]
     pub webgpu_limits: bool,
+    /// GPU memory for the volume textures, MiB (default: the adapter's rule, as the viewer).
+    /// Over it the features are kept max-pooled at 1/2, 1/4, ... resolution.
+    #[arg(long)]
+    pub gpu_budget_mib: Option<u64>,
     /// Voxel spacing of a `phantom:` input, mm: one value or X,Y,Z.
     #[arg(long, value_delimiter = ',', default_value = "0.5")]
     pub spacing_mm: Vec<f64>,
@@ -227,9 +231,20 @@ pub fn compute_features(
     volume: &std::sync::Arc<Volume>,
     request: &Request,
     webgpu_limits: bool,
+    gpu_budget_mib: Option<u64>,
 ) -> anyhow::Result<FeatureTexture> {
+    let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
+    let (budget, feature_level) = crate::gpu::budget::plan_features(ctx, dims, gpu_budget_mib);
+    if feature_level > 0 {
+        eprintln!(
+            "features kept at {} within the GPU budget of {} MiB",
+            crate::gpu::budget::level_text(feature_level),
+            budget.mib()
+        );
+    }
     let options = crate::compute::pipeline::JobOptions {
         limits: webgpu_limits.then(wgpu::Limits::default),
+        feature_level,
         ..Default::default()
     };
     let mut job = FeatureJob::shared(ctx, std::sync::Arc::clone(volume), request, options)?;
@@ -329,6 +344,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                 &volume,
                 &request,
                 args.webgpu_limits,
+                args.gpu_budget_mib,
             )?)
         }
     };

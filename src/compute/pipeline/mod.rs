@@ -121,6 +121,10 @@ pub struct JobOptions {
     /// trilinear interpolation, instead of one hardware-filtered fetch (the default where the
     /// device filters f32 textures: ~1.9x faster on lavapipe, within a tolerance of the twin).
     pub exact_rst: bool,
+    /// The level of the feature texture the job writes: 0 full resolution, L > 0 max-pooled
+    /// by 2^L per axis (what the GPU budget allows: `gpu::budget::feature_level`). The
+    /// features are computed at full resolution either way; an export reads them there.
+    pub feature_level: u32,
 }
 
 impl Default for JobOptions {
@@ -133,6 +137,7 @@ impl Default for JobOptions {
             rst_voxels_per_step: None,
             step_seconds: None,
             exact_rst: false,
+            feature_level: 0,
         }
     }
 }
@@ -280,6 +285,11 @@ impl FeatureJob {
         options: JobOptions,
     ) -> Result<Self, PipelineError> {
         Self::shared(ctx, Arc::new(volume.clone()), request, options)
+    }
+
+    /// The level of the feature texture the job writes (0: full resolution).
+    pub fn feature_level(&self) -> u32 {
+        self.texture.level
     }
 
     /// Steps so far that recorded and submitted work.

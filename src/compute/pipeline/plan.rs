@@ -15,7 +15,8 @@ impl FeatureJob {
         let input = Grid::of(&volume);
         let resolved = req.resolve(&input)?;
         let dims = volume.dims.map(to_u32);
-        let (texture, alloc) = FeatureTexture::new_checked(ctx, dims, "features")?;
+        let (texture, alloc) =
+            FeatureTexture::new_level_checked(ctx, dims, options.feature_level, "features")?;
         let compute = resolved.compute;
         let factors = resolved.factors;
         let mut notes = resolved.notes.clone();

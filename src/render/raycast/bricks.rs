@@ -32,6 +32,9 @@ pub struct Bricks {
     source: wgpu::Texture,
     source_view: wgpu::TextureView,
     features: bool,
+    /// The source's level (a feature texture may be max-pooled) and the volume's voxels.
+    level: u32,
+    volume_dims: [u32; 3],
     /// Brick slices made so far.
     done_z: u32,
 }
@@ -49,9 +52,12 @@ pub enum BrickSource<'a> {
 struct Slices {
     z0: u32,
     nz: u32,
-    _pad: [u32; 2],
+    level: u32,
+    _pad0: u32,
+    dims: [u32; 3],
+    _pad1: u32,
 }
-const _: () = assert!(std::mem::size_of::<Slices>() == 16);
+const _: () = assert!(std::mem::size_of::<Slices>() == 32);
 
 impl Bricks {
     /// Native only: the brick values (tests), brick x fastest.
@@ -98,7 +104,10 @@ impl Bricks {
             &Slices {
                 z0: self.done_z,
                 nz,
-                _pad: [0; 2],
+                level: self.level,
+                _pad0: 0,
+                dims: self.volume_dims,
+                _pad1: 0,
             },
         );
         let bind_group = bind_group(
@@ -141,9 +150,9 @@ impl Raycaster {
 
     /// An empty brick table of `source`, to be made with [`Bricks::advance`].
     pub fn start_bricks(&self, ctx: &GpuContext, source: BrickSource<'_>) -> Bricks {
-        let (texture, view, dims, features) = match source {
-            BrickSource::Intensity(v) => (&v.intensity, &v.intensity_view, v.dims, false),
-            BrickSource::Features(f) => (&f.texture, &f.view, f.dims, true),
+        let (texture, view, dims, features, level) = match source {
+            BrickSource::Intensity(v) => (&v.intensity, &v.intensity_view, v.dims, false, 0),
+            BrickSource::Features(f) => (&f.texture, &f.view, f.dims, true, f.level),
         };
         let nb = brick_dims(dims);
         let (out, out_view) = output_texture(
@@ -160,9 +169,49 @@ impl Raycaster {
             source: texture.clone(),
             source_view: view.clone(),
             features,
+            level,
+            volume_dims: dims,
             done_z: 0,
         }
     }
+}
+
+/// The CPU twin of raycast_bricks.wgsl's `bricks_features` at a max-pooled level: for each brick
+/// of a volume of `dims`, `[max V, 0, max A, max B]` over the texels (`texels`, of a texture of
+/// `texture_dims`) of the blocks that hold its voxels.
+pub fn cpu_pooled_bricks(
+    dims: [u32; 3],
+    level: u32,
+    texture_dims: [u32; 3],
+    texels: &[[f32; 4]],
+) -> Vec<[f32; 4]> {
+    let nb = brick_dims(dims);
+    let t = texture_dims.map(|x| x as usize);
+    let mut out = Vec::with_capacity(nb.iter().map(|&x| x as usize).product());
+    for bz in 0..nb[2] {
+        for by in 0..nb[1] {
+            for bx in 0..nb[0] {
+                let b = [bx, by, bz];
+                let lo: [usize; 3] = std::array::from_fn(|a| ((b[a] * BRICK) >> level) as usize);
+                let hi: [usize; 3] = std::array::from_fn(|a| {
+                    ((b[a] * BRICK + BRICK).min(dims[a].saturating_sub(1)) >> level) as usize
+                });
+                let mut e = [-BIG, 0.0, -BIG, -BIG];
+                for k in lo[2]..=hi[2] {
+                    for j in lo[1]..=hi[1] {
+                        for i in lo[0]..=hi[0] {
+                            let v = texels[i + t[0] * (j + t[1] * k)];
+                            e[0] = e[0].max(v[0]);
+                            e[2] = e[2].max(v[1]);
+                            e[3] = e[3].max(v[2]);
+                        }
+                    }
+                }
+                out.push(e);
+            }
+        }
+    }
+    out
 }
 
 /// The CPU twin of raycast_bricks.wgsl. For each brick: `[max c0, min c0, max c1, max c2]` of

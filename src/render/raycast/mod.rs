@@ -198,6 +198,7 @@ impl Raycaster {
         let skipping = scene.skipping();
         let mut p = if skipping { p.with_skipping() } else { p };
         (p.row0, p.row_end) = (rows.start, rows.end);
+        p.feature_level = features.map_or(0, |f| f.level);
         ctx.queue
             .write_buffer(&target.params, 0, bytemuck::bytes_of(&p));
         let feature_view = features.map_or(&self.no_features, |f| &f.view);

@@ -41,7 +41,9 @@ pub struct Params {
     pub row0: u32,
     /// One past the last image row of the dispatch.
     pub row_end: u32,
-    pub _pad: [u32; 2],
+    /// The feature texture's level (0: full resolution; L: max-pooled by 2^L per axis).
+    pub feature_level: u32,
+    pub _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 128);
 
@@ -251,6 +253,7 @@ pub fn params(
         max_steps,
         row0: 0,
         row_end: size[1],
-        _pad: [0; 2],
+        feature_level: 0,
+        _pad: 0,
     }
 }

@@ -5,7 +5,7 @@
 #[cfg(doc)]
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 
-use super::bricks::{BRICK, brick_dims, cpu_bricks};
+use super::bricks::{BRICK, brick_dims, cpu_bricks, cpu_pooled_bricks};
 use super::settings::{
     BIG, CHANNEL_COLOURS, FLAG_BRICKS, FLAG_FEATURES, FLAG_INTENSITY, FLAG_INVERT, Params,
 };
@@ -16,7 +16,11 @@ use super::settings::{
 pub struct TwinScene {
     pub dims: [u32; 3],
     pub intensity: Vec<f32>,
+    /// The feature texels: a texel per voxel, or at [`Self::feature_level`] L > 0 the
+    /// max-pooled level's texels (of [`Self::feature_dims`]).
     pub features: Option<Vec<[f32; 4]>>,
+    pub feature_level: u32,
+    pub feature_dims: [u32; 3],
     pub feature_max: Option<[f32; 3]>,
     /// Brick extrema ([`cpu_bricks`]): intensity `(max, min)`, features `(max V, A, B)`; the
     /// twin skips bricks as the shader does when the params ask for it.
@@ -25,6 +29,39 @@ pub struct TwinScene {
 }
 
 impl TwinScene {
+    /// The scene [`RenderVolume::upload`] and [`FeatureTexture::from_components_level`] would
+    /// make, the features at level `level`.
+    pub fn pooled(
+        volume: &crate::Volume,
+        components: Option<&crate::cpu::Components3>,
+        level: u32,
+    ) -> Self {
+        let mut scene = Self::new(volume, components);
+        if level == 0 {
+            return scene;
+        }
+        let dims = scene.dims;
+        let feature_dims = crate::gpu::volume_texture::level_dims(dims, level);
+        scene.features = components.map(|c| {
+            crate::gpu::volume_texture::pool_texels(c, dims, level)
+                .into_iter()
+                .map(|t| {
+                    let [v, a, b] = crate::gpu::volume_texture::decode_rgb9e5(t);
+                    [v, a, b, 0.0]
+                })
+                .collect()
+        });
+        scene.feature_bricks = scene.features.as_ref().map(|f| {
+            cpu_pooled_bricks(dims, level, feature_dims, f)
+                .into_iter()
+                .map(|b| [b[0], b[2], b[3], 0.0])
+                .collect()
+        });
+        scene.feature_level = level;
+        scene.feature_dims = feature_dims;
+        scene
+    }
+
     /// The scene [`RenderVolume::upload`] and [`FeatureTexture::from_components`] would make.
     pub fn new(volume: &crate::Volume, components: Option<&crate::cpu::Components3>) -> Self {
         let scale = crate::gpu::volume_texture::texture_value_scale(
@@ -55,6 +92,8 @@ impl TwinScene {
             dims,
             intensity,
             features,
+            feature_level: 0,
+            feature_dims: dims,
             feature_max,
             bricks: Some(bricks.into_iter().map(|b| [b[0], b[1], 0.0, 0.0]).collect()),
             feature_bricks: feature_bricks
@@ -194,8 +233,27 @@ pub fn cpu_twin(scene: &TwinScene, p: &Params) -> TwinImage {
                     && let Some(feats) = &scene.features
                 {
                     feature_samples += 1;
+                    let level = scene.feature_level;
+                    let fd = scene.feature_dims.map(|x| x as usize);
+                    // A pooled level: the largest texel of the blocks of the 8 voxels.
+                    let pooled = |c: usize| {
+                        let mut m = -BIG;
+                        for cz in [i0[2], i1[2]] {
+                            for cy in [i0[1], i1[1]] {
+                                for cx in [i0[0], i1[0]] {
+                                    let t = [cx, cy, cz].map(|v| (v as u32 >> level) as usize);
+                                    m = m.max(feats[t[0] + fd[0] * (t[1] + fd[1] * t[2])][c]);
+                                }
+                            }
+                        }
+                        m
+                    };
                     for c in 0..3 {
-                        let fv = tri(&|idx| feats[idx][c]);
+                        let fv = if level > 0 {
+                            pooled(c)
+                        } else {
+                            tri(&|idx| feats[idx][c])
+                        };
                         if fv > best_f[c] {
                             best_f[c] = fv;
                             t_f[c] = t;
