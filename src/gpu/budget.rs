@@ -54,10 +54,10 @@ impl GpuBudget {
         }
     }
 
-    /// A budget the user gave, in MiB (at least 16 MiB: the features of a small volume).
+    /// A budget the user gave, in MiB (at least 1).
     pub fn user_mib(mib: u64) -> Self {
         Self {
-            bytes: mib.max(16) << 20,
+            bytes: mib.max(1) << 20,
             source: BudgetSource::User,
         }
     }

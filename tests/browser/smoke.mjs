@@ -432,6 +432,30 @@ try {
     }
   });
 
+  // 3z: a GPU budget too small for the features at full resolution (`?gpu_budget_mib=1`): the
+  // features are kept max-pooled (level >= 1, said in the status), computed and drawn in colour.
+  await withBrowser([...baseArgs, ...webgpuArgs], async (page) => {
+    await page.goto(`${url}?method=li&gpu_budget_mib=1`);
+    await page.waitForFunction(() => {
+      const s = window.shapecastStatus;
+      const f = s?.features?.state;
+      return s && (s.phase === 'error' || (s.frames >= 3 && (f === 'done' || f === 'failed')));
+    }, null, { timeout: timeoutMs, polling: 250 }).catch(() => {});
+    await page.waitForTimeout(1500);
+    const status = await page.evaluate(() => window.shapecastStatus);
+    const shot = await page.screenshot({ path: path.join(outDir, 'pooled.png') });
+    const png = PNG.sync.read(shot);
+    let red = 0;
+    for (let p = 0; p < png.width * png.height; p += 1) {
+      const [r, g, b] = [png.data[4 * p], png.data[4 * p + 1], png.data[4 * p + 2]];
+      if (r > 150 && g < 80 && b < 80) red += 1;
+    }
+    check('GPU budget: features kept max-pooled, computed and drawn',
+      status?.features?.state === 'done' && status?.features?.level >= 1
+        && status?.features?.gpuBudgetMib === 1 && red > 200 && !status?.error,
+      `${JSON.stringify(status?.features)}, ${red} red pixels, error ${status?.error} (${path.join(outDir, 'pooled.png')})`);
+  });
+
   // 4: a browser without WebGPU.
   await withBrowser(baseArgs, async (page) => {
     await page.addInitScript(() => {
