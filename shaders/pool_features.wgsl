@@ -5,7 +5,9 @@
 // invocation per pooled texel of the chunk's box; it takes the maximum over its block's voxels
 // that lie in the box, and the texel's value already in the texture (a block the box cuts was
 // partly written by the brick or chunk before; the texture starts at 0 and features are never
-// negative, so the maximum of both is the block's). The maxima and histograms count every voxel
+// negative, so the maximum of both is the block's), encoded rounding up (`encode_rgb9e5_up`:
+// never below any voxel's full-resolution texel, and a texel read back re-encodes to itself).
+// The maxima and histograms count every voxel
 // of the box once, as `main` does, so the default gains do not depend on the level. Twin:
 // src/gpu/volume_texture/pool.rs.
 
@@ -70,7 +72,7 @@ fn pool(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
                 }
             }
         }
-        dst[id.x + pp.pitch * (id.y + pp.out_dims.y * id.z)] = encode_rgb9e5(m);
+        dst[id.x + pp.pitch * (id.y + pp.out_dims.y * id.z)] = encode_rgb9e5_up(m);
     }
     workgroupBarrier();
     if li < 3u {

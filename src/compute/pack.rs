@@ -200,13 +200,13 @@ impl Pack {
             .max_storage_buffer_binding_size
             .min(rec.ctx.limits.max_buffer_size);
         let pooled_slice_bytes = u64::from(row_bytes) * u64::from(pny);
-        // Pooled slices per chunk, whole blocks of voxel slices (a chunk may start inside a
-        // block: it then takes one pooled slice more).
-        let pooled_per_chunk = (limit / pooled_slice_bytes.max(1)).clamp(2, 1 << 16) as u32 - 1;
+        // Pooled slices per chunk: a chunk ends on a block's edge (or after one voxel slice),
+        // so it writes at most this many.
+        let pooled_per_chunk = (limit / pooled_slice_bytes.max(1)).clamp(1, 1 << 15) as u32;
         let voxels_per_chunk = pooled_per_chunk.saturating_mul(f).max(1);
         let staging = self.staging(
             rec.ctx,
-            (pooled_slice_bytes * u64::from(pooled_per_chunk + 1)).max(4),
+            (pooled_slice_bytes * u64::from(pooled_per_chunk)).max(4),
             limit,
         );
         let view = dst

@@ -10,7 +10,8 @@
 //! [`MAX_ALLOCATION_BYTES`] whatever the budget.
 //!
 //! Over budget the features are kept max-pooled ([`feature_level`]): level L holds, per channel,
-//! the maximum of each block of 2^L voxels per axis, exact for a MIP at its own resolution.
+//! the maximum of each block of 2^L voxels per axis (rounded up, so never below a voxel's
+//! full-resolution texel), exact for a MIP at its own resolution.
 
 use crate::gpu::volume_texture::{FEATURE_TEXEL_BYTES, level_dims, texture_bytes};
 
@@ -57,7 +58,7 @@ impl GpuBudget {
     /// A budget the user gave, in MiB (at least 1).
     pub fn user_mib(mib: u64) -> Self {
         Self {
-            bytes: mib.max(1) << 20,
+            bytes: mib.max(1).saturating_mul(1 << 20),
             source: BudgetSource::User,
         }
     }

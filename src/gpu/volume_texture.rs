@@ -38,7 +38,7 @@ pub use histogram::{
 };
 pub use pool::pool_texels;
 use rgb9e5::pow2;
-pub use rgb9e5::{RGB9E5_MAX, decode_rgb9e5, encode_rgb9e5, feature_texel};
+pub use rgb9e5::{RGB9E5_MAX, decode_rgb9e5, encode_rgb9e5, encode_rgb9e5_up, feature_texel};
 
 use super::alloc::{AllocCheck, Allocation};
 use std::sync::Arc;
@@ -646,6 +646,32 @@ pub fn read_texture_blocking(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rounding_up_never_falls_below_a_voxel_of_the_block() {
+        let mut rng = crate::cpu::testing::Lcg::new(99);
+        let mut next = || rng.unit();
+        for _ in 0..100_000 {
+            // Within the format's range (above it every encoding clamps).
+            let scale = 2f32.powf(next() * 22.0 - 15.0);
+            // Two voxels of a block: a bright vessel and a faint blob.
+            let a = [next() * scale * 300.0, 0.0, next() * scale];
+            let b = [next() * scale, next() * scale, next() * scale * 2.0];
+            let m: [f32; 3] = std::array::from_fn(|c| a[c].max(b[c]));
+            let up = decode_rgb9e5(encode_rgb9e5_up(m));
+            for v in [a, b] {
+                let dense = feature_texel(v);
+                for c in 0..3 {
+                    assert!(
+                        up[c] >= v[c] && up[c] >= dense[c],
+                        "{m:?} -> {up:?}, voxel {v:?}"
+                    );
+                }
+            }
+            // A texel read back encodes to itself (a block finished by a later chunk).
+            assert_eq!(decode_rgb9e5(encode_rgb9e5_up(up)), up);
+        }
+    }
 
     #[test]
     fn shared_exponent_round_trip() {

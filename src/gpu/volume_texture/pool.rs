@@ -1,12 +1,13 @@
 //! The CPU twin of pool_features.wgsl: a max-pooled level of feature components, as texels.
 
-use super::encode_rgb9e5;
+use super::encode_rgb9e5_up;
 use super::level_dims;
 use crate::cpu::Components3;
 
 /// Level `level` of `components` (a volume of `dims`, i fastest): per texel and channel the
 /// largest value of its block of 2^level voxels per axis (values clamped as the texels clamp
-/// them: negative and NaN count as 0), encoded as the texture's texels (i fastest).
+/// them: negative and NaN count as 0), encoded rounding up as the pool kernel does
+/// ([`encode_rgb9e5_up`]), i fastest.
 pub fn pool_texels(components: &Components3, dims: [u32; 3], level: u32) -> Vec<u32> {
     let out = level_dims(dims, level);
     let f = 1usize << level.min(31);
@@ -27,7 +28,7 @@ pub fn pool_texels(components: &Components3, dims: [u32; 3], level: u32) -> Vec<
                         }
                     }
                 }
-                texels.push(encode_rgb9e5(m));
+                texels.push(encode_rgb9e5_up(m));
             }
         }
     }

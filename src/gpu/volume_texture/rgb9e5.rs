@@ -34,6 +34,22 @@ pub fn decode_rgb9e5(t: u32) -> [f32; 3] {
     [t & 511, (t >> 9) & 511, (t >> 18) & 511].map(|q| q as f32 * scale)
 }
 
+/// [`encode_rgb9e5`] rounding up (shaders/rgb9e5.wgsl's `encode_rgb9e5_up`): each channel's
+/// value at least its input and at least its [`encode_rgb9e5`] value beside any other channels;
+/// what a max-pooled texel is encoded with, so that it never falls below a voxel of its block.
+pub fn encode_rgb9e5_up(v: [f32; 3]) -> u32 {
+    let c = v.map(|x| if x > 0.0 { x.min(RGB9E5_MAX) } else { 0.0 });
+    let m = c[0].max(c[1]).max(c[2]);
+    let e_m = ((m.to_bits() >> 23) & 0xff) as i32 - 127;
+    let mut e = e_m.max(-16) + 16;
+    if (m * pow2(24 - e)).ceil() > 511.0 {
+        e += 1;
+    }
+    let scale = pow2(24 - e);
+    let q = c.map(|x| ((x * scale).ceil() as u32).min(511));
+    q[0] | (q[1] << 9) | (q[2] << 18) | ((e as u32) << 27)
+}
+
 /// The values a feature texel holds for `v` (the twins' feature data).
 pub fn feature_texel(v: [f32; 3]) -> [f32; 3] {
     decode_rgb9e5(encode_rgb9e5(v))
