@@ -23,20 +23,14 @@ struct Params {
 @group(0) @binding(0) var<storage, read> p: Params;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
 @group(0) @binding(2) var<storage, read_write> dst: array<u32>;
-// maxima[0..3]: the largest value of each component (float bits); maxima[4 + c * BINS + b]:
-// the histogram of component c's positive values (bins of src/gpu/volume_texture.rs, the twin).
-@group(0) @binding(3) var<storage, read_write> maxima: array<atomic<u32>>;
+// binding 3: the maxima and histograms (feature_stats.wgsl).
 
 #import rgb9e5.wgsl
-
-var<workgroup> wg_max: array<atomic<u32>, 3>;
+#import feature_stats.wgsl
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) li: u32) {
-    if li < 3u {
-        atomicStore(&wg_max[li], 0u);
-    }
-    workgroupBarrier();
+    stats_begin(li);
     if all(id < p.dims) {
         let s = p.src_dims;
         let n = s.x * s.y * s.z;
@@ -47,15 +41,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
             finite_or_zero(src[2u * n + idx]),
         );
         dst[id.x + p.pitch * (id.y + p.dims.y * id.z)] = encode_rgb9e5(v);
-        for (var c = 0u; c < 3u; c++) {
-            atomicMax(&wg_max[c], bitcast<u32>(max(v[c], 0.0)));
-            if v[c] > 0.0 {
-                atomicAdd(&maxima[4u + c * BINS + bin_of(v[c])], 1u);
-            }
-        }
+        stats_count(v);
     }
-    workgroupBarrier();
-    if li < 3u {
-        atomicMax(&maxima[li], atomicLoad(&wg_max[li]));
-    }
+    stats_end(li);
 }

@@ -1,4 +1,5 @@
 #import rgb9e5.wgsl
+#import feature_stats.wgsl
 
 // Packs a block of features (3 components, component-major f32, as pack_features.wgsl takes
 // them) into a max-pooled level of a method's feature texture (level L: texel m holds, per channel, the maximum over the voxels m * 2^L .. (m + 1) * 2^L - 1 per axis). One
@@ -10,8 +11,6 @@
 // The maxima and histograms count every voxel
 // of the box once, as `main` does, so the default gains do not depend on the level. Twin:
 // src/gpu/volume_texture/pool.rs.
-
-var<workgroup> wg_max: array<atomic<u32>, 3>;
 
 struct PoolParams {
     out_dims: vec3<u32>, // pooled texels written: staging box, at (0, out_y0, out_z0)
@@ -35,16 +34,12 @@ struct PoolParams {
 @group(0) @binding(0) var<storage, read> pp: PoolParams;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
 @group(0) @binding(2) var<storage, read_write> dst: array<u32>;
-// As in pack_features.wgsl: the maxima (float bits) and the histograms.
-@group(0) @binding(3) var<storage, read_write> maxima: array<atomic<u32>>;
+// binding 3: the maxima and histograms (feature_stats.wgsl).
 @group(0) @binding(4) var existing: texture_3d<f32>;
 
 @compute @workgroup_size(8, 8, 1)
 fn pool(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) li: u32) {
-    if li < 3u {
-        atomicStore(&wg_max[li], 0u);
-    }
-    workgroupBarrier();
+    stats_begin(li);
     if all(id < pp.out_dims) {
         let f = 1u << pp.level;
         let s = pp.src_dims;
@@ -63,19 +58,11 @@ fn pool(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
                         finite_or_zero(src[2u * n + idx]),
                     );
                     m = max(m, v);
-                    for (var c = 0u; c < 3u; c++) {
-                        atomicMax(&wg_max[c], bitcast<u32>(max(v[c], 0.0)));
-                        if v[c] > 0.0 {
-                            atomicAdd(&maxima[4u + c * BINS + bin_of(v[c])], 1u);
-                        }
-                    }
+                    stats_count(v);
                 }
             }
         }
         dst[id.x + pp.pitch * (id.y + pp.out_dims.y * id.z)] = encode_rgb9e5_up(m);
     }
-    workgroupBarrier();
-    if li < 3u {
-        atomicMax(&maxima[li], atomicLoad(&wg_max[li]));
-    }
+    stats_end(li);
 }

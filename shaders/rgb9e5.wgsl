@@ -1,15 +1,5 @@
 // Shared by the pack and pool kernels: the Rgb9e5 encoding (src/gpu/volume_texture/rgb9e5.rs
-// is its CPU twin, bit for bit), the clamping of a feature value, and the histogram's bins
-// (src/gpu/volume_texture/histogram.rs).
-
-const BINS: u32 = 960u;
-const BINS_PER_OCTAVE: f32 = 32.0;
-const LOWEST_OCTAVE: f32 = -10.0;
-
-fn bin_of(v: f32) -> u32 {
-    let b = floor((log2(v) - LOWEST_OCTAVE) * BINS_PER_OCTAVE);
-    return u32(clamp(b, 0.0, f32(BINS - 1u)));
-}
+// is its CPU twin, bit for bit) and the clamping of a feature value.
 
 const F16_MAX: f32 = 65504.0;
 

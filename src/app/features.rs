@@ -11,8 +11,8 @@ use crate::cpu::rays::RAY_COUNTS;
 use crate::cpu::rst::DEFAULT_STEP_MM;
 use crate::cpu::tf::{Preset, TransferFunction};
 use crate::gpu::GpuContext;
-use crate::gpu::budget::{GpuBudget, feature_level, level_text};
-use crate::gpu::volume_texture::{FeatureTexture, texture_bytes};
+use crate::gpu::budget::{GpuBudget, level_text};
+use crate::gpu::volume_texture::FeatureTexture;
 use crate::volume::Volume;
 use std::sync::Arc;
 
@@ -316,14 +316,6 @@ impl FeatureManager {
         self.gpu_budget
     }
 
-    /// The feature level a job for `volume` writes within the budget (0: full resolution),
-    /// beside the intensity texture at full resolution.
-    pub fn level_for(&self, ctx: &GpuContext, volume: &Volume) -> u32 {
-        let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
-        let bytes = self.gpu_budget.for_features(texture_bytes(dims, 2));
-        feature_level(dims, bytes, ctx.limits.max_texture_dimension_3d)
-    }
-
     /// What jobs call when a step is done on the GPU (the viewer: ask for a frame).
     pub fn set_waker(&mut self, wake: Waker) {
         self.waker = Some(wake);
@@ -405,9 +397,13 @@ impl FeatureManager {
         // more than `STEP_SECONDS` of feature work (more only where its own frames are slower):
         // a step is timed by the device's timestamps around it (or, without them, from when
         // the work queued before it was done), so a slow frame does not count as the step's.
-        let feature_level = self.level_for(ctx, volume);
-        let intensity = texture_bytes(volume.dims.map(|d| d as u32), 2);
-        self.budget_bytes = self.gpu_budget.for_features(intensity);
+        // The level that fits the budget beside the intensity (0: full resolution); the
+        // methods kept share the same bytes.
+        let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
+        let feature_level = self
+            .gpu_budget
+            .feature_level(dims, ctx.limits.max_texture_dimension_3d);
+        self.budget_bytes = self.gpu_budget.features_of(dims);
         let options = JobOptions {
             step_seconds: paced(ctx).then_some(STEP_SECONDS),
             feature_level,

@@ -273,8 +273,13 @@ pub fn run(opts: &Options<'_>) -> anyhow::Result<()> {
     request.preset = opts.preset;
     // Paced as the viewer paces its steps, the features at the level the GPU budget allows.
     let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
+    let max_dim = if opts.webgpu_limits {
+        wgpu::Limits::default().max_texture_dimension_3d
+    } else {
+        ctx.limits.max_texture_dimension_3d
+    };
     let (gpu_budget, feature_level) =
-        crate::gpu::budget::plan_features(&ctx, dims, opts.gpu_budget_mib);
+        crate::gpu::budget::plan_features(&ctx, dims, opts.gpu_budget_mib, max_dim);
     println!(
         "GPU budget {} MiB ({:?}): features at {}",
         gpu_budget.mib(),

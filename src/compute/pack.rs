@@ -47,6 +47,82 @@ struct PoolParams {
 }
 const _: () = assert!(std::mem::size_of::<PoolParams>() == 80);
 
+/// Copies a staging box of `extent` texels (rows `row_bytes` apart, as many rows per slice as
+/// the box has) into the feature texture at `origin`.
+fn copy_staging(
+    encoder: &mut wgpu::CommandEncoder,
+    (staging, row_bytes): (&wgpu::Buffer, u32),
+    dst: &FeatureTexture,
+    origin: [u32; 3],
+    extent: [u32; 3],
+) {
+    encoder.copy_buffer_to_texture(
+        wgpu::TexelCopyBufferInfo {
+            buffer: staging,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row_bytes),
+                rows_per_image: Some(extent[1]),
+            },
+        },
+        wgpu::TexelCopyTextureInfo {
+            texture: &dst.texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d {
+                x: origin[0],
+                y: origin[1],
+                z: origin[2],
+            },
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::Extent3d {
+            width: extent[0],
+            height: extent[1],
+            depth_or_array_layers: extent[2],
+        },
+    );
+}
+
+/// One dispatch of a pooled pack: the box's slices `slices` (box-relative), written as the
+/// pooled slices `out_z0 .. out_z0 + pnz`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct PooledChunk {
+    slices: std::ops::Range<u32>,
+    out_z0: u32,
+    pnz: u32,
+}
+
+/// The chunks of a box at voxel slice `z0` whose slices `slices` go into level `level`, each
+/// writing at most `per_chunk` pooled slices: chunks end on a block's edge where the slices
+/// allow, so that consecutive chunks share at most the pooled slice of a block they cut.
+fn pooled_chunks(
+    z0: u32,
+    slices: std::ops::Range<u32>,
+    level: u32,
+    per_chunk: u32,
+) -> impl Iterator<Item = PooledChunk> {
+    let f = 1u32 << level.min(31);
+    let voxels = per_chunk.max(1).saturating_mul(f);
+    let mut s0 = slices.start;
+    std::iter::from_fn(move || {
+        if s0 >= slices.end {
+            return None;
+        }
+        let z = z0 + s0;
+        let end = ((z.saturating_add(voxels)) / f * f).max(z + 1) - z0;
+        let s1 = end.min(slices.end);
+        let out_z0 = z >> level;
+        let pnz = (z0 + s1 - 1) / f + 1 - out_z0;
+        let chunk = PooledChunk {
+            slices: s0..s1,
+            out_z0,
+            pnz,
+        };
+        s0 = s1;
+        Some(chunk)
+    })
+}
+
 /// Where a packed box comes from and goes to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PackBox {
@@ -203,24 +279,19 @@ impl Pack {
         // Pooled slices per chunk: a chunk ends on a block's edge (or after one voxel slice),
         // so it writes at most this many.
         let pooled_per_chunk = (limit / pooled_slice_bytes.max(1)).clamp(1, 1 << 15) as u32;
-        let voxels_per_chunk = pooled_per_chunk.saturating_mul(f).max(1);
         let staging = self.staging(
             rec.ctx,
             (pooled_slice_bytes * u64::from(pooled_per_chunk)).max(4),
             limit,
         );
-        let view = dst
-            .texture
-            .create_view(&wgpu::TextureViewDescriptor::default());
-        let mut s0 = slices.start;
-        while s0 < nz {
+        for chunk in pooled_chunks(at.z0, slices.start..nz, level, pooled_per_chunk) {
+            let PooledChunk {
+                slices: std::ops::Range { start: s0, end: s1 },
+                out_z0,
+                pnz,
+            } = chunk;
             let box_z0 = at.z0 + s0;
-            // End on a block's edge where the slices allow, so that chunks share few texels.
-            let end = ((box_z0 + voxels_per_chunk) / f * f).max(box_z0 + 1) - at.z0;
-            let s1 = end.min(nz);
             let box_nz = s1 - s0;
-            let out_z0 = box_z0 >> level;
-            let pnz = (box_z0 + box_nz - 1) / f + 1 - out_z0;
             let out_dims = [pnx, pny, pnz];
             let params = params_buffer(
                 &rec.ctx.device,
@@ -251,37 +322,18 @@ impl Pack {
                     src.as_entire_binding(),
                     staging.as_entire_binding(),
                     self.maxima.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&view),
+                    wgpu::BindingResource::TextureView(&dst.view),
                 ],
             );
             let groups = SlabGrid::new(out_dims, [1.0; 3]).workgroups(WORKGROUP);
             checks::dispatch(rec.encoder, "pool", &self.pool, &bind, groups);
-            rec.encoder.copy_buffer_to_texture(
-                wgpu::TexelCopyBufferInfo {
-                    buffer: &staging,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(row_bytes),
-                        rows_per_image: Some(pny),
-                    },
-                },
-                wgpu::TexelCopyTextureInfo {
-                    texture: &dst.texture,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d {
-                        x: 0,
-                        y: out_y0,
-                        z: out_z0,
-                    },
-                    aspect: wgpu::TextureAspect::All,
-                },
-                wgpu::Extent3d {
-                    width: pnx,
-                    height: pny,
-                    depth_or_array_layers: pnz,
-                },
+            copy_staging(
+                rec.encoder,
+                (&staging, row_bytes),
+                dst,
+                [0, out_y0, out_z0],
+                out_dims,
             );
-            s0 = s1;
         }
     }
 
@@ -348,30 +400,12 @@ impl Pack {
         );
         let groups = block.workgroups(WORKGROUP);
         checks::dispatch(encoder, "pack", &self.pipeline, &bind, groups);
-        encoder.copy_buffer_to_texture(
-            wgpu::TexelCopyBufferInfo {
-                buffer: staging,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row_bytes),
-                    rows_per_image: Some(ny),
-                },
-            },
-            wgpu::TexelCopyTextureInfo {
-                texture: &dst.texture,
-                mip_level: 0,
-                origin: wgpu::Origin3d {
-                    x: 0,
-                    y: at.y0,
-                    z: at.z0 + src_z0,
-                },
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::Extent3d {
-                width: nx,
-                height: ny,
-                depth_or_array_layers: nz,
-            },
+        copy_staging(
+            encoder,
+            (staging, row_bytes),
+            dst,
+            [0, at.y0, at.z0 + src_z0],
+            [nx, ny, nz],
         );
     }
 
@@ -400,5 +434,40 @@ impl Pack {
                 .get(4 * c..4 * c + 4)
                 .map_or(0.0, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every slice in one chunk, in order; no chunk writes more pooled slices than it may; the
+    /// pooled slices are those the box's voxels fall in, shared only where a block is cut.
+    #[test]
+    fn pooled_chunks_cover_the_slices_within_their_size() {
+        for level in 1..=3u32 {
+            let f = 1u32 << level;
+            for z0 in [0u32, 1, 5, 8] {
+                for (start, end) in [(0u32, 1u32), (0, 37), (3, 29), (7, 8)] {
+                    for per in [1u32, 2, 5, 100] {
+                        let chunks: Vec<PooledChunk> =
+                            pooled_chunks(z0, start..end, level, per).collect();
+                        let mut next = start;
+                        for c in &chunks {
+                            assert_eq!(c.slices.start, next);
+                            assert!(c.slices.end > c.slices.start);
+                            assert!(c.pnz <= per, "{c:?} over {per}");
+                            assert_eq!(c.out_z0, (z0 + c.slices.start) / f);
+                            assert_eq!(c.out_z0 + c.pnz, (z0 + c.slices.end - 1) / f + 1);
+                            next = c.slices.end;
+                        }
+                        assert_eq!(next, end);
+                        if per >= 100 {
+                            assert_eq!(chunks.len(), 1);
+                        }
+                    }
+                }
+            }
+        }
     }
 }

@@ -73,6 +73,18 @@ impl GpuBudget {
         self.bytes >> 20
     }
 
+    /// Bytes one method's features may hold beside the full-resolution intensity texture
+    /// (R16Float) of a volume of `dims`.
+    pub fn features_of(&self, dims: [u32; 3]) -> u64 {
+        self.for_features(texture_bytes(dims, 2))
+    }
+
+    /// The feature level of a volume of `dims` within this budget ([`feature_level`]) on a
+    /// device whose largest 3D texture is `max_dim`.
+    pub fn feature_level(&self, dims: [u32; 3], max_dim: u32) -> u32 {
+        feature_level(dims, self.features_of(dims), max_dim)
+    }
+
     /// What is left for one method's features once `intensity_bytes` are held (at least a
     /// quarter of the budget: an intensity that takes more is over the budget itself, and the
     /// features then stay small), and never more than one allocation may be.
@@ -98,16 +110,16 @@ pub fn feature_level(dims: [u32; 3], bytes: u64, max_dim: u32) -> u32 {
 }
 
 /// The budget on `ctx` (the user's MiB, if given) and the feature level of a volume of `dims`
-/// within it beside its intensity texture (R16Float at full resolution).
+/// within it, for a device whose largest 3D texture is `max_dim` (the CLI's `--webgpu-limits`
+/// plans with WebGPU's).
 pub fn plan_features(
     ctx: &crate::gpu::GpuContext,
     dims: [u32; 3],
     user_mib: Option<u64>,
+    max_dim: u32,
 ) -> (GpuBudget, u32) {
     let budget = GpuBudget::choose(&ctx.adapter_info, user_mib);
-    let bytes = budget.for_features(texture_bytes(dims, 2));
-    let level = feature_level(dims, bytes, ctx.limits.max_texture_dimension_3d);
-    (budget, level)
+    (budget, budget.feature_level(dims, max_dim))
 }
 
 /// What a level means to a reader: "full resolution", "1/2 resolution (max of 2 x 2 x 2

@@ -13,6 +13,7 @@ pub const FILES: &[(&str, &str)] = shader_files![
     "common.wgsl",
     "noise_windows.wgsl",
     "rgb9e5.wgsl",
+    "feature_stats.wgsl",
     "pack_features.wgsl",
     "pool_features.wgsl",
     "eigen.wgsl",

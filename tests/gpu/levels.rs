@@ -5,7 +5,7 @@
 //! pixel's feature is at least the full-resolution MIP's.
 
 use glam::{DMat3, DQuat};
-use shapecast::compute::pipeline::{FeatureJob, FeatureResult, JobOptions};
+use shapecast::compute::pipeline::{FeatureResult, JobOptions};
 use shapecast::cpu::pipeline::{Method, Request};
 use shapecast::cpu::{Components3, Grid};
 use shapecast::gpu::GpuContext;
@@ -13,7 +13,6 @@ use shapecast::gpu::context::test_context;
 use shapecast::gpu::volume_texture::{
     FeatureTexture, RenderVolume, decode_rgb9e5, level_dims, pool_texels, read_texture_blocking,
 };
-use shapecast::phantom::{Phantom, Shape};
 use shapecast::render::camera::{Camera, ViewPreset};
 use shapecast::render::raycast::{
     ChannelDisplay, RaycastTarget, Raycaster, RenderSettings, Scene, TwinScene, VolumeGeometry,
@@ -22,44 +21,17 @@ use shapecast::render::raycast::{
 use shapecast::render::slice::{Overlay, SlicePlane, SliceRenderer, SliceRequest, cpu_twin_level};
 use shapecast::volume::Volume;
 
-/// Nodules beside a vessel in noisy soft tissue, odd dims so that blocks are cut at the faces.
+/// The pipeline tests' nodule beside a vessel and a dark tube, in noisy soft tissue (odd dims,
+/// so that blocks are cut at the faces).
 fn scene() -> Volume {
-    Phantom::new("levels", [0.0, 0.0, 0.0], [21.0, 19.0, 27.0], 40.0)
-        .with(
-            Shape::Sphere {
-                centre_mm: [6.0, 7.0, 9.0],
-                radius_mm: 2.5,
-            },
-            140.0,
-        )
-        .with(
-            Shape::Sphere {
-                centre_mm: [15.0, 12.0, 19.0],
-                radius_mm: 1.6,
-            },
-            160.0,
-        )
-        .with(
-            Shape::Cylinder {
-                a_mm: [0.0, 9.5, 4.0],
-                b_mm: [21.0, 9.5, 24.0],
-                radius_mm: 1.5,
-            },
-            150.0,
-        )
-        .render_noisy([0.9, 0.8, 1.1], 6.0, 3)
+    super::pipeline::scene([0.9, 0.8, 1.1], 6.0)
 }
 
+/// Li at two scales, exported.
 fn run(ctx: &GpuContext, volume: &Volume, options: JobOptions) -> FeatureResult {
     let mut req = Request::new(Method::Li);
     req.sigmas_mm = Some(vec![1.2, 2.0]);
-    let options = JobOptions {
-        export: true,
-        ..options
-    };
-    let mut job = FeatureJob::with_options(ctx, volume, &req, options).expect("job");
-    job.run_blocking(ctx).expect("run");
-    job.finish_result().expect("result")
+    super::pipeline::run_gpu_with(ctx, volume, &req, options)
 }
 
 /// Texels of a feature texture, decoded.

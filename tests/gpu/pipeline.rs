@@ -13,7 +13,7 @@ use shapecast::phantom::{Phantom, Shape};
 use shapecast::volume::Volume;
 
 /// A nodule next to a vessel and a dark tube (airway-like), in soft tissue with mild noise.
-fn scene(spacing_mm: [f64; 3], noise_hu: f64) -> Volume {
+pub(crate) fn scene(spacing_mm: [f64; 3], noise_hu: f64) -> Volume {
     let p = Phantom::new("scene", [0.0, 0.0, 0.0], [17.0, 15.0, 40.0], 40.0)
         .with(
             Shape::Sphere {
@@ -62,7 +62,7 @@ fn run_gpu(
     )
 }
 
-fn run_gpu_with(
+pub(crate) fn run_gpu_with(
     ctx: &GpuContext,
     volume: &Volume,
     req: &Request,

@@ -234,7 +234,13 @@ pub fn compute_features(
     gpu_budget_mib: Option<u64>,
 ) -> anyhow::Result<FeatureTexture> {
     let dims = volume.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX));
-    let (budget, feature_level) = crate::gpu::budget::plan_features(ctx, dims, gpu_budget_mib);
+    let limits = webgpu_limits.then(wgpu::Limits::default);
+    let max_dim = limits
+        .as_ref()
+        .unwrap_or(&ctx.limits)
+        .max_texture_dimension_3d;
+    let (budget, feature_level) =
+        crate::gpu::budget::plan_features(ctx, dims, gpu_budget_mib, max_dim);
     if feature_level > 0 {
         eprintln!(
             "features kept at {} within the GPU budget of {} MiB",
@@ -243,7 +249,7 @@ pub fn compute_features(
         );
     }
     let options = crate::compute::pipeline::JobOptions {
-        limits: webgpu_limits.then(wgpu::Limits::default),
+        limits,
         feature_level,
         ..Default::default()
     };

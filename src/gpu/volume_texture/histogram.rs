@@ -1,10 +1,11 @@
-//! The feature histograms the pack kernel keeps (shaders/pack_features.wgsl) and what is read
+//! The feature histograms the pack and pool kernels keep (shaders/feature_stats.wgsl) and what is read
 //! from them: each feature's 99.9th percentile, what a gain of 1 shows as full colour.
 
 use crate::cpu::Components3;
 
 /// Bins of the feature histograms: 32 per octave from 2^-10 to 2^20 (2.2% wide), kept by the
-/// pack kernel (`shaders/pack_features.wgsl`, the same binning) for [`super::FeatureTexture::p999`].
+/// pack and pool kernels (`shaders/feature_stats.wgsl`, the same binning) for
+/// [`super::FeatureTexture::p999`].
 pub const HISTOGRAM_BINS: usize = 960;
 const BINS_PER_OCTAVE: f32 = 32.0;
 const LOWEST_OCTAVE: f32 = -10.0;

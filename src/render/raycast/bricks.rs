@@ -176,14 +176,21 @@ impl Raycaster {
     }
 }
 
-/// The CPU twin of raycast_bricks.wgsl's `bricks_features` at a max-pooled level: for each brick
-/// of a volume of `dims`, `[max V, 0, max A, max B]` over the texels (`texels`, of a texture of
-/// `texture_dims`) of the blocks that hold its voxels.
-pub fn cpu_pooled_bricks(
+/// The CPU twin of raycast_bricks.wgsl. For each brick: `[max c0, min c0, max c1, max c2]` of
+/// the three values `get` gives per voxel (intensity: all three the same).
+pub fn cpu_bricks<T>(dims: [u32; 3], values: &[T], get: impl Fn(&T) -> [f32; 3]) -> Vec<[f32; 4]> {
+    cpu_bricks_of_level(dims, 0, dims, values, get)
+}
+
+/// [`cpu_bricks`] of a max-pooled level `level` (`values` a texture of `texture_dims`): each
+/// brick of the volume's `dims` over the texels of the blocks that hold its voxels, as the
+/// kernel reads a pooled feature texture.
+pub fn cpu_bricks_of_level<T>(
     dims: [u32; 3],
     level: u32,
     texture_dims: [u32; 3],
-    texels: &[[f32; 4]],
+    values: &[T],
+    get: impl Fn(&T) -> [f32; 3],
 ) -> Vec<[f32; 4]> {
     let nb = brick_dims(dims);
     let t = texture_dims.map(|x| x as usize);
@@ -196,42 +203,11 @@ pub fn cpu_pooled_bricks(
                 let hi: [usize; 3] = std::array::from_fn(|a| {
                     ((b[a] * BRICK + BRICK).min(dims[a].saturating_sub(1)) >> level) as usize
                 });
-                let mut e = [-BIG, 0.0, -BIG, -BIG];
-                for k in lo[2]..=hi[2] {
-                    for j in lo[1]..=hi[1] {
-                        for i in lo[0]..=hi[0] {
-                            let v = texels[i + t[0] * (j + t[1] * k)];
-                            e[0] = e[0].max(v[0]);
-                            e[2] = e[2].max(v[1]);
-                            e[3] = e[3].max(v[2]);
-                        }
-                    }
-                }
-                out.push(e);
-            }
-        }
-    }
-    out
-}
-
-/// The CPU twin of raycast_bricks.wgsl. For each brick: `[max c0, min c0, max c1, max c2]` of
-/// the three values `get` gives per voxel (intensity: all three the same).
-pub fn cpu_bricks<T>(dims: [u32; 3], values: &[T], get: impl Fn(&T) -> [f32; 3]) -> Vec<[f32; 4]> {
-    let nb = brick_dims(dims);
-    let d = dims.map(|x| x as usize);
-    let mut out = Vec::with_capacity(nb.iter().map(|&x| x as usize).product());
-    for bz in 0..nb[2] {
-        for by in 0..nb[1] {
-            for bx in 0..nb[0] {
-                let b = [bx, by, bz];
-                let lo: [usize; 3] = std::array::from_fn(|a| (b[a] * BRICK) as usize);
-                let hi: [usize; 3] =
-                    std::array::from_fn(|a| (lo[a] + BRICK as usize).min(d[a].saturating_sub(1)));
                 let mut e = [-BIG, BIG, -BIG, -BIG];
                 for k in lo[2]..=hi[2] {
                     for j in lo[1]..=hi[1] {
                         for i in lo[0]..=hi[0] {
-                            let v = get(&values[i + d[0] * (j + d[1] * k)]);
+                            let v = get(&values[i + t[0] * (j + t[1] * k)]);
                             e[0] = e[0].max(v[0]);
                             e[1] = e[1].min(v[0]);
                             e[2] = e[2].max(v[1]);

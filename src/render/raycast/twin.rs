@@ -5,7 +5,7 @@
 #[cfg(doc)]
 use crate::gpu::volume_texture::{FeatureTexture, RenderVolume};
 
-use super::bricks::{BRICK, brick_dims, cpu_bricks, cpu_pooled_bricks};
+use super::bricks::{BRICK, brick_dims, cpu_bricks, cpu_bricks_of_level};
 use super::settings::{
     BIG, CHANNEL_COLOURS, FLAG_BRICKS, FLAG_FEATURES, FLAG_INTENSITY, FLAG_INVERT, Params,
 };
@@ -52,10 +52,12 @@ impl TwinScene {
                 .collect()
         });
         scene.feature_bricks = scene.features.as_ref().map(|f| {
-            cpu_pooled_bricks(dims, level, feature_dims, f)
-                .into_iter()
-                .map(|b| [b[0], b[2], b[3], 0.0])
-                .collect()
+            cpu_bricks_of_level(dims, level, feature_dims, f, |v: &[f32; 4]| {
+                [v[0], v[1], v[2]]
+            })
+            .into_iter()
+            .map(|b| [b[0], b[2], b[3], 0.0])
+            .collect()
         });
         scene.feature_level = level;
         scene.feature_dims = feature_dims;
