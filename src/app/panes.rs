@@ -288,11 +288,10 @@ impl ShapecastApp {
                                             && let Some([a, b, c]) =
                                                 self.probe.value_at(e.id, p.voxel)
                                         {
-                                            t.push_str(&format!("   V {a:.1}  A {b:.1}  B {c:.1}"));
-                                            if e.texture.level > 0 {
-                                                let f = e.texture.block();
-                                                t.push_str(&format!(" (max of {f}x{f}x{f})"));
-                                            }
+                                            t.push_str(&format!(
+                                                "   V {a:.1}  A {b:.1}  B {c:.1}{}",
+                                                e.texture.value_note()
+                                            ));
                                         }
                                         t
                                     });

@@ -486,6 +486,16 @@ impl FeatureTexture {
     pub fn block(&self) -> u32 {
         1u32 << self.level.min(31)
     }
+
+    /// What a value read from this texture is, for a readout beside it: "" at full
+    /// resolution, " (max of 2x2x2)" at level 1 (a block's maximum, not the voxel's value).
+    pub fn value_note(&self) -> String {
+        if self.level == 0 {
+            return String::new();
+        }
+        let f = self.block();
+        format!(" (max of {f}x{f}x{f})")
+    }
 }
 
 impl FeatureTexture {

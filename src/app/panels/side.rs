@@ -412,17 +412,11 @@ impl ShapecastApp {
         }
         if let Some(entry) = self.displayed_entry() {
             match self.probe.value_at(entry.id, voxel) {
-                Some([a, b, c]) => {
-                    s.push_str(&format!(
-                        "   {}: V {a:.1}  A {b:.1}  B {c:.1}",
-                        self.mode.label()
-                    ));
-                    // A pooled level holds each block's maximum, not this voxel's value.
-                    if entry.texture.level > 0 {
-                        let f = entry.texture.block();
-                        s.push_str(&format!(" (max of {f}x{f}x{f})"));
-                    }
-                }
+                Some([a, b, c]) => s.push_str(&format!(
+                    "   {}: V {a:.1}  A {b:.1}  B {c:.1}{}",
+                    self.mode.label(),
+                    entry.texture.value_note()
+                )),
                 None => s.push_str(&format!("   {}: …", self.mode.label())),
             }
         }

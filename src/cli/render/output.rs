@@ -85,6 +85,8 @@ pub(super) fn pick_json(
             "airwayness": v[1],
             "blobness": v[2],
         });
+        // Kept max-pooled within the GPU budget: the values are the voxel's block's maxima.
+        out["feature_level"] = json!(f.level);
     }
     Ok(out)
 }
